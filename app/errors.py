@@ -1,0 +1,120 @@
+"""The application's exception tree.
+
+Every error a user can meet derives from :class:`AppError`; it carries a stable
+machine-readable ``code`` and the HTTP ``status`` the API maps it to. Leaves also
+subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
+
+    AppError
+     +-- IngestError                      (422)
+     |    +-- UnsupportedFormatError      (415)  no reader recognises the content
+     |    +-- LogFormatError (ValueError) (422)  corrupt or unreadable log content
+     |    |    +-- TruncatedLogError             the log ends inside a record
+     |    +-- DatabaseError (ValueError)  (422)  DBC/KCD/SYM/ARXML cannot be loaded
+     |    +-- DecodeError (ValueError)    (422)  frames cannot be decoded
+     |    +-- SignalMapError (ValueError) (422)  signal map invalid or does not fit the DBC
+     |    +-- MissingSignalError (KeyError)(422) required canonical channels absent
+     +-- AnalysisError                    (422)
+     |    +-- InsufficientDataError       (422)
+     +-- InputError (ValueError)          (400)  absurd parameters, bad request values
+     +-- UploadTooLargeError              (413)
+     +-- NotFoundError (LookupError)      (404)
+     +-- ConflictError                    (409)
+     +-- StorageError (OSError)           (500)
+     +-- LiveBusError (ConnectionError)   (503)
+
+Simulator errors (``sim.errors.SimError``) are mapped by the API as well.
+"""
+
+from __future__ import annotations
+
+
+class AppError(Exception):
+    """Base of every lashscope error a user can meet."""
+
+    code: str = "app_error"
+    status: int = 500
+
+    def __init__(self, detail: str, *, code: str | None = None) -> None:
+        super().__init__(detail)
+        self.detail = detail
+        if code is not None:
+            self.code = code
+
+    def __str__(self) -> str:
+        return self.detail
+
+
+class IngestError(AppError):
+    code = "ingest_error"
+    status = 422
+
+
+class UnsupportedFormatError(IngestError):
+    code = "unsupported_format"
+    status = 415
+
+
+class LogFormatError(IngestError, ValueError):
+    code = "log_format"
+
+
+class TruncatedLogError(LogFormatError):
+    code = "log_truncated"
+
+
+class DatabaseError(IngestError, ValueError):
+    code = "database_error"
+
+
+class DecodeError(IngestError, ValueError):
+    code = "decode_error"
+
+
+class SignalMapError(IngestError, ValueError):
+    code = "signal_map_error"
+
+
+class MissingSignalError(IngestError, KeyError):
+    code = "missing_signal"
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return self.detail
+
+
+class AnalysisError(AppError):
+    code = "analysis_error"
+    status = 422
+
+
+class InsufficientDataError(AnalysisError):
+    code = "insufficient_data"
+
+
+class InputError(AppError, ValueError):
+    code = "invalid_input"
+    status = 400
+
+
+class UploadTooLargeError(AppError):
+    code = "upload_too_large"
+    status = 413
+
+
+class NotFoundError(AppError, LookupError):
+    code = "not_found"
+    status = 404
+
+
+class ConflictError(AppError):
+    code = "conflict"
+    status = 409
+
+
+class StorageError(AppError, OSError):
+    code = "storage_error"
+    status = 500
+
+
+class LiveBusError(AppError, ConnectionError):
+    code = "live_bus_error"
+    status = 503

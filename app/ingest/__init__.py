@@ -1,0 +1,1 @@
+"""Ingest: log readers (chosen by content), database loading, vectorized decoding, signal maps."""
