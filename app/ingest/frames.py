@@ -104,7 +104,8 @@ class FrameChunk:
 class ReadIssue:
     """One problem found while reading: where (byte offset or line), what, how many frames lost."""
 
-    kind: str  # e.g. "truncated", "bad_object_size", "corrupt_zlib", "bad_line", "non_hex", "short_data", "time_backwards"
+    # kind: "truncated", "bad_object_size", "corrupt_zlib", "bad_line", "non_hex", "short_data", "time_backwards"...
+    kind: str
     message: str
     offset: int | None = None  # byte offset in the file (binary formats)
     line: int | None = None  # 1-based line number (text formats)
