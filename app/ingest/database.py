@@ -253,7 +253,7 @@ def _load_dbc(src: Path, raw: bytes, tolerant: bool) -> LoadedDatabase:
     for _ in range(_MAX_REPAIR_ROUNDS):
         try:
             db = cantools.database.load_string(doc.text(), database_format="dbc", strict=True)
-        except Exception as exc:  # noqa: BLE001 - wrapped or repaired below
+        except Exception as exc:  # wrapped or repaired below
             # cantools' grammar needs BU_ (and BS_ in some positions); add them only when parsing fails.
             if tolerant and not sections_checked and "Invalid syntax" in str(exc):
                 sections_checked = True
