@@ -1,0 +1,253 @@
+r"""Ripple metrics of one event: the motor-speed response to a torque reversal.
+
+All metrics are computed on the speed *detrended from the rigid-body trend* and signed
+so that the gap-open excursion is positive (``y = direction * (speed - trend)``)::
+
+    y (rpm)          impact peak (gaps close)
+      ^                 *                          rise height = y_peak - baseline
+      |                / \        .-.              fluctuation = y_peak - y_valley
+      |  rise         /   \      /   \   .-.       first overshoot = y_peak - y_final
+      |  (gap open)  /     \    /     \_/   \_____ y_final
+      | ___________ /       \  /
+      |            t_open    \/ valley (adjacent)
+      +-----------|---------|------------------------> t
+                  |<------->| gap-open time (t_open to t_peak)
+
+The rigid-body trend is what the speed would do with a stiff, lash-free driveline:
+``trend(t) = c0 + c1 (t - t_cross) + g * integral(torque dt)``. With the driveline's
+reflected inertia known, ``g = 60 / (2 pi J_eq)`` rpm/(N m s) is fixed and only c0, c1
+(road load) are fitted; otherwise g is fitted too. Definitions: docs/metrics.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.signal import find_peaks
+
+from app.analysis.series import FloatArray, median_period, noise_rms, parabolic_vertex
+from app.errors import InsufficientDataError
+from app.signals import Signal
+
+METRIC_NAMES: tuple[str, ...] = (
+    "fluctuation_rpm", "rise_height_rpm", "gap_open_time_s", "first_overshoot_rpm",
+    "shuffle_freq_hz", "damping_ratio", "settling_time_s",
+)
+NAN = float("nan")
+
+
+@dataclass(frozen=True)
+class MetricParams:
+    peak_lead_s: float = 0.05  # the impact peak may come this long before the torque crossing (timing skew)
+    peak_search_s: float = 0.3  # ... and at most this long after it
+    baseline_s: float = 0.15  # the rise fit starts this long before the crossing
+    min_prominence_rpm: float = 0.5
+    settle_fraction: float = 0.05  # settled: within this fraction of the fluctuation ...
+    settle_floor_rpm: float = 1.0  # ... or this many rpm (or 3x the noise), whichever is larger
+    final_fraction: float = 0.25  # y_final = median over the last quarter of the window
+    freq_band_hz: tuple[float, float] = (0.5, 40.0)
+    rigid_gain_rpm_per_nms: float | None = None
+
+
+@dataclass(frozen=True)
+class RippleMetrics:
+    """Metrics of one speed trace around one event (NaN where not determinable)."""
+
+    fluctuation_rpm: float
+    rise_height_rpm: float
+    gap_open_time_s: float
+    first_overshoot_rpm: float
+    shuffle_freq_hz: float
+    damping_ratio: float
+    settling_time_s: float  # from the torque zero crossing
+    t_gap_open_s: float
+    t_impact_s: float
+    t_valley_s: float
+    noise_rpm: float
+    sample_period_s: float
+
+    def values(self) -> dict[str, float]:
+        return {k: getattr(self, k) for k in METRIC_NAMES}
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def rigid_trend(
+    t: FloatArray, speed: FloatArray, torque: Signal, t_ref: float, gain: float | None = None
+) -> FloatArray:
+    """Least-squares rigid-body trend of ``speed`` (rpm) at times ``t`` (s), shape (n,)."""
+    tq = torque.at(t)
+    ok = np.isfinite(tq)
+    if not ok.any():
+        raise InsufficientDataError(f"torque has no samples between {t[0]:.3f} and {t[-1]:.3f} s")
+    tq = np.interp(t, t[ok], tq[ok])  # hold the edges where the torque channel starts late / ends early
+    integral = np.concatenate(([0.0], np.cumsum(0.5 * (tq[1:] + tq[:-1]) * np.diff(t))))
+    x = t - t_ref
+    fin = np.isfinite(speed)
+    target = speed - (gain * integral if gain is not None else 0.0)
+    cols = [np.ones_like(x), x] if gain is not None else [np.ones_like(x), x, integral]
+    a = np.column_stack(cols)
+    coef, *_ = np.linalg.lstsq(a[fin], target[fin], rcond=None)
+    trend = a @ coef
+    return trend + (gain * integral if gain is not None else 0.0)
+
+
+def _first_peak(y: FloatArray, i0: int, i1: int, prom: float) -> int | None:
+    peaks, _ = find_peaks(y, prominence=prom)
+    inside = peaks[(peaks >= i0) & (peaks <= i1)]
+    if inside.size:
+        return int(inside[0])
+    if i1 <= i0:
+        return None
+    j = i0 + int(np.argmax(y[i0:i1 + 1]))
+    return j if i0 < j < y.size - 1 else None
+
+
+def _knee_fit(t: FloatArray, y: FloatArray) -> tuple[float, float]:
+    """Fit ``b + a max(0, t - t0)^p`` (a > 0, p in {1, 2}) to a rise; return (t0, b)."""
+    step = max(min(float(np.min(np.diff(t))) / 8.0, 1e-3), 1e-5)
+    grid = np.arange(t[0], t[-1], step)
+    if grid.size == 0:
+        return float(t[0]), float(y[0])
+    best = (np.inf, float(t[0]), float(y[0]))
+    n = y.size
+    for p in (1.0, 2.0):
+        u = np.maximum(0.0, t[None, :] - grid[:, None]) ** p  # (g, n)
+        um = u.mean(axis=1)
+        ym = y.mean()
+        cov = (u * (y - ym)[None, :]).mean(axis=1)
+        var = (u * u).mean(axis=1) - um * um
+        with np.errstate(invalid="ignore", divide="ignore"):
+            a = cov / var
+            sse = n * (np.var(y) - cov * cov / var)
+        sse = np.where((var > 0) & (a > 0), sse, np.inf)
+        g = int(np.argmin(sse))
+        if sse[g] < best[0]:
+            best = (float(sse[g]), float(grid[g]), float(ym - a[g] * um[g]))
+    return best[1], best[2]
+
+
+def _alternating_extrema(y: FloatArray, start: int, prom: float) -> list[int]:
+    hi, _ = find_peaks(y, prominence=prom)
+    lo, _ = find_peaks(-y, prominence=prom)
+    marks = sorted([(int(i), 1) for i in hi if i >= start] + [(int(i), -1) for i in lo if i >= start])
+    out: list[tuple[int, int]] = []
+    for i, s in marks:
+        if out and out[-1][1] == s:  # two maxima in a row: keep the more extreme one
+            if s * y[i] > s * y[out[-1][0]]:
+                out[-1] = (i, s)
+            continue
+        out.append((i, s))
+    return [i for i, _ in out]
+
+
+def _spectral_peak(y: FloatArray, dt: float, band: tuple[float, float]) -> float:
+    if y.size < 8:
+        return NAN
+    nfft = 1 << int(np.ceil(np.log2(y.size * 16)))
+    mag = np.abs(np.fft.rfft(y - y.mean(), nfft))
+    f = np.fft.rfftfreq(nfft, dt)
+    m = (f >= band[0]) & (f <= band[1])
+    if not m.any():
+        return NAN
+    idx = np.flatnonzero(m)
+    k = int(idx[np.argmax(mag[idx])])
+    off, _ = parabolic_vertex(mag, k)
+    return float(f[k] + off * (f[1] - f[0]))
+
+
+def ripple_metrics(
+    t: FloatArray, speed: FloatArray, torque: Signal, t_cross: float, direction: float,
+    params: MetricParams | None = None,
+) -> RippleMetrics:
+    """Ripple metrics of one speed trace over one event window.
+
+    Parameters
+    ----------
+    t, speed
+        Sample times (s, shape (n,), increasing) and motor speed (rpm) over the event window.
+    torque
+        Motor torque (N m) covering the window, for the rigid-body trend.
+    t_cross
+        Torque zero-crossing time (s).
+    direction
+        +1 for a tip-in, -1 for a tip-out.
+    """
+    p = params or MetricParams()
+    fin = np.isfinite(speed)
+    t, speed = t[fin], speed[fin]
+    if t.size < 8:
+        raise InsufficientDataError(f"{t.size} speed samples in the event window; need at least 8")
+    dt = median_period(t)
+    y = direction * (speed - rigid_trend(t, speed, torque, t_cross, p.rigid_gain_rpm_per_nms))
+    noise = noise_rms(y[t < t_cross - p.peak_lead_s]) if np.sum(t < t_cross - p.peak_lead_s) > 8 else noise_rms(y)
+    final = float(np.median(y[int(y.size * (1.0 - p.final_fraction)):]))
+    i0 = int(np.searchsorted(t, t_cross - p.peak_lead_s))
+    i1 = int(np.searchsorted(t, t_cross + p.peak_search_s, side="right")) - 1
+    span = float(np.ptp(y[i0:])) if i0 < y.size else 0.0
+    prom = max(p.min_prominence_rpm, 4.0 * noise, 0.1 * span)
+    ip = _first_peak(y, i0, min(i1, y.size - 1), prom)
+    nan_result = RippleMetrics(NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, noise, dt)
+    if ip is None:
+        return nan_result
+    off_p, y_peak = parabolic_vertex(y, ip)
+    t_peak = float(t[ip] + off_p * dt)
+
+    valleys, _ = find_peaks(-y, prominence=prom)
+    after = valleys[valleys > ip]
+    iv = int(after[0]) if after.size else None
+    y_valley, t_valley = NAN, NAN
+    if iv is not None:
+        off_v, y_valley = parabolic_vertex(y, iv)
+        t_valley = float(t[iv] + off_v * dt)
+
+    ib = int(np.searchsorted(t, t_cross - p.baseline_s))
+    t_open, base = _knee_fit(t[ib:ip + 1], y[ib:ip + 1]) if ip - ib >= 3 else (NAN, NAN)
+
+    ext = _alternating_extrema(y, ip, max(p.min_prominence_rpm, 4.0 * noise, 0.02 * (y_peak - final)))
+    if ext and ext[0] != ip:
+        ext = [ip, *[i for i in ext if i > ip]]
+    use = ext[1:] if len(ext) >= 4 else ext  # the impact peak is not part of the free oscillation
+    vals, times = [], []
+    for i in use:
+        off, v = parabolic_vertex(y, i)
+        vals.append(v)
+        times.append(float(t[i] + off * dt))
+    # Half-cycle peak-to-peak swings cancel a constant detrending offset; stop once they sink into the noise.
+    swings = np.abs(np.diff(np.asarray(vals)))
+    small = np.flatnonzero(swings < max(6.0 * noise, 0.05 * swings[0])) if swings.size else np.zeros(1, int)
+    keep = int(small[0]) if small.size else swings.size  # usable swings, each spanning half a period
+    zeta = NAN
+    if keep >= 2:
+        delta = 2.0 * float(np.mean(np.log(swings[:keep - 1] / swings[1:keep])))  # swings are half a period apart
+        zeta = delta / float(np.sqrt(4.0 * np.pi**2 + delta**2))
+    if keep >= 2:
+        freq = keep / (2.0 * (times[keep] - times[0]))
+    else:
+        freq = _spectral_peak(y[ip:] - final, dt, p.freq_band_hz)
+
+    band = max(p.settle_fraction * (y_peak - y_valley if np.isfinite(y_valley) else y_peak - final),
+               p.settle_floor_rpm, 3.0 * noise)
+    outside = np.flatnonzero(np.abs(y[ip:] - final) > band)
+    settle = NAN
+    if outside.size and ip + int(outside[-1]) < y.size - 1:
+        settle = float(t[ip + int(outside[-1]) + 1] - t_cross)
+    elif not outside.size:
+        settle = t_peak - t_cross
+
+    return RippleMetrics(
+        fluctuation_rpm=y_peak - y_valley if np.isfinite(y_valley) else NAN,
+        rise_height_rpm=y_peak - base if np.isfinite(base) else NAN,
+        gap_open_time_s=t_peak - t_open if np.isfinite(t_open) else NAN,
+        first_overshoot_rpm=y_peak - final,
+        shuffle_freq_hz=freq,
+        damping_ratio=zeta,
+        settling_time_s=settle,
+        t_gap_open_s=t_open,
+        t_impact_s=t_peak,
+        t_valley_s=t_valley,
+        noise_rpm=noise,
+        sample_period_s=dt,
+    )
