@@ -103,11 +103,11 @@ def downsample_minmax(
     NaN values are ignored when choosing the rows. Returns the kept times and columns.
     """
     n = t.size
-    if max_points < 4:
-        raise InputError(f"max_points = {max_points}: must be at least 4")
+    per_bucket = 2 * max(1, len(columns))
+    if max_points < 2 + per_bucket:
+        raise InputError(f"max_points = {max_points}: must be at least {2 + per_bucket} for {len(columns)} series")
     if n <= max_points:
         return t, dict(columns)
-    per_bucket = 2 * max(1, len(columns))
     buckets = max(1, (max_points - 2) // per_bucket)
     size = int(np.ceil(n / buckets))
     buckets = int(np.ceil(n / size))

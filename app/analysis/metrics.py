@@ -102,7 +102,8 @@ def _first_peak(y: FloatArray, i0: int, i1: int, prom: float) -> int | None:
     if i1 <= i0:
         return None
     j = i0 + int(np.argmax(y[i0:i1 + 1]))
-    return j if i0 < j < y.size - 1 else None
+    rises = y[j] - float(np.min(y[i0:j + 1])) >= prom
+    return j if i0 < j < y.size - 1 and rises else None
 
 
 def _knee_fit(t: FloatArray, y: FloatArray) -> tuple[float, float]:
