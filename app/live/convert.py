@@ -1,0 +1,96 @@
+"""python-can :class:`can.Message` objects <-> columnar :class:`FrameChunk` rows.
+
+A live bus delivers one message at a time; the decoder works on columns. The session
+collects a batch of messages and turns it into one chunk here. ``t0`` is the bus time
+(s, python-can's ``Message.timestamp`` clock) of the measurement start, so chunk times
+are integer ns since that start, exactly as a log reader produces them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+
+import can
+import numpy as np
+
+from app.ingest.frames import FrameChunk, FrameFlag
+
+
+def message_flags(msg: can.Message) -> int:
+    flags = 0
+    if msg.is_extended_id:
+        flags |= FrameFlag.EXTENDED
+    if msg.is_fd:
+        flags |= FrameFlag.FD
+    if msg.is_error_frame:
+        flags |= FrameFlag.ERROR
+    if msg.is_remote_frame:
+        flags |= FrameFlag.REMOTE
+    if msg.bitrate_switch:
+        flags |= FrameFlag.BRS
+    if msg.error_state_indicator:
+        flags |= FrameFlag.ESI
+    if not msg.is_rx:
+        flags |= FrameFlag.TX
+    return int(flags)
+
+
+def messages_to_chunk(msgs: Sequence[can.Message], t0: float, channel: int = 0) -> FrameChunk:
+    """Columns for ``msgs``.
+
+    Parameters
+    ----------
+    msgs : sequence of can.Message, length n
+    t0 : float
+        Bus time (s) of the measurement start; ``t_ns = round((timestamp - t0) * 1e9)``.
+    channel : int
+        Channel number recorded for every row (a live session listens on one bus).
+
+    Returns
+    -------
+    FrameChunk
+        ``data`` is (n, 8) unless a frame carries more than 8 bytes, then (n, 64). Bytes
+        beyond the received payload are zero; ``dlc`` keeps the length the frame claimed,
+        clipped to the row width, so a frame shorter than its DLC decodes as the short
+        payload it is.
+    """
+    n = len(msgs)
+    width = 64 if any(len(m.data) > 8 for m in msgs) else 8
+    t = np.empty(n, np.float64)
+    arb = np.empty(n, np.uint32)
+    flags = np.empty(n, np.uint8)
+    dlc = np.empty(n, np.uint8)
+    data = np.zeros((n, width), np.uint8)
+    for i, m in enumerate(msgs):
+        t[i] = m.timestamp
+        arb[i] = m.arbitration_id
+        flags[i] = message_flags(m)
+        payload = bytes(m.data[:width]) if m.data else b""
+        # a remote frame requests dlc bytes and carries none; a data frame is as long as its payload
+        dlc[i] = min(m.dlc, width) if m.is_remote_frame else len(payload)
+        if payload:
+            data[i, : len(payload)] = np.frombuffer(payload, np.uint8)
+    t_ns = np.rint((t - t0) * 1e9).astype(np.int64)
+    return FrameChunk(t_ns, np.full(n, channel, np.int16), arb, flags, dlc, data)
+
+
+def chunk_to_messages(chunk: FrameChunk, t0: float = 0.0, channel: str | int | None = None) -> Iterator[can.Message]:
+    """Messages for the rows of ``chunk`` (timestamps ``t0 + t_ns / 1e9``)."""
+    for i in range(len(chunk)):
+        f = int(chunk.flags[i])
+        n = int(chunk.dlc[i])
+        yield can.Message(
+            timestamp=t0 + int(chunk.t_ns[i]) / 1e9,
+            arbitration_id=int(chunk.arb_id[i]),
+            is_extended_id=bool(f & FrameFlag.EXTENDED),
+            is_fd=bool(f & FrameFlag.FD),
+            is_error_frame=bool(f & FrameFlag.ERROR),
+            is_remote_frame=bool(f & FrameFlag.REMOTE),
+            bitrate_switch=bool(f & FrameFlag.BRS),
+            error_state_indicator=bool(f & FrameFlag.ESI),
+            is_rx=not f & FrameFlag.TX,
+            dlc=n,
+            data=b"" if f & FrameFlag.REMOTE else chunk.data[i, :n].tobytes(),
+            channel=channel,
+            check=False,
+        )
