@@ -1,0 +1,59 @@
+"""Service settings from the environment (``LASHSCOPE_*``), read once behind :func:`get_settings`.
+
+``LASHSCOPE_DATA_DIR``          where SQLite and the files live (default ``./lashscope-data``)
+``LASHSCOPE_MAX_UPLOAD_MB``     upload size cap in MiB (default 1024); larger uploads get 413
+``LASHSCOPE_CORS_ORIGINS``      comma-separated origins allowed by CORS (default none)
+``LASHSCOPE_ANALYSIS_WORKERS``  background analyses run at the same time (default 1)
+``LASHSCOPE_JOB_MAX_ATTEMPTS``  a job cut off by a crash is re-run until it has started this often
+``LASHSCOPE_DBC_DIR``           the project's DBC files and signal maps (default: ``dbc/`` in the source tree)
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
+
+SOURCE_ROOT = Path(__file__).resolve().parents[1]
+
+
+def default_dbc_dir() -> Path:
+    for candidate in (SOURCE_ROOT / "dbc", Path.cwd() / "dbc"):
+        if candidate.is_dir():
+            return candidate
+    return SOURCE_ROOT / "dbc"
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="LASHSCOPE_", extra="ignore")
+
+    data_dir: Path = Path("lashscope-data")
+    max_upload_mb: float = Field(default=1024.0, gt=0)
+    upload_drain_mb: float = Field(default=64.0, ge=0)  # read and discard this much of an oversized body before 413
+    cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
+    analysis_workers: int = Field(default=1, ge=1, le=16)
+    job_max_attempts: int = Field(default=2, ge=1)
+    dbc_dir: Path = Field(default_factory=default_dbc_dir)
+    series_cache_entries: int = Field(default=256, ge=0)
+    host: str = "127.0.0.1"
+    port: int = Field(default=8000, ge=0, le=65535)
+
+    @field_validator("cors_origins", mode="before")
+    @classmethod
+    def _split_origins(cls, v: object) -> object:
+        if isinstance(v, str):
+            return [o.strip() for o in v.split(",") if o.strip()]
+        return v
+
+    @property
+    def max_upload_bytes(self) -> int:
+        return int(self.max_upload_mb * 1024 * 1024)
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    """The process-wide settings, read from the environment on first use."""
+    return Settings()

@@ -1,0 +1,59 @@
+"""SQLite schema of the embedded store (idempotent: run at every start)."""
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS logs (
+    id TEXT PRIMARY KEY,
+    sha256 TEXT NOT NULL UNIQUE,
+    filename TEXT NOT NULL,
+    size_bytes INTEGER NOT NULL,
+    format TEXT NOT NULL,
+    created_at TEXT NOT NULL,
+    path TEXT NOT NULL,
+    frames INTEGER NOT NULL,
+    duration_s REAL NOT NULL,
+    start_time TEXT,
+    issues TEXT NOT NULL,
+    meta TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS vehicles (
+    name TEXT NOT NULL,
+    version INTEGER NOT NULL,
+    created_at TEXT NOT NULL,
+    sha256 TEXT NOT NULL,
+    driveline_path TEXT NOT NULL,
+    database_path TEXT NOT NULL,
+    signal_map_path TEXT NOT NULL,
+    summary TEXT NOT NULL,
+    PRIMARY KEY (name, version)
+);
+CREATE TABLE IF NOT EXISTS jobs (
+    id TEXT PRIMARY KEY,
+    kind TEXT NOT NULL,
+    subject TEXT NOT NULL,
+    status TEXT NOT NULL CHECK (status IN ('queued', 'running', 'done', 'failed')),
+    progress REAL NOT NULL,
+    stage TEXT NOT NULL,
+    attempts INTEGER NOT NULL,
+    created_at TEXT NOT NULL,
+    updated_at TEXT NOT NULL,
+    started_at TEXT,
+    finished_at TEXT,
+    error_code TEXT,
+    error_detail TEXT,
+    owner_pid INTEGER
+);
+CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status);
+CREATE INDEX IF NOT EXISTS jobs_subject ON jobs (kind, subject);
+CREATE TABLE IF NOT EXISTS analyses (
+    id TEXT PRIMARY KEY,
+    log_id TEXT NOT NULL REFERENCES logs (id),
+    vehicle_name TEXT NOT NULL,
+    vehicle_version INTEGER NOT NULL,
+    options TEXT NOT NULL,
+    created_at TEXT NOT NULL,
+    job_id TEXT NOT NULL REFERENCES jobs (id),
+    summary TEXT NOT NULL,
+    FOREIGN KEY (vehicle_name, vehicle_version) REFERENCES vehicles (name, version)
+);
+CREATE INDEX IF NOT EXISTS analyses_log ON analyses (log_id);
+"""
