@@ -1,0 +1,226 @@
+"""Joint bounded least-squares fit of nuisance and effect parameters on calibration events.
+
+Every fit -- the baseline included -- frees the three nuisance parameters (time offset, torque
+gain, road load): an unmodelled time offset left out of the baseline is exactly what a prototype
+then "explained" as actuator lag. Parameters are mapped to the unit box so that one finite-
+difference step (2 % of the prior range) means the same for all of them; the step is coarse on
+purpose, because a fixed-step simulator with contact events is only piecewise smooth.
+
+Fits see calibration events only: :func:`fit` takes the frozen :class:`~.split.Split` and refuses
+any event that is not on its calibration side.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import least_squares
+
+from app.analysis.diagnosis.forward import DiagEvent, EffectSetting, Nuisance, predict, vehicle_with, weighted_residual
+from app.analysis.diagnosis.split import Split, require_calibration
+from sim import Vehicle
+from sim.effects.base import Effect, ParamSpec
+from sim.errors import SimError
+
+FloatArray = npt.NDArray[np.float64]
+
+GAIN_BOUNDS = (0.85, 1.15)
+GRADE_BOUNDS_PCT = (-4.0, 4.0)
+OFFSET_PERIODS = 2.0  # time offset bounded to +-2 sample periods of the speed channel
+_PENALTY = 1e3  # residual (noise units) returned for a parameter set the simulator rejects
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """Bounds of the nuisance parameters for one log."""
+
+    offset_s: tuple[float, float]
+    gain: tuple[float, float] = GAIN_BOUNDS
+    grade_pct: tuple[float, float] = GRADE_BOUNDS_PCT
+
+    @classmethod
+    def for_period(cls, period_s: float) -> Bounds:
+        half = OFFSET_PERIODS * max(period_s, 0.001)
+        return cls((-half, half))
+
+    def specs(self) -> tuple[ParamSpec, ...]:
+        return (
+            ParamSpec("offset_s", "s", self.offset_s[0], self.offset_s[1], 0.0, "torque-speed time offset"),
+            ParamSpec("gain", "-", self.gain[0], self.gain[1], 1.0, "torque gain"),
+            ParamSpec("grade_pct", "%", self.grade_pct[0], self.grade_pct[1], 0.0, "road-load offset as grade"),
+        )
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Outcome of one fit on the calibration events.
+
+    Attributes
+    ----------
+    effects : effect ids in the fit (empty for the baseline).
+    nuisance : fitted nuisance parameters.
+    values : fitted values per effect id.
+    chi2 : weighted SSE on the calibration events (noise units); ``n`` its sample count.
+    nfev : simulator passes over the calibration events.
+    at_bound : ``"<effect>.<param>"`` names that ended within 1 % of a prior bound (not counting an
+        effect parameter resting at its ``off`` value).
+    """
+
+    effects: tuple[str, ...]
+    nuisance: Nuisance
+    values: dict[str, dict[str, float]]
+    chi2: float
+    n: int
+    nfev: int
+    at_bound: tuple[str, ...] = ()
+    message: str = ""
+    settings: tuple[EffectSetting, ...] = field(default=(), repr=False, compare=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "effects": list(self.effects),
+            "nuisance": {k: round(v, 6) for k, v in self.nuisance.to_dict().items()},
+            "params": {e: {k: round(v, 6) for k, v in vals.items()} for e, vals in self.values.items()},
+            "calibration_chi2_per_sample": round(self.chi2 / max(self.n, 1), 4),
+            "simulator_passes": self.nfev,
+            "at_bound": list(self.at_bound),
+        }
+
+
+Progress = Callable[[str], None]
+
+
+class _Problem:
+    """Maps a unit-box vector to nuisance + effect values and evaluates calibration residuals."""
+
+    def __init__(self, base: Vehicle, events: Sequence[DiagEvent], effects: Sequence[Effect], bounds: Bounds,
+                 model: str) -> None:
+        self.base = base
+        self.events = tuple(events)
+        self.effects = tuple(effects)
+        self.model = model
+        self.specs: list[ParamSpec] = list(bounds.specs())
+        self.owner: list[str] = ["nuisance"] * 3
+        for eff in self.effects:
+            self.specs.extend(eff.params)
+            self.owner.extend([eff.id] * len(eff.params))
+        self.lo = np.array([p.lo for p in self.specs])
+        self.span = np.array([p.hi - p.lo for p in self.specs])
+        self.n_res = sum(e.n for e in self.events)
+        self.nfev = 0
+
+    def decode(self, u: FloatArray) -> tuple[Nuisance, tuple[EffectSetting, ...]]:
+        x = self.lo + np.clip(u, 0.0, 1.0) * self.span
+        nui = Nuisance(float(x[0]), float(x[1]), float(x[2]))
+        settings: list[EffectSetting] = []
+        i = 3
+        for eff in self.effects:
+            k = len(eff.params)
+            settings.append((eff, eff.values([float(v) for v in x[i:i + k]])))
+            i += k
+        return nui, tuple(settings)
+
+    def encode(self, nui: Nuisance, values: dict[str, dict[str, float]] | None = None) -> FloatArray:
+        x = [nui.offset_s, nui.gain, nui.grade_pct]
+        for eff in self.effects:
+            given = (values or {}).get(eff.id, {})
+            x.extend(given.get(p.name, p.off) for p in eff.params)
+        return np.clip((np.array(x) - self.lo) / self.span, 0.0, 1.0)
+
+    def residuals(self, u: FloatArray) -> FloatArray:
+        self.nfev += 1
+        nui, settings = self.decode(u)
+        try:
+            veh = vehicle_with(self.base, nui, settings)
+            parts = [weighted_residual(ev, predict(ev, veh, nui, settings, self.model)) for ev in self.events]
+            r = np.concatenate(parts)
+        except SimError:
+            return np.full(self.n_res, _PENALTY)
+        return np.where(np.isfinite(r), r, _PENALTY)
+
+
+def _chi2(r: FloatArray) -> float:
+    return float(np.dot(r, r))
+
+
+def _starts(effects: Sequence[Effect], rng: np.random.Generator, n_random: int) -> list[FloatArray]:
+    """Unit-box start points for the effect parameters: the 'off' point, the middle, a few draws."""
+    k = sum(len(e.params) for e in effects)
+    if k == 0:
+        return [np.zeros(0)]
+    off = np.concatenate([[(p.off - p.lo) / (p.hi - p.lo) for p in e.params] for e in effects])
+    pts = [np.full(k, 0.5), off, np.full(k, 0.2), np.full(k, 0.8)]
+    pts.extend(rng.uniform(0.05, 0.95, size=(n_random, k)))
+    return [np.asarray(p, dtype=np.float64) for p in pts]
+
+
+def fit(
+    base: Vehicle,
+    events: Sequence[DiagEvent],
+    split: Split,
+    effects: Sequence[Effect] = (),
+    *,
+    bounds: Bounds,
+    model: str = "multibody",
+    start: FitResult | None = None,
+    max_nfev: int | None = None,
+    n_random_starts: int = 2,
+    seed: int = 0,
+) -> FitResult:
+    """Fit nuisance (+ effect) parameters on the calibration events of ``split``.
+
+    Parameters
+    ----------
+    base : the diagnosed vehicle (what the model says without any candidate effect).
+    events : calibration events; any held-out event raises :class:`~app.errors.AnalysisError`.
+    split : the frozen split.
+    effects : candidate effects fitted jointly (empty: the baseline calibration).
+    bounds : nuisance bounds.
+    model : simulator model name.
+    start : a previous fit whose nuisance (and effect values) seed this one.
+    max_nfev : budget of residual evaluations for the local refinement.
+    n_random_starts : random effect-parameter start points screened besides the fixed ones.
+    seed : RNG seed of the random start points.
+    """
+    require_calibration(split, events)
+    prob = _Problem(base, events, effects, bounds, model)
+    rng = np.random.default_rng(seed)
+    nui0 = start.nuisance if start is not None else Nuisance()
+    u_nui = prob.encode(nui0)[:3]
+    # screen start points: the time offset for the baseline (it has local minima one period
+    # apart), effect parameters for candidates
+    candidates: list[FloatArray] = []
+    if not effects:
+        for frac in (0.5, 0.25, 0.75, 0.0, 1.0):
+            u = u_nui.copy()
+            u[0] = frac
+            candidates.append(u)
+    else:
+        prev = start.values if start is not None else None
+        if prev is not None and all(e.id in prev for e in effects):
+            candidates.append(prob.encode(nui0, prev))
+        for eff_u in _starts(effects, rng, n_random_starts):
+            candidates.append(np.concatenate([u_nui, eff_u]))
+    scored = [(_chi2(prob.residuals(u)), i) for i, u in enumerate(candidates)]
+    best_u = candidates[min(scored)[1]]
+    n_par = best_u.size
+    budget = max_nfev if max_nfev is not None else 6 * (n_par + 1)
+    sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
+                        diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-4, gtol=1e-6)
+    u = np.asarray(sol.x, dtype=np.float64)
+    r = prob.residuals(u)
+    nui, settings = prob.decode(u)
+    values = {eff.id: dict(vals) for eff, vals in settings}
+    at_bound = []
+    for spec, owner, ui in zip(prob.specs, prob.owner, u, strict=True):
+        near = ui < 0.01 or ui > 0.99
+        value = spec.lo + ui * (spec.hi - spec.lo)
+        resting_off = owner != "nuisance" and abs(spec.off - value) <= 0.01 * (spec.hi - spec.lo)
+        if near and not resting_off:
+            at_bound.append(f"{owner}.{spec.name}")
+    return FitResult(tuple(e.id for e in effects), nui, values, _chi2(r), prob.n_res, prob.nfev, tuple(at_bound),
+                     str(sol.message), settings)

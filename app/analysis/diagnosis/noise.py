@@ -1,0 +1,154 @@
+"""Model-free noise floor of a measured speed channel.
+
+The diagnosis must know how much of the residual *no* model could ever explain: sensor noise,
+DBC quantisation and timestamp jitter. All three are estimated from the measured data alone,
+without any simulation, so the floor cannot be bent by a fit:
+
+- **sample period and jitter** from the timestamp differences: with ``t_k = kT + j_k`` the
+  differences are ``T + j_{k+1} - j_k``, so their robust spread is ``sqrt(2)`` times the jitter;
+  dropped frames (differences near ``2T``, ``3T``...) are folded back onto ``T`` first;
+- **white noise** from second differences on quiet samples (away from events):
+  ``var(x[i+1] - 2x[i] + x[i-1]) = 6 sigma^2`` for white noise, while a slowly varying signal
+  contributes almost nothing;
+- **quantisation** as the smallest step between distinct values, ``q^2 / 12``, as a lower bound
+  when the noise is too small to dither the quantiser.
+
+A timestamp error ``e`` on a sample of a signal changing at ``v'`` rpm/s looks like a speed error
+``v' e``; :meth:`NoiseFloor.variance` turns the jitter into a per-sample variance from the measured
+slope (again model-free).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from app.errors import InsufficientDataError
+
+FloatArray = npt.NDArray[np.float64]
+
+_MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class NoiseFloor:
+    """Noise of a measured speed channel, estimated without a model.
+
+    Attributes
+    ----------
+    sigma_rpm : white noise standard deviation (rpm), at least ``quant_step_rpm / sqrt(12)``.
+    quant_step_rpm : smallest step between distinct values (rpm); 0 when not quantised.
+    jitter_s : standard deviation of timestamp jitter (s).
+    period_s : nominal sample period (s).
+    n_samples : number of second differences the white-noise estimate used.
+    """
+
+    sigma_rpm: float
+    quant_step_rpm: float
+    jitter_s: float
+    period_s: float
+    n_samples: int
+
+    def variance(self, slope_rpm_s: npt.ArrayLike) -> FloatArray:
+        """Per-sample residual variance (rpm^2) no model can remove, for samples with slope ``slope_rpm_s``."""
+        s = np.asarray(slope_rpm_s, dtype=np.float64)
+        return self.sigma_rpm**2 + (self.jitter_s * s) ** 2
+
+    def to_dict(self) -> dict[str, float | int]:
+        return asdict(self)
+
+
+def sample_period(t: FloatArray) -> float:
+    """Nominal sample period (s): the median of the timestamp differences that are not drop-outs."""
+    d = np.diff(np.asarray(t, dtype=np.float64))
+    d = d[d > 0]
+    if d.size == 0:
+        raise InsufficientDataError("speed channel has fewer than two distinct timestamps")
+    first = float(np.median(d))
+    # drop-outs double the difference; the median of the single-period ones is the period
+    single = d[d < 1.5 * first]
+    return float(np.median(single)) if single.size else first
+
+
+def timestamp_jitter(t: FloatArray, period_s: float) -> float:
+    """Jitter standard deviation (s) from timestamp differences folded onto the nominal period."""
+    d = np.diff(np.asarray(t, dtype=np.float64))
+    k = np.maximum(np.round(d / period_s), 1.0)
+    dev = d - k * period_s
+    if dev.size < 3:
+        return 0.0
+    # a slow clock-rate mismatch shifts every difference equally; the median removes it
+    dev = dev - np.median(dev)
+    return float(_MAD_TO_SIGMA * np.median(np.abs(dev)) / np.sqrt(2.0))
+
+
+def quantisation_step(values: FloatArray) -> float:
+    """Smallest step (rpm) between distinct sample values, robust to float round-off; 0 if none."""
+    v = np.unique(np.round(np.asarray(values, dtype=np.float64), 9))
+    if v.size < 2:
+        return 0.0
+    steps = np.diff(v)
+    steps = steps[steps > 1e-9]
+    if steps.size == 0:
+        return 0.0
+    q = float(steps.min())
+    # only a quantiser if the other steps are (nearly) integer multiples of the smallest one
+    ratio = steps[: min(steps.size, 2000)] / q
+    return q if float(np.median(np.abs(ratio - np.round(ratio)))) < 0.05 else 0.0
+
+
+def estimate_noise_floor(t: FloatArray, values: FloatArray, quiet: npt.NDArray[np.bool_] | None = None) -> NoiseFloor:
+    """Estimate the noise floor of a measured channel.
+
+    Parameters
+    ----------
+    t : (n,) sample times (s), increasing.
+    values : (n,) samples (rpm).
+    quiet : (n,) optional mask of samples away from transients (e.g. outside event windows);
+        second differences are taken where three consecutive quiet samples are one period apart.
+        When fewer than 20 such triples exist, all samples are used.
+
+    Returns
+    -------
+    NoiseFloor
+    """
+    t = np.asarray(t, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    ok = np.isfinite(v)
+    t, v = t[ok], v[ok]
+    if t.size < 5:
+        raise InsufficientDataError(f"speed channel has {t.size} valid samples; at least 5 are needed for a noise floor")
+    period = sample_period(t)
+    jitter = timestamp_jitter(t, period)
+    q = quantisation_step(v)
+    d = np.diff(t)
+    regular = (d > 0.5 * period) & (d < 1.5 * period)
+    triple = regular[:-1] & regular[1:]
+    if quiet is not None:
+        qm = np.asarray(quiet, dtype=bool)[ok]
+        triple_q = triple & qm[:-2] & qm[1:-1] & qm[2:]
+        if int(triple_q.sum()) >= 20:
+            triple = triple_q
+    d2 = v[2:] - 2.0 * v[1:-1] + v[:-2]
+    d2 = d2[triple]
+    if d2.size < 3:
+        sigma = 0.0
+    else:
+        mad = float(np.median(np.abs(d2 - np.median(d2))))
+        sigma = _MAD_TO_SIGMA * mad / np.sqrt(6.0)
+        if mad == 0.0:
+            # the quantiser was not dithered: fall back to the RMS, which sees the rare steps
+            sigma = float(np.sqrt(np.mean(d2**2) / 6.0))
+    sigma = max(sigma, q / np.sqrt(12.0), 1e-6)
+    return NoiseFloor(float(sigma), q, jitter, period, int(d2.size))
+
+
+def measured_slope(t: FloatArray, values: FloatArray) -> FloatArray:
+    """Slope (rpm/s) of a measured series by central differences over one sample each side."""
+    t = np.asarray(t, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    if t.size < 3:
+        return np.zeros_like(v)
+    return np.asarray(np.gradient(v, t), dtype=np.float64)

@@ -1,0 +1,86 @@
+"""From decoded signals and detected events to the diagnosis' event data.
+
+Checks the channels (a missing one raises :class:`~app.errors.MissingSignalError` naming it),
+estimates the model-free noise floor from the speed samples *outside* every event window, and
+cuts each included event to the window the diagnosis simulates and scores: ``pre_s`` before the
+torque crossing to ``post_s`` after it (inside the event's own window).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.analysis.diagnosis.forward import DiagEvent
+from app.analysis.diagnosis.noise import NoiseFloor, estimate_noise_floor, measured_slope
+from app.analysis.events import SPEED, TORQUE, Event
+from app.errors import InsufficientDataError, MissingSignalError
+from app.signals import SignalSet
+
+REQUIRED = (TORQUE, SPEED)
+
+
+@dataclass(frozen=True)
+class WindowParams:
+    pre_s: float = 0.3  # simulated before the torque crossing (the initial-condition anchor needs a few samples)
+    post_s: float = 1.0  # after it: impact, about six shuffle periods, and some steady response
+    anchor_end_s: float = 0.08  # anchor on samples more than this before the crossing (gaps open near it)
+    torque_margin_s: float = 0.1  # torque kept beyond the window so the time-offset fit can shift it
+    min_samples: int = 20
+
+
+def require_channels(signals: SignalSet) -> None:
+    missing = [name for name in REQUIRED if name not in signals or len(signals[name]) == 0]
+    if missing:
+        raise MissingSignalError(
+            f"diagnosis needs channels {list(REQUIRED)}; missing or empty: {missing}; have {sorted(signals)}")
+
+
+def prepare(signals: SignalSet, events: Sequence[Event], params: WindowParams | None = None
+            ) -> tuple[list[DiagEvent], NoiseFloor, list[dict[str, object]]]:
+    """Diagnosis event data, the noise floor, and the events left out (with reasons).
+
+    Parameters
+    ----------
+    signals : decoded signals with ``motor_torque_nm`` and ``motor_speed_rpm``.
+    events : detected events (:func:`app.analysis.events.detect_events`); excluded ones are skipped.
+    params : window settings.
+    """
+    p = params or WindowParams()
+    require_channels(signals)
+    tq, sp = signals[TORQUE], signals[SPEED]
+    ok_t, ok_s = np.isfinite(tq.values), np.isfinite(sp.values)
+    tq_t, tq_v = tq.t[ok_t], tq.values[ok_t]
+    sp_t, sp_v = sp.t[ok_s], sp.values[ok_s]
+    if sp_t.size < 5 or tq_t.size < 5:
+        raise InsufficientDataError(f"{TORQUE} has {tq_t.size} and {SPEED} {sp_t.size} finite samples")
+    quiet = np.ones(sp_t.size, dtype=bool)
+    for ev in events:
+        quiet &= ~((sp_t >= ev.t_start_s) & (sp_t <= ev.t_end_s))
+    noise = estimate_noise_floor(sp_t, sp_v, quiet)
+    slope = measured_slope(sp_t, sp_v)
+    out: list[DiagEvent] = []
+    skipped: list[dict[str, object]] = []
+    for ev in events:
+        if not ev.included:
+            skipped.append({"index": ev.index, "reason": ev.exclusion})
+            continue
+        t0 = max(ev.t_cross_s - p.pre_s, ev.t_start_s)
+        t1 = min(ev.t_cross_s + p.post_s, ev.t_end_s)
+        ms = (sp_t >= t0) & (sp_t <= t1)
+        mt = (tq_t >= t0 - p.torque_margin_s) & (tq_t <= t1 + p.torque_margin_s)
+        pre = sp_t[ms] < ev.t_cross_s - p.anchor_end_s
+        if int(ms.sum()) < p.min_samples or int(pre.sum()) < 2 or int(mt.sum()) < 3:
+            skipped.append({"index": ev.index, "reason": (
+                f"too few samples in the diagnosis window {t0:.3f}-{t1:.3f} s: {int(ms.sum())} speed, "
+                f"{int(pre.sum())} before the crossing, {int(mt.sum())} torque")})
+            continue
+        out.append(DiagEvent(
+            index=ev.index, kind=ev.kind.value, t_event=ev.t_cross_s, t_start=float(t0), t_end=float(t1),
+            speed_rpm=float(ev.motor_speed_rpm), torque_step_nm=float(ev.torque_after_nm - ev.torque_before_nm),
+            torque_t=tq_t[mt], torque_nm=tq_v[mt], speed_t=sp_t[ms], speed_meas=sp_v[ms],
+            var=noise.variance(slope[ms]), pre=pre,
+        ))
+    return out, noise, skipped

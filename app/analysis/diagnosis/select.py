@@ -1,0 +1,217 @@
+"""The diagnosis procedure: split, calibrate, fit candidates, greedy pairs, score, decide.
+
+:func:`run_diagnosis` is pure (data in, typed result out) and reports progress through a callback
+``progress(fraction, message)``. Order of work, and what sees which events::
+
+    split (frozen, seed + SHA-256)          all events
+    baseline fit (nuisance only)            calibration events
+    each candidate: joint fit               calibration events
+    scores, localisation                    held-out events (fitted values frozen)
+    greedy pairs: best single + partners    fit on calibration, scored on held-out
+    decision                                held-out scores only
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from app.analysis.diagnosis.calibrate import Bounds, FitResult, fit
+from app.analysis.diagnosis.decide import (
+    CandidateScore,
+    Decision,
+    DecisionRules,
+    bootstrap_draws,
+    decide,
+    score_candidate,
+)
+from app.analysis.diagnosis.forward import DiagEvent, Prediction, predict, vehicle_with, weighted_residual
+from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2, phase_times, uniform
+from app.analysis.diagnosis.noise import NoiseFloor
+from app.analysis.diagnosis.score import EventScore
+from app.analysis.diagnosis.split import Split, make_split
+from app.errors import InputError
+from sim import Vehicle
+from sim.effects import EFFECTS, get_effect
+
+FloatArray = npt.NDArray[np.float64]
+Progress = Callable[[float, str], None]
+
+
+@dataclass(frozen=True)
+class DiagnosisOptions:
+    candidates: tuple[str, ...] = tuple(EFFECTS)
+    seed: int = 0
+    model: str = "multibody"
+    max_pairs: int = 3  # partners tried with the best single effect
+    rules: DecisionRules = field(default_factory=DecisionRules)
+
+    def __post_init__(self) -> None:
+        unknown = [c for c in self.candidates if c not in EFFECTS]
+        if unknown:
+            raise InputError(f"unknown candidate effects {unknown}; known: {list(EFFECTS)}")
+        if len(set(self.candidates)) != len(self.candidates):
+            raise InputError(f"candidate effects repeat: {list(self.candidates)}")
+        if self.model not in ("multibody", "two_inertia"):
+            raise InputError(f"model {self.model!r}: must be 'multibody' or 'two_inertia'")
+
+
+@dataclass
+class Evaluation:
+    """A fitted model evaluated on events: per-event scores and predictions."""
+
+    fit: FitResult
+    scores: dict[int, EventScore]
+    predictions: dict[int, Prediction]
+
+    def chi2(self, indices: Sequence[int]) -> FloatArray:
+        return np.array([self.scores[i].chi2 for i in indices], dtype=np.float64)
+
+
+@dataclass
+class DiagnosisResult:
+    """Everything the report and the plots need (see :mod:`.report` for the JSON form)."""
+
+    options: DiagnosisOptions
+    vehicle_name: str
+    split: Split
+    noise: NoiseFloor
+    events: list[DiagEvent]
+    skipped: list[dict[str, object]]
+    baseline: Evaluation | None
+    candidates: dict[str, Evaluation]
+    singles: list[CandidateScore]
+    pairs: list[CandidateScore]
+    phases: dict[int, PhaseTimes]
+    decision: Decision
+    draws: npt.NDArray[np.int64] | None
+    elapsed_s: float
+    fit_order: list[str] = field(default_factory=list)  # every fit, in order, with the events it used
+
+    def heldout(self) -> list[int]:
+        return list(self.split.heldout)
+
+
+def evaluate(base: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], model: str,
+             phases: dict[int, PhaseTimes] | None, period: float) -> Evaluation:
+    """Predictions and scores of a fitted model on ``events`` (no parameter changes)."""
+    veh = vehicle_with(base, fitted.nuisance, fitted.settings)
+    scores: dict[int, EventScore] = {}
+    preds: dict[int, Prediction] = {}
+    for ev in events:
+        pred = predict(ev, veh, fitted.nuisance, fitted.settings, model)
+        r = weighted_residual(ev, pred)
+        ph = phases[ev.index] if phases and ev.index in phases else phase_times(ev, pred)
+        chi, cnt = phase_chi2(r, ph.labels(ev.speed_t))
+        raw = ev.speed_meas - pred.speed
+        _, ru = uniform(ev, raw, period)
+        scores[ev.index] = EventScore(ev.index, float(r @ r), ev.n, float(raw @ raw), chi, cnt, band_energy(ru, period))
+        preds[ev.index] = pred
+    return Evaluation(fitted, scores, preds)
+
+
+def _merge_start(base: FitResult, *parts: FitResult) -> FitResult:
+    values: dict[str, dict[str, float]] = {}
+    for p in parts:
+        values.update(p.values)
+    return FitResult((), base.nuisance, values, 0.0, 0, 0)
+
+
+def run_diagnosis(
+    events: Sequence[DiagEvent],
+    noise: NoiseFloor,
+    vehicle: Vehicle,
+    options: DiagnosisOptions | None = None,
+    progress: Progress | None = None,
+    skipped: Sequence[dict[str, object]] = (),
+) -> DiagnosisResult:
+    """Diagnose the sim-to-real gap of one log.
+
+    Parameters
+    ----------
+    events : prepared event data (:func:`.prepare.prepare`).
+    noise : model-free noise floor of the speed channel.
+    vehicle : the diagnosed vehicle (its effects as the file says).
+    options : candidate subset, split seed, model, decision rules.
+    progress : ``progress(fraction in [0, 1], message)``.
+    skipped : events left out upstream, reported as such.
+    """
+    opts = options or DiagnosisOptions()
+    say = progress or (lambda f, m: None)
+    t_start = time.perf_counter()
+    split = make_split(events, opts.seed)
+    cal = split.calibration_events(events)
+    ho = split.heldout_events(events)
+    ho_idx = [e.index for e in ho]
+    rules = opts.rules
+    period = noise.period_s
+
+    def result(decision: Decision, **kw: object) -> DiagnosisResult:
+        base_kw: dict[str, object] = {"baseline": None, "candidates": {}, "singles": [], "pairs": [], "phases": {},
+                                      "draws": None, "fit_order": []}
+        base_kw.update(kw)
+        return DiagnosisResult(opts, vehicle.name, split, noise, list(events), list(skipped), decision=decision,
+                               elapsed_s=time.perf_counter() - t_start, **base_kw)  # type: ignore[arg-type]
+
+    if min(len(cal), len(ho)) < rules.min_events_per_side:
+        reason = (f"{len(events)} usable events ({len(cal)} calibration, {len(ho)} held-out); at least "
+                  f"{2 * rules.min_events_per_side} are needed, {rules.min_events_per_side} on each side")
+        if skipped:
+            reason += f"; {len(skipped)} events were left out (see events_skipped)"
+        return result(Decision("insufficient_data", reason=reason))
+
+    n_steps = 2 + len(opts.candidates) + min(opts.max_pairs, max(len(opts.candidates) - 1, 0))
+    step = [0]
+
+    def tick(msg: str) -> None:
+        step[0] += 1
+        say(min(step[0] / n_steps, 0.99), msg)
+
+    bounds = Bounds.for_period(period)
+    fit_order: list[str] = []
+    say(0.0, f"baseline calibration on {len(cal)} events (held out: {len(ho)})")
+    base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
+    fit_order.append(f"baseline: {[e.index for e in cal]}")
+    base_eval = evaluate(vehicle, base_fit, events, opts.model, None, period)
+    phases = {ev.index: phase_times(ev, base_eval.predictions[ev.index]) for ev in events}
+    base_eval = evaluate(vehicle, base_fit, events, opts.model, phases, period)
+    tick("baseline calibrated")
+
+    draws = bootstrap_draws(len(ho), rules, opts.seed + 1)
+    b = base_eval.chi2(ho_idx)
+    n = np.array([base_eval.scores[i].n for i in ho_idx], dtype=np.float64)
+    evals: dict[str, Evaluation] = {}
+    singles: list[CandidateScore] = []
+    for cid in opts.candidates:
+        say(step[0] / n_steps, f"fitting {cid}")
+        f = fit(vehicle, cal, split, (get_effect(cid),), bounds=bounds, model=opts.model, start=base_fit,
+                seed=opts.seed)
+        fit_order.append(f"{cid}: {[e.index for e in cal]}")
+        evals[cid] = evaluate(vehicle, f, ho, opts.model, phases, period)
+        singles.append(score_candidate(cid, (cid,), b, evals[cid].chi2(ho_idx), n, draws, rules))
+        tick(f"{cid}: held-out shrink {100 * singles[-1].shrink.value:.0f} %")
+
+    pairs: list[CandidateScore] = []
+    ranked = sorted(singles, key=lambda c: float(c.chi2.sum()))
+    if ranked and ranked[0].explained.value < rules.explained_share and len(ranked) > 1:
+        first = ranked[0].id
+        # partners ranked by their calibration fit, so the choice does not peek at held-out data
+        partners = sorted((c for c in opts.candidates if c != first), key=lambda c: evals[c].fit.chi2)
+        for second in partners[:opts.max_pairs]:
+            say(step[0] / n_steps, f"fitting {first} + {second}")
+            pid = f"{first}+{second}"
+            f = fit(vehicle, cal, split, (get_effect(first), get_effect(second)), bounds=bounds, model=opts.model,
+                    start=_merge_start(evals[first].fit, evals[first].fit, evals[second].fit), seed=opts.seed)
+            fit_order.append(f"{pid}: {[e.index for e in cal]}")
+            evals[pid] = evaluate(vehicle, f, ho, opts.model, phases, period)
+            pairs.append(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules))
+            tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
+
+    decision = decide(b, n, singles, pairs, draws, rules, len(cal))
+    say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
+    return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
+                  draws=draws, fit_order=fit_order)

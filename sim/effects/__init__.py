@@ -1,0 +1,51 @@
+"""Library of candidate unmodelled effects, one module each (see :mod:`sim.effects.base`).
+
+``EFFECTS`` maps an effect id to its :class:`~sim.effects.base.Effect`; :func:`get_effect` raises
+an error that lists the known ids. :func:`apply_effects` returns a vehicle with effect values set,
+which is how a diagnosed effect becomes a new vehicle version.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from sim.effects import backlash, drag, housing_mount, speed_sensor, torque_lag
+from sim.effects.base import Effect, ParamSpec
+from sim.errors import ParameterError
+
+EFFECTS: dict[str, Effect] = {
+    e.id: e
+    for e in (
+        backlash.EFFECT,
+        housing_mount.EFFECT,
+        torque_lag.EFFECT,
+        speed_sensor.EFFECT,
+        drag.EFFECT,
+    )
+}
+
+
+def get_effect(effect_id: str) -> Effect:
+    try:
+        return EFFECTS[effect_id]
+    except KeyError:
+        raise ParameterError("effect", effect_id, f"unknown effect; known: {', '.join(EFFECTS)}") from None
+
+
+def apply_effects(vehicle: Any, settings: Mapping[str, Mapping[str, float]]) -> Any:
+    """``vehicle`` with each effect's parameter values applied (``{effect_id: {param: value}}``).
+
+    Effects that act on the input or output only cannot be stored in a vehicle and raise
+    :class:`~sim.errors.ParameterError`.
+    """
+    v = vehicle
+    for eid, values in settings.items():
+        eff = get_effect(eid)
+        if eff.vehicle_change is None:
+            raise ParameterError(f"effects.{eid}", dict(values), "acts outside the vehicle; cannot be stored in it")
+        v = eff.vehicle_change(v, eff.values(values))
+    return v
+
+
+__all__ = ["EFFECTS", "Effect", "ParamSpec", "apply_effects", "get_effect"]

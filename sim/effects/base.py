@@ -1,0 +1,171 @@
+"""What an unmodelled effect is: a small, bounded, parametric extension of the driveline model.
+
+An :class:`Effect` has at most three parameters (:class:`ParamSpec`, each with physical bounds and
+an ``off`` value at which the effect vanishes) and acts in up to three places:
+
+``vehicle``
+    parameter changes through the model's own fields (``Vehicle.with_changes``), e.g. lash sizes;
+``input``
+    a transform of the torque input before it reaches the model, e.g. an actuator lag;
+``output``
+    a transform of the simulated motor speed before it is compared, e.g. sensor filtering.
+
+Input and output transforms work on a uniform fine grid (``dt`` seconds, 1 ms by default) so that
+sub-sample delays and lags are represented; the caller feeds the transformed input to the
+simulator with linear interpolation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from sim.errors import ParameterError
+
+FloatArray = npt.NDArray[np.float64]
+Values = Mapping[str, float]
+VehicleChange = Callable[[Any, Values], Any]
+InputTransform = Callable[[FloatArray, FloatArray, Values], FloatArray]
+OutputTransform = Callable[[FloatArray, FloatArray, Values], FloatArray]
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One effect parameter.
+
+    Attributes
+    ----------
+    name : identifier, unique within the effect.
+    unit : SI unit of the value.
+    lo, hi : physical prior bounds (inclusive).
+    off : value at which the effect vanishes (inside ``[lo, hi]``).
+    doc : one line saying what it is.
+    """
+
+    name: str
+    unit: str
+    lo: float
+    hi: float
+    off: float
+    doc: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.lo < self.hi:
+            raise ParameterError(self.name, (self.lo, self.hi), "prior bounds must satisfy lo < hi")
+        if not self.lo <= self.off <= self.hi:
+            raise ParameterError(self.name, self.off, f"'off' value must lie in [{self.lo}, {self.hi}]")
+
+    def check(self, value: float) -> float:
+        v = float(value)
+        if not np.isfinite(v) or v < self.lo - 1e-12 or v > self.hi + 1e-12:
+            raise ParameterError(self.name, value, f"outside its prior range [{self.lo}, {self.hi}] {self.unit}")
+        return min(max(v, self.lo), self.hi)
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A candidate effect.
+
+    Attributes
+    ----------
+    id : stable identifier used in reports (``torque_lag``, ``speed_sensor``...).
+    title : human-readable name.
+    params : parameter specs (at most three).
+    vehicle_change : ``f(vehicle, values) -> vehicle`` or None.
+    input_transform : ``f(t_fine, torque_fine, values) -> torque_fine`` or None.
+    output_transform : ``f(t_fine, speed_fine, values) -> speed_fine`` or None.
+    model : simulator model the effect needs (``"multibody"`` or ``"any"``).
+    """
+
+    id: str
+    title: str
+    params: tuple[ParamSpec, ...]
+    vehicle_change: VehicleChange | None = None
+    input_transform: InputTransform | None = None
+    output_transform: OutputTransform | None = None
+    model: str = "any"
+    notes: str = ""
+    _names: tuple[str, ...] = field(init=False, repr=False, default=())
+
+    def __post_init__(self) -> None:
+        if len(self.params) > 3:
+            raise ParameterError(self.id, len(self.params), "an effect has at most three parameters")
+        object.__setattr__(self, "_names", tuple(p.name for p in self.params))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self._names
+
+    def off_values(self) -> dict[str, float]:
+        return {p.name: p.off for p in self.params}
+
+    def values(self, x: Sequence[float] | Values) -> dict[str, float]:
+        """Checked parameter values from a sequence in ``params`` order or a mapping by name."""
+        if isinstance(x, Mapping):
+            unknown = set(x) - set(self.names)
+            if unknown:
+                raise ParameterError(self.id, sorted(unknown), f"unknown parameters; known: {list(self.names)}")
+            return {p.name: p.check(x.get(p.name, p.off)) for p in self.params}
+        seq = list(x)
+        if len(seq) != len(self.params):
+            raise ParameterError(self.id, seq, f"expects {len(self.params)} values {list(self.names)}")
+        return {p.name: p.check(v) for p, v in zip(self.params, seq, strict=True)}
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "title": self.title,
+            "model": self.model,
+            "acts_on": [k for k, f in (("vehicle", self.vehicle_change), ("input", self.input_transform),
+                                       ("output", self.output_transform)) if f is not None],
+            "params": [{"name": p.name, "unit": p.unit, "lo": p.lo, "hi": p.hi, "off": p.off, "doc": p.doc}
+                       for p in self.params],
+            "notes": self.notes,
+        }
+
+
+def shift(t: FloatArray, y: FloatArray, delay_s: float) -> FloatArray:
+    """``y(t - delay)`` on the grid ``t``, holding the first value before the start."""
+    if delay_s == 0.0:
+        return y
+    return np.asarray(np.interp(t - delay_s, t, y), dtype=np.float64)
+
+
+def first_order(t: FloatArray, y: FloatArray, tau_s: float) -> FloatArray:
+    """First-order lag ``tau x' = y - x`` on a uniform grid, starting in steady state.
+
+    Uses the exact discretisation for a input held over each step; a time constant below a tenth of
+    the step is treated as no lag.
+    """
+    if y.size < 2:
+        return y
+    dt = float(t[1] - t[0])
+    if tau_s <= 0.1 * dt:
+        return y
+    from scipy.signal import lfilter  # local: keeps ``import sim`` light
+
+    a = float(np.exp(-dt / tau_s))
+    out, _ = lfilter([1.0 - a], [1.0, -a], y, zi=[a * y[0]])
+    return np.asarray(out, dtype=np.float64)
+
+
+def moving_average(t: FloatArray, y: FloatArray, window_s: float) -> FloatArray:
+    """Mean of ``y`` over the trailing window ``[t - window, t]`` (fractional windows allowed).
+
+    This is what an inverter reports when it computes speed as an angle difference over a window.
+    """
+    if y.size < 2:
+        return y
+    dt = float(t[1] - t[0])
+    if window_s <= 0.5 * dt:
+        return y
+    cum = np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))))
+    # before the start the signal is taken as steady at its first value
+    t0 = float(t[0])
+    back = t - window_s
+    cum_back = np.where(back >= t0, np.interp(back, t, cum), (back - t0) * y[0])
+    return np.asarray((cum - cum_back) / window_s, dtype=np.float64)
