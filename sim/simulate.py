@@ -1,0 +1,213 @@
+"""``simulate()``: measured torque in, resolver speed, coupling torques and gap states out."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from sim.errors import InputSignalError, InstabilityError, ParameterError
+from sim.inputs import TorqueInput, prepare_input
+from sim.integrate import STATUS_NONFINITE, STATUS_OK, run_chain
+from sim.model import ChainModel, build_chain, max_rate, quasi_static_state
+from sim.params import GAP_NAMES, Vehicle
+from sim.sensor import delay_sample_quantize
+from sim.two_inertia import pack, project, quasi_static, run_two_inertia
+from sim.whatif import WhatIf
+
+F64 = NDArray[np.float64]
+RPM = 30.0 / math.pi  # rad/s -> rpm
+STEP_SAFETY = 0.3  # fraction of the explicit stability limit 2/|lambda|max
+MAX_EVENTS = 20000
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """Simulation output on a uniform grid (``output_dt``).
+
+    Attributes
+    ----------
+    t : (n,) s
+    motor_speed_rpm : (n,) as the resolver reports it (rotor relative to housing, after the
+        optional speed-sensor effect)
+    rotor_speed_rpm, wheel_speed_rpm, vehicle_speed_kmh : (n,) absolute
+    airgap_torque_nm : (n,) torque acting on the rotor (after the optional torque lag)
+    coupling_torques : name -> (n,) N m at the driven member (gear pairs: the large gear;
+        half-shafts: per shaft; ``mount``: housing roll reaction)
+    gap_open : gap name -> (n,) bool, the gap's dead zone is open (no contact)
+    gap_events : (gap, t_open, t_close) at integrator-step resolution; t_close is nan if open at the end
+    dt : integrator step (s); input_gaps : spans of missing torque samples
+    """
+
+    t: F64
+    motor_speed_rpm: F64
+    rotor_speed_rpm: F64
+    wheel_speed_rpm: F64
+    vehicle_speed_kmh: F64
+    airgap_torque_nm: F64
+    coupling_torques: dict[str, F64]
+    gap_open: dict[str, NDArray[np.bool_]]
+    gap_events: list[tuple[str, float, float]]
+    model: str
+    dt: float
+    input_gaps: tuple[tuple[float, float], ...] = ()
+    body_speeds_rpm: dict[str, F64] = field(default_factory=dict)
+
+
+def choose_step(chain: ChainModel, output_dt: float, dt: float | None = None) -> tuple[float, int]:
+    """Integrator step (s) dividing ``output_dt`` and steps per output sample."""
+    if output_dt <= 0 or not math.isfinite(output_dt):
+        raise ParameterError("output_dt", output_dt, "must be a positive number of seconds")
+    dt_max = dt if dt is not None else STEP_SAFETY * 2.0 / max_rate(chain)
+    if dt_max <= 0 or not math.isfinite(dt_max):
+        raise ParameterError("dt", dt_max, "must be a positive number of seconds")
+    sub = max(1, math.ceil(output_dt / dt_max - 1e-9))
+    return output_dt / sub, sub
+
+
+def initial_speed(vehicle: Vehicle, speed0_rpm: float | None) -> float:
+    """Initial motor speed (rad/s): given rpm, else the file's vehicle speed through ratio and radius."""
+    if speed0_rpm is not None:
+        if not math.isfinite(speed0_rpm):
+            raise ParameterError("speed0_rpm", speed0_rpm, "must be finite")
+        return speed0_rpm / RPM
+    return vehicle.body.speed_kmh / 3.6 / vehicle.wheel.radius * vehicle.ratio
+
+
+def _grid(inp: TorqueInput, output_dt: float) -> tuple[float, int]:
+    t0 = float(inp.t[0])
+    n_out = math.floor((float(inp.t[-1]) - t0) / output_dt + 1e-9) + 1
+    if n_out < 2:
+        raise InputSignalError(f"input spans {inp.t[-1] - t0:.6g} s, shorter than output_dt = {output_dt} s")
+    return t0, n_out
+
+
+def simulate(
+    vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLike, *,
+    model: Literal["multibody", "two_inertia"] = "multibody", speed0_rpm: float | None = None,
+    interp: Literal["hold", "linear"] = "hold", dt: float | None = None, output_dt: float = 0.001,
+    what_if: WhatIf | None = None,
+) -> SimResult:
+    """Simulate the driveline under measured motor torque.
+
+    Parameters
+    ----------
+    vehicle : the driveline description
+    t_s, torque_nm : (n,) torque samples at irregular, strictly increasing times (s, N m)
+    model : "multibody" (five gaps, housing, segmented half-shafts) or "two_inertia" (eqs. 1-6)
+    speed0_rpm : motor speed at ``t_s[0]``; None -> from ``vehicle.body.speed_kmh``
+    interp : "hold" or "linear" between torque samples
+    dt : integrator step (s); None -> chosen from the highest mode of the linearised system
+    output_dt : output grid spacing (s); the step divides it exactly
+    what_if : optional changes applied to vehicle and torque first
+
+    Raises
+    ------
+    InputSignalError, ParameterError, InstabilityError
+    """
+    inp = prepare_input(t_s, torque_nm, interp)
+    if what_if is not None:
+        vehicle = what_if.apply_vehicle(vehicle)
+        t_new, q_new, resampled = what_if.apply_torque(inp.t, inp.torque)
+        inp = TorqueInput(t_new, q_new, inp.linear or resampled, inp.gaps)
+    w0 = initial_speed(vehicle, speed0_rpm)
+    if model == "two_inertia":
+        return _simulate_two_inertia(vehicle, inp, w0, dt, output_dt)
+    if model != "multibody":
+        raise ParameterError("model", model, "must be 'multibody' or 'two_inertia'")
+    chain = build_chain(vehicle)
+    step, sub = choose_step(chain, output_dt, dt)
+    t0, n_out = _grid(inp, output_dt)
+    theta0, omega0 = quasi_static_state(chain, float(inp.torque[0]), w0)
+    nb, nc = chain.n_bodies, chain.n_couplings
+    out_res, out_sens, out_torque = np.zeros(n_out), np.zeros(n_out), np.zeros(n_out)
+    out_omega, out_tau = np.zeros((n_out, nb)), np.zeros((n_out, nc))
+    out_open = np.zeros((n_out, nc), dtype=np.bool_)
+    ev_gap = np.zeros(MAX_EVENTS, dtype=np.int64)
+    ev_t = np.zeros(MAX_EVENTS)
+    ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
+    eff = vehicle.effects
+    lag = np.array([eff.torque_lag.delay_s, eff.torque_lag.tau_s])
+    limit = 20.0 * abs(w0) + 5000.0
+    status, t_fail, n_ev = run_chain(
+        chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf,
+        chain.rotor, chain.housing, chain.wheel, chain.road, chain.rotor_drag, lag, eff.speed_sensor.tau_s,
+        inp.t, inp.torque, inp.linear, t0, step, n_out, sub, theta0, omega0, limit,
+        out_res, out_sens, out_torque, out_omega, out_tau, out_open, ev_gap, ev_t, ev_kind,
+    )
+    _raise_status(status, t_fail, step)
+    t = np.asarray(t0 + np.arange(n_out) * output_dt, dtype=np.float64)
+    sens = eff.speed_sensor
+    speed = delay_sample_quantize(t, out_sens * RPM, sens.delay_s, sens.sample_s, sens.resolution_rpm)
+    torques = {name: out_tau[:, j] * chain.creport[j] for j, name in enumerate(chain.coupling_names)}
+    n_hs = vehicle.halfshaft.count
+    for name in torques:
+        if name.startswith("halfshaft"):
+            torques[name] = torques[name] / n_hs
+    gap_open = {g: out_open[:, chain.gap_coupling[g]].copy() for g in GAP_NAMES}
+    opened = {chain.gap_coupling[g]: bool(out_open[0, chain.gap_coupling[g]]) for g in GAP_NAMES}
+    events = _pair_events(
+        [(GAP_NAMES[int(ev_gap[k])], float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)],
+        {GAP_NAMES[j]: o for j, o in opened.items()}, t0,
+    )
+    w_wheel = out_omega[:, chain.wheel]
+    return SimResult(
+        t=t, motor_speed_rpm=speed, rotor_speed_rpm=out_omega[:, chain.rotor] * RPM,
+        wheel_speed_rpm=w_wheel * RPM, vehicle_speed_kmh=w_wheel * vehicle.wheel.radius * 3.6,
+        airgap_torque_nm=out_torque, coupling_torques=torques, gap_open=gap_open, gap_events=events,
+        model="multibody", dt=step, input_gaps=inp.gaps,
+        body_speeds_rpm={name: out_omega[:, b] * RPM for b, name in enumerate(chain.body_names)},
+    )
+
+
+def _raise_status(status: int, t_fail: float, step: float) -> None:
+    if status == STATUS_OK:
+        return
+    what = "non-finite state" if status == STATUS_NONFINITE else "diverging speed"
+    raise InstabilityError(f"{what} at t = {t_fail:.6f} s with step dt = {step:.3g} s; reduce dt or check "
+                           "stiffness/inertia values")
+
+
+def _pair_events(
+    raw: list[tuple[str, float, int]], open0: dict[str, bool], t0: float
+) -> list[tuple[str, float, float]]:
+    """(gap, t, 1=open/0=close) transitions -> (gap, t_open, t_close) intervals, sorted by t_open."""
+    pending = {g: t0 for g, o in open0.items() if o}
+    out: list[tuple[str, float, float]] = []
+    for gap, t, kind in raw:
+        if kind == 1:
+            pending[gap] = t
+        elif gap in pending:
+            out.append((gap, pending.pop(gap), t))
+    out.extend((g, t, math.nan) for g, t in pending.items())
+    return sorted(out, key=lambda e: e[1])
+
+
+def _simulate_two_inertia(vehicle: Vehicle, inp: TorqueInput, w0: float, dt: float | None,
+                          output_dt: float) -> SimResult:
+    p = project(vehicle)
+    arr, road = pack(p)
+    dt_max = dt if dt is not None else STEP_SAFETY * 2.0 / p.max_rate()
+    sub = max(1, math.ceil(output_dt / dt_max - 1e-9))
+    step = output_dt / sub
+    t0, n_out = _grid(inp, output_dt)
+    state0 = quasi_static(p, float(inp.torque[0]), w0)
+    out = np.zeros((n_out, 5))
+    ev_t = np.zeros(MAX_EVENTS)
+    ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
+    status, t_fail, n_ev = run_two_inertia(arr, road, inp.t, inp.torque, inp.linear, t0, step, n_out, sub, state0,
+                                           20.0 * abs(w0) + 5000.0, out, ev_t, ev_kind)
+    _raise_status(status, t_fail, step)
+    t = np.asarray(t0 + np.arange(n_out) * output_dt, dtype=np.float64)
+    is_open = out[:, 3] > 0.5
+    events = _pair_events([("lumped", float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)],
+                          {"lumped": bool(is_open[0])}, t0)
+    return SimResult(
+        t=t, motor_speed_rpm=out[:, 0] * RPM, rotor_speed_rpm=out[:, 0] * RPM, wheel_speed_rpm=out[:, 1] * RPM,
+        vehicle_speed_kmh=out[:, 1] * vehicle.wheel.radius * 3.6, airgap_torque_nm=out[:, 4],
+        coupling_torques={"halfshaft": out[:, 2]}, gap_open={"lumped": is_open}, gap_events=events,
+        model="two_inertia", dt=step, input_gaps=inp.gaps,
+    )

@@ -1,0 +1,166 @@
+"""The paper's two-inertia model (Section 2.1, eqs. 1-6) with the gap-state backlash law.
+
+Equations (per driven wheel; ``n`` equal half-shafts)::
+
+    Jm th_m'' + bm th_m' = Tm - (n / i) Ths                              (1)
+    Ths = khs th_s + chs th_s'                                           (2)
+    th_s = th_d - th_b,   th_d = th_m / i - th_w                         (3, 4)
+    th_b' = max(0, th_d' + khs/chs (th_d - th_b))   if th_b <= -alpha     (5)
+            th_d' + khs/chs (th_d - th_b)            if |th_b| < alpha
+            min(0, th_d' + khs/chs (th_d - th_b))   if th_b >= +alpha
+    Jw th_w'' + bw th_w' = Ths - Thb - Tbx                               (6)
+
+Inside the gap ``th_s`` relaxes with ``th_s' = -(khs/chs) th_s`` so ``Ths == 0`` exactly. The
+extracted paper text loses the minus sign in (5); the form above is Nordin's and the only
+one that keeps ``th_b`` in ``[-alpha, alpha]``. After each explicit step ``th_b`` is
+projected back onto ``[-alpha, alpha]``; the contact tests are ``<=``/``>=`` on the projected
+value, never float equality on an unprojected one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from sim.integrate import STATUS_DIVERGED, STATUS_NONFINITE, STATUS_OK, input_at, road_torque
+from sim.model import ChainModel, build_chain
+from sim.params import Vehicle
+
+
+@dataclass(frozen=True)
+class TwoInertiaParams:
+    """Parameters of eqs. 1-6 (SI units; half-shaft values per shaft, wheel values per wheel)."""
+
+    jm: float  # kg m^2, motor plus reducer referred to the motor
+    bm: float  # N m s/rad
+    ratio: float  # i, motor / wheel speed
+    khs: float  # N m/rad per half-shaft (whole-driveline compliance in series)
+    chs: float  # N m s/rad per half-shaft, > 0 (the gap law divides by it)
+    alpha: float  # rad, half of the total clearance 2 alpha, in half-shaft angle
+    jw: float  # kg m^2 per wheel, I_w + M R^2 / 2
+    bw: float = 0.0  # N m s/rad per wheel
+    n_shafts: int = 2
+    road: tuple[float, ...] = (0.3, 0.0, 0.0, 0.0, 0.0, 0.0)  # as ChainModel.road, whole vehicle
+
+    def max_rate(self) -> float:
+        """Largest rate (1/s) of the contact-mode linear system and of the gap relaxation khs/chs."""
+        k_m = self.n_shafts * self.khs / self.ratio**2
+        w2 = k_m / self.jm + self.khs / self.jw
+        return max(math.sqrt(w2), self.khs / self.chs)
+
+
+def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaParams:
+    """Reduce the multibody vehicle to eqs. 1-6.
+
+    Reducer inertias are referred to the motor (paper: "equivalent to the motor inertia"), half
+    of the half-shaft inertia to each end, all coupling compliances added in series and
+    referred to the half-shaft, and all five clearances summed in half-shaft angle.
+    """
+    m = chain or build_chain(vehicle)
+    i = vehicle.ratio
+    n = vehicle.halfshaft.count
+    wheel_own = n * vehicle.wheel.inertia + vehicle.body.mass * vehicle.wheel.radius**2
+    jw_total = float(m.inertia[m.wheel])
+    jm = float(sum(m.inertia[b] * m.speed_ratio[b] ** 2 for b in range(m.n_bodies) if b not in (m.wheel, m.housing)))
+    # half-shaft interior nodes count half to each side in this reduction
+    extra = jw_total - wheel_own
+    compliance = 0.0
+    damp_compliance = 0.0
+    alpha_w = 0.0
+    for j in range(m.n_couplings):
+        if m.ca[j] == m.housing:
+            continue
+        to_wheel = i * m.speed_ratio[m.ca[j]]  # a-angle per wheel angle
+        compliance += 1.0 / (m.ck[j] * to_wheel**2)
+        damp_compliance += 1.0 / max(m.cc[j] * to_wheel**2, 1e-12)
+        alpha_w += m.chalf[j] / to_wheel
+    return TwoInertiaParams(
+        jm=jm, bm=float(m.rotor_drag[0]), ratio=i,
+        khs=1.0 / compliance / n, chs=1.0 / damp_compliance / n, alpha=alpha_w,
+        jw=(wheel_own + extra) / n, n_shafts=n, road=tuple(float(x) for x in m.road),
+    )
+
+
+@njit(cache=True)
+def run_two_inertia(
+    p: np.ndarray, road: np.ndarray, tin: np.ndarray, tq: np.ndarray, linear: bool,
+    t0: float, dt: float, n_out: int, sub: int, state0: np.ndarray, speed_limit: float,
+    out: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray,
+) -> tuple[int, float, int]:
+    """Integrate eqs. 1-6. ``p = [jm, bm, i, khs, chs, alpha, jw, bw, n]``; ``state0 = [th_m, w_m, th_w, w_w, th_b]``.
+
+    ``out[k] = [w_m, w_w, Ths, gap_open, Tm]`` at ``t0 + k*sub*dt``. Returns ``(status, t, n_events)``.
+    """
+    jm, bm, ratio, khs, chs, alpha, jw, bw, n = p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7], p[8]
+    th_m, w_m, th_w, w_w, th_b = state0[0], state0[1], state0[2], state0[3], state0[4]
+    k_in = 0
+    n_ev = 0
+    t = t0
+    tm, k_in = input_at(tin, tq, linear, t, k_in)
+    th_d = th_m / ratio - th_w
+    ths = khs * (th_d - th_b) if (th_b >= alpha or th_b <= -alpha) else 0.0
+    was_open = alpha > 0.0 and -alpha < th_b < alpha
+    for k in range(n_out):
+        if k > 0:
+            for _ in range(sub):
+                tm, k_in = input_at(tin, tq, linear, t, k_in)
+                th_d = th_m / ratio - th_w
+                w_d = w_m / ratio - w_w
+                drive = w_d + khs / chs * (th_d - th_b)
+                if alpha <= 0.0:
+                    w_b = 0.0
+                elif th_b <= -alpha:
+                    w_b = max(0.0, drive)
+                elif th_b >= alpha:
+                    w_b = min(0.0, drive)
+                else:
+                    w_b = drive
+                ths = khs * (th_d - th_b) + chs * (w_d - w_b)
+                a_m = (tm - bm * w_m - n / ratio * ths) / jm
+                a_w = (ths - bw * w_w - road_torque(road, w_w) / n) / jw
+                w_m += dt * a_m
+                w_w += dt * a_w
+                th_m += dt * w_m
+                th_w += dt * w_w
+                th_b = min(alpha, max(-alpha, th_b + dt * w_b))  # projection onto the gap
+                now_open = alpha > 0.0 and -alpha < th_b < alpha
+                if now_open != was_open:
+                    was_open = now_open
+                    if n_ev < ev_t.size:
+                        ev_t[n_ev] = t
+                        ev_kind[n_ev] = 1 if now_open else 0
+                        n_ev += 1
+                t += dt
+            if not (math.isfinite(w_m) and math.isfinite(w_w) and math.isfinite(th_b)):
+                return STATUS_NONFINITE, t, n_ev
+            if abs(w_m) > speed_limit:
+                return STATUS_DIVERGED, t, n_ev
+        out[k, 0] = w_m
+        out[k, 1] = w_w
+        out[k, 2] = ths
+        out[k, 3] = 1.0 if was_open else 0.0
+        out[k, 4] = tm
+    return STATUS_OK, t, n_ev
+
+
+def pack(p: TwoInertiaParams) -> tuple[np.ndarray, np.ndarray]:
+    arr = np.array([p.jm, p.bm, p.ratio, p.khs, p.chs, p.alpha, p.jw, p.bw, float(p.n_shafts)])
+    return arr, np.asarray(p.road, dtype=np.float64)
+
+
+def quasi_static(p: TwoInertiaParams, torque: float, omega_m: float) -> np.ndarray:
+    """``[th_m, w_m, th_w, w_w, th_b]`` uniformly accelerating, gap closed on the loaded flank."""
+    w_w = omega_m / p.ratio
+    road = road_torque(np.asarray(p.road, dtype=np.float64), w_w)
+    j_eq = p.jm + p.n_shafts * p.jw / p.ratio**2
+    acc_m = (torque - p.bm * omega_m - (road + p.n_shafts * p.bw * w_w) / p.ratio) / j_eq
+    ths = (torque - p.bm * omega_m - p.jm * acc_m) * p.ratio / p.n_shafts
+    th_b = float(np.sign(ths)) * p.alpha
+    th_d = th_b + ths / p.khs
+    return np.array([th_d * p.ratio, omega_m, 0.0, w_w, th_b])
+
+
+__all__ = ["STATUS_DIVERGED", "STATUS_NONFINITE", "STATUS_OK", "TwoInertiaParams", "project", "run_two_inertia"]

@@ -1,0 +1,107 @@
+"""Vehicle TOML files: load a preset or a path, parse text, write a vehicle back as TOML.
+
+Layout (see ``sim/presets/paper.toml`` for a documented example)::
+
+    name = "..."
+    [motor]        rotor_inertia, viscous_damping, max_power_kw
+    [reducer]      teeth = [z1, z2, z3, z4], shaft inertias, per-coupling stiffness/damping
+    [halfshaft]    stiffness, damping, inertia (per shaft), segments, count
+    [wheel]        inertia (per wheel, own), radius
+    [body]         mass, speed_kmh, rolling_resistance, drag_area, air_density, grade_percent, brake_torque
+    [housing]      enabled, inertia, mount_stiffness, mount_damping
+    [gaps.<name>]  nominal, min, max      (total clearance, rad, own shaft angle)
+    [effects.*]    optional effects, all off by default
+    [tolerances]   "section.field" = [min, max]
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from sim.errors import ParameterError
+from sim.params import Vehicle
+
+
+def preset_names() -> list[str]:
+    """Names of the TOML presets shipped in ``sim/presets``."""
+    root = resources.files("sim") / "presets"
+    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+
+
+def load_vehicle(name_or_path: str | Path) -> Vehicle:
+    """A preset by name (``"paper"``) or a TOML file path.
+
+    Raises
+    ------
+    ParameterError
+        Unknown preset/missing file (field ``vehicle``) or an invalid field (named with its value).
+    """
+    text: str
+    source = str(name_or_path)
+    if isinstance(name_or_path, str) and name_or_path in preset_names():
+        text = (resources.files("sim") / "presets" / f"{name_or_path}.toml").read_text(encoding="utf-8")
+    else:
+        path = Path(name_or_path)
+        if not path.is_file():
+            raise ParameterError("vehicle", source, f"neither a preset ({', '.join(preset_names())}) nor a file")
+        text = path.read_text(encoding="utf-8")
+    return load_vehicle_text(text, source=source)
+
+
+def load_vehicle_text(text: str, *, source: str = "<text>") -> Vehicle:
+    """Parse TOML (or JSON, if the text starts with ``{``) into a validated :class:`Vehicle`."""
+    try:
+        data = json.loads(text) if text.lstrip().startswith("{") else tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
+        raise ParameterError("vehicle", source, f"not valid TOML/JSON: {exc}") from exc
+    return Vehicle.from_dict(data)
+
+
+def dump_toml(vehicle: Vehicle) -> str:
+    """TOML text that :func:`load_vehicle_text` reads back to an equal vehicle."""
+    data = vehicle.to_dict()
+    lines: list[str] = []
+    for key, value in data.items():
+        if not isinstance(value, dict):
+            lines.append(f"{key} = {_value(value)}")
+    _tables(data, [], lines)
+    return "\n".join(lines) + "\n"
+
+
+def _tables(data: dict[str, Any], prefix: list[str], lines: list[str]) -> None:
+    for key, value in data.items():
+        if not isinstance(value, dict):
+            continue
+        path = [*prefix, key]
+        scalars = {k: v for k, v in value.items() if not isinstance(v, dict)}
+        if scalars or not value:
+            lines.append("")
+            lines.append(f"[{'.'.join(path)}]")
+            for k, v in scalars.items():
+                lines.append(f"{_key(k)} = {_value(v)}")
+        _tables(value, path, lines)
+
+
+def _key(k: str) -> str:
+    return k if k.replace("_", "").isalnum() else json.dumps(k)
+
+
+def _value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            raise ParameterError("vehicle", v, "cannot write a non-finite number")
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    raise ParameterError("vehicle", v, f"cannot write a {type(v).__name__} to TOML")

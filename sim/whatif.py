@@ -1,0 +1,91 @@
+"""What-if runs: scale or remove gaps, scale the torque, shape the torque near its zero crossing.
+
+A :class:`WhatIf` is applied by :func:`sim.simulate` (``what_if=``) to the vehicle and the
+torque input before the run, so a what-if result is an ordinary :class:`~sim.SimResult`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.errors import ParameterError
+from sim.params import GAP_NAMES, Vehicle
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class WhatIf:
+    """Changes for one what-if run.
+
+    Attributes
+    ----------
+    gap_scale : gap name -> factor on its nominal size (0 removes it); ``"all"`` scales all five
+    torque_scale : factor on the whole torque input
+    antijerk_rate : N m/s, rate limit on the torque while ``|T| < antijerk_band`` (0 = off)
+    antijerk_band : N m, half-width of the band around zero torque where the limit applies
+    changes : any other dotted vehicle field changes (``{"housing.enabled": False}``)
+    """
+
+    gap_scale: Mapping[str, float] = field(default_factory=dict)
+    torque_scale: float = 1.0
+    antijerk_rate: float = 0.0
+    antijerk_band: float = 20.0
+    changes: Mapping[str, object] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name, s in self.gap_scale.items():
+            if name != "all" and name not in GAP_NAMES:
+                raise ParameterError(f"what_if.gap_scale.{name}", s, f"unknown gap; known: {GAP_NAMES} or 'all'")
+            if not np.isfinite(s) or s < 0:
+                raise ParameterError(f"what_if.gap_scale.{name}", s, "must be a finite factor >= 0")
+        if not np.isfinite(self.torque_scale):
+            raise ParameterError("what_if.torque_scale", self.torque_scale, "must be finite")
+        if self.antijerk_rate < 0 or self.antijerk_band < 0:
+            raise ParameterError("what_if.antijerk_rate", self.antijerk_rate, "rate and band must be >= 0")
+
+    def apply_vehicle(self, v: Vehicle) -> Vehicle:
+        changes: dict[str, object] = dict(self.changes)
+        for name in GAP_NAMES:
+            s = self.gap_scale.get(name, 1.0) * self.gap_scale.get("all", 1.0)
+            if s != 1.0:
+                changes[f"gaps.{name}"] = getattr(v.gaps, name).nominal * s
+        return v.with_changes(changes) if changes else v
+
+    def apply_torque(self, t: F64, torque: F64) -> tuple[F64, F64, bool]:
+        """Scaled and (if asked) rate-limited torque. Returns ``(t, torque, resampled)``.
+
+        The rate limit needs a time base, so shaped torque is returned on a 1 ms grid (to be
+        interpolated linearly); unshaped torque keeps the original samples.
+        """
+        q = torque * self.torque_scale
+        if self.antijerk_rate <= 0:
+            return t, q, False
+        step = 1e-3
+        grid = np.arange(t[0], t[-1] + 0.5 * step, step)
+        x = np.interp(grid, t, q)
+        return grid, antijerk(grid, x, self.antijerk_rate, self.antijerk_band), True
+
+
+def antijerk(t: F64, torque: F64, rate: float, band: float, catchup: float = 5.0) -> F64:
+    """Anti-jerk shaping: limit ``|dT/dt|`` to ``rate`` (N m/s) while the torque is near zero.
+
+    The limit applies while the shaped torque is within ``band`` (N m) of zero or the request
+    lies on the other side of zero (a crossing). Outside the band the output returns to the
+    request at ``catchup * rate`` rather than jumping, so shaping never adds a step.
+    Uniform grid ``t`` (s), torque (N m), both (n,).
+    """
+    y = np.empty_like(torque)
+    y[0] = torque[0]
+    step = float(t[1] - t[0]) if t.size > 1 else 0.0
+    for k in range(1, torque.size):
+        prev = y[k - 1]
+        want = torque[k] - prev
+        crossing = abs(prev) < band or (prev > 0) != (torque[k] > 0)
+        dmax = rate * step * (1.0 if crossing else catchup)
+        y[k] = prev + min(max(want, -dmax), dmax)
+    return y
