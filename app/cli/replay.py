@@ -1,0 +1,136 @@
+"""``lashscope replay LOG --interface I --channel C [--rate R] [--loop] [--ids ...]``.
+
+Sends the frames of a log onto a CAN bus with their original timing (scaled by ``--rate``),
+shows progress, and on Ctrl-C stops cleanly and prints a summary (exit code 130).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+from collections.abc import Callable, Generator
+from pathlib import Path
+from types import FrameType
+
+from app.errors import InputError
+from app.ingest.frames import FrameChunk
+from app.live.bus import BusConfig, BusLink, supported_interfaces
+from app.live.replay import Replayer, ReplayStats, parse_ids
+
+
+def parse_options(pairs: list[str] | None) -> dict[str, object]:
+    """``["fd=true", "data_bitrate=2000000"]`` -> python-can keyword arguments."""
+    out: dict[str, object] = {}
+    for pair in pairs or []:
+        key, sep, raw = pair.partition("=")
+        if not sep or not key:
+            raise InputError(f"--option {pair!r}: write KEY=VALUE")
+        low = raw.lower()
+        value: object
+        if low in ("true", "false"):
+            value = low == "true"
+        else:
+            try:
+                value = int(raw, 0)
+            except ValueError:
+                try:
+                    value = float(raw)
+                except ValueError:
+                    value = raw
+        out[key.replace("-", "_")] = value
+    return out
+
+
+def add_bus_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--interface", "-i", required=True, metavar="NAME",
+                   help=f"python-can interface ({', '.join(supported_interfaces())})")
+    p.add_argument("--channel", "-c", default=None, help="bus channel, e.g. vcan0, PCAN_USBBUS1, 127.0.0.1:29536")
+    p.add_argument("--bitrate", type=int, default=None, help="bit rate for interfaces that set it (bit/s)")
+    p.add_argument("--option", "-o", action="append", metavar="KEY=VALUE",
+                   help="extra python-can interface argument (repeatable), e.g. -o fd=true")
+
+
+def bus_config(args: argparse.Namespace) -> BusConfig:
+    return BusConfig(args.interface, args.channel, args.bitrate, parse_options(args.option))
+
+
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = subparsers.add_parser(
+        "replay", help="replay a log onto a CAN bus with its original timing",
+        description="Send the frames of LOG onto a CAN bus at their original pace (scaled by --rate). "
+                    "Ctrl-C stops cleanly and prints a summary.")
+    p.add_argument("log", type=Path, help="log file (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4)")
+    add_bus_arguments(p)
+    p.add_argument("--rate", type=float, default=1.0, help="speed factor: 2 = twice as fast (default 1)")
+    p.add_argument("--loop", action="store_true", help="start again at the end until Ctrl-C")
+    p.add_argument("--ids", default=None, help="only these IDs, e.g. '0x108,0x118' (0x for hex, else decimal)")
+    p.add_argument("--log-channel", type=int, action="append", default=None,
+                   help="only frames from this channel of the log (0-based, repeatable)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=run)
+
+
+def _chunks(path: Path) -> Generator[FrameChunk, None, None]:
+    from app.ingest.readers import open_log
+
+    reader = open_log(path)
+    yield from reader.chunks()
+
+
+def _progress_printer(tty: bool) -> Callable[[ReplayStats], None]:
+    last_line = [0.0]
+
+    def show(st: ReplayStats) -> None:
+        line = (f"replay: {st.frames_sent:,} frames, log t = {st.log_time_s:8.2f} s, wall {st.wall_s:8.2f} s, "
+                f"pacing p99 {st.pacing.percentile_ms(99):.2f} ms, send failures {st.send_failures}")
+        if tty:
+            print("\r" + line, end="", file=sys.stderr, flush=True)
+        elif st.wall_s - last_line[0] >= 5.0:
+            print(line, file=sys.stderr, flush=True)
+            last_line[0] = st.wall_s
+
+    return show
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.log.is_file():
+        raise InputError(f"log file not found: {args.log}")
+    ids = parse_ids(args.ids)
+    # Read the first chunk before touching the bus: a corrupt or unsupported log fails fast.
+    probe = _chunks(args.log)
+    next(probe, None)
+    probe.close()
+    link = BusLink(bus_config(args))
+    link.open()
+    tty = sys.stderr.isatty()
+    show = _progress_printer(tty)
+    replayer = Replayer(link, lambda: _chunks(args.log), rate=args.rate, loop=args.loop, ids=ids,
+                        channels=args.log_channel, progress=show)
+
+    def on_sigint(signum: int, frame: FrameType | None) -> None:
+        replayer.stop()
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        stats = replayer.run()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        link.close()
+    if tty:
+        print(file=sys.stderr)
+    summary: dict[str, object] = dict(stats.summary())
+    summary["bus"] = link.cfg.describe()
+    summary["bus_reconnects"] = max(0, link.status.connects - 1)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        how = "stopped by Ctrl-C" if stats.stopped_early else "done"
+        print(f"replay {how}: {stats.frames_sent:,} frames sent onto {link.cfg.describe()} "
+              f"in {stats.wall_s:.2f} s (log time {stats.log_time_s:.2f} s, rate {args.rate:g}, "
+              f"loops {stats.loops_done})")
+        print(f"  pacing error p50 {summary['pacing_p50_ms']:.2f} ms, p99 {summary['pacing_p99_ms']:.2f} ms, "
+              f"max {summary['pacing_max_ms']:.2f} ms; skipped by filter {stats.frames_skipped:,}; "
+              f"send failures {stats.send_failures:,}")
+    return 130 if stats.stopped_early else 0
