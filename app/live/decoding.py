@@ -67,3 +67,19 @@ def all_signals_mapper(decoded: Mapping[str, DecodedMessage]) -> dict[str, tuple
             present = dm.is_present(sig)
             out[f"{name}.{sig}"] = (t[present], values[present]) if not present.all() else (t, values)
     return out
+
+
+def pairs_mapper(pairs: Mapping[str, tuple[str, str]]) -> Mapper:
+    """Channel -> (message, signal) pairs without conversion (the signal map adds units and signs)."""
+
+    def mapper(decoded: Mapping[str, DecodedMessage]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        for channel, (message, signal) in pairs.items():
+            dm = decoded.get(message)
+            if dm is None or signal not in dm.signals:
+                continue
+            present = dm.is_present(signal)
+            out[channel] = (dm.t_ns[present] / 1e9, dm.signals[signal][present])
+        return out
+
+    return mapper

@@ -18,6 +18,8 @@ replays of any length.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import queue
 import sys
 import threading
@@ -77,6 +79,7 @@ class ReplayStats:
     log_time_s: float = 0.0  # position in the log (s since its first frame)
     wall_s: float = 0.0
     stopped_early: bool = False
+    realtime: bool = False  # the pacing thread got a real-time scheduling priority
     pacing: PacingHistogram = field(default_factory=PacingHistogram)
 
     def summary(self) -> dict[str, float | int | bool]:
@@ -88,6 +91,7 @@ class ReplayStats:
             "log_time_s": round(self.log_time_s, 6),
             "wall_s": round(self.wall_s, 6),
             "stopped_early": self.stopped_early,
+            "realtime": self.realtime,
             "pacing_p50_ms": self.pacing.percentile_ms(50),
             "pacing_p99_ms": self.pacing.percentile_ms(99),
             "pacing_max_ms": round(self.pacing.max_ns / 1e6, 3),
@@ -149,7 +153,7 @@ class Replayer:
     def __init__(self, link: BusLink, source: ChunkSource, *, rate: float = 1.0, loop: bool = False,
                  ids: Collection[int] | None = None, channels: Collection[int] | None = None,
                  progress: Callable[[ReplayStats], None] | None = None, progress_every_s: float = 0.5,
-                 lead_s: float = 0.05) -> None:
+                 lead_s: float = 0.05, realtime: bool = True) -> None:
         if not rate > 0 or not np.isfinite(rate):
             raise InputError(f"--rate must be a positive number, got {rate}")
         self.link = link
@@ -161,6 +165,7 @@ class Replayer:
         self.progress = progress
         self.progress_every_ns = int(progress_every_s * 1e9)
         self.lead_ns = int(lead_s * 1e9)
+        self.realtime = realtime
         self.stats = ReplayStats()
         self._stop = threading.Event()
 
@@ -203,6 +208,8 @@ class Replayer:
     def run(self) -> ReplayStats:
         """Replay until the log ends (or forever with ``loop``) or :meth:`stop` is called."""
         stats = self.stats
+        if self.realtime:
+            stats.realtime = _enter_realtime()
         q: queue.Queue[FrameChunk | BaseException | None] = queue.Queue(maxsize=4)
         reader = threading.Thread(target=self._prefetch, args=(q,), name="replay-prefetch", daemon=True)
         old_switch = sys.getswitchinterval()
@@ -258,7 +265,35 @@ class Replayer:
             stats.wall_s = max(0.0, (time.perf_counter_ns() - start_ns) / 1e9)
             reader.join(2.0)
             sys.setswitchinterval(old_switch)
+            if stats.realtime:
+                _leave_realtime()
 
 
 _END_OF_PASS = FrameChunk.empty()
+
+
+def _enter_realtime(priority: int = 10) -> bool:
+    """Give the calling (pacing) thread round-robin real-time priority where the OS allows it.
+
+    On a busy machine a normal thread woken at its deadline can wait a whole scheduler slice
+    (several ms) for a CPU; a real-time thread preempts normal ones. Linux caps real-time CPU use
+    (``sched_rt_runtime_us``), and the thread sleeps between frames, so this cannot starve the
+    machine. Without the privilege (CAP_SYS_NICE or an rtprio limit) replay runs unprivileged.
+    """
+    setter = getattr(os, "sched_setscheduler", None)
+    policy = getattr(os, "SCHED_RR", None)
+    if setter is None or policy is None:
+        return False
+    try:
+        setter(0, policy, os.sched_param(priority))  # pid 0 = the calling thread on Linux
+    except OSError:
+        return False
+    return True
+
+
+def _leave_realtime() -> None:
+    setter = getattr(os, "sched_setscheduler", None)
+    if setter is not None:
+        with contextlib.suppress(OSError):
+            setter(0, os.SCHED_OTHER, os.sched_param(0))
 
