@@ -101,9 +101,12 @@ def run_chain(
     is_open = np.zeros(nc, dtype=np.bool_)
     for j in range(nc):
         d = theta[ca[j]] - (cr[j] * theta[cb[j]] if cb[j] >= 0 else 0.0)
+        dd = omega[ca[j]] - (cr[j] * omega[cb[j]] if cb[j] >= 0 else 0.0)
         if housing >= 0:
             d -= ce[j] * theta[housing]
+            dd -= ce[j] * omega[housing]
         is_open[j] = chalf[j] > 0.0 and abs(d) < chalf[j]
+        tau[j] = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
     k_in = 0
     k_lag = 0
     t_air, k_in = input_at(tin, tq, linear, t0 - lag[0], k_in)

@@ -232,3 +232,10 @@ def quasi_static_state(m: ChainModel, torque: float, omega_rotor: float) -> tupl
         delta = np.sign(tau[j]) * m.chalf[j] + tau[j] / m.ck[j]
         theta[a] = delta + m.cr[j] * theta[b] + m.ce[j] * theta_h
     return theta, omega
+
+
+def deflections(m: ChainModel, theta: F64) -> F64:
+    """Coupling deflections ``delta_j`` (rad, in a's angle) for body angles ``theta``."""
+    b_theta = np.where(m.cb >= 0, theta[np.maximum(m.cb, 0)], 0.0)
+    h_theta = theta[m.housing] if m.housing >= 0 else 0.0
+    return np.asarray(theta[m.ca] - m.cr * b_theta - m.ce * h_theta, dtype=np.float64)

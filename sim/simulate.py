@@ -148,10 +148,9 @@ def simulate(
         if name.startswith("halfshaft"):
             torques[name] = torques[name] / n_hs
     gap_open = {g: out_open[:, chain.gap_coupling[g]].copy() for g in GAP_NAMES}
-    opened = {chain.gap_coupling[g]: bool(out_open[0, chain.gap_coupling[g]]) for g in GAP_NAMES}
     events = _pair_events(
         [(GAP_NAMES[int(ev_gap[k])], float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)],
-        {GAP_NAMES[j]: o for j, o in opened.items()}, t0,
+        {g: bool(out_open[0, chain.gap_coupling[g]]) for g in GAP_NAMES}, t0,
     )
     w_wheel = out_omega[:, chain.wheel]
     return SimResult(

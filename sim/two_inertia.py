@@ -118,7 +118,10 @@ def run_two_inertia(
                     w_b = min(0.0, drive)
                 else:
                     w_b = drive
-                ths = khs * (th_d - th_b) + chs * (w_d - w_b)
+                if alpha > 0.0 and -alpha < th_b < alpha:
+                    ths = 0.0  # the law makes khs th_s + chs th_s' vanish; avoid round-off residue
+                else:
+                    ths = khs * (th_d - th_b) + chs * (w_d - w_b)
                 a_m = (tm - bm * w_m - n / ratio * ths) / jm
                 a_w = (ths - bw * w_w - road_torque(road, w_w) / n) / jw
                 w_m += dt * a_m
