@@ -1,0 +1,104 @@
+"""CAN log readers, chosen by content: BLF, ASC, candump -L, PEAK TRC, SavvyCAN/GVRET CSV, MF4.
+
+Usage::
+
+    from app.ingest.readers import open_log
+
+    with open_log("drive.blf") as log:          # format sniffed from the bytes
+        print(log.meta.start_time, log.meta.start_clock)
+        for chunk in log.chunks():             # FrameChunk, at most chunk_frames rows each
+            ...
+        for issue in log.report.issues:        # every skipped/corrupt region, with offset or line
+            ...
+
+Salvage mode (``strict=False``, the default) reads what is readable and records every
+problem in ``report``; strict mode raises :class:`~app.errors.LogFormatError` (or
+:class:`~app.errors.TruncatedLogError`) at the first problem, naming the byte offset or
+line. Problems found by ``chunks()`` are raised from the iteration. See
+``docs/ingest-readers.md`` for the formats and the report entry kinds.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from types import TracebackType
+from typing import BinaryIO, Protocol, runtime_checkable
+
+from app.ingest.frames import FrameChunk, IngestReport, LogMeta
+from app.ingest.readers._base import BaseReader
+from app.ingest.readers._source import open_source
+from app.ingest.readers.asc import ASCReader
+from app.ingest.readers.blf import BLFReader
+from app.ingest.readers.candump import CandumpReader
+from app.ingest.readers.gvret_csv import GvretCsvReader
+from app.ingest.readers.mf4 import MF4Reader
+from app.ingest.readers.sniff import FORMATS, sniff_format, unsupported
+from app.ingest.readers.trc import TRCReader
+
+__all__ = ["FORMATS", "READERS", "LogReader", "open_log", "sniff_format"]
+
+
+@runtime_checkable
+class LogReader(Protocol):
+    """An open log: metadata and report, frames streamed in bounded chunks; a context manager."""
+
+    meta: LogMeta
+    report: IngestReport
+
+    def chunks(self) -> Iterator[FrameChunk]: ...
+
+    def close(self) -> None: ...
+
+    def __enter__(self) -> LogReader: ...
+
+    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None,
+                 tb: TracebackType | None) -> None: ...
+
+
+READERS: dict[str, type] = {
+    "blf": BLFReader,
+    "asc": ASCReader,
+    "candump": CandumpReader,
+    "trc": TRCReader,
+    "gvret_csv": GvretCsvReader,
+    "mf4": MF4Reader,
+}
+
+
+def open_log(source: str | os.PathLike[str] | BinaryIO, *, fmt: str | None = None, strict: bool = False,
+             chunk_frames: int = 65536) -> LogReader:
+    """Open a CAN log for streaming.
+
+    Parameters
+    ----------
+    source : path or binary file object
+        The log; gzip-compressed content (any name) is inflated transparently.
+    fmt : str, optional
+        Force a format (a key of ``READERS``) instead of sniffing the content.
+    strict : bool
+        Raise at the first problem instead of salvaging and reporting.
+    chunk_frames : int
+        Maximum rows per :class:`~app.ingest.frames.FrameChunk` (memory bound).
+
+    Raises
+    ------
+    LogFormatError
+        Empty file, damaged header, or (strict) any damage found while opening.
+    UnsupportedFormatError
+        The content matches no supported format, or ``fmt`` is unknown.
+    StorageError
+        The path cannot be opened.
+    """
+    stream, head, path = open_source(source)
+    try:
+        if fmt is None:
+            fmt = sniff_format(head, stream.name)
+        elif fmt not in READERS:
+            raise unsupported(stream.name, f"unknown format {fmt!r}")
+        cls: type[BaseReader] = READERS[fmt]
+        reader: LogReader = cls(stream, head, strict=strict, chunk_frames=chunk_frames, path=path)
+        return reader
+    except BaseException:
+        stream.close()
+        raise

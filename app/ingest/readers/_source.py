@@ -1,0 +1,204 @@
+"""Opening a log source: a path or a caller's binary file object, gzip by magic, a peekable head.
+
+Every reader consumes a :class:`ByteStream`: a forward-only byte stream that counts the
+bytes it has handed out (so problems can be reported with a byte offset) and turns the
+errors of a damaged gzip member into :class:`StreamDamage` instead of a foreign exception.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gzip
+import io
+import os
+import zlib
+from pathlib import Path
+from typing import BinaryIO, Protocol, cast
+
+from app.errors import InputError, LogFormatError, StorageError
+
+GZIP_MAGIC = b"\x1f\x8b"
+HEAD_BYTES = 65536  # enough for every format's header and a few hundred text lines
+
+
+class Readable(Protocol):
+    def read(self, n: int = -1, /) -> bytes: ...
+
+    def close(self) -> None: ...
+
+
+class StreamDamage(Exception):
+    """The decompressed stream ended early or is corrupt (gzip); ``truncated`` says which."""
+
+    def __init__(self, message: str, *, truncated: bool) -> None:
+        super().__init__(message)
+        self.truncated = truncated
+
+
+class _Prefixed:
+    """Replays an already-read head, then continues with the wrapped stream (non-seekable input)."""
+
+    def __init__(self, head: bytes, rest: Readable) -> None:
+        self._head = head
+        self._rest = rest
+
+    def read(self, n: int = -1, /) -> bytes:
+        if not self._head:
+            return self._rest.read(n)
+        if n < 0:
+            out, self._head = self._head + self._rest.read(), b""
+            return out
+        out, self._head = self._head[:n], self._head[n:]
+        return out
+
+    def seekable(self) -> bool:
+        return False
+
+    def close(self) -> None:
+        """The wrapped stream belongs to the caller."""
+
+
+class ByteStream:
+    """Forward-only reads with a running byte offset; gzip damage surfaces as :class:`StreamDamage`.
+
+    Parameters
+    ----------
+    raw : BinaryIO
+        The (possibly gzip-wrapped) stream positioned at the first byte of the log.
+    name : str
+        Display name used in every message (the file name, or ``"<stream>"``).
+    compressed : bool
+        True when ``raw`` is a gzip decompressor; offsets then count decompressed bytes.
+    """
+
+    def __init__(self, raw: Readable, name: str, *, compressed: bool, closers: list[Readable]) -> None:
+        self._raw = raw
+        self.name = name
+        self.compressed = compressed
+        self.offset = 0
+        self._closers = closers
+        self._pending: StreamDamage | None = None
+        self._dead = False
+
+    def read(self, n: int) -> bytes:
+        """Up to ``n`` bytes; fewer only at the end of the stream or just before damage.
+
+        Damage found after some bytes were read is raised by the *next* call, so the bytes
+        before it are never lost; after that the stream reads as ended.
+        """
+        if self._pending is not None:
+            damage, self._pending, self._dead = self._pending, None, True
+            raise damage
+        if n <= 0 or self._dead:
+            return b""
+        chunks: list[bytes] = []
+        want = n
+        while want > 0:
+            try:
+                data = self._raw.read(want)
+            except EOFError as exc:  # gzip: member ended before its end-of-stream marker
+                damage = StreamDamage(f"compressed stream ends early after {self.offset} bytes ({exc})",
+                                      truncated=True)
+            except (gzip.BadGzipFile, zlib.error, OSError) as exc:
+                damage = StreamDamage(f"compressed stream is corrupt after {self.offset} bytes ({exc})",
+                                      truncated=False)
+            else:
+                if not data:
+                    break
+                chunks.append(data)
+                self.offset += len(data)
+                want -= len(data)
+                continue
+            if chunks:
+                self._pending = damage
+                break
+            self._dead = True
+            raise damage
+        return chunks[0] if len(chunks) == 1 else b"".join(chunks)
+
+    def close(self) -> None:
+        for f in self._closers:
+            with contextlib.suppress(OSError):  # a damaged gzip member can complain again on close
+                f.close()
+        self._closers = []
+
+
+def describe(source: str | os.PathLike[str] | BinaryIO) -> str:
+    """A short display name for messages."""
+    if isinstance(source, str | os.PathLike):
+        return Path(source).name
+    name = getattr(source, "name", None)
+    return Path(name).name if isinstance(name, str) else "<stream>"
+
+
+def _peek(stream: BinaryIO, n: int) -> tuple[bytes, BinaryIO]:
+    """Read the first ``n`` bytes and return them with a stream that still starts at byte 0."""
+    head = stream.read(n)
+    if not isinstance(head, bytes | bytearray):
+        raise InputError("log source must be opened in binary mode ('rb')")
+    head = bytes(head)
+    try:
+        if stream.seekable():
+            stream.seek(-len(head), io.SEEK_CUR)
+            return head, stream
+    except (OSError, ValueError):
+        pass
+    return head, cast(BinaryIO, _Prefixed(head, stream))
+
+
+def open_source(source: str | os.PathLike[str] | BinaryIO) -> tuple[ByteStream, bytes, Path | None]:
+    """Open ``source`` and return the (decompressed) stream, its head bytes and the path if any.
+
+    Raises
+    ------
+    LogFormatError
+        Empty file, or a gzip member whose first bytes cannot be decompressed.
+    StorageError
+        The path cannot be opened.
+    """
+    name = describe(source)
+    closers: list[Readable] = []
+    path: Path | None = None
+    if isinstance(source, str | os.PathLike):
+        path = Path(source)
+        try:
+            raw: BinaryIO = open(path, "rb")  # noqa: SIM115 -- closed by ByteStream.close
+        except FileNotFoundError as exc:
+            raise StorageError(f"log file not found: {path}") from exc
+        except IsADirectoryError as exc:
+            raise StorageError(f"log path is a directory, not a file: {path}") from exc
+        except OSError as exc:
+            raise StorageError(f"cannot open log file {path}: {exc.strerror or exc}") from exc
+        closers.append(raw)
+    else:
+        raw = source
+    try:
+        head, raw = _peek(raw, HEAD_BYTES)
+    except OSError as exc:
+        ByteStream(raw, name, compressed=False, closers=closers).close()
+        raise StorageError(f"cannot read log {name}: {exc}") from exc
+    if not head:
+        ByteStream(raw, name, compressed=False, closers=closers).close()
+        raise LogFormatError(f"{name}: empty log")
+    if head[:2] != GZIP_MAGIC:
+        return ByteStream(raw, name, compressed=False, closers=closers), head, path
+    start = raw.tell() if raw.seekable() else 0
+    gz = gzip.GzipFile(fileobj=raw, mode="rb")
+    inner = ByteStream(gz, name, compressed=True, closers=[gz, *closers])
+    try:
+        inner_head = inner.read(HEAD_BYTES)
+    except StreamDamage as exc:
+        inner.close()
+        raise LogFormatError(f"{name}: gzip data cannot be decompressed: {exc}") from exc
+    if not inner_head:
+        inner.close()
+        raise LogFormatError(f"{name}: empty log (the gzip member decompresses to nothing)")
+    if not raw.seekable():
+        # Keep the decompressed head and continue decompressing from where the peek stopped.
+        replay = _Prefixed(inner_head, gz)
+        return ByteStream(replay, name, compressed=True, closers=[gz, *closers]), inner_head, path
+    # Restart the decompressor so readers see decompressed byte 0 again.
+    gz.close()  # does not close ``raw``: GzipFile only closes files it opened itself
+    raw.seek(start)
+    gz = gzip.GzipFile(fileobj=raw, mode="rb")
+    return ByteStream(gz, name, compressed=True, closers=[gz, *closers]), inner_head, path

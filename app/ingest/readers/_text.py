@@ -1,0 +1,150 @@
+"""Helpers shared by the text readers: exact decimal times, hex bytes, DLC tables, bounded line reading."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterator
+
+from app.ingest.readers._source import ByteStream, StreamDamage
+
+# CAN FD DLC code -> payload length (codes above 15 read as 64, like python-can's ``dlc2len``)
+DLC_TO_LEN = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
+LEN_TO_DLC = {n: i for i, n in enumerate(DLC_TO_LEN)}
+
+MAX_TIME_NS = 2**62  # keeps differences of two times inside int64
+BLOCK_BYTES = 1 << 20  # text is read in blocks of whole lines
+MAX_LINE_BYTES = 1 << 16  # a longer "line" is garbage; it is skipped up to the next newline
+
+_DECIMAL = re.compile(r"^(\d+)(?:\.(\d*))?$")
+
+
+class BadLine(Exception):
+    """One line that cannot be used: ``kind`` is the report kind, the message says why."""
+
+    def __init__(self, kind: str, message: str) -> None:
+        super().__init__(message)
+        self.kind = kind
+        self.message = message
+
+
+def dlc2len(dlc: int) -> int:
+    return DLC_TO_LEN[dlc] if 0 <= dlc <= 15 else 64
+
+
+def decimal_to_ns(text: str, scale_exp: int = 9, *, what: str = "timestamp") -> int:
+    """An unsigned decimal time as integer ns, exactly (no float rounding).
+
+    ``scale_exp`` is the number of ns per unit as a power of ten: 9 for seconds, 6 for
+    milliseconds, 3 for microseconds. Digits beyond 1 ns are truncated (logs print at most
+    ns resolution); values above 2**62 ns (146 years) are out of range.
+    """
+    m = _DECIMAL.match(text)
+    if m is None:
+        if text.startswith("-"):
+            raise BadLine("bad_timestamp", f"negative {what} {text!r}")
+        raise BadLine("bad_timestamp", f"{what} {text!r} is not a decimal number")
+    whole, frac = m.group(1), m.group(2) or ""
+    frac = (frac + "0" * scale_exp)[:scale_exp]
+    value = int(whole[-30:]) * 10**scale_exp + (int(frac) if frac else 0)
+    if len(whole) > 30 or value > MAX_TIME_NS:
+        raise BadLine("bad_timestamp", f"{what} {text[:40]!r} is out of range")
+    return value
+
+
+def hex_bytes(tokens: list[str], n: int, *, base: int = 16, what: str = "data byte") -> bytes:
+    """The first ``n`` tokens as bytes; short or non-hex input raises :class:`BadLine`."""
+    if len(tokens) < n:
+        raise BadLine("short_data", f"{len(tokens)} data bytes present, {n} expected from the DLC")
+    out = bytearray(n)
+    for i in range(n):
+        tok = tokens[i]
+        try:
+            v = int(tok, base)
+        except ValueError:
+            raise BadLine("non_hex", f"{what} {i + 1} {tok!r} is not a {'hex' if base == 16 else 'decimal'} "
+                          "number") from None
+        if not 0 <= v <= 255 or tok[0] in "+-":
+            raise BadLine("non_hex", f"{what} {i + 1} {tok!r} is not a byte value")
+        out[i] = v
+    return bytes(out)
+
+
+def parse_int(tok: str, base: int, what: str) -> int:
+    """A non-negative integer token; anything else raises :class:`BadLine` (kind ``non_hex``)."""
+    if not tok or tok[0] in "+-" or "_" in tok:
+        raise BadLine("non_hex", f"{what} {tok!r} is not a {'hex' if base == 16 else 'decimal'} number")
+    try:
+        return int(tok, base)
+    except ValueError:
+        raise BadLine("non_hex", f"{what} {tok!r} is not a {'hex' if base == 16 else 'decimal'} number") from None
+
+
+def printable(line: str) -> bool:
+    """False for lines with control characters other than tab: binary garbage."""
+    return line.isprintable() or all(c.isprintable() or c == "\t" for c in line)
+
+
+class LineSource:
+    """Whole lines from a :class:`ByteStream` with 1-based line numbers; long garbage lines are cut.
+
+    ``on_long`` is called with the line number of every line longer than ``MAX_LINE_BYTES``
+    (the line is then skipped); ``on_damage`` with stream damage (reading then ends).
+    """
+
+    def __init__(self, stream: ByteStream, on_long: Callable[[int], None],
+                 on_damage: Callable[[StreamDamage], None]) -> None:
+        self._stream = stream
+        self._on_long = on_long
+        self._on_damage = on_damage
+        self.line_no = 0
+
+    def blocks(self) -> Iterator[tuple[bytes, int]]:
+        """Blocks of whole lines (``\\n``-terminated except possibly the last) with the first line's number."""
+        carry = b""
+        skipping = False  # inside an over-long line: drop bytes until its newline
+        while True:
+            try:
+                data = self._stream.read(BLOCK_BYTES)
+            except StreamDamage as exc:
+                self._on_damage(exc)
+                data = b""
+            if not data:
+                if carry and not skipping:
+                    first = self.line_no + 1
+                    self.line_no += carry.count(b"\n") + 1
+                    yield carry, first
+                return
+            if skipping:
+                nl = data.find(b"\n")
+                if nl < 0:
+                    continue
+                data = data[nl + 1:]
+                skipping = False
+            buf = carry + data if carry else data
+            cut = buf.rfind(b"\n") + 1
+            if cut == 0:
+                if len(buf) > MAX_LINE_BYTES:
+                    self.line_no += 1
+                    self._on_long(self.line_no)
+                    carry, skipping = b"", True
+                else:
+                    carry = buf
+                continue
+            block, carry = buf[:cut], buf[cut:]
+            pending_long = len(carry) > MAX_LINE_BYTES  # the tail is an over-long line
+            first = self.line_no + 1
+            self.line_no += block.count(b"\n")
+            yield block, first
+            if pending_long:
+                self.line_no += 1
+                self._on_long(self.line_no)
+                carry, skipping = b"", True
+
+    def lines(self) -> Iterator[tuple[int, str]]:
+        """Decoded lines (latin-1, so any byte decodes; CR/LF stripped) with their numbers."""
+        for block, first in self.blocks():
+            parts = block.split(b"\n")
+            if block.endswith(b"\n"):
+                parts.pop()
+            for i, raw in enumerate(parts):
+                yield first + i, raw.rstrip(b"\r").decode("latin-1")

@@ -1,0 +1,360 @@
+"""Vector BLF: a strict, salvaging, streaming reader (our own; python-can's hangs and truncates silently).
+
+File layout::
+
+    file header (usually 144 bytes)   "LOGG", u32 header size, app/version bytes,
+                                      u64 file size, u64 uncompressed size, u32 object count,
+                                      u32 objects read, SYSTEMTIME start, SYSTEMTIME stop
+    LOG_CONTAINER objects             "LOBJ" base header (16 bytes), u16 compression
+                                      (0 none, 2 zlib), 6 reserved, u32 uncompressed size,
+                                      4 reserved, then the (compressed) bytes of inner objects
+    ...                               inner objects may straddle container boundaries
+
+Containers are read one at a time (memory is bounded by one container plus one chunk),
+inflated with zlib, and walked by the compiled kernel in :mod:`blf_kernel`. Damage is
+reported with the file offset of the enclosing container; reading resumes at the next
+signature. The start time is the header's SYSTEMTIME, which Vector tools write in local
+time (python-can reads it as UTC, its issue 1992): ``start_clock = "blf_header_local"``.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections.abc import Iterator
+from datetime import datetime
+
+import numpy as np
+
+from app.errors import LogFormatError, TruncatedLogError
+from app.ingest.frames import FrameChunk, ReadIssue
+from app.ingest.readers import blf_kernel as K
+from app.ingest.readers._base import BaseReader, ChunkBuilder
+from app.ingest.readers._source import StreamDamage
+
+FILE_HEADER = struct.Struct("<4sLBBBBBBBBQQLL8H8H")
+OBJ_BASE = struct.Struct("<4sHHLL")
+CONTAINER_HEADER = struct.Struct("<H6xL4x")
+MAX_CONTAINER = 64 << 20  # containers are 128 kB in practice; larger sizes are corrupt
+SCAN_BLOCK = 1 << 16
+
+# Non-CAN objects skipped without an issue (they carry no frames); other types get an
+# "unknown_object" entry. DATA_LOST_* mean the logger itself dropped data: reported.
+KNOWN_OTHER = {
+    3: "CAN_OVERLOAD", 4: "CAN_STATISTIC", 5: "APP_TRIGGER", 10: "LOG_CONTAINER", 31: "CAN_DRIVER_ERROR",
+    44: "CAN_DRIVER_SYNC", 65: "APP_TEXT", 72: "SYS_VARIABLE", 74: "CAN_DRIVER_ERROR_EXT", 92: "EVENT_COMMENT",
+    96: "GLOBAL_MARKER", 115: "RESTORE_POINT_CONTAINER", 127: "WATER_MARK_EVENT", 128: "TRIGGER_CONDITION",
+}
+DATA_LOST = {125: "DATA_LOST_BEGIN", 126: "DATA_LOST_END"}
+
+
+def _starts_frame(c: bytes) -> bool:
+    """True when ``c`` begins (after up to 3 padding bytes) with the header of a CAN object."""
+    j = c.find(b"LOBJ", 0, 7)
+    return 0 <= j <= 3 and len(c) >= j + 16 and struct.unpack_from("<L", c, j + 12)[0] in K.FRAME_TYPES
+
+
+def systemtime(fields: tuple[int, ...]) -> datetime | None:
+    """Windows SYSTEMTIME (year, month, weekday, day, h, min, s, ms) as a naive datetime, or None."""
+    year, month, _dow, day, hour, minute, second, ms = fields
+    try:
+        return datetime(year, month, day, hour, minute, second, ms * 1000)
+    except ValueError:
+        return None
+
+
+class BLFReader(BaseReader):
+    """Vector BLF reader; see the module docstring for the layout and policies."""
+
+    fmt = "blf"
+    _back: bytes = b""  # pushed-back bytes, read again before the stream
+    _off: int = 0  # file offset of the next byte ``_read`` returns
+
+    def _open(self) -> None:
+        head = self._head
+        if head[:4] != b"LOGG":
+            raise LogFormatError(f"{self.name}: not a BLF file (signature {head[:4]!r}, expected b'LOGG')")
+        if len(head) < FILE_HEADER.size:
+            raise TruncatedLogError(f"{self.name}: BLF file header truncated ({len(head)} of "
+                                    f"{FILE_HEADER.size} bytes)")
+        h = FILE_HEADER.unpack_from(head)
+        self._header_size = int(h[1])
+        if not FILE_HEADER.size <= self._header_size <= 4096:
+            self.problem("bad_header", f"file header size {self._header_size} is implausible; assuming 144",
+                         offset=4)
+            self._header_size = 144
+        start, stop = systemtime(h[14:22]), systemtime(h[22:30])
+        self.meta.start_time = start
+        self.meta.start_clock = "blf_header_local" if start else "unknown"
+        self.meta.extra.update({
+            "application_id": str(h[2]), "application_version": f"{h[3]}.{h[4]}.{h[5]}",
+            "header_object_count": str(h[12]),
+        })
+        if stop is not None:
+            self.meta.extra["stop_time_local"] = stop.isoformat()
+
+    # -- byte access with push-back (offsets stay exact for resync reports) -----------------------
+    def _read(self, n: int) -> bytes:
+        if self._back:
+            out = self._back[:n]
+            self._back = self._back[n:]
+            if len(out) < n:
+                out += self._stream.read(n - len(out))
+        else:
+            out = self._stream.read(n)
+        self._off += len(out)
+        return out
+
+    def _unread(self, data: bytes) -> None:
+        self._back = data + self._back
+        self._off -= len(data)
+
+    def _scan_signature(self, start_off: int, reason: str) -> bool:
+        """Skip forward to the next ``LOBJ`` (pushed back); report the skipped region. False at EOF."""
+        tail = b""
+        while True:
+            block = self._read(SCAN_BLOCK)
+            if not block:
+                break
+            buf = tail + block
+            j = buf.find(b"LOBJ")
+            if j >= 0:
+                found = self._off - len(buf) + j
+                self._unread(buf[j:])
+                self.problem("bad_signature", f"{reason}; skipped {found - start_off} bytes to the next object "
+                             "signature", offset=start_off)
+                return True
+            tail = buf[-3:]
+        self.problem("bad_signature", f"{reason}; no further object signature in the remaining "
+                     f"{self._off - start_off} bytes", offset=start_off, truncated=True)
+        return False
+
+    # -- outer loop ------------------------------------------------------------------------------
+    def _iter_chunks(self) -> Iterator[FrameChunk]:
+        self._back = b""
+        self._off = 0
+        self._carry = b""
+        self._carry_src = (0, 0)  # (container offset, byte inside it) where the carry starts
+        self._resync_inner = False
+        self._truncation_reported = False
+        self._type_counts = np.zeros(256, np.int64)
+        self._inner_resync: ReadIssue | None = None
+        builder = ChunkBuilder(self.chunk_frames)
+        try:
+            self._read(self._header_size)
+            yield from self._containers(builder)
+        except StreamDamage as exc:
+            self.damage(exc)
+            self._truncation_reported = True
+        yield from self._finish(builder)
+        if builder.n:
+            yield builder.take()
+        self._summarise_objects()
+
+    def _containers(self, builder: ChunkBuilder) -> Iterator[FrameChunk]:
+        while True:
+            off = self._off
+            hdr = self._read(16)
+            if not hdr:
+                return
+            if hdr[:4] != b"LOBJ":
+                k = hdr.find(b"LOBJ", 1, 8)
+                if 0 < k <= 3:  # padding after the previous object
+                    self._unread(hdr[k:])
+                    continue
+                if len(hdr) < 16 and not hdr.strip(b"\0"):
+                    return  # trailing padding
+                self._unread(hdr[1:])
+                if not self._scan_signature(off, f"no object signature at byte offset {off}"):
+                    return
+                continue
+            if len(hdr) < 16:
+                self.problem("truncated", f"file ends inside an object header ({len(hdr)} of 16 bytes)",
+                             offset=off, truncated=True)
+                self._truncation_reported = True
+                return
+            _sig, _hsize, _hver, size, otype = OBJ_BASE.unpack(hdr)
+            limit = MAX_CONTAINER if otype == K.LOG_CONTAINER else K.MAX_OBJECT_SIZE
+            if size < (32 if otype == K.LOG_CONTAINER else 16) or size > limit:
+                self._unread(hdr[4:])
+                if not self._scan_signature(off, f"object at byte offset {off} declares an impossible size "
+                                            f"{size} (type {otype})"):
+                    return
+                continue
+            body = self._read(size - 16)
+            cut = len(body) < size - 16
+            if cut:
+                self.problem("truncated", f"file ends inside the object at byte offset {off}: it declares {size} "
+                             f"bytes, {16 + len(body)} are present", offset=off, truncated=True)
+                self._truncation_reported = True
+            if otype == K.LOG_CONTAINER:
+                yield from self._container(off, body, builder, cut)
+            else:
+                yield from self._loose_object(off, hdr + body, builder)
+
+    def _container(self, off: int, body: bytes, builder: ChunkBuilder, cut: bool) -> Iterator[FrameChunk]:
+        if len(body) < CONTAINER_HEADER.size:
+            return  # truncation already reported
+        method, unc_size = CONTAINER_HEADER.unpack_from(body)
+        payload = body[CONTAINER_HEADER.size:]
+        broken = cut
+        if method == 0:
+            data = payload
+        elif method == 2:
+            data, error = self._inflate(payload, unc_size)
+            broken = broken or error is not None
+            if error is not None and not cut:
+                self.problem("corrupt_zlib", f"log container at byte offset {off}: {error}; recovered "
+                             f"{len(data)} of {unc_size} bytes, reading resumes at the next container",
+                             offset=off, frames_lost=None)
+        else:
+            self.problem("unknown_compression", f"log container at byte offset {off} uses compression method "
+                         f"{method} (known: 0 none, 2 zlib); container skipped", offset=off)
+            self._drop_carry(off)
+            return
+        yield from self._walk(data, off, builder)
+        if broken:
+            self._drop_carry(off)
+
+    def _inflate(self, payload: bytes, unc_size: int) -> tuple[bytes, str | None]:
+        """zlib-inflate a container in pieces, keeping whatever precedes damage; cap the output size."""
+        d = zlib.decompressobj()
+        out: list[bytes] = []
+        produced = 0
+        try:
+            for i in range(0, len(payload), SCAN_BLOCK):
+                piece = d.decompress(payload[i:i + SCAN_BLOCK], MAX_CONTAINER - produced + 1)
+                out.append(piece)
+                produced += len(piece)
+                if produced > MAX_CONTAINER or d.unconsumed_tail:
+                    return b"".join(out)[:MAX_CONTAINER], f"inflates beyond {MAX_CONTAINER} bytes"
+                if d.eof:
+                    break
+        except zlib.error as exc:
+            return b"".join(out), f"corrupt zlib data ({exc})"
+        if not d.eof:
+            return b"".join(out), "zlib data ends before its end-of-stream marker"
+        return b"".join(out), None
+
+    def _drop_carry(self, off: int) -> None:
+        """After a damaged container the bytes that straddle into the next one are meaningless."""
+        if self._carry.strip(b"\0") and _starts_frame(self._carry):
+            self.problem("truncated", f"an object straddling into the damaged container at byte offset {off} "
+                             "is lost", offset=off, frames_lost=1)
+        self._carry = b""
+        self._resync_inner = True
+
+    def _loose_object(self, off: int, obj: bytes, builder: ChunkBuilder) -> Iterator[FrameChunk]:
+        """An object outside any container (older writers): walk it on its own."""
+        saved, saved_src, saved_resync = self._carry, self._carry_src, self._resync_inner
+        self._carry, self._resync_inner = b"", False
+        yield from self._walk(obj, off, builder)
+        self._carry, self._carry_src, self._resync_inner = saved, saved_src, saved_resync
+
+    # -- inner walk ------------------------------------------------------------------------------
+    def _where(self, pos: int, carry_len: int, off: int) -> tuple[int, str]:
+        if pos >= carry_len:
+            return off, f"byte {pos - carry_len} of the container at byte offset {off}"
+        coff, inner = self._carry_src
+        return coff, f"byte {inner + pos} of the container at byte offset {coff}"
+
+    def _walk(self, data: bytes, off: int, builder: ChunkBuilder) -> Iterator[FrameChunk]:
+        carry = self._carry
+        buf = carry + data if carry else data
+        arr = np.frombuffer(buf, np.uint8)
+        end = len(buf)
+        pos = 0
+        if self._resync_inner:
+            j = buf.find(b"LOBJ")
+            if j < 0:
+                self._set_carry(buf, max(0, end - 3), len(carry), off)
+                return
+            pos, self._resync_inner = j, False
+        while True:
+            st, pos, n, detail = K.walk_objects(arr, pos, end, builder.t_ns, builder.channel, builder.arb_id,
+                                                builder.flags, builder.dlc, builder.data, builder.n, builder.cap,
+                                                self._type_counts)
+            if n > builder.n:
+                self._inner_resync = None  # decoded something: a later problem is a new region
+            builder.n = n
+            if st == K.ST_FULL:
+                yield builder.take()
+                continue
+            if st == K.ST_END:
+                self._set_carry(buf, pos, len(carry), off)
+                return
+            coff, where = self._where(pos, len(carry), off)
+            if st in (K.ST_BAD_TS, K.ST_BAD_FRAME):
+                what = "a timestamp beyond int64 ns" if st == K.ST_BAD_TS else "impossible content (> 64 data bytes)"
+                self.problem("bad_frame", f"CAN object at {where} has {what}; object skipped", offset=coff,
+                             frames_lost=1)
+                pos += detail
+                continue
+            if st == K.ST_BAD_SIG:
+                reason, start = f"no object signature at {where}", pos + 1
+            elif st == K.ST_BAD_HEADER:
+                reason, start = f"object at {where} has an unknown header (version {detail})", pos + 4
+            else:
+                reason, start = f"object at {where} declares an impossible size {detail}", pos + 4
+            j = buf.find(b"LOBJ", start)
+            if self._inner_resync is None:
+                kind = "bad_signature" if st == K.ST_BAD_SIG else "bad_object_size"
+                self._inner_resync = self.problem(kind, f"{reason}; skipped to the next object signature",
+                                                  offset=coff)
+            if j < 0:
+                self._set_carry(buf, max(pos, end - 3), len(carry), off)
+                return
+            pos = j
+
+    def _set_carry(self, buf: bytes, pos: int, carry_len: int, off: int) -> None:
+        if pos >= carry_len:
+            self._carry_src = (off, pos - carry_len)
+        else:
+            coff, inner = self._carry_src
+            self._carry_src = (coff, inner + pos)
+        self._carry = buf[pos:]
+
+    def _finish(self, builder: ChunkBuilder) -> Iterator[FrameChunk]:
+        """At the end of the file: an incomplete last object is reported, and the objects after it salvaged."""
+        rest = self._carry
+        self._carry = b""
+        if not rest.strip(b"\0"):
+            return
+        coff, inner = self._carry_src
+        if not self._truncation_reported:
+            self.problem("truncated", f"the file ends inside the object at byte {inner} of the container at byte "
+                         f"offset {coff}", offset=coff, frames_lost=1 if _starts_frame(rest) else 0,
+                         truncated=True)
+        arr = np.frombuffer(rest, np.uint8)
+        pos, resume = 0, False
+        while True:
+            if not resume:  # skip past the incomplete (or bad) object at ``pos``
+                j = rest.find(b"LOBJ", pos + 4)
+                if j < 0:
+                    return
+                pos = j
+            st, pos, n, detail = K.walk_objects(arr, pos, len(rest), builder.t_ns, builder.channel, builder.arb_id,
+                                                builder.flags, builder.dlc, builder.data, builder.n, builder.cap,
+                                                self._type_counts)
+            builder.n = n
+            resume = st == K.ST_FULL
+            if resume:
+                yield builder.take()
+            elif st in (K.ST_BAD_TS, K.ST_BAD_FRAME):
+                pos += detail - 4
+
+    def _summarise_objects(self) -> None:
+        counts = self._type_counts
+        skipped = []
+        for found in np.flatnonzero(counts):
+            t, c = int(found), int(counts[found])
+            if t in KNOWN_OTHER:
+                skipped.append(f"{KNOWN_OTHER[t]}({t}) x{c}")
+            elif t in DATA_LOST:
+                self.problem("data_lost", f"the logger recorded {c} {DATA_LOST[t]} event(s): it dropped data "
+                             "while recording", count=c)
+            else:
+                label = f"type {t}" if t < 255 else "types >= 255"
+                self.problem("unknown_object", f"skipped {c} object(s) of {label} (not CAN)", count=c)
+        if skipped:
+            self.meta.extra["skipped_objects"] = ", ".join(skipped)

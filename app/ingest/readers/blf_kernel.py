@@ -1,0 +1,282 @@
+"""Compiled walk over the objects inside decompressed BLF log-container bytes.
+
+The kernel decodes CAN objects straight into a :class:`~app.ingest.readers._base.ChunkBuilder`'s
+columns and stops at the first thing it cannot vouch for, returning a status and the byte
+position; the Python driver (``blf.py``) reports, resynchronises and calls it again. Every
+path either advances ``pos`` or returns, so the walk cannot loop forever.
+
+Object layout (little endian; ``hsize`` is 32 for header version 1, 40 for version 2)::
+
+    0   "LOBJ"  u16 header size  u16 header version  u32 object size  u32 object type
+    16  u32 object flags (1: timestamp in 10 us units, 2: in ns)
+    20  u16 client index / u8 timestamp status     22  u16 object version
+    24  u64 timestamp since measurement start        [32 u64 original timestamp: version 2]
+    hsize: the object's payload, e.g. CAN_MESSAGE::
+
+        +0 u16 channel (1-based)  +2 u8 flags (0x01 Tx, 0x80 remote)  +3 u8 DLC
+        +4 u32 id (bit 31: extended)  +8 u8[8] data
+
+Objects are followed by ``size % 4`` padding bytes; the walk tolerates 0 to 3 bytes of
+padding of either convention by looking for the next signature in that window.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+# object types (Vector binlog object IDs)
+CAN_MESSAGE = 1
+CAN_ERROR = 2
+LOG_CONTAINER = 10
+CAN_ERROR_EXT = 73
+CAN_MESSAGE2 = 86
+CAN_FD_MESSAGE = 100
+CAN_FD_MESSAGE_64 = 101
+CAN_FD_ERROR_64 = 104
+
+# kernel status codes
+ST_END = 0  # every complete object consumed; ``pos`` is the start of an incomplete remainder
+ST_FULL = 1  # the output columns are full; ``pos`` is the next object
+ST_BAD_SIG = 2  # no "LOBJ" signature at ``pos`` (nor within 3 padding bytes)
+ST_BAD_HEADER = 3  # unknown header version or header size; detail = header version
+ST_BAD_SIZE = 4  # object size impossible for its type, or the next object is not where it says; detail = size
+ST_BAD_TS = 5  # timestamp does not fit int64 ns; detail = object size (skip it)
+ST_BAD_FRAME = 6  # a CAN object with impossible content (e.g. > 64 data bytes); detail = object size
+
+MAX_OBJECT_SIZE = 1 << 20  # larger inner objects are corrupt sizes (real ones are at most a few kB)
+
+_SIG = 0x4A424F4C  # b"LOBJ" little endian
+_I64_MAX = 9223372036854775807
+_MAX_10US = _I64_MAX // 10000
+
+_FLAG_EXT = 1
+_FLAG_FD = 2
+_FLAG_ERR = 4
+_FLAG_RTR = 8
+_FLAG_BRS = 16
+_FLAG_ESI = 32
+_FLAG_TX = 64
+
+FRAME_TYPES = frozenset({CAN_MESSAGE, CAN_ERROR, CAN_ERROR_EXT, CAN_MESSAGE2, CAN_FD_MESSAGE,
+                         CAN_FD_MESSAGE_64, CAN_FD_ERROR_64})
+
+_DLC_LEN = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64], np.int64)
+
+
+@numba.njit(inline="always")
+def _u16(b: np.ndarray, p: int) -> int:
+    return int(b[p]) | (int(b[p + 1]) << 8)
+
+
+@numba.njit(inline="always")
+def _u32(b: np.ndarray, p: int) -> int:
+    return (int(b[p]) | (int(b[p + 1]) << 8) | (int(b[p + 2]) << 16)
+            | (int(b[p + 3]) << 24))
+
+
+@numba.njit(inline="always")
+def _dlc_len(code: int) -> int:
+    return _DLC_LEN[code] if code <= 15 else 64
+
+
+@numba.njit(inline="always")
+def _payload_bounds(otype: int) -> tuple[int, int]:
+    """Plausible payload sizes per CAN type; CAN_MESSAGE is fixed ("extension not allowed")."""
+    if otype == CAN_MESSAGE:
+        return 16, 16
+    if otype == CAN_ERROR:
+        return 4, 16
+    if otype == CAN_ERROR_EXT:
+        return 32, 64
+    if otype == CAN_MESSAGE2:
+        return 16, 64
+    if otype == CAN_FD_MESSAGE:
+        return 20, 256
+    if otype == CAN_FD_MESSAGE_64:
+        return 40, 512
+    if otype == CAN_FD_ERROR_64:
+        return 44, 512
+    return 0, MAX_OBJECT_SIZE
+
+
+@numba.njit(inline="always")
+def _sig_at(b: np.ndarray, p: int) -> bool:
+    return b[p] == 0x4C and b[p + 1] == 0x4F and b[p + 2] == 0x42 and b[p + 3] == 0x4A
+
+
+@numba.njit(cache=True, nogil=True)
+def walk_objects(buf: np.ndarray, pos: int, end: int,
+                 t_ns: np.ndarray, channel: np.ndarray, arb_id: np.ndarray, flags: np.ndarray,
+                 dlc: np.ndarray, data: np.ndarray, n: int, cap: int,
+                 type_counts: np.ndarray) -> tuple[int, int, int, int]:
+    """Decode objects in ``buf[pos:end]`` into rows ``n..cap-1``; return ``(status, pos, n, detail)``.
+
+    ``type_counts[min(type, 255)]`` counts the non-CAN objects that were skipped.
+    """
+    while True:
+        if n >= cap:
+            return ST_FULL, pos, n, 0
+        if pos + 4 > end:
+            return ST_END, pos, n, 0
+        if not _sig_at(buf, pos):
+            found = -1
+            for k in range(1, 4):
+                if pos + k + 4 > end:
+                    return ST_END, pos, n, 0
+                if _sig_at(buf, pos + k):
+                    found = pos + k
+                    break
+            if found < 0:
+                return ST_BAD_SIG, pos, n, 0
+            pos = found
+        if pos + 16 > end:
+            return ST_END, pos, n, 0
+        hsize = _u16(buf, pos + 4)
+        hver = _u16(buf, pos + 6)
+        size = _u32(buf, pos + 8)
+        otype = _u32(buf, pos + 12)
+        if hver == 1:
+            hmin = 32
+        elif hver == 2:
+            hmin = 40
+        else:
+            return ST_BAD_HEADER, pos, n, hver
+        if hsize < hmin or hsize > hmin + 64:
+            return ST_BAD_HEADER, pos, n, hver
+        if size < hsize or size > MAX_OBJECT_SIZE:
+            return ST_BAD_SIZE, pos, n, size
+        lo, hi = _payload_bounds(otype)
+        if size - hsize < lo or size - hsize > hi:
+            return ST_BAD_SIZE, pos, n, size
+        if pos + size > end:
+            return ST_END, pos, n, 0
+        nxt = pos + size
+        if otype != CAN_MESSAGE and nxt + 7 <= end:
+            # a size that does not land on the next signature is corrupt (fixed-size CAN_MESSAGE
+            # needs no check: if the next signature is missing, the next object is the damaged one)
+            ok = False
+            for k in range(4):
+                if _sig_at(buf, nxt + k):
+                    ok = True
+                    break
+            if not ok:
+                return ST_BAD_SIZE, pos, n, size
+        if otype not in (CAN_MESSAGE, CAN_MESSAGE2, CAN_FD_MESSAGE, CAN_FD_MESSAGE_64, CAN_ERROR_EXT, CAN_ERROR,
+                         CAN_FD_ERROR_64):
+            type_counts[min(otype, 255)] += 1
+            pos = nxt
+            continue
+        oflags = _u32(buf, pos + 16)
+        ts_lo = _u32(buf, pos + 24)
+        ts_hi = _u32(buf, pos + 28)
+        if ts_hi >= 0x80000000:
+            return ST_BAD_TS, pos, n, size
+        ts = (ts_hi << 32) | ts_lo
+        if oflags == 1:  # 10 us units (python-can treats every other value as ns)
+            if ts > _MAX_10US:
+                return ST_BAD_TS, pos, n, size
+            ts *= 10000
+        p = pos + hsize
+        avail = size - hsize
+        fl = 0
+        if otype in (CAN_MESSAGE, CAN_MESSAGE2):
+            ch = _u16(buf, p) - 1
+            f8 = buf[p + 2]
+            code = int(buf[p + 3])
+            ident = _u32(buf, p + 4)
+            nbytes = min(code, 8)
+            if f8 & 0x80:
+                fl |= _FLAG_RTR
+                nbytes = 0
+            if f8 & 0x01:
+                fl |= _FLAG_TX
+            length = code
+            src = p + 8
+        elif otype == CAN_FD_MESSAGE:
+            ch = _u16(buf, p) - 1
+            f8 = buf[p + 2]
+            code = int(buf[p + 3])
+            ident = _u32(buf, p + 4)
+            fdf = buf[p + 13]
+            nbytes = int(buf[p + 14])
+            if nbytes > 64:
+                return ST_BAD_FRAME, pos, n, size
+            nbytes = min(nbytes, avail - 20)
+            if fdf & 0x1:
+                fl |= _FLAG_FD
+            if fdf & 0x2:
+                fl |= _FLAG_BRS
+            if fdf & 0x4:
+                fl |= _FLAG_ESI
+            if f8 & 0x80:
+                fl |= _FLAG_RTR
+                nbytes = 0
+            if f8 & 0x01:
+                fl |= _FLAG_TX
+            length = _dlc_len(code)
+            src = p + 20
+        elif otype == CAN_FD_MESSAGE_64:
+            ch = int(buf[p]) - 1
+            code = int(buf[p + 1])
+            valid = int(buf[p + 2])
+            ident = _u32(buf, p + 4)
+            f32 = _u32(buf, p + 12)
+            direction = buf[p + 34]
+            ext_off = int(buf[p + 35])
+            if valid > 64:
+                return ST_BAD_FRAME, pos, n, size
+            # the data field may be shorter than ``valid`` (python-can issue 1905): zero-pad
+            stop = ext_off if ext_off != 0 else size
+            nbytes = max(0, min(valid, stop - hsize - 40))
+            if f32 & 0x0010:
+                fl |= _FLAG_RTR
+            if f32 & 0x1000:
+                fl |= _FLAG_FD
+            if f32 & 0x2000:
+                fl |= _FLAG_BRS
+            if f32 & 0x4000:
+                fl |= _FLAG_ESI
+            if direction != 0:
+                fl |= _FLAG_TX
+            length = _dlc_len(code)
+            src = p + 40
+            if fl & _FLAG_RTR:
+                nbytes = 0
+        elif otype == CAN_ERROR_EXT:
+            ch = _u16(buf, p) - 1
+            code = int(buf[p + 10])
+            ident = _u32(buf, p + 16)
+            fl |= _FLAG_ERR
+            nbytes = min(code, 8)
+            length = code
+            src = p + 24
+        elif otype == CAN_ERROR:
+            ch = _u16(buf, p) - 1
+            ident = 0
+            fl |= _FLAG_ERR
+            nbytes = 0
+            length = 0
+            src = p
+        else:  # CAN_FD_ERROR_64
+            ch = int(buf[p]) - 1
+            code = int(buf[p + 1])
+            valid = int(buf[p + 2])
+            ident = _u32(buf, p + 12)
+            if valid > 64:
+                return ST_BAD_FRAME, pos, n, size
+            fl |= _FLAG_ERR | _FLAG_FD
+            nbytes = max(0, min(valid, avail - 44))
+            length = _dlc_len(code & 0xF)
+            src = p + 44
+        if ident & 0x80000000:
+            fl |= _FLAG_EXT
+        t_ns[n] = ts
+        channel[n] = ch if -32768 <= ch <= 32767 else -1
+        arb_id[n] = ident & 0x1FFFFFFF
+        flags[n] = fl
+        dlc[n] = length
+        for k in range(nbytes):
+            data[n, k] = buf[src + k]
+        n += 1
+        pos = nxt

@@ -1,0 +1,122 @@
+"""Which format is this log? Decided by content; the file suffix only breaks ties.
+
+Binary formats have magic bytes (BLF ``LOGG``, MDF ``MDF     `` / ``UnFinMF ``). Text formats
+are scored by how many of the first lines have that format's unmistakable shape; a gzip
+head is inflated first. CANedge's compressed/encrypted MF4 containers (``Generic File``)
+are recognised only to refuse them with a clear message.
+"""
+
+from __future__ import annotations
+
+import re
+import zlib
+from pathlib import PurePath
+
+from app.errors import LogFormatError, UnsupportedFormatError
+
+FORMATS = ("blf", "asc", "candump", "trc", "gvret_csv", "mf4")
+
+SUFFIXES = {
+    ".blf": "blf", ".asc": "asc", ".log": "candump", ".trc": "trc", ".csv": "gvret_csv",
+    ".mf4": "mf4", ".mdf": "mf4",
+}
+
+_LINE_RULES: dict[str, tuple[re.Pattern[str], ...]] = {
+    "asc": (
+        re.compile(r"^\s*date\s+\S+", re.I),
+        re.compile(r"^\s*base\s+(hex|dec)\b", re.I),
+        re.compile(r"^\s*(no\s+)?internal\s+events\s+logged", re.I),
+        re.compile(r"^\s*begin\s+triggerblock", re.I),
+        re.compile(r"^\s*\d+\.\d+\s+(\d+\s+\w+x?\s+(Rx|Tx)\b|\d+\s+ErrorFrame|CANFD\s+\d+)", re.I),
+    ),
+    "candump": (re.compile(r"^\s*\(\d+(\.\d+)?\)\s+\S+\s+[0-9A-Fa-f]{3,8}#"),),
+    "trc": (
+        re.compile(r"^;\$(FILEVERSION|STARTTIME|COLUMNS)="),
+        re.compile(r"^\s*\d+\)\s+\d+(\.\d+)?\s+"),
+        re.compile(r"^\s*\d+\s+\d+\.\d+\s+(DT|FD|FB|FE|BI|RR|ST|ER|EC|EV)\s"),
+    ),
+    "gvret_csv": (
+        re.compile(r"^\s*Time Stamp,ID,Extended,(Dir,)?Bus,LEN", re.I),
+        re.compile(r"^\d+(\.\d+)?,(0x)?[0-9A-Fa-f]{1,8},(true|false),((Rx|Tx),)?\d+,\d+(,[0-9A-Fa-f]{1,2})*,?\s*$",
+                   re.I),
+    ),
+}
+
+
+def _inflate_head(head: bytes) -> bytes:
+    """As much of a gzip member's start as the given bytes decompress to."""
+    d = zlib.decompressobj(16 + zlib.MAX_WBITS)
+    try:
+        return d.decompress(head, 1 << 20)
+    except zlib.error as exc:
+        raise LogFormatError(f"gzip data cannot be decompressed: {exc}") from exc
+
+
+def _suffix_format(name: str | None) -> str | None:
+    if not name:
+        return None
+    suffixes = [s.lower() for s in PurePath(name).suffixes]
+    if suffixes and suffixes[-1] == ".gz":
+        suffixes.pop()
+    return SUFFIXES.get(suffixes[-1]) if suffixes else None
+
+
+def unsupported(name: str | None, why: str) -> UnsupportedFormatError:
+    label = f"{name}: " if name else ""
+    return UnsupportedFormatError(f"{label}{why}; supported formats: {', '.join(FORMATS)} "
+                                  "(BLF, ASC and others also gzip-compressed)")
+
+
+def sniff_format(head: bytes, name: str | None = None) -> str:
+    """The format of a log from its first bytes (content first; ``name``'s suffix breaks ties).
+
+    Parameters
+    ----------
+    head : bytes
+        The first bytes of the file (64 kB is plenty; fewer work for most formats).
+    name : str, optional
+        File name; its suffix (``.blf``, ``.asc``, ``.asc.gz`` ...) is used only when the
+        content matches several text formats equally well.
+
+    Returns
+    -------
+    str
+        One of ``FORMATS``.
+
+    Raises
+    ------
+    LogFormatError
+        ``head`` is empty, or is gzip data that cannot be inflated.
+    UnsupportedFormatError
+        Nothing recognisable; the message lists the supported formats.
+    """
+    if not head:
+        raise LogFormatError(f"{name + ': ' if name else ''}empty log")
+    if head[:2] == b"\x1f\x8b":
+        inner = _inflate_head(head)
+        if not inner:
+            raise LogFormatError(f"{name + ': ' if name else ''}empty log (gzip member decompresses to nothing)")
+        return sniff_format(inner, name[:-3] if name and name.lower().endswith(".gz") else name)
+    if head[:4] == b"LOGG":
+        return "blf"
+    if head[:8] in (b"MDF     ", b"UnFinMF "):
+        return "mf4"
+    if head[:12] == b"Generic File":
+        raise unsupported(name, "this is a CANedge compressed or encrypted MF4 container (MFC/MFE), which needs "
+                          "the vendor's decompression/decryption first")
+    if b"\0" in head[:4096]:
+        raise unsupported(name, "binary content with no known signature")
+    text = head.decode("latin-1")
+    lines = text.splitlines()[:200]
+    if len(head) >= 65536 and len(lines) > 1:
+        lines = lines[:-1]  # the last line may be cut
+    scores = {fmt: sum(1 for line in lines if any(r.match(line) for r in rules))
+              for fmt, rules in _LINE_RULES.items()}
+    best = max(scores.values())
+    if best == 0:
+        raise unsupported(name, "no line has the shape of a supported text log")
+    leaders = [fmt for fmt, s in scores.items() if s == best]
+    suffix = _suffix_format(name)
+    if len(leaders) > 1 and suffix in leaders:
+        return suffix
+    return leaders[0]

@@ -1,0 +1,185 @@
+"""PEAK-System TRC trace files, versions 1.0, 1.1, 1.2, 1.3, 2.0 and 2.1.
+
+Columns per version (``;`` starts a comment; offsets are milliseconds since the start)::
+
+    1.0   1)  17535  00000100  8  00 11 22 ...            number) offset id dlc data|RTR
+    1.1   1)  17535.4  Tx  00000100  8  00 11 ...         ... type(Rx/Tx/Warng/Error) ...
+    1.2   1)  17535.4  1  Tx  00000100  8  00 11 ...      ... bus type id dlc data
+    1.3   1)  17535.400 1  Tx  00000100 -  8  00 11 ...   ... bus type id reserved dlc data
+    2.x   columns named by ;$COLUMNS=N,O,T,B,I,d,R,L,D (l = length in 2.0)
+          types DT, FD, FB (BRS), FE (ESI), BI (BRS+ESI), RR (remote), ER (error); ST/EC/EV skipped
+
+``;$STARTTIME`` is days since 1899-12-30 in the recording PC's local time
+(``start_clock = "trc_header_local"``; python-can reads it as UTC). Version 1.0 has only
+a ``Start time:`` comment (``"trc_comment_local"``). Bus numbers are 1-based in the file
+and 0-based in our frames; files without a bus column are bus 1 (channel 0).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from datetime import datetime, timedelta
+
+from app.errors import LogFormatError
+from app.ingest.frames import FrameChunk, FrameFlag
+from app.ingest.readers._base import BaseReader, ChunkBuilder
+from app.ingest.readers._text import BadLine, LineSource, decimal_to_ns, dlc2len, hex_bytes, parse_int, printable
+
+EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFlag.FD, FrameFlag.ERROR,
+                                                    FrameFlag.REMOTE, FrameFlag.BRS, FrameFlag.ESI, FrameFlag.TX))
+_COMMENT_START = re.compile(r"Start time:\s*(\d{1,2})\.(\d{1,2})\.(\d{4})\s+(\d{1,2}):(\d{2}):(\d{2})(?:\.(\d{1,3}))?")
+_V2_FRAME_TYPES = {"DT": 0, "FD": FD, "FB": FD | BRS, "FE": FD | ESI, "BI": FD | BRS | ESI, "RR": RTR}
+_V2_EVENTS = {"ST", "EC", "EV", "ER"}
+
+Frame = tuple[int, int, int, int, int, bytes]  # t_ns, channel, arb_id, flags, dlc, payload
+
+
+def _bus(tok: str) -> int:
+    """1-based bus number -> 0-based channel."""
+    bus = parse_int(tok, 10, "bus")
+    if not 1 <= bus <= 32767:
+        raise BadLine("bad_line", f"bus number {tok} out of range")
+    return bus - 1
+
+
+class TRCReader(BaseReader):
+    """PEAK TRC reader (see the module docstring)."""
+
+    fmt = "trc"
+
+    def _open(self) -> None:
+        self.version = "1.0"
+        self.columns: dict[str, int] = {}
+        for line in self._head.decode("latin-1").splitlines()[:200]:
+            s = line.strip()
+            if not s.startswith(";"):
+                if s:
+                    break
+                continue
+            key, _, value = s[1:].partition("=")
+            if key == "$FILEVERSION":
+                self.version = value.strip()
+            elif key == "$STARTTIME":
+                try:
+                    days = float(value)
+                    self.meta.start_time = datetime(1899, 12, 30) + timedelta(days=days)
+                    self.meta.start_clock = "trc_header_local"
+                except (ValueError, OverflowError):
+                    self.problem("bad_header", f"unreadable $STARTTIME {value!r}", line=None)
+            elif key == "$COLUMNS":
+                self.columns = {c.strip(): i for i, c in enumerate(value.split(","))}
+            elif self.meta.start_time is None and (m := _COMMENT_START.search(s)) is not None:
+                d, mo, y, h, mi, sec, ms = m.groups()
+                try:
+                    self.meta.start_time = datetime(int(y), int(mo), int(d), int(h), int(mi), int(sec),
+                                                    int((ms or "0").ljust(3, "0")) * 1000)
+                    self.meta.start_clock = "trc_comment_local"
+                except ValueError:
+                    pass
+        self.meta.extra["trc_version"] = self.version
+        if self.version not in ("1.0", "1.1", "1.2", "1.3", "2.0", "2.1"):
+            self.problem("bad_header", f"unknown TRC version {self.version!r}; reading as 1.0")
+            self.version = "1.0"
+        if self.version.startswith("2"):
+            missing = {"O", "T", "I", "D"} - set(self.columns)
+            if missing or not ({"L", "l"} & set(self.columns)):
+                raise LogFormatError(f"{self.name}: TRC {self.version} header lacks the $COLUMNS entries "
+                                f"{sorted(missing) or 'L/l'}")
+
+    # -- per version ------------------------------------------------------------------------------
+    def parse_line(self, s: str) -> Frame | None:
+        """One data line as a frame, or None for non-frame events; damage raises :class:`BadLine`."""
+        if not printable(s):
+            raise BadLine("bad_line", "binary data (non-printable bytes) instead of a TRC line")
+        tok = s.split()
+        if self.version.startswith("2"):
+            return self._v2(tok)
+        if not tok[0].endswith(")"):
+            raise BadLine("bad_line", f"not a TRC {self.version} message line: {s[:60]!r}")
+        if self.version == "1.0":
+            if len(tok) < 4:
+                raise BadLine("short_data", "fewer than 4 columns")
+            t, ch, kind, rest = tok[1], 0, "Rx", tok[2:]
+        elif self.version == "1.1":
+            if len(tok) < 5:
+                raise BadLine("short_data", "fewer than 5 columns")
+            t, ch, kind, rest = tok[1], 0, tok[2], tok[3:]
+        else:
+            need = 6 if self.version == "1.2" else 7
+            if len(tok) < need:
+                raise BadLine("short_data", f"fewer than {need} columns")
+            ch = _bus(tok[2])
+            t, kind = tok[1], tok[3]
+            rest = [tok[4], *tok[6:]] if self.version == "1.3" else tok[4:]
+        t_ns = decimal_to_ns(t, 6, what="time offset")
+        if kind == "Error":
+            return t_ns, ch, 0, ERR, 0, b""
+        if kind not in ("Rx", "Tx") or rest[0] == "FFFFFFFF":
+            return None  # bus status ("Warng", bus-heavy info lines)
+        id_tok, dlc_tok, data = rest[0], rest[1], rest[2:]
+        ident = parse_int(id_tok, 16, "identifier")
+        fl = (EXT if len(id_tok) > 4 else 0) | (TX if kind == "Tx" else 0)
+        dlc = parse_int(dlc_tok, 10, "DLC")
+        if dlc > 8:
+            raise BadLine("bad_line", f"DLC {dlc} exceeds 8")
+        if data[:1] == ["RTR"]:
+            return t_ns, ch, ident, fl | RTR, dlc, b""
+        return t_ns, ch, ident, fl, dlc, hex_bytes(data, dlc)
+
+    def _v2(self, tok: list[str]) -> Frame | None:
+        cols = self.columns
+        n_fixed = len(cols) - 1  # the data column D is last and spans the rest of the line
+        if len(tok) <= cols["T"]:
+            raise BadLine("short_data", "line ends before the type column")
+        kind = tok[cols["T"]]
+        if kind in _V2_EVENTS:
+            if kind == "ER":
+                t_ns = decimal_to_ns(tok[cols["O"]], 6, what="time offset")
+                ch = _bus(tok[cols["B"]]) if "B" in cols else 0
+                return t_ns, ch, 0, ERR, 0, b""
+            return None
+        if kind not in _V2_FRAME_TYPES:
+            raise BadLine("bad_line", f"unknown message type {kind!r}")
+        if len(tok) < n_fixed:
+            raise BadLine("short_data", f"{len(tok)} columns, {n_fixed} expected before the data")
+        t_ns = decimal_to_ns(tok[cols["O"]], 6, what="time offset")
+        ch = _bus(tok[cols["B"]]) if "B" in cols else 0
+        id_tok = tok[cols["I"]]
+        ident = parse_int(id_tok, 16, "identifier")
+        fl = _V2_FRAME_TYPES[kind] | (EXT if len(id_tok) > 4 else 0)
+        if "d" in cols and tok[cols["d"]] == "Tx":
+            fl |= TX
+        if "l" in cols:
+            length = parse_int(tok[cols["l"]], 10, "data length")
+        else:
+            code = parse_int(tok[cols["L"]], 10, "DLC")
+            length = dlc2len(code) if fl & FD else min(code, 8)
+        if length > (64 if fl & FD else 8):
+            raise BadLine("bad_line", f"data length {length} too long for a {'CAN FD' if fl & FD else 'CAN'} frame")
+        if fl & RTR:
+            return t_ns, ch, ident, fl, length, b""
+        return t_ns, ch, ident, fl, length, hex_bytes(tok[cols["D"]:], length)
+
+    def _iter_chunks(self) -> Iterator[FrameChunk]:
+        builder = ChunkBuilder(self.chunk_frames)
+        lines = LineSource(self._stream, self._long_line, self.damage)
+        for line_no, line in lines.lines():
+            s = line.strip()
+            if not s or s.startswith(";"):
+                continue
+            try:
+                frame = self.parse_line(s)
+            except BadLine as bad:
+                self.problem(bad.kind, f"line skipped: {bad.message}", line=line_no)
+                continue
+            if frame is not None:
+                builder.add(*frame)
+                if builder.full:
+                    yield builder.take()
+        if builder.n:
+            yield builder.take()
+
+    def _long_line(self, line_no: int) -> None:
+        self.problem("bad_line", "line skipped: longer than 64 kB (binary data?)", line=line_no)
+
