@@ -20,7 +20,16 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
-from app.analysis.diagnosis.forward import DiagEvent, EffectSetting, Nuisance, predict, vehicle_with, weighted_residual
+from app.analysis.diagnosis.forward import (
+    DiagEvent,
+    EffectSetting,
+    Nuisance,
+    best_offset,
+    prediction,
+    simulate_event,
+    vehicle_with,
+    weighted_residual,
+)
 from app.analysis.diagnosis.split import Split, require_calibration
 from sim import Vehicle
 from sim.effects.base import Effect, ParamSpec
@@ -48,8 +57,8 @@ class Bounds:
         return cls((-half, half))
 
     def specs(self) -> tuple[ParamSpec, ...]:
+        """Nuisance parameters in the least-squares vector (the offset is profiled, not in it)."""
         return (
-            ParamSpec("offset_s", "s", self.offset_s[0], self.offset_s[1], 0.0, "torque-speed time offset"),
             ParamSpec("gain", "-", self.gain[0], self.gain[1], 1.0, "torque gain"),
             ParamSpec("grade_pct", "%", self.grade_pct[0], self.grade_pct[1], 0.0, "road-load offset as grade"),
         )
@@ -95,7 +104,13 @@ Progress = Callable[[str], None]
 
 
 class _Problem:
-    """Maps a unit-box vector to nuisance + effect values and evaluates calibration residuals."""
+    """Maps a unit-box vector to nuisance + effect values and evaluates calibration residuals.
+
+    The vector holds gain, road load and the effect parameters; the time offset is profiled out
+    for every evaluation (:func:`~.forward.best_offset`).
+    """
+
+    N_NUISANCE = 2
 
     def __init__(self, base: Vehicle, events: Sequence[DiagEvent], effects: Sequence[Effect], bounds: Bounds,
                  model: str) -> None:
@@ -103,8 +118,9 @@ class _Problem:
         self.events = tuple(events)
         self.effects = tuple(effects)
         self.model = model
+        self.bounds = bounds
         self.specs: list[ParamSpec] = list(bounds.specs())
-        self.owner: list[str] = ["nuisance"] * 3
+        self.owner: list[str] = ["nuisance"] * self.N_NUISANCE
         for eff in self.effects:
             self.specs.extend(eff.params)
             self.owner.extend([eff.id] * len(eff.params))
@@ -112,12 +128,13 @@ class _Problem:
         self.span = np.array([p.hi - p.lo for p in self.specs])
         self.n_res = sum(e.n for e in self.events)
         self.nfev = 0
+        self.last_offset = 0.0
 
-    def decode(self, u: FloatArray) -> tuple[Nuisance, tuple[EffectSetting, ...]]:
+    def decode(self, u: FloatArray, offset: float = 0.0) -> tuple[Nuisance, tuple[EffectSetting, ...]]:
         x = self.lo + np.clip(u, 0.0, 1.0) * self.span
-        nui = Nuisance(float(x[0]), float(x[1]), float(x[2]))
+        nui = Nuisance(offset, float(x[0]), float(x[1]))
         settings: list[EffectSetting] = []
-        i = 3
+        i = self.N_NUISANCE
         for eff in self.effects:
             k = len(eff.params)
             settings.append((eff, eff.values([float(v) for v in x[i:i + k]])))
@@ -125,21 +142,23 @@ class _Problem:
         return nui, tuple(settings)
 
     def encode(self, nui: Nuisance, values: dict[str, dict[str, float]] | None = None) -> FloatArray:
-        x = [nui.offset_s, nui.gain, nui.grade_pct]
+        x = [nui.gain, nui.grade_pct]
         for eff in self.effects:
             given = (values or {}).get(eff.id, {})
             x.extend(given.get(p.name, p.off) for p in eff.params)
-        return np.clip((np.array(x) - self.lo) / self.span, 0.0, 1.0)
+        return np.asarray(np.clip((np.array(x) - self.lo) / self.span, 0.0, 1.0), dtype=np.float64)
 
     def residuals(self, u: FloatArray) -> FloatArray:
         self.nfev += 1
         nui, settings = self.decode(u)
         try:
             veh = vehicle_with(self.base, nui, settings)
-            parts = [weighted_residual(ev, predict(ev, veh, nui, settings, self.model)) for ev in self.events]
-            r = np.concatenate(parts)
+            outs = [simulate_event(ev, veh, nui.gain, settings, self.model) for ev in self.events]
         except SimError:
             return np.full(self.n_res, _PENALTY)
+        self.last_offset = best_offset(self.events, outs, self.bounds.offset_s)
+        r = np.concatenate([weighted_residual(ev, prediction(ev, out, self.last_offset))
+                            for ev, out in zip(self.events, outs, strict=True)])
         return np.where(np.isfinite(r), r, _PENALTY)
 
 
@@ -190,15 +209,10 @@ def fit(
     prob = _Problem(base, events, effects, bounds, model)
     rng = np.random.default_rng(seed)
     nui0 = start.nuisance if start is not None else Nuisance()
-    u_nui = prob.encode(nui0)[:3]
-    # screen start points: the time offset for the baseline (it has local minima one period
-    # apart), effect parameters for candidates
+    u_nui = prob.encode(nui0)[:prob.N_NUISANCE]
     candidates: list[FloatArray] = []
     if not effects:
-        for frac in (0.5, 0.25, 0.75, 0.0, 1.0):
-            u = u_nui.copy()
-            u[0] = frac
-            candidates.append(u)
+        candidates.append(u_nui)
     else:
         prev = start.values if start is not None else None
         if prev is not None and all(e.id in prev for e in effects):
@@ -213,9 +227,12 @@ def fit(
                         diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-4, gtol=1e-6)
     u = np.asarray(sol.x, dtype=np.float64)
     r = prob.residuals(u)
-    nui, settings = prob.decode(u)
+    nui, settings = prob.decode(u, prob.last_offset)
     values = {eff.id: dict(vals) for eff, vals in settings}
     at_bound = []
+    lo_off, hi_off = bounds.offset_s
+    if min(nui.offset_s - lo_off, hi_off - nui.offset_s) <= 0.01 * (hi_off - lo_off):
+        at_bound.append("nuisance.offset_s")
     for spec, owner, ui in zip(prob.specs, prob.owner, u, strict=True):
         near = ui < 0.01 or ui > 0.99
         value = spec.lo + ui * (spec.hi - spec.lo)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -29,7 +29,14 @@ from app.analysis.diagnosis.decide import (
     decide,
     score_candidate,
 )
-from app.analysis.diagnosis.forward import DiagEvent, Prediction, predict, vehicle_with, weighted_residual
+from app.analysis.diagnosis.forward import (
+    DiagEvent,
+    Prediction,
+    input_uncertainty,
+    predict,
+    vehicle_with,
+    weighted_residual,
+)
 from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2, phase_times, uniform
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.score import EventScore
@@ -175,6 +182,13 @@ def run_diagnosis(
     fit_order: list[str] = []
     say(0.0, f"baseline calibration on {len(cal)} events (held out: {len(ho)})")
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
+    # add the input-reconstruction uncertainty to every sample's variance, then recalibrate
+    veh0 = vehicle_with(vehicle, base_fit.nuisance, ())
+    events = [replace(ev, var=ev.var + input_uncertainty(ev, veh0, base_fit.nuisance, (), opts.model))
+              for ev in events]
+    cal = split.calibration_events(events)
+    ho = split.heldout_events(events)
+    base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, start=base_fit, seed=opts.seed)
     fit_order.append(f"baseline: {[e.index for e in cal]}")
     base_eval = evaluate(vehicle, base_fit, events, opts.model, None, period)
     phases = {ev.index: phase_times(ev, base_eval.predictions[ev.index]) for ev in events}

@@ -31,10 +31,11 @@ class DriveSpec:
     duration_s: float = 60.0
     drive_nm: tuple[float, float] = (50.0, 150.0)
     regen_nm: tuple[float, float] = (-90.0, -30.0)
-    hold_s: tuple[float, float] = (1.9, 2.8)
+    hold_s: tuple[float, float] = (3.0, 3.8)
     ramp_rate_nm_s: tuple[float, float] = (900.0, 2200.0)
     speed_kmh: tuple[float, float] = (25.0, 55.0)
     start_kmh: float = 35.0
+    smooth_s: float = 0.03  # jerk limit of the torque request: ramps pass a moving average this long
 
 
 @dataclass(frozen=True)
@@ -45,7 +46,7 @@ class CanSampling:
     speed_noise_rpm: float = 0.5
     speed_res_rpm: float = 1.0
     torque_res_nm: float = 0.5
-    jitter_s: float = 0.0005
+    jitter_s: float = 0.0002
     drop_fraction: float = 0.01
     offset_s: float = 0.0  # torque timestamps minus the time the value was valid
 
@@ -80,7 +81,7 @@ def make_drive(vehicle: Vehicle, rng: np.random.Generator, spec: DriveSpec | Non
         # stretch the hold toward the target speed (clipped to the allowed range)
         need = j_eq * (target - w) / (q_new - load)
         if need > 0:
-            hold = float(np.clip(need, s.hold_s[0], s.hold_s[1] * 1.3))
+            hold = float(np.clip(need, s.hold_s[0], s.hold_s[1] * 1.2))
         knots_t += [t, t + ramp]
         knots_q += [q_prev, q_new]
         w += ((q_prev + q_new) / 2 - load) * ramp / j_eq + (q_new - load) * hold / j_eq
@@ -88,7 +89,11 @@ def make_drive(vehicle: Vehicle, rng: np.random.Generator, spec: DriveSpec | Non
     knots_t.append(s.duration_s)
     knots_q.append(knots_q[-1])
     tf = np.arange(0.0, s.duration_s, dt)
-    return Drive(tf, np.interp(tf, knots_t, knots_q), motor_rpm(vehicle, s.start_kmh))
+    q = np.interp(tf, knots_t, knots_q)
+    k = max(int(round(s.smooth_s / dt)), 1)
+    if k > 1:
+        q = np.convolve(np.pad(q, (k, k), mode="edge"), np.ones(k) / k, mode="same")[k:-k]
+    return Drive(tf, q, motor_rpm(vehicle, s.start_kmh))
 
 
 def run_truth(vehicle: Vehicle, drive: Drive, model: str = "multibody") -> SimResult:
