@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.signal import correlate
 
 from app.analysis.series import FloatArray, parabolic_vertex
 from app.errors import InputError, InsufficientDataError
@@ -75,17 +76,16 @@ def estimate_lag(
     core = np.zeros(n, bool)
     core[kmax:n - kmax] = True
     core &= sel
-    idx = np.flatnonzero(core)
-    ra = a[idx]
+    am = np.where(core, a, 0.0)
+    # every lag at once: FFT cross-correlations of the masked reference with the target (and its energy)
+    num = correlate(b, am, mode="full", method="fft")[n - 1 - kmax:n + kmax]
+    energy_b = correlate(b * b, core.astype(np.float64), mode="full", method="fft")[n - 1 - kmax:n + kmax]
+    den = np.sqrt(np.maximum(float(np.dot(am, am)) * energy_b, 0.0))
     lags = np.arange(-kmax, kmax + 1)
-    corr = np.empty(lags.size)
-    for j, k in enumerate(lags):
-        rb = b[idx + k]
-        den = float(np.sqrt(np.dot(ra, ra) * np.dot(rb, rb)))
-        corr[j] = float(np.dot(ra, rb)) / den if den > 0 else 0.0
+    corr = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
     best = int(np.argmax(corr))
     off, val = parabolic_vertex(corr, best)
-    return OffsetEstimate(float((lags[best] + off) * dt), float(np.clip(val, -1.0, 1.0)), int(idx.size))
+    return OffsetEstimate(float((lags[best] + off) * dt), float(np.clip(val, -1.0, 1.0)), int(core.sum()))
 
 
 def shift(sig: Signal, lag_s: float) -> Signal:

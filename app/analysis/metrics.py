@@ -196,9 +196,13 @@ def ripple_metrics(
     off_p, y_peak = parabolic_vertex(y, ip)
     t_peak = float(t[ip] + off_p * dt)
 
-    valleys, _ = find_peaks(-y, prominence=prom)
-    after = valleys[valleys > ip]
-    iv = int(after[0]) if after.size else None
+    # the adjacent valley: the lowest point between the impact peak and the next significant peak
+    peaks, _ = find_peaks(y, prominence=prom)
+    nxt = peaks[peaks > ip]
+    stop = int(nxt[0]) if nxt.size else y.size
+    iv = ip + 1 + int(np.argmin(y[ip + 1:stop])) if stop > ip + 1 else None
+    if iv is not None and (iv >= y.size - 1 or y[ip] - y[iv] < prom):
+        iv = None  # still falling at the end of the window, or no real swing
     y_valley, t_valley = NAN, NAN
     if iv is not None:
         off_v, y_valley = parabolic_vertex(y, iv)
@@ -223,7 +227,8 @@ def ripple_metrics(
     zeta = NAN
     if keep >= 2:
         delta = 2.0 * float(np.mean(np.log(swings[:keep - 1] / swings[1:keep])))  # swings are half a period apart
-        zeta = delta / float(np.sqrt(4.0 * np.pi**2 + delta**2))
+        # growing swings (delta <= 0) mean a second excitation, not a free decay: no damping ratio
+        zeta = delta / float(np.sqrt(4.0 * np.pi**2 + delta**2)) if delta > 0 else NAN
     if keep >= 2:
         freq = keep / (2.0 * (times[keep] - times[0]))
     else:

@@ -78,8 +78,7 @@ class SQLiteStore:
         self._local = threading.local()
         self._all: list[sqlite3.Connection] = []
         self._lock = threading.Lock()
-        with self._tx() as db:
-            db.executescript(SCHEMA)
+        self._conn().executescript(SCHEMA)  # idempotent; executescript manages its own transaction
 
     # -- connections -------------------------------------------------------------------
     def _conn(self) -> sqlite3.Connection:

@@ -1,0 +1,107 @@
+"""Result files of a finished job: one JSON document plus named float64 ``.npy`` arrays.
+
+Written to a temporary sibling directory and renamed into place, so a reader never sees
+half a result and a crash leaves no partial directory behind. Readers memory-map the
+arrays and keep recently used results open (:class:`ResultCache`), so a dashboard read
+touches only the pages it needs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import threading
+from collections import OrderedDict
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from app.errors import NotFoundError, StorageError
+
+DOC = "result.json"
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` with NaN/inf floats replaced by None and numpy scalars by Python numbers."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def write_result(directory: Path, doc: Mapping[str, Any], arrays: Mapping[str, npt.NDArray[Any]]) -> None:
+    tmp = directory.with_name(directory.name + ".tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        (tmp / "arrays").mkdir(parents=True)
+        for name, arr in arrays.items():
+            np.save(tmp / "arrays" / f"{name}.npy", np.ascontiguousarray(arr, dtype=np.float64))
+        (tmp / DOC).write_text(json.dumps(json_safe(dict(doc)), allow_nan=False), encoding="utf-8")
+        shutil.rmtree(directory, ignore_errors=True)
+        os.replace(tmp, directory)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise StorageError(f"cannot write results to {directory}: {exc.strerror}") from exc
+
+
+class ResultFiles:
+    """A finished result directory: the document and memory-mapped arrays."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = directory
+        try:
+            self.doc: dict[str, Any] = json.loads((directory / DOC).read_text(encoding="utf-8"))
+        except FileNotFoundError as exc:
+            raise NotFoundError(f"no results in {directory.name}") from exc
+        self._arrays: dict[str, npt.NDArray[np.float64]] = {}
+        self._lock = threading.Lock()
+
+    def has(self, name: str) -> bool:
+        return (self.directory / "arrays" / f"{name}.npy").exists()
+
+    def array(self, name: str) -> npt.NDArray[np.float64]:
+        with self._lock:
+            arr = self._arrays.get(name)
+            if arr is None:
+                path = self.directory / "arrays" / f"{name}.npy"
+                if not path.exists():
+                    raise NotFoundError(f"result {self.directory.name} has no series {name!r}")
+                arr = np.load(path, mmap_mode="r")
+                self._arrays[name] = arr
+            return arr
+
+
+class ResultCache:
+    """The most recently used :class:`ResultFiles`, keyed by directory."""
+
+    def __init__(self, size: int = 32) -> None:
+        self.size = size
+        self._items: OrderedDict[Path, ResultFiles] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, directory: Path) -> ResultFiles:
+        with self._lock:
+            hit = self._items.get(directory)
+            if hit is not None:
+                self._items.move_to_end(directory)
+                return hit
+        files = ResultFiles(directory)
+        with self._lock:
+            self._items[directory] = files
+            while len(self._items) > max(self.size, 1):
+                self._items.popitem(last=False)
+        return files
+
+    def forget(self, directory: Path) -> None:
+        with self._lock:
+            self._items.pop(directory, None)

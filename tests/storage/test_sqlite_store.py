@@ -1,0 +1,156 @@
+"""The embedded store: de-duplication, versions, jobs across restarts, concurrent writers."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.errors import ConflictError, InputError, NotFoundError
+from app.storage import JobStatus, SQLiteStore
+from app.storage.results import ResultFiles, json_safe, write_result
+
+
+def _add_log(store: SQLiteStore, content: bytes, name: str = "a.blf") -> tuple[str, bool]:
+    tmp = store.temp_path(".blf")
+    tmp.write_bytes(content)
+    rec, created = store.add_log(tmp, sha256=hashlib.sha256(content).hexdigest(), filename=name, fmt="blf",
+                                 frames=10, duration_s=1.0, start_time=None, issues=[], meta={})
+    assert not tmp.exists()
+    return rec.id, created
+
+
+def _vehicle_files(tmp_path: Path, tag: str) -> dict[str, Path]:
+    files = {}
+    for key in ("driveline", "database", "signal_map"):
+        p = tmp_path / f"{key}-{tag}.txt"
+        p.write_text(f"{key} {tag}")
+        files[key] = p
+    return files
+
+
+def test_logs_are_deduplicated_by_content(tmp_path: Path) -> None:
+    store = SQLiteStore(tmp_path)
+    a, created_a = _add_log(store, b"one")
+    b, created_b = _add_log(store, b"one", "renamed.blf")
+    c, _ = _add_log(store, b"two")
+    assert created_a and not created_b and a == b and a != c
+    assert len(list((tmp_path / "logs").iterdir())) == 2
+    store.delete_log(a)
+    with pytest.raises(NotFoundError):
+        store.get_log(a)
+    assert len(list((tmp_path / "logs").iterdir())) == 1
+
+
+def test_vehicle_versions_and_unchanged_content(tmp_path: Path) -> None:
+    store = SQLiteStore(tmp_path / "data")
+    v1, new1 = store.add_vehicle("ev-1", **_vehicle_files(tmp_path, "a"), summary={"k": 1})
+    same, new_same = store.add_vehicle("ev-1", **_vehicle_files(tmp_path, "a"), summary={})
+    v2, new2 = store.add_vehicle("ev-1", **_vehicle_files(tmp_path, "b"), summary={})
+    assert (v1.version, new1, same.version, new_same, v2.version, new2) == (1, True, 1, False, 2, True)
+    assert store.get_vehicle("ev-1").version == 2
+    assert store.get_vehicle("ev-1", 1).driveline_path.read_text() == "driveline a"
+    assert [v.version for v in store.vehicle_versions("ev-1")] == [1, 2]
+    with pytest.raises(InputError, match="vehicle name"):
+        store.add_vehicle("Bad Name!", **_vehicle_files(tmp_path, "c"), summary={})
+
+
+def test_everything_survives_a_reopen_and_interrupted_jobs_are_resumed_then_failed(tmp_path: Path) -> None:
+    store = SQLiteStore(tmp_path)
+    log_id, _ = _add_log(store, b"log")
+    veh, _ = store.add_vehicle("car", **_vehicle_files(tmp_path, "x"), summary={})
+    rec = store.create_analysis(log_id, veh, {"model": "multibody"})
+    store.start_job(rec.job.id)
+    store.close()
+
+    # simulate a crash: the job row says running, owned by a process that no longer exists
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    reopened = SQLiteStore(tmp_path)
+    reopened._conn().execute("UPDATE jobs SET owner_pid = ?", (int(dead.stdout),))
+    assert reopened.get_log(log_id).filename == "a.blf"
+    assert reopened.get_vehicle("car").version == 1
+    pending = reopened.recover_jobs(max_attempts=2)
+    assert [j.id for j in pending] == [rec.job.id]
+    assert "resumed" in reopened.get_job(rec.job.id).stage
+
+    reopened.start_job(rec.job.id)  # second attempt, cut off again
+    reopened._conn().execute("UPDATE jobs SET owner_pid = ?", (int(dead.stdout),))
+    assert reopened.recover_jobs(max_attempts=2) == []
+    job = reopened.get_job(rec.job.id)
+    assert job.status is JobStatus.FAILED and job.error_code == "interrupted"
+    assert "2 of 2 attempts" in (job.error_detail or "")
+
+
+def test_a_job_owned_by_a_live_process_is_left_alone(tmp_path: Path) -> None:
+    store = SQLiteStore(tmp_path)
+    job = store.create_job("analysis", "x")
+    store.start_job(job.id)
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        store._conn().execute("UPDATE jobs SET owner_pid = ?", (other.pid,))
+        assert store.recover_jobs(2) == []
+        assert store.get_job(job.id).status is JobStatus.RUNNING
+    finally:
+        other.kill()
+        other.wait()
+
+
+def test_busy_analysis_blocks_log_delete(tmp_path: Path) -> None:
+    store = SQLiteStore(tmp_path)
+    log_id, _ = _add_log(store, b"log")
+    veh, _ = store.add_vehicle("car", **_vehicle_files(tmp_path, "x"), summary={})
+    rec = store.create_analysis(log_id, veh, {})
+    with pytest.raises(ConflictError):
+        store.delete_log(log_id)
+    with pytest.raises(ConflictError):
+        store.delete_analysis(rec.id)
+    store.fail_job(rec.job.id, "x", "y")
+    store.delete_log(log_id)
+    with pytest.raises(NotFoundError):
+        store.get_analysis(rec.id)
+
+
+def test_concurrent_writers_from_threads_and_processes(tmp_path: Path) -> None:
+    store = SQLiteStore(tmp_path)
+    errors: list[BaseException] = []
+
+    def worker(k: int) -> None:
+        try:
+            for i in range(15):
+                _add_log(store, f"{k}-{i}".encode())
+                _add_log(store, b"shared")  # every thread also uploads the same bytes
+        except BaseException as exc:
+            errors.append(exc)
+
+    code = ("import hashlib,sys; from app.storage import SQLiteStore; s=SQLiteStore(sys.argv[1])\n"
+            "for i in range(15):\n"
+            "    b=f'p-{i}'.encode(); t=s.temp_path(); t.write_bytes(b)\n"
+            "    s.add_log(t, sha256=hashlib.sha256(b).hexdigest(), filename='p', fmt='blf', frames=1,"
+            " duration_s=0.0, start_time=None, issues=[], meta={})\n")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], cwd=Path(__file__).resolve().parents[2],
+                            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
+    threads = [threading.Thread(target=worker, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert proc.wait(60) == 0
+    assert not errors
+    assert len(store.list_logs(limit=1000)) == 4 * 15 + 1 + 15
+
+
+def test_result_files_round_trip_and_nan_to_null(tmp_path: Path) -> None:
+    d = tmp_path / "res"
+    write_result(d, {"x": float("nan"), "y": [1.0, float("inf")]}, {"a": np.arange(5.0)})
+    files = ResultFiles(d)
+    assert files.doc == {"x": None, "y": [1.0, None]}
+    np.testing.assert_array_equal(files.array("a"), np.arange(5.0))
+    assert json_safe({"k": np.float64(2.5)}) == {"k": 2.5}
+    with pytest.raises(NotFoundError):
+        files.array("missing")
