@@ -22,6 +22,8 @@ padding of either convention by looking for the next signature in that window.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numba
 import numpy as np
 
@@ -65,18 +67,23 @@ _DLC_LEN = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64], np.
 
 
 @numba.njit(inline="always")
-def _u16(b: np.ndarray, p: int) -> int:
-    return int(b[p]) | (int(b[p + 1]) << 8)
+def _u8(b: np.ndarray, p: int) -> Any:
+    return np.int64(b[p])
 
 
 @numba.njit(inline="always")
-def _u32(b: np.ndarray, p: int) -> int:
-    return (int(b[p]) | (int(b[p + 1]) << 8) | (int(b[p + 2]) << 16)
-            | (int(b[p + 3]) << 24))
+def _u16(b: np.ndarray, p: int) -> Any:  # numba types it int64
+    return np.int64(b[p]) | (np.int64(b[p + 1]) << 8)
 
 
 @numba.njit(inline="always")
-def _dlc_len(code: int) -> int:
+def _u32(b: np.ndarray, p: int) -> Any:  # int64 (unsigned mixes would promote to float)
+    return (np.int64(b[p]) | (np.int64(b[p + 1]) << 8) | (np.int64(b[p + 2]) << 16)
+            | (np.int64(b[p + 3]) << 24))
+
+
+@numba.njit(inline="always")
+def _dlc_len(code: int) -> Any:
     return _DLC_LEN[code] if code <= 15 else 64
 
 
@@ -183,7 +190,7 @@ def walk_objects(buf: np.ndarray, pos: int, end: int,
         if otype in (CAN_MESSAGE, CAN_MESSAGE2):
             ch = _u16(buf, p) - 1
             f8 = buf[p + 2]
-            code = int(buf[p + 3])
+            code = _u8(buf, p + 3)
             ident = _u32(buf, p + 4)
             nbytes = min(code, 8)
             if f8 & 0x80:
@@ -196,10 +203,10 @@ def walk_objects(buf: np.ndarray, pos: int, end: int,
         elif otype == CAN_FD_MESSAGE:
             ch = _u16(buf, p) - 1
             f8 = buf[p + 2]
-            code = int(buf[p + 3])
+            code = _u8(buf, p + 3)
             ident = _u32(buf, p + 4)
             fdf = buf[p + 13]
-            nbytes = int(buf[p + 14])
+            nbytes = _u8(buf, p + 14)
             if nbytes > 64:
                 return ST_BAD_FRAME, pos, n, size
             nbytes = min(nbytes, avail - 20)
@@ -217,13 +224,13 @@ def walk_objects(buf: np.ndarray, pos: int, end: int,
             length = _dlc_len(code)
             src = p + 20
         elif otype == CAN_FD_MESSAGE_64:
-            ch = int(buf[p]) - 1
-            code = int(buf[p + 1])
-            valid = int(buf[p + 2])
+            ch = _u8(buf, p) - 1
+            code = _u8(buf, p + 1)
+            valid = _u8(buf, p + 2)
             ident = _u32(buf, p + 4)
             f32 = _u32(buf, p + 12)
             direction = buf[p + 34]
-            ext_off = int(buf[p + 35])
+            ext_off = _u8(buf, p + 35)
             if valid > 64:
                 return ST_BAD_FRAME, pos, n, size
             # the data field may be shorter than ``valid`` (python-can issue 1905): zero-pad
@@ -245,7 +252,7 @@ def walk_objects(buf: np.ndarray, pos: int, end: int,
                 nbytes = 0
         elif otype == CAN_ERROR_EXT:
             ch = _u16(buf, p) - 1
-            code = int(buf[p + 10])
+            code = _u8(buf, p + 10)
             ident = _u32(buf, p + 16)
             fl |= _FLAG_ERR
             nbytes = min(code, 8)
@@ -259,9 +266,9 @@ def walk_objects(buf: np.ndarray, pos: int, end: int,
             length = 0
             src = p
         else:  # CAN_FD_ERROR_64
-            ch = int(buf[p]) - 1
-            code = int(buf[p + 1])
-            valid = int(buf[p + 2])
+            ch = _u8(buf, p) - 1
+            code = _u8(buf, p + 1)
+            valid = _u8(buf, p + 2)
             ident = _u32(buf, p + 12)
             if valid > 64:
                 return ST_BAD_FRAME, pos, n, size
