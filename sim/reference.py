@@ -67,7 +67,8 @@ def make_rhs(m: ChainModel, t_in: F64, q_in: F64, linear: bool) -> Callable[[flo
             f[m.housing] -= tm
         w_w = omega[m.wheel]
         v = w_w * radius
-        road = radius * (crr * mass * GRAVITY * np.tanh(v / 0.1) + half_rho_cda * v * abs(v) + mass * GRAVITY * sin_grade)
+        force = crr * mass * GRAVITY * np.tanh(v / 0.1) + half_rho_cda * v * abs(v) + mass * GRAVITY * sin_grade
+        road = radius * force
         f[m.wheel] -= road + brake * np.tanh(w_w / 0.05)
         return np.concatenate((omega, f / m.inertia))
 

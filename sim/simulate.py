@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -87,8 +86,8 @@ def _grid(inp: TorqueInput, output_dt: float) -> tuple[float, int]:
 
 def simulate(
     vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLike, *,
-    model: Literal["multibody", "two_inertia"] = "multibody", speed0_rpm: float | None = None,
-    interp: Literal["hold", "linear"] = "hold", dt: float | None = None, output_dt: float = 0.001,
+    model: str = "multibody", speed0_rpm: float | None = None,
+    interp: str = "hold", dt: float | None = None, output_dt: float = 0.001,
     what_if: WhatIf | None = None,
 ) -> SimResult:
     """Simulate the driveline under measured motor torque.

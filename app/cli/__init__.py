@@ -18,7 +18,7 @@ from app.errors import AppError
 from sim.errors import SimError
 
 # Subcommand modules, in the order they appear in --help.
-COMMANDS: tuple[str, ...] = ()
+COMMANDS: tuple[str, ...] = ("sim",)
 
 
 def build_parser() -> argparse.ArgumentParser:

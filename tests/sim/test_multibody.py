@@ -55,7 +55,7 @@ def _free_vehicle(gap_scale: float = 0.0, damping: float = 0.0):  # type: ignore
 def _run_raw(v, theta0, omega0, torque: float, t_end: float, dt: float | None = None):  # type: ignore[no-untyped-def]
     m = build_chain(v)
     step, sub = choose_step(m, 1e-3, dt)
-    n_out = int(round(t_end / 1e-3)) + 1
+    n_out = round(t_end / 1e-3) + 1
     nb, nc = m.n_bodies, m.n_couplings
     om = np.zeros((n_out, nb))
     th = np.zeros((n_out, nc))

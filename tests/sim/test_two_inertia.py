@@ -14,8 +14,8 @@ from sim.two_inertia import TwoInertiaParams, pack, project, run_two_inertia
 def _run(p: TwoInertiaParams, torque: float, state0: list[float], t_end: float, dt: float = 1e-5,
          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     arr, road = pack(p)
-    n_out = int(round(t_end / 1e-4)) + 1
-    sub = int(round(1e-4 / dt))
+    n_out = round(t_end / 1e-4) + 1
+    sub = round(1e-4 / dt)
     out = np.zeros((n_out, 5))
     ev_t = np.zeros(100)
     ev_k = np.zeros(100, dtype=np.int64)
@@ -33,7 +33,7 @@ def test_gap_traverse_time_under_constant_torque() -> None:
     it has turned 2 alpha i: t_close = sqrt(4 alpha i Jm / T)."""
     torque = 20.0
     p = BASE
-    out, ev_t, ev_k, n = _run(p, torque, [-p.alpha * p.ratio, 0.0, 0.0, 0.0, -p.alpha], 0.2)
+    out, ev_t, ev_k, _n = _run(p, torque, [-p.alpha * p.ratio, 0.0, 0.0, 0.0, -p.alpha], 0.2)
     t_close = math.sqrt(4 * p.alpha * p.ratio * p.jm / torque)
     closes = ev_t[ev_k == 0]
     assert closes.size >= 1

@@ -1,0 +1,79 @@
+"""Batch equals single runs; tolerance analysis; the paper reproduction and the CLI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.cli import main
+from sim import ParameterError, WhatIf, load_vehicle, simulate
+from sim.batch import simulate_batch, tolerance_analysis
+from sim.paper import reproduce, tip_in_torque
+
+PAPER = load_vehicle("paper")
+
+
+def test_batch_matches_single_runs() -> None:
+    t, q = tip_in_torque(duration_s=0.4)
+    variants = [{}, {"gaps.halfshaft": 0.0}, {"halfshaft.stiffness": 6000.0, "body.mass": 1900.0}]
+    batch = simulate_batch(PAPER, variants, t, q, interp="linear")
+    for k, change in enumerate(variants):
+        single = simulate(PAPER.with_changes(change), t, q, interp="linear")
+        assert np.allclose(batch.motor_speed_rpm[k], single.motor_speed_rpm, atol=1e-9)
+        assert batch.gap_events[k] == single.gap_events
+    with pytest.raises(ParameterError, match="topology"):
+        simulate_batch(PAPER, [{}, {"halfshaft.segments": 3}], t, q)
+    with pytest.raises(ParameterError, match=r"variants\[1\]"):
+        simulate_batch(PAPER, [{}, {"body.mass": -1.0}], t, q)
+
+
+def test_tolerance_analysis_is_seeded_and_brackets_nominal() -> None:
+    t, q = tip_in_torque(duration_s=0.5)
+    a = tolerance_analysis(PAPER, t, q, n=24, seed=5, interp="linear", window=(0.1, 0.5))
+    b = tolerance_analysis(PAPER, t, q, n=24, seed=5, interp="linear", window=(0.1, 0.5))
+    assert np.array_equal(a.fluct_rpm, b.fluct_rpm)
+    lo, hi = a.band(0, 100)
+    assert lo < hi
+    col = a.fields.index("gaps.halfshaft")
+    assert np.all((a.samples[:, col] >= PAPER.gaps.halfshaft.min) & (a.samples[:, col] <= PAPER.gaps.halfshaft.max))
+    # bigger half-shaft lash -> more ripple: the sampled lash and the ripple correlate
+    assert np.corrcoef(a.samples[:, col], a.fluct_rpm)[0, 1] > 0.3
+    assert 0.0 <= a.percentile_of(a.nominal_fluct_rpm) <= 100.0
+
+
+def test_antijerk_whatif_reduces_ripple() -> None:
+    t, q = tip_in_torque(duration_s=0.6)
+    base = simulate(PAPER, t, q, interp="linear")
+    shaped = simulate(PAPER, t, q, interp="linear", what_if=WhatIf(antijerk_rate=200.0, antijerk_band=30.0))
+    from sim.metrics import peak_to_valley
+
+    assert peak_to_valley(shaped.t, shaped.motor_speed_rpm) < 0.8 * peak_to_valley(base.t, base.motor_speed_rpm)
+
+
+def test_reproduce_paper_targets() -> None:
+    """The targets the preset is documented to meet (docs/simulation.md lists the misses)."""
+    rows, cases = reproduce(PAPER)
+    by = {r.quantity: r for r in rows}
+    for key in ("unloaded time, nominal gaps (ms)", "unloaded time, all gaps halved (ms)",
+                "unloaded time, torque halved (ms)", "fluctuation ratio half_gaps/nominal",
+                "fluctuation ratio half_torque/nominal", "sensitivity ranking S1<S2<S3<S4<S5",
+                "gaps 4+5 eliminated: impact-induced / nominal (%)"):
+        assert by[key].ok, (key, by[key].ours)
+    assert cases["zero_gaps"].unloaded_ms == 0.0
+
+
+def test_cli_reproduce_and_simulate(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    assert main(["reproduce-paper"]) == 0
+    assert "targets met" in capsys.readouterr().out
+    csv_in = tmp_path / "torque.csv"
+    t, q = tip_in_torque(duration_s=0.4)
+    csv_in.write_text("t_s,torque_nm\n" + "".join(f"{a},{b}\n" for a, b in zip(t, q, strict=True)))
+    out = tmp_path / "out.csv"
+    assert main(["simulate", str(csv_in), "--interp", "linear", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "unloaded intervals" in text
+    assert out.read_text().splitlines()[0].startswith("t_s,motor_speed_rpm")
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,torque\n0,1\n")
+    assert main(["simulate", str(bad)]) == 2
+    assert main(["simulate", str(csv_in), "--vehicle", "nosuch"]) == 2
