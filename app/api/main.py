@@ -1,0 +1,64 @@
+"""The application factory.
+
+``create_app(settings)`` wires the store (embedded SQLite + files by default), the job
+runner, CORS and the error handlers, and includes every router in :data:`ROUTERS` -- append
+a module's ``router`` there to add a resource.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import APIRouter, FastAPI
+from fastapi.middleware.cors import CORSMiddleware
+
+from app import __version__
+from app.api import errors
+from app.api.routes import analyses, health, logs, series, vehicles
+from app.jobs import JobRunner
+from app.settings import Settings, get_settings
+from app.storage.results import ResultCache
+from app.storage.sqlite import SQLiteStore
+
+ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router]
+
+log = logging.getLogger("lashscope.api")
+
+DESCRIPTION = """EV CAN logs in, driveline shuffle and clunk answers out.
+
+Upload a log, register a vehicle (driveline TOML + DBC + signal map), start an analysis,
+then read events, ripple metrics and measured-vs-simulated speed. Every error is JSON
+`{"detail": ..., "code": ...}`."""
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    cfg = settings or get_settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        store = SQLiteStore(cfg.data_dir)
+        store.clean_temp()  # uploads cut off by a previous stop
+        runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts)
+        app.state.store, app.state.runner = store, runner
+        app.state.results = ResultCache()
+        resumed = runner.start()
+        if resumed:
+            log.info("resumed %d queued job(s)", len(resumed))
+        try:
+            yield
+        finally:
+            runner.shutdown(wait=False)
+            store.close()
+
+    app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan)
+    if settings is not None:
+        app.dependency_overrides[get_settings] = lambda: settings
+    if cfg.cors_origins:
+        app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],
+                           allow_headers=["*"])
+    errors.install(app)
+    for router in ROUTERS:
+        app.include_router(router)
+    return app

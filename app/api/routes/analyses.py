@@ -1,0 +1,83 @@
+"""Analyses: log x vehicle -> events, simulation, metrics; run in the background, results kept."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, Response, status
+
+from app.api.deps import ResultsDep, RunnerDep, StoreDep
+from app.api.schemas import ERRORS, AnalysisCreate, AnalysisOut
+from app.errors import AppError, ConflictError
+from app.pipeline import AnalysisOptions
+from app.storage.base import Store
+from app.storage.records import AnalysisRecord, JobStatus
+from app.storage.results import ResultCache, ResultFiles
+
+router = APIRouter(prefix="/analyses", tags=["analyses"], responses=ERRORS)
+
+
+def finished(store: Store, cache: ResultCache, analysis_id: str) -> tuple[AnalysisRecord, ResultFiles]:
+    """The record and result files of a finished analysis; typed errors otherwise.
+
+    A failed analysis answers with its own error (e.g. 422 ``missing_signal``); one still
+    queued or running answers 409 ``analysis_not_ready``.
+    """
+    rec = store.get_analysis(analysis_id)
+    job = rec.job
+    if job.status is JobStatus.FAILED:
+        err = AppError(f"analysis {analysis_id} failed: {job.error_detail}", code=job.error_code or "analysis_failed")
+        err.status = 500 if job.error_code in ("internal_error", "storage_error") else 422
+        raise err
+    if job.status is not JobStatus.DONE:
+        raise ConflictError(f"analysis {analysis_id} is {job.status.value} ({job.stage}, {job.progress:.0%})",
+                            code="analysis_not_ready")
+    return rec, cache.get(rec.result_dir)
+
+
+@router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=AnalysisOut,
+             summary="Start an analysis of a log with a vehicle (runs in the background)")
+def create_analysis(body: AnalysisCreate, store: StoreDep, runner: RunnerDep) -> AnalysisOut:
+    opts = AnalysisOptions.from_dict(body.options)  # 400 on bad options, before anything is queued
+    store.get_log(body.log_id)
+    vehicle = store.get_vehicle(body.vehicle, body.vehicle_version)
+    rec = store.create_analysis(body.log_id, vehicle, opts.to_dict())
+    runner.submit(rec.job.id)
+    return AnalysisOut.of(store.get_analysis(rec.id))
+
+
+@router.get("", response_model=list[AnalysisOut], summary="List analyses, newest first")
+def list_analyses(store: StoreDep, log_id: str | None = None, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+                  offset: Annotated[int, Query(ge=0)] = 0) -> list[AnalysisOut]:
+    return [AnalysisOut.of(a) for a in store.list_analyses(log_id, limit, offset)]
+
+
+@router.get("/{analysis_id}", response_model=AnalysisOut, summary="Status, progress and summary")
+def get_analysis(analysis_id: str, store: StoreDep) -> AnalysisOut:
+    return AnalysisOut.of(store.get_analysis(analysis_id))
+
+
+@router.delete("/{analysis_id}", status_code=status.HTTP_204_NO_CONTENT, summary="Delete a finished analysis")
+def delete_analysis(analysis_id: str, store: StoreDep, cache: ResultsDep) -> Response:
+    rec = store.get_analysis(analysis_id)
+    store.delete_analysis(analysis_id)
+    cache.forget(rec.result_dir)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+@router.get("/{analysis_id}/events", summary="Tip-in/tip-out events, excluded ones with the reason")
+def get_events(analysis_id: str, store: StoreDep, cache: ResultsDep,
+               included: bool | None = None) -> dict[str, Any]:
+    _, files = finished(store, cache, analysis_id)
+    events = files.doc["events"]
+    if included is not None:
+        events = [e for e in events if e["included"] is included]
+    return {"analysis_id": analysis_id, "count": len(events), "events": events}
+
+
+@router.get("/{analysis_id}/metrics", summary="Ripple metrics per event: measured, simulated, differences")
+def get_metrics(analysis_id: str, store: StoreDep, cache: ResultsDep) -> dict[str, Any]:
+    _, files = finished(store, cache, analysis_id)
+    d = files.doc
+    return {"analysis_id": analysis_id, "summary": d["summary"], "offset": d["offset"], "whole": d["whole"],
+            "events": d["metrics"], "notes": d["notes"]}

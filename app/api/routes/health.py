@@ -1,0 +1,22 @@
+from __future__ import annotations
+
+import sqlite3
+
+from fastapi import APIRouter
+
+from app import __version__
+from app.api.deps import StoreDep
+from app.api.schemas import HealthOut
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/health", response_model=HealthOut, summary="Liveness, storage and job queue")
+def health(store: StoreDep) -> HealthOut:
+    try:
+        jobs = store.job_counts()
+        db = "ok"
+    except sqlite3.Error as exc:
+        jobs, db = {}, f"error: {exc}"
+    return HealthOut(status="ok" if db == "ok" else "degraded", version=__version__, data_dir=str(store.root),
+                     database=db, jobs=jobs)

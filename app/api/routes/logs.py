@@ -1,0 +1,81 @@
+"""Logs: streamed upload with a size cap and content-hash de-duplication, list, status, delete."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query, Request, Response, status
+from fastapi.concurrency import run_in_threadpool
+
+from app.api.deps import SettingsDep, StoreDep
+from app.api.schemas import ERRORS, LogOut
+from app.api.upload import receive_upload
+from app.errors import InputError
+from app.pipeline import inspect_log
+
+router = APIRouter(prefix="/logs", tags=["logs"], responses=ERRORS)
+
+UPLOAD_DOC = {
+    "requestBody": {
+        "content": {
+            "multipart/form-data": {"schema": {"type": "object", "properties": {
+                "file": {"type": "string", "format": "binary"}}, "required": ["file"]}},
+            "application/octet-stream": {"schema": {"type": "string", "format": "binary"}},
+        },
+        "required": True,
+    }
+}
+
+
+@router.post("", status_code=status.HTTP_201_CREATED, response_model=LogOut, openapi_extra=UPLOAD_DOC,
+             summary="Upload a CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4; gzip accepted)")
+async def upload_log(request: Request, response: Response, store: StoreDep, settings: SettingsDep,
+                     filename: Annotated[str | None, Query(description="name for a raw-body upload")] = None
+                     ) -> LogOut:
+    """The body is streamed to disk and hashed; the log is read once to validate it.
+
+    Same content as an existing log: 200 with that log and ``duplicate: true``.
+    """
+    up = await receive_upload(request, store.temp_path, settings.max_upload_bytes,
+                              int(settings.upload_drain_mb * 2**20), filename)
+    if len(up.files) != 1:
+        for f in up.files:
+            f.path.unlink(missing_ok=True)
+        raise InputError(f"expected one file in the upload, got {len(up.files)}")
+    f = up.files[0]
+    existing = store.find_log_by_hash(f.sha256)
+    if existing is not None:
+        f.path.unlink(missing_ok=True)
+        response.status_code = status.HTTP_200_OK
+        return LogOut.of(existing, duplicate=True)
+    try:
+        if f.size == 0:
+            raise InputError(f"upload {f.filename!r} is empty")
+        info = await run_in_threadpool(inspect_log, f.path)
+    except BaseException:
+        f.path.unlink(missing_ok=True)
+        raise
+    rec, created = await run_in_threadpool(
+        store.add_log, f.path, sha256=f.sha256, filename=f.filename, fmt=info["format"], frames=info["frames"],
+        duration_s=info["duration_s"], start_time=info["start_time"], issues=info["issues"],
+        meta={"start_clock": info["start_clock"], "channels": info["channels"]})
+    if not created:
+        response.status_code = status.HTTP_200_OK
+    return LogOut.of(rec, duplicate=not created)
+
+
+@router.get("", response_model=list[LogOut], summary="List logs, newest first")
+def list_logs(store: StoreDep, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+              offset: Annotated[int, Query(ge=0)] = 0) -> list[LogOut]:
+    return [LogOut.of(r) for r in store.list_logs(limit, offset)]
+
+
+@router.get("/{log_id}", response_model=LogOut, summary="One log: format, frames, duration, read problems")
+def get_log(log_id: str, store: StoreDep) -> LogOut:
+    return LogOut.of(store.get_log(log_id))
+
+
+@router.delete("/{log_id}", status_code=status.HTTP_204_NO_CONTENT, summary="Delete a log and its analyses")
+def delete_log(log_id: str, store: StoreDep) -> Response:
+    store.delete_log(log_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -1,0 +1,156 @@
+"""Series reads for dashboards: aligned speed (whole log or one event) and decoded signals.
+
+``max_points`` keeps at most that many rows, choosing in every bucket the rows with each
+column's minimum and maximum so shuffle peaks survive; ``t0``/``t1`` cut a time range first.
+``format=csv`` (or ``Accept: text/csv``) returns CSV instead of JSON. Responses of finished
+analyses never change, so they are cached by their query.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import threading
+from collections import OrderedDict
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+from fastapi import APIRouter, Query, Request, Response
+
+from app.analysis.align import downsample_minmax
+from app.api.deps import ResultsDep, SettingsDep, StoreDep
+from app.api.routes.analyses import finished
+from app.api.schemas import ERRORS, SeriesOut
+from app.errors import InputError, NotFoundError
+from app.payload import SERIES_COLUMNS
+from app.storage.results import ResultFiles
+
+router = APIRouter(prefix="/analyses", tags=["series"], responses=ERRORS)
+F64 = npt.NDArray[np.float64]
+SERIES_DOC: dict[int | str, dict[str, Any]] = {200: {"model": SeriesOut, "content": {"text/csv": {}}}}
+
+
+class _Cache:
+    def __init__(self) -> None:
+        self._items: OrderedDict[tuple[object, ...], tuple[bytes, str]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, key: tuple[object, ...]) -> tuple[bytes, str] | None:
+        with self._lock:
+            hit = self._items.get(key)
+            if hit is not None:
+                self._items.move_to_end(key)
+            return hit
+
+    def put(self, key: tuple[object, ...], value: tuple[bytes, str], size: int) -> None:
+        with self._lock:
+            self._items[key] = value
+            while len(self._items) > size:
+                self._items.popitem(last=False)
+
+
+_CACHE = _Cache()
+
+
+def _nullable(a: F64) -> list[float | None]:
+    return [None if v != v else v for v in a.tolist()]  # NaN -> null (NaN != NaN)
+
+
+def _render(analysis_id: str, event: int | None, t: F64, cols: dict[str, F64], source: int,
+            fmt: Literal["json", "csv"]) -> tuple[bytes, str]:
+    if fmt == "csv":
+        buf = io.StringIO()
+        names = list(cols)
+        buf.write(",".join(["t_s", *names]) + "\n")
+        table = np.column_stack([t, *cols.values()]) if t.size else np.empty((0, 1 + len(names)))
+        np.savetxt(buf, table, fmt="%.9g", delimiter=",")
+        return buf.getvalue().replace("nan", "").encode(), "text/csv"
+    body = {"analysis_id": analysis_id, "event": event, "points": int(t.size), "source_points": source,
+            "columns": list(cols), "t_s": t.tolist(), **{k: _nullable(v) for k, v in cols.items()}}
+    return json.dumps(body, allow_nan=False).encode(), "application/json"
+
+
+def _window(t: F64, t0: float | None, t1: float | None) -> slice:
+    lo = 0 if t0 is None else int(np.searchsorted(t, t0, side="left"))
+    hi = t.size if t1 is None else int(np.searchsorted(t, t1, side="right"))
+    if t0 is not None and t1 is not None and t1 < t0:
+        raise InputError(f"t1 = {t1} s is before t0 = {t0} s")
+    return slice(lo, max(lo, hi))
+
+
+def _speed(files: ResultFiles, event: int | None) -> tuple[F64, dict[str, F64]]:
+    if event is None:
+        if not files.has("whole_t"):
+            raise NotFoundError("this analysis has no whole-log series (whole_log was off or the simulation failed)")
+        return files.array("whole_t"), {c: files.array(f"whole_{c}") for c in SERIES_COLUMNS}
+    rows = files.doc["event_rows"].get(str(event))
+    if rows is None:
+        n = len(files.doc["events"])
+        raise NotFoundError(f"event {event} has no aligned series (events 0..{n - 1}; excluded events have none)")
+    s = slice(rows[0], rows[1])
+    return files.array("ev_t")[s], {c: files.array(f"ev_{c}")[s] for c in SERIES_COLUMNS}
+
+
+def _wants_csv(request: Request, fmt: str | None) -> Literal["json", "csv"]:
+    if fmt is not None:
+        return "csv" if fmt == "csv" else "json"
+    return "csv" if "text/csv" in request.headers.get("accept", "") else "json"
+
+
+MaxPoints = Annotated[int, Query(ge=0, le=1_000_000, description="0 = every point")]
+Fmt = Annotated[Literal["json", "csv"] | None, Query(alias="format")]
+
+
+@router.get("/{analysis_id}/speed", responses=SERIES_DOC, response_class=Response,
+            summary="Measured vs simulated motor speed (and torque) on a common time base")
+def get_speed(analysis_id: str, request: Request, store: StoreDep, cache: ResultsDep, settings: SettingsDep,
+              event: Annotated[int | None, Query(ge=0, description="event index; omit for the whole log")] = None,
+              max_points: MaxPoints = 2000, t0: float | None = None, t1: float | None = None,
+              fmt: Fmt = None) -> Response:
+    out = _wants_csv(request, fmt)
+    key = ("speed", analysis_id, event, max_points, t0, t1, out)
+    hit = _CACHE.get(key)
+    if hit is None:
+        _, files = finished(store, cache, analysis_id)
+        t, cols = _speed(files, event)
+        w = _window(t, t0, t1)
+        t, cols = np.asarray(t[w]), {k: np.asarray(v[w]) for k, v in cols.items()}
+        source = int(t.size)
+        if max_points:
+            t, cols = downsample_minmax(t, cols, max_points)
+        hit = _render(analysis_id, event, t, cols, source, out)
+        _CACHE.put(key, hit, settings.series_cache_entries)
+    return Response(hit[0], media_type=hit[1])
+
+
+@router.get("/{analysis_id}/events/{event}/speed", responses=SERIES_DOC, response_class=Response,
+            summary="Measured vs simulated speed of one event window")
+def get_event_speed(analysis_id: str, event: int, request: Request, store: StoreDep, cache: ResultsDep,
+                    settings: SettingsDep, max_points: MaxPoints = 2000, fmt: Fmt = None) -> Response:
+    return get_speed(analysis_id, request, store, cache, settings, event, max_points, None, None, fmt)
+
+
+@router.get("/{analysis_id}/signals", summary="Decoded channels of the analysed log")
+def list_signals(analysis_id: str, store: StoreDep, cache: ResultsDep) -> dict[str, object]:
+    _, files = finished(store, cache, analysis_id)
+    return {"analysis_id": analysis_id, "signals": files.doc["signals"]}
+
+
+@router.get("/{analysis_id}/signals/{name}", responses=SERIES_DOC, response_class=Response,
+            summary="One decoded channel (its own sample times)")
+def get_signal(analysis_id: str, name: str, request: Request, store: StoreDep, cache: ResultsDep,
+               max_points: MaxPoints = 2000, t0: float | None = None, t1: float | None = None,
+               fmt: Fmt = None) -> Response:
+    _, files = finished(store, cache, analysis_id)
+    info = files.doc["signals"].get(name)
+    if info is None:
+        raise NotFoundError(f"no decoded channel {name!r}; have {sorted(files.doc['signals'])}")
+    t = files.array(f"sig_{info['key']}_t")
+    w = _window(t, t0, t1)
+    tt, cols = np.asarray(t[w]), {name: np.asarray(files.array(f"sig_{info['key']}_v")[w])}
+    source = int(tt.size)
+    if max_points:
+        tt, cols = downsample_minmax(tt, cols, max_points)
+    body, media = _render(analysis_id, None, tt, cols, source, _wants_csv(request, fmt))
+    return Response(body, media_type=media)

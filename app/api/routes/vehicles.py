@@ -1,0 +1,123 @@
+"""Vehicles: a driveline description (TOML) + DBC + signal map, versioned by name."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, Request, Response, status
+from fastapi.concurrency import run_in_threadpool
+
+from app.api.deps import SettingsDep, StoreDep
+from app.api.schemas import ERRORS, VehicleOut
+from app.api.upload import receive_upload
+from app.errors import InputError
+from app.pipeline import check_vehicle_files, gap_sensitivity
+from app.storage.results import json_safe
+from sim import load_vehicle, preset_names
+
+router = APIRouter(prefix="/vehicles", tags=["vehicles"], responses=ERRORS)
+
+FORM_DOC = {
+    "requestBody": {
+        "content": {"multipart/form-data": {"schema": {"type": "object", "properties": {
+            "name": {"type": "string", "description": "vehicle name: a-z, 0-9, '-', '_'"},
+            "driveline": {"type": "string", "format": "binary", "description": "driveline TOML (sim format)"},
+            "preset": {"type": "string", "description": "instead of a driveline file: a preset name, e.g. paper"},
+            "dbc": {"type": "string", "format": "binary", "description": "database (DBC/KCD/SYM/ARXML); "
+                    "default: the project's dbc/lashscope_ev.dbc"},
+            "signal_map": {"type": "string", "format": "binary",
+                           "description": "signal map TOML; default: dbc/lashscope_ev.map.toml"},
+        }, "required": ["name"]}}},
+        "required": True,
+    }
+}
+
+
+@router.post("", status_code=status.HTTP_201_CREATED, response_model=VehicleOut, openapi_extra=FORM_DOC,
+             summary="Create a vehicle or a new version of it")
+async def create_vehicle(request: Request, response: Response, store: StoreDep, settings: SettingsDep) -> VehicleOut:
+    """Every file is checked before anything is stored: the driveline must load in the simulator,
+    the database must load, and the signal map must fit the database. Identical content to the
+    latest version returns that version (200, ``unchanged: true``)."""
+    up = await receive_upload(request, store.temp_path, 64 * 2**20, 0)
+    files = {f.field_name: f.path for f in up.files}
+    try:
+        name = up.fields.get("name", "").strip()
+        if not name:
+            raise InputError("form field 'name' is required")
+        unknown = set(files) - {"driveline", "dbc", "signal_map"}
+        if unknown:
+            raise InputError(f"unexpected file fields {sorted(unknown)}; use driveline, dbc, signal_map")
+        driveline = files.get("driveline")
+        if driveline is None:
+            preset = up.fields.get("preset", "").strip()
+            if preset not in preset_names():
+                raise InputError(f"give a driveline TOML file or a preset; presets: {preset_names()}")
+            driveline = store.temp_path(".toml")
+            driveline.write_text(_preset_toml(preset), encoding="utf-8")
+            files["driveline"] = driveline
+        dbc = files.get("dbc") or settings.dbc_dir / "lashscope_ev.dbc"
+        smap = files.get("signal_map") or settings.dbc_dir / "lashscope_ev.map.toml"
+        summary = await run_in_threadpool(check_vehicle_files, driveline, dbc, smap)
+        rec, created = await run_in_threadpool(store.add_vehicle, name, driveline=driveline, database=dbc,
+                                               signal_map=smap, summary=summary)
+    finally:
+        for p in files.values():
+            p.unlink(missing_ok=True)
+    if not created:
+        response.status_code = status.HTTP_200_OK
+    return VehicleOut.of(rec, unchanged=not created)
+
+
+def _preset_toml(name: str) -> str:
+    from sim import dump_toml
+
+    return dump_toml(load_vehicle(name))
+
+
+@router.get("", response_model=list[VehicleOut], summary="Vehicles (latest version of each)")
+def list_vehicles(store: StoreDep) -> list[VehicleOut]:
+    return [VehicleOut.of(v) for v in store.list_vehicles()]
+
+
+@router.get("/{name}", response_model=VehicleOut, summary="Latest version of a vehicle")
+def get_vehicle(name: str, store: StoreDep) -> VehicleOut:
+    return VehicleOut.of(store.get_vehicle(name))
+
+
+@router.get("/{name}/versions", response_model=list[VehicleOut], summary="Every version of a vehicle")
+def vehicle_versions(name: str, store: StoreDep) -> list[VehicleOut]:
+    return [VehicleOut.of(v) for v in store.vehicle_versions(name)]
+
+
+@router.get("/{name}/versions/{version}", response_model=VehicleOut, summary="One version of a vehicle")
+def vehicle_version(name: str, version: int, store: StoreDep) -> VehicleOut:
+    return VehicleOut.of(store.get_vehicle(name, version))
+
+
+@router.get("/{name}/versions/{version}/driveline", summary="The driveline TOML of a version",
+            response_class=Response, responses={200: {"content": {"application/toml": {}}}})
+def vehicle_driveline(name: str, version: int, store: StoreDep) -> Response:
+    rec = store.get_vehicle(name, version)
+    return Response(rec.driveline_path.read_bytes(), media_type="application/toml")
+
+
+@router.get("/{name}/gap-sensitivity", summary="Gap what-ifs and sensitivities S1..S5 for the vehicle")
+async def vehicle_gap_sensitivity(name: str, store: StoreDep,
+                                  version: Annotated[int | None, Query(ge=1)] = None) -> dict[str, Any]:
+    """Each of the five gaps removed and halved under the paper's tip-in, with the nominal and
+    no-backlash responses; computed on first request and kept beside the vehicle version."""
+    rec = store.get_vehicle(name, version)
+    cached = rec.driveline_path.parent / "gap_sensitivity.json"
+    if cached.exists():
+        doc: dict[str, Any] = json.loads(cached.read_text(encoding="utf-8"))
+        return doc
+    vehicle = await run_in_threadpool(load_vehicle, rec.driveline_path)
+    doc = json_safe(await run_in_threadpool(gap_sensitivity, vehicle))
+    doc.update(name=rec.name, version=rec.version)
+    tmp = cached.with_suffix(".tmp")
+    tmp.write_text(json.dumps(doc), encoding="utf-8")
+    Path(tmp).replace(cached)
+    return doc

@@ -1,0 +1,125 @@
+"""Response and request bodies (published in the OpenAPI document)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, Field
+
+from app.storage.records import AnalysisRecord, JobRecord, LogRecord, VehicleRecord
+
+
+class ErrorOut(BaseModel):
+    detail: str
+    code: str
+
+
+ERRORS: dict[int | str, dict[str, Any]] = {s: {"model": ErrorOut} for s in (400, 404, 409, 413, 415, 422, 500)}
+
+
+class LogOut(BaseModel):
+    id: str
+    sha256: str
+    filename: str
+    size_bytes: int
+    format: str
+    status: str = "ready"
+    created_at: str
+    frames: int
+    duration_s: float
+    start_time: str | None
+    issues: list[dict[str, Any]]
+    duplicate: bool = False
+
+    @classmethod
+    def of(cls, r: LogRecord, duplicate: bool = False) -> LogOut:
+        return cls(id=r.id, sha256=r.sha256, filename=r.filename, size_bytes=r.size_bytes, format=r.format,
+                   created_at=r.created_at, frames=r.frames, duration_s=r.duration_s, start_time=r.start_time,
+                   issues=r.issues, duplicate=duplicate)
+
+
+class VehicleOut(BaseModel):
+    name: str
+    version: int
+    created_at: str
+    sha256: str
+    summary: dict[str, Any]
+    files: dict[str, str]
+    unchanged: bool = False
+
+    @classmethod
+    def of(cls, r: VehicleRecord, unchanged: bool = False) -> VehicleOut:
+        return cls(name=r.name, version=r.version, created_at=r.created_at, sha256=r.sha256, summary=r.summary,
+                   files={"driveline": r.driveline_path.name, "database": r.database_path.name,
+                          "signal_map": r.signal_map_path.name}, unchanged=unchanged)
+
+
+class JobOut(BaseModel):
+    id: str
+    status: str
+    progress: float
+    stage: str
+    attempts: int
+    created_at: str
+    started_at: str | None
+    finished_at: str | None
+    error: ErrorOut | None
+
+    @classmethod
+    def of(cls, j: JobRecord) -> JobOut:
+        err = ErrorOut(detail=j.error_detail or "", code=j.error_code) if j.error_code else None
+        return cls(id=j.id, status=j.status.value, progress=j.progress, stage=j.stage, attempts=j.attempts,
+                   created_at=j.created_at, started_at=j.started_at, finished_at=j.finished_at, error=err)
+
+
+class AnalysisCreate(BaseModel):
+    log_id: str
+    vehicle: str
+    vehicle_version: int | None = None
+    options: dict[str, Any] = Field(default_factory=dict, description="AnalysisOptions fields (app.pipeline)")
+
+
+class AnalysisOut(BaseModel):
+    id: str
+    log_id: str
+    vehicle: str
+    vehicle_version: int
+    options: dict[str, Any]
+    created_at: str
+    status: str
+    progress: float
+    job: JobOut
+    summary: dict[str, Any]
+    links: dict[str, str]
+
+    @classmethod
+    def of(cls, a: AnalysisRecord) -> AnalysisOut:
+        base = f"/analyses/{a.id}"
+        links = {"self": base, "events": f"{base}/events", "metrics": f"{base}/metrics", "speed": f"{base}/speed",
+                 "signals": f"{base}/signals", "log": f"/logs/{a.log_id}",
+                 "vehicle": f"/vehicles/{a.vehicle_name}/versions/{a.vehicle_version}"}
+        return cls(id=a.id, log_id=a.log_id, vehicle=a.vehicle_name, vehicle_version=a.vehicle_version,
+                   options=a.options, created_at=a.created_at, status=a.job.status.value, progress=a.job.progress,
+                   job=JobOut.of(a.job), summary=a.summary, links=links)
+
+
+class HealthOut(BaseModel):
+    status: str
+    version: str
+    data_dir: str
+    database: str
+    jobs: dict[str, int]
+
+
+class SeriesOut(BaseModel):
+    """Aligned series: ``t_s`` and one list per column, all the same length (null where undefined)."""
+
+    analysis_id: str
+    event: int | None
+    points: int
+    source_points: int
+    columns: list[str]
+    t_s: list[float]
+    measured_rpm: list[float | None] | None = None
+    simulated_rpm: list[float | None] | None = None
+    torque_nm: list[float | None] | None = None

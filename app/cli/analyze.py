@@ -1,0 +1,60 @@
+"""``lashscope analyze LOG --vehicle V``: the same pipeline as the API, in-process, JSON out."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: Any) -> None:
+    p: argparse.ArgumentParser = sub.add_parser(
+        "analyze", help="analyse a log: events, simulation, metrics",
+        description="Decode LOG with the DBC and signal map, find tip-in/tip-out events, simulate the vehicle "
+        "with the measured torque and compare ripple metrics.")
+    p.add_argument("log", type=Path, help="CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4; gzip accepted)")
+    p.add_argument("--vehicle", required=True, help="driveline preset name (e.g. paper) or TOML file")
+    p.add_argument("--dbc", type=Path, default=None, help="database (default: dbc/lashscope_ev.dbc)")
+    p.add_argument("--signal-map", type=Path, default=None, help="signal map (default: dbc/lashscope_ev.map.toml)")
+    p.add_argument("--model", choices=["multibody", "two_inertia"], default="multibody")
+    p.add_argument("--no-whole-log", action="store_true", help="skip the open-loop whole-log simulation")
+    p.add_argument("--json", action="store_true", help="print the full result as JSON")
+    p.add_argument("--out", type=Path, default=None, help="also write the JSON result to this file")
+    p.set_defaults(func=run)
+
+
+def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
+    from app.payload import result_payload
+    from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
+    from app.settings import get_settings
+    from app.storage.results import json_safe
+    from sim import load_vehicle
+
+    dbc_dir = get_settings().dbc_dir
+    inputs = VehicleInputs(load_vehicle(args.vehicle), args.dbc or dbc_dir / "lashscope_ev.dbc",
+                           args.signal_map or dbc_dir / "lashscope_ev.map.toml")
+    opts = AnalysisOptions(model=args.model, whole_log=not args.no_whole_log)
+    doc, _ = result_payload(run_analysis(args.log, inputs, opts))
+    doc["log"] = str(args.log)
+    doc["vehicle"] = inputs.vehicle.name
+    return dict(json_safe(doc))
+
+
+def run(args: argparse.Namespace) -> int:
+    from app.cli.report import events_table, metrics_table, summary_line
+
+    doc = analysis_doc(args)
+    text = json.dumps(doc, indent=1)
+    if args.out is not None:
+        args.out.write_text(text, encoding="utf-8")
+    if args.json:
+        sys.stdout.write(text + "\n")
+    else:
+        print(summary_line(doc))
+        print()
+        print(events_table(doc))
+        print()
+        print(metrics_table(doc))
+    return 0

@@ -1,0 +1,59 @@
+"""Plain-text tables of an analysis document (events, metrics) for the command line."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+METRIC_ROWS = (
+    ("fluctuation_rpm", "fluctuation peak-valley", "rpm", 1.0),
+    ("rise_height_rpm", "rise height (gap open)", "rpm", 1.0),
+    ("gap_open_time_s", "gap-open / rising edge", "ms", 1e3),
+    ("first_overshoot_rpm", "first overshoot", "rpm", 1.0),
+    ("shuffle_freq_hz", "shuffle frequency", "Hz", 1.0),
+    ("damping_ratio", "damping ratio", "-", 1.0),
+    ("settling_time_s", "settling time", "s", 1.0),
+)
+
+
+def _f(v: Any, scale: float = 1.0, digits: int = 1) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return f"{v * scale:.{digits}f}"
+
+
+def events_table(doc: dict[str, Any]) -> str:
+    lines = [f"{'#':>3} {'kind':<8} {'t (s)':>8} {'torque (N m)':>15} {'rate (N m/s)':>12} {'km/h':>6}  status"]
+    for e in doc["events"]:
+        status = "analysed" if e["has_metrics"] else (e["exclusion"] or e["error"] or "-")
+        torque = f"{e['torque_before_nm']:.0f} -> {e['torque_after_nm']:.0f}"
+        lines.append(f"{e['index']:>3} {e['kind']:<8} {e['t_cross_s']:>8.2f} {torque:>15} "
+                     f"{e['torque_rate_nm_s']:>12.0f} {_f(e['vehicle_speed_kmh']):>6}  {status}")
+    return "\n".join(lines)
+
+
+def metrics_table(doc: dict[str, Any]) -> str:
+    summ = doc["summary"].get("metrics", {})
+    lines = [f"{'metric (median over events)':<30} {'measured':>10} {'simulated':>10} {'sim-meas':>10}  unit"]
+    for key, label, unit, scale in METRIC_ROWS:
+        row = summ.get(key)
+        if not row:
+            continue
+        digits = 3 if unit in ("-", "s") else 1
+        lines.append(f"{label:<30} {_f(row['measured_median'], scale, digits):>10} "
+                     f"{_f(row['simulated_median'], scale, digits):>10} "
+                     f"{_f(row['difference_median'], scale, digits):>10}  {unit}")
+    for key, label in (("rms_rpm", "aligned speed RMS error"), ("nrmse", "aligned speed NRMSE")):
+        row = summ.get(key)
+        if row:
+            lines.append(f"{label:<30} {'':>10} {'':>10} {_f(row['difference_median'], 1.0, 3):>10}  "
+                         f"{'rpm' if key == 'rms_rpm' else '-'}")
+    return "\n".join(lines)
+
+
+def summary_line(doc: dict[str, Any]) -> str:
+    s = doc["summary"]
+    whole = doc.get("whole") or {}
+    return (f"{s['events']} events ({s['tip_in']} tip-in, {s['tip_out']} tip-out): {s['with_metrics']} analysed, "
+            f"{s['excluded']} excluded; torque-to-speed offset {_f(s['offset_ms'])} ms; whole-log speed RMS "
+            f"{_f(whole.get('rms_rpm'))} rpm")

@@ -1,0 +1,310 @@
+"""The one place that chains the stages: log -> signals -> events -> simulation -> alignment -> metrics.
+
+::
+
+    run_analysis(log, VehicleInputs, AnalysisOptions, progress)
+      decode     open_log + load_database + load_signal_map + load_signals  -> SignalSet
+      events     detect_events                                              -> [Event]
+      simulate   sim.simulate per included event window (from the measured speed at its start),
+                 and once over the whole log
+      align      common time base; torque-to-speed offset = lag of measured behind simulated speed
+      metrics    ripple metrics of measured and (offset-corrected) simulated speed, differences
+
+Progress goes to ``progress(stage, fraction)`` with ``fraction`` in 0..1 over the whole run;
+nothing here prints. Results are plain dataclasses; :func:`app.pipeline_results.result_payload`
+turns them into JSON + arrays for storage.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from app.analysis.align import OffsetEstimate, common_time_base, estimate_lag, overlap, shift
+from app.analysis.compare import EventComparison, SpeedError, compare_event, speed_error
+from app.analysis.events import SPEED, TORQUE, Event, EventParams, detect_events
+from app.analysis.metrics import MetricParams, ripple_metrics
+from app.analysis.series import FloatArray, finite_signal, median_period
+from app.errors import InputError, InsufficientDataError, MissingSignalError
+from app.signals import Signal, SignalSet
+from sim import SimError, SimResult, Vehicle, simulate
+from sim.metrics import unloaded_time
+
+ProgressFn = Callable[[str, float], None]
+REQUIRED = (TORQUE, SPEED)
+RPM_PER_RAD_S = 30.0 / np.pi
+
+
+def _no_progress(stage: str, fraction: float) -> None:
+    return None
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    model: Literal["multibody", "two_inertia"] = "multibody"
+    events: EventParams = field(default_factory=EventParams)
+    metrics: MetricParams = field(default_factory=MetricParams)
+    fit_offset: bool = True
+    max_offset_s: float = 0.05  # the torque-to-speed offset is searched within ± this
+    event_dt_s: float = 0.001  # time base of the per-event aligned series
+    whole_log: bool = True  # also simulate the whole log in one open-loop run
+    torque_interp: Literal["hold", "linear"] = "linear"
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any] | None) -> AnalysisOptions:
+        data = dict(data or {})
+        ev_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("events", {}).items()}
+        mp_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("metrics", {}).items()}
+        try:
+            opts = cls(events=EventParams(**ev_kw), metrics=MetricParams(**mp_kw), **data)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"analysis options: {exc}") from exc
+        if opts.model not in ("multibody", "two_inertia"):
+            raise InputError(f"analysis options: model = {opts.model!r}; use 'multibody' or 'two_inertia'")
+        if not 0 <= opts.max_offset_s <= 1.0 or not 1e-4 <= opts.event_dt_s <= 0.05:
+            raise InputError("analysis options: max_offset_s must be in [0, 1] s and event_dt_s in [1e-4, 0.05] s")
+        return opts
+
+
+@dataclass(frozen=True)
+class VehicleInputs:
+    """What an analysis needs about the vehicle: the driveline, its DBC and the signal map."""
+
+    vehicle: Vehicle
+    database: Path
+    signal_map: Path
+
+
+@dataclass(frozen=True)
+class Aligned:
+    """Measured and simulated speed (rpm) and torque (N m) on one uniform time base ``t`` (s), all (n,)."""
+
+    t: FloatArray
+    measured_rpm: FloatArray
+    simulated_rpm: FloatArray
+    torque_nm: FloatArray
+
+
+@dataclass(frozen=True)
+class EventResult:
+    event: Event
+    aligned: Aligned | None = None
+    comparison: EventComparison | None = None
+    sim_gap_open_time_s: float = float("nan")  # the simulator's own first-gap-open to last-gap-close time
+    error: str | None = None  # why this included event has no metrics (simulation failed, too few samples)
+
+
+@dataclass(frozen=True)
+class AnalysisResult:
+    signals: SignalSet
+    events: list[Event]
+    event_results: list[EventResult]
+    offset: OffsetEstimate
+    whole: Aligned | None
+    whole_error: SpeedError | None
+    ingest: dict[str, Any] = field(default_factory=dict)
+    timings_s: dict[str, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def decode_log(log_path: Path, database: Path, signal_map: Path,
+               progress: ProgressFn = _no_progress) -> tuple[SignalSet, dict[str, Any]]:
+    """Read and decode a log into canonical signals; returns the signals and an ingest summary."""
+    from app.pipeline_ingest import decode_log as _decode  # the ingest edge, kept apart from the arithmetic
+
+    return _decode(log_path, database, signal_map, REQUIRED, progress)
+
+
+def _simulate(vehicle: Vehicle, torque: Signal, speed: Signal, t0: float, t1: float,
+              opts: AnalysisOptions, output_dt: float) -> SimResult:
+    m = (torque.t >= t0) & (torque.t <= t1)
+    tq_t, tq_v = torque.t[m], torque.values[m]
+    if tq_t.size < 2:
+        raise InsufficientDataError(f"torque has {tq_t.size} samples between {t0:.3f} and {t1:.3f} s")
+    speed0 = float(speed.at([tq_t[0]])[0])
+    return simulate(vehicle, tq_t, tq_v, model=opts.model, speed0_rpm=speed0 if np.isfinite(speed0) else None,
+                    interp=opts.torque_interp, output_dt=output_dt)
+
+
+def _sim_signal(res: SimResult) -> Signal:
+    return Signal("simulated_speed_rpm", res.t, res.motor_speed_rpm, "rpm")
+
+
+def _pooled_lag(pairs: list[tuple[FloatArray, FloatArray]], dt: float, max_lag_s: float) -> OffsetEstimate:
+    """Lag of measured behind simulated speed over all events (NaN gaps keep events apart)."""
+    if not pairs:
+        return OffsetEstimate(0.0, float("nan"), 0)
+    gap = np.full(int(max_lag_s / dt) + 2, np.nan)
+    sim = np.concatenate([x for s, _ in pairs for x in (s, gap)])
+    meas = np.concatenate([x for _, m in pairs for x in (m, gap)])
+    return estimate_lag(sim, meas, dt, max_lag_s)
+
+
+def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptions | None = None,
+                    progress: ProgressFn = _no_progress, start: float = 0.0) -> AnalysisResult:
+    """Events, simulation, alignment and metrics for decoded signals (see the module docstring)."""
+    opts = options or AnalysisOptions()
+    clock = time.perf_counter()
+    timings: dict[str, float] = {}
+
+    def stage(name: str, frac: float) -> None:
+        progress(name, start + (1.0 - start) * frac)
+
+    for name in REQUIRED:
+        if name not in signals:
+            raise MissingSignalError(f"the analysis needs channel {name!r}; decoded channels: {sorted(signals)}")
+    torque, speed = finite_signal(signals[TORQUE]), finite_signal(signals[SPEED])
+    stage("events", 0.0)
+    events = detect_events(signals, opts.events)
+    timings["events"] = time.perf_counter() - clock
+    included = [e for e in events if e.included]
+    notes: list[str] = []
+
+    # 1. simulate each event window, on a fine common time base
+    sims: dict[int, tuple[SimResult, FloatArray]] = {}
+    errors: dict[int, str] = {}
+    dt = opts.event_dt_s
+    for k, ev in enumerate(included):
+        stage("simulate", 0.05 + 0.45 * k / max(1, len(included)))
+        try:
+            res = _simulate(vehicle, torque, speed, ev.t_start_s - opts.max_offset_s, ev.t_end_s, opts, dt)
+        except (SimError, InsufficientDataError) as exc:
+            errors[ev.index] = f"simulation failed: {exc}"
+            continue
+        sims[ev.index] = (res, common_time_base(ev.t_start_s, ev.t_end_s, dt))
+    timings["simulate_events"] = time.perf_counter() - clock - sum(timings.values())
+
+    # 2. the torque-to-speed offset, pooled over events
+    stage("align", 0.5)
+    offset = OffsetEstimate(0.0, float("nan"), 0)
+    if opts.fit_offset and opts.max_offset_s > 0:
+        pairs = [(_sim_signal(r).at(g), speed.at(g)) for r, g in sims.values()]
+        offset = _pooled_lag(pairs, dt, opts.max_offset_s)
+        if offset.samples and abs(offset.lag_s) >= 0.95 * opts.max_offset_s:
+            notes.append(f"torque-to-speed offset {offset.lag_s * 1e3:.1f} ms is at the search bound "
+                         f"±{opts.max_offset_s * 1e3:.0f} ms")
+    lag = offset.lag_s
+    torque_shifted = shift(torque, lag)
+
+    # 3. metrics per event, measured vs offset-corrected simulation
+    results: list[EventResult] = []
+    for ev in events:
+        if not ev.included:
+            results.append(EventResult(ev))
+            continue
+        if ev.index not in sims:
+            results.append(EventResult(ev, error=errors.get(ev.index)))
+            continue
+        res, grid = sims[ev.index]
+        sim_sig = shift(_sim_signal(res), lag)
+        aligned = Aligned(grid, speed.at(grid), sim_sig.at(grid), torque.at(grid))
+        w = speed.window(ev.t_start_s, ev.t_end_s)
+        t_ref = ev.t_cross_s + lag
+        try:
+            m_meas = ripple_metrics(w.t, w.values, torque_shifted, t_ref, ev.direction, opts.metrics)
+            m_sim = ripple_metrics(w.t, sim_sig.at(w.t), torque_shifted, t_ref, ev.direction, opts.metrics)
+        except InsufficientDataError as exc:
+            results.append(EventResult(ev, aligned, error=str(exc)))
+            continue
+        comparison = compare_event(ev.index, m_meas, m_sim, aligned.measured_rpm, aligned.simulated_rpm)
+        gap_time = unloaded_time(res.gap_events, ev.t_cross_s - 0.2, ev.t_cross_s + 0.3)
+        results.append(EventResult(ev, aligned, comparison, gap_time))
+    stage("metrics", 0.75)
+    timings["align_metrics"] = time.perf_counter() - clock - sum(timings.values())
+
+    # 4. the whole log in one open-loop run
+    whole: Aligned | None = None
+    whole_err: SpeedError | None = None
+    if opts.whole_log:
+        t0, t1 = overlap([torque, speed])
+        dt_whole = float(np.clip(median_period(speed.t), 1e-3, 0.02))
+        try:
+            res = _simulate(vehicle, torque, speed, t0, t1, opts, dt_whole)
+            grid = common_time_base(t0, t1, dt_whole)
+            whole = Aligned(grid, speed.at(grid), shift(_sim_signal(res), lag).at(grid), torque.at(grid))
+            whole_err = speed_error(whole.measured_rpm, whole.simulated_rpm)
+        except (SimError, InsufficientDataError) as exc:
+            notes.append(f"whole-log simulation failed: {exc}")
+        timings["simulate_whole"] = time.perf_counter() - clock - sum(timings.values())
+    stage("done", 1.0)
+    return AnalysisResult(signals, events, results, offset, whole, whole_err, timings_s=timings, notes=notes)
+
+
+def run_analysis(log_path: Path, vehicle: VehicleInputs, options: AnalysisOptions | None = None,
+                 progress: ProgressFn = _no_progress) -> AnalysisResult:
+    """Decode ``log_path`` with the vehicle's DBC and signal map, then :func:`analyze_signals`."""
+    clock = time.perf_counter()
+    signals, ingest = decode_log(log_path, vehicle.database, vehicle.signal_map,
+                                 lambda s, f: progress(s, 0.4 * f))
+    decode_s = time.perf_counter() - clock
+    result = analyze_signals(signals, vehicle.vehicle, options, progress, start=0.4)
+    return replace(result, ingest=ingest, timings_s={"decode": decode_s, **result.timings_s})
+
+
+def inspect_log(path: Path, progress: ProgressFn = _no_progress) -> dict[str, Any]:
+    """Read a whole log once (salvaging) to count frames and collect what was damaged.
+
+    Raises the reader's typed errors (UnsupportedFormatError, LogFormatError) when nothing
+    usable is there.
+    """
+    from app.ingest.readers import open_log
+
+    frames = 0
+    t_first: int | None = None
+    t_last = 0
+    with open_log(path) as reader:
+        for chunk in reader.chunks():
+            if len(chunk):
+                frames += len(chunk)
+                t_first = int(chunk.t_ns[0]) if t_first is None else min(t_first, int(chunk.t_ns[0]))
+                t_last = max(t_last, int(chunk.t_ns.max()))
+        meta, report = reader.meta, reader.report
+    if frames == 0:
+        from app.errors import LogFormatError
+        raise LogFormatError(f"{path.name}: no CAN frames could be read ({len(report.issues)} problems found)")
+    return {
+        "format": meta.format, "frames": frames,
+        "duration_s": (t_last - (t_first or 0)) / 1e9,
+        "start_time": meta.start_time.isoformat() if meta.start_time else None,
+        "start_clock": meta.start_clock,
+        "issues": [asdict(i) for i in report.issues],
+        "channels": {str(k): v for k, v in meta.channels.items()},
+    }
+
+
+def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> dict[str, Any]:
+    """Gap what-ifs for a vehicle under the paper's scripted tip-in (see :mod:`sim.paper`).
+
+    For each of the five gaps: the speed fluctuation and impact-induced fluctuation with the
+    gap removed and halved, and the sensitivity ``S_i`` (normalised to the half-shaft gap = 100),
+    next to the nominal and the zero-gap (no backlash at all) responses.
+    """
+    from sim import GAP_NAMES, WhatIf
+    from sim.paper import run_case, sensitivities
+
+    cases = {"nominal": run_case(vehicle, "nominal"), "zero_gaps": run_case(vehicle, "zero_gaps",
+                                                                              WhatIf(gap_scale={"all": 0.0}))}
+    gaps: list[dict[str, Any]] = []
+    for i, g in enumerate(GAP_NAMES, start=1):
+        progress("gap_sensitivity", i / (len(GAP_NAMES) + 1))
+        removed = cases[f"no_gap{i}"] = run_case(vehicle, f"no_gap{i}", WhatIf(gap_scale={g: 0.0}))
+        halved = run_case(vehicle, f"half_gap{i}", WhatIf(gap_scale={g: 0.5}))
+        gaps.append({"gap": g, "nominal_rad": getattr(vehicle.gaps, g).nominal,
+                     "removed": _case(removed), "halved": _case(halved)})
+    for row, s in zip(gaps, sensitivities(vehicle, cases), strict=True):
+        row["sensitivity"] = float(s)
+    return {"vehicle": vehicle.name, "scenario": "tip-in -50 -> +150 N m over 0.135 s (sim.paper)",
+            "nominal": _case(cases["nominal"]), "zero_gaps": _case(cases["zero_gaps"]), "gaps": gaps}
+
+
+def _case(c: Any) -> dict[str, float]:
+    return {"unloaded_ms": c.unloaded_ms, "fluctuation_rpm": c.fluct_rpm, "impact_rpm": c.impact_rpm,
+            "rise_rpm": c.rise_rpm}

@@ -1,0 +1,159 @@
+"""API benchmark: upload and analyse a 30-minute log; aligned-speed read latency under 20 clients.
+
+Run: ``.venv/bin/python bench/api.py`` (about 2-3 minutes on 2 cores). Starts ``lashscope serve``
+on a free loopback port with a fresh data directory, so nothing else shares the server.
+
+Targets (issue 4): analysis of the 30-minute log <= 30 s; p95 of
+``GET /analyses/{id}/speed?max_points=2000`` under 20 concurrent clients <= 150 ms.
+The obvious alternative -- sending every point and letting the dashboard downsample -- is
+timed in the same run and the ratio printed. Reads are measured twice: the same query
+repeated (served from the response cache, as for many viewers of one dashboard) and every
+request a different time window (each one downsampled from the memory-mapped arrays).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import httpx
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from app.demo.build import build_demo_log  # noqa: E402
+from app.demo.scenario import Scenario  # noqa: E402
+from app.settings import default_dbc_dir  # noqa: E402
+from tests.api.conftest import Server, create_vehicle, upload  # noqa: E402
+
+
+def pct(values: list[float], q: float) -> float:
+    s = sorted(values)
+    return s[min(len(s) - 1, round(q / 100 * (len(s) - 1)))]
+
+
+def hammer(url: str, clients: int, per_client: int, params_for: object) -> tuple[list[float], float]:
+    """``clients`` threads, each with its own connection, ``per_client`` GETs; returns latencies (ms), wall s."""
+    lat: list[float] = []
+    lock = threading.Lock()
+    barrier = threading.Barrier(clients)
+
+    def worker(k: int) -> None:
+        mine = []
+        with httpx.Client(timeout=60.0) as c:
+            c.get(url, params=params_for(k, -1)).raise_for_status()  # type: ignore[operator]  # warm connection
+            barrier.wait()
+            for i in range(per_client):
+                t0 = time.perf_counter()
+                r = c.get(url, params=params_for(k, i))  # type: ignore[operator]
+                mine.append((time.perf_counter() - t0) * 1e3)
+                r.raise_for_status()
+        with lock:
+            lat.extend(mine)
+
+    threads = [threading.Thread(target=worker, args=(k,)) for k in range(clients)]
+    t0 = time.perf_counter()
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return lat, time.perf_counter() - t0
+
+
+def line(name: str, lat: list[float], wall: float) -> str:
+    return (f"{name:<44} n={len(lat):>5}  p50={pct(lat, 50):7.1f} ms  p95={pct(lat, 95):7.1f} ms  "
+            f"p99={pct(lat, 99):7.1f} ms  ({len(lat) / wall:6.0f} req/s)")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, default=30.0)
+    ap.add_argument("--clients", type=int, default=20)
+    ap.add_argument("--requests", type=int, default=50, help="per client")
+    args = ap.parse_args()
+
+    with tempfile.TemporaryDirectory(prefix="lashscope-bench-") as tmp:
+        tmpdir = Path(tmp)
+        log = tmpdir / "drive30.blf"
+        t0 = time.perf_counter()
+        dbc = default_dbc_dir()
+        frames = build_demo_log(log, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml",
+                                Scenario(duration_s=args.minutes * 60.0))
+        print(f"built {args.minutes:g}-minute log: {frames} frames, {log.stat().st_size / 2**20:.1f} MiB "
+              f"in {time.perf_counter() - t0:.1f} s (not part of the figures)")
+
+        srv = Server(tmpdir / "data", max_upload_mb=1024).start()
+        try:
+            with httpx.Client(base_url=srv.url, timeout=600.0) as c:
+                create_vehicle(c)
+                t0 = time.perf_counter()
+                r = upload(c, log)
+                r.raise_for_status()
+                up_s = time.perf_counter() - t0
+                log_id = r.json()["id"]
+                t0 = time.perf_counter()
+                aid = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
+                while (body := c.get(f"/analyses/{aid}").json())["status"] not in ("done", "failed"):
+                    time.sleep(0.1)
+                wall_s = time.perf_counter() - t0
+                if body["status"] != "done":
+                    print(f"analysis failed: {body['job']['error']}")
+                    return 1
+                from datetime import datetime
+
+                job = body["job"]
+                run_s = (datetime.fromisoformat(job["finished_at"]) -
+                         datetime.fromisoformat(job["started_at"])).total_seconds()
+                summ = body["summary"]
+                print(f"upload (stream to disk, hash, validate {r.json()['frames']} frames): {up_s:.2f} s")
+                print(f"analysis of the {args.minutes:g}-minute log: {run_s:.2f} s in the job "
+                      f"({wall_s:.2f} s wall from POST to done); {summ['events']} events, "
+                      f"{summ['with_metrics']} with metrics; target <= 30 s: {'PASS' if run_s <= 30 else 'FAIL'}")
+                meta = c.get(f"/analyses/{aid}/metrics").json()["whole"]
+                print(f"whole-log aligned series: {meta['points']} points per column")
+
+            url = f"{srv.url}/analyses/{aid}/speed"
+            n, k = args.requests, args.clients
+            span = args.minutes * 60.0
+
+            def same(_c: int, _i: int) -> dict[str, object]:
+                return {"max_points": 2000}
+
+            def varied(cl: int, i: int) -> dict[str, object]:
+                t_a = (cl * 97.0 + i * 13.0) % (span - 120.0)  # a distinct 2-minute-plus window per request
+                return {"max_points": 2000, "t0": round(t_a, 3), "t1": round(t_a + 120.0 + (i % 7), 3)}
+
+            def whole_varied(cl: int, i: int) -> dict[str, object]:
+                return {"max_points": 2000 + cl * 100 + i}  # whole log, never the same query twice
+
+            def full(_c: int, _i: int) -> dict[str, object]:
+                return {"max_points": 0}
+
+            print(f"\nGET /analyses/{{id}}/speed, {k} concurrent clients x {n} requests, loopback:")
+            lat_same, w = hammer(url, k, n, same)
+            print(line("max_points=2000, whole log, same query", lat_same, w))
+            lat_var, w = hammer(url, k, n, whole_varied)
+            print(line("max_points=2000..4000, whole log, uncached", lat_var, w))
+            lat_win, w = hammer(url, k, n, varied)
+            print(line("max_points=2000, 2-min windows, uncached", lat_win, w))
+            lat_full, w = hammer(url, k, max(2, n // 10), full)
+            print(line("alternative: every point (max_points=0)", lat_full, w))
+            p95 = pct(lat_var, 95)
+            print(f"\np95 uncached whole-log read with max_points~2000: {p95:.1f} ms; target <= 150 ms: "
+                  f"{'PASS' if p95 <= 150 else 'FAIL'}")
+            print(f"ratio p95 every-point / max_points (uncached): {pct(lat_full, 95) / p95:.1f}x; "
+                  f"median bytes per response: {len(httpx.get(url, params={'max_points': 2000}).content)} vs "
+                  f"{len(httpx.get(url, params={'max_points': 0}, timeout=120).content)}")
+            print(f"(median of medians, same query: {statistics.median(lat_same):.1f} ms)")
+        finally:
+            srv.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,114 @@
+"""A real server for the API tests: ``lashscope serve`` in a subprocess on a free loopback port."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.conftest import REPO
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Server:
+    def __init__(self, data_dir: Path, max_upload_mb: float = 4.0) -> None:
+        self.data_dir = data_dir
+        self.max_upload_mb = max_upload_mb
+        self.proc: subprocess.Popen[bytes] | None = None
+        self.url = ""
+
+    def start(self, timeout: float = 90.0) -> Server:
+        port = free_port()
+        self.url = f"http://127.0.0.1:{port}"
+        env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONPATH": str(REPO)}
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port), "--data-dir",
+             str(self.data_dir), "--max-upload-mb", str(self.max_upload_mb), "--log-level", "warning"],
+            cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                err = self.proc.stderr.read().decode() if self.proc.stderr else ""
+                raise RuntimeError(f"server exited with {self.proc.returncode}: {err[-2000:]}")
+            try:
+                if httpx.get(f"{self.url}/health", timeout=1.0).status_code == 200:
+                    return self
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.2)
+        self.stop()
+        raise RuntimeError(f"server at {self.url} did not come up in {timeout} s")
+
+    def stop(self, sig: int = signal.SIGTERM) -> None:
+        if self.proc is None:
+            return
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if self.proc.stderr:
+            self.proc.stderr.close()
+        self.proc = None
+
+    @property
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+
+@pytest.fixture
+def server(tmp_path: Path) -> Iterator[Server]:
+    srv = Server(tmp_path / "data").start()
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture(scope="session")
+def demo_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 40 s scripted drive written as BLF through the project DBC (built once per session)."""
+    from app.demo.build import build_demo_log
+    from app.demo.scenario import Scenario
+    from app.settings import default_dbc_dir
+
+    path = tmp_path_factory.mktemp("demo") / "drive.blf"
+    dbc = default_dbc_dir()
+    build_demo_log(path, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml",
+                   Scenario(duration_s=40.0, brake_cycle=3))
+    return path
+
+
+def wait_for(client: httpx.Client, analysis_id: str, timeout: float = 120.0) -> dict[str, object]:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        body: dict[str, object] = client.get(f"/analyses/{analysis_id}").json()
+        if body["status"] in ("done", "failed"):
+            return body
+        time.sleep(0.2)
+    raise AssertionError(f"analysis {analysis_id} did not finish in {timeout} s")
+
+
+def create_vehicle(client: httpx.Client, name: str = "ev") -> dict[str, object]:
+    r = client.post("/vehicles", data={"name": name, "preset": "paper"})
+    assert r.status_code in (200, 201), r.text
+    body: dict[str, object] = r.json()
+    return body
+
+
+def upload(client: httpx.Client, path: Path) -> httpx.Response:
+    with path.open("rb") as fh:
+        return client.post("/logs", files={"file": (path.name, fh, "application/octet-stream")})

@@ -1,0 +1,89 @@
+"""Bad uploads and bad vehicles get typed JSON errors, and the server keeps serving."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.api.conftest import Server, create_vehicle, upload, wait_for
+from tests.conftest import shared_file
+
+
+def _assert_error(r: httpx.Response, status: int, code: str) -> None:
+    assert r.status_code == status, r.text
+    body = r.json()
+    assert set(body) == {"detail", "code"} and body["code"] == code and body["detail"]
+
+
+def test_bad_uploads(server: Server, tmp_path: Path, demo_log: Path) -> None:
+    with httpx.Client(base_url=server.url, timeout=60.0) as c:
+        junk = tmp_path / "junk.blf"
+        junk.write_bytes(os.urandom(20000))
+        _assert_error(upload(c, junk), 415, "unsupported_format")
+
+        broken = tmp_path / "broken.blf"
+        raw = demo_log.read_bytes()
+        broken.write_bytes(raw[:200] + os.urandom(3000))  # a BLF header with garbage behind it
+        r = upload(c, broken)
+        assert r.status_code in (201, 422), r.text
+        if r.status_code == 422:
+            assert r.json()["code"].startswith("log_")
+        else:
+            assert r.json()["issues"], "a damaged log that is kept must report its damage"
+
+        empty = tmp_path / "empty.asc"
+        empty.write_bytes(b"")
+        assert upload(c, empty).status_code in (400, 422)
+
+        big = tmp_path / "big.blf"
+        big.write_bytes(raw[:4096] + os.urandom(5 * 2**20))  # over the 4 MiB cap of the test server
+        _assert_error(upload(c, big), 413, "upload_too_large")
+        with big.open("rb") as fh:
+            _assert_error(c.post("/logs", params={"filename": "big.blf"}, content=fh.read()), 413,
+                          "upload_too_large")
+        assert list((server.data_dir / "tmp").iterdir()) == []  # partial files removed
+        assert c.get("/logs").json() == [] or all(x["filename"] != "big.blf" for x in c.get("/logs").json())
+
+        _assert_error(c.post("/analyses", json={"log_id": "log_nope", "vehicle": "ev"}), 404, "not_found")
+        _assert_error(c.post("/analyses", json={"vehicle": "ev"}), 422, "validation_error")
+        assert c.get("/health").json()["status"] == "ok"
+
+
+def test_wrong_dbc_bad_map_and_missing_signals(server: Server, tmp_path: Path) -> None:
+    with httpx.Client(base_url=server.url, timeout=60.0) as c:
+        bad = tmp_path / "bad.dbc"
+        bad.write_text("BO_ this is not a database\n")
+        r = c.post("/vehicles", data={"name": "x", "preset": "paper"}, files={"dbc": ("bad.dbc", bad.read_bytes())})
+        _assert_error(r, 422, "database_error")
+
+        other = shared_file("cantools-testfiles", "dbc", "abs.dbc")  # loads fine, but not this vehicle's DBC
+        r = c.post("/vehicles", data={"name": "x", "preset": "paper"},
+                   files={"dbc": ("abs.dbc", other.read_bytes())})
+        _assert_error(r, 422, "signal_map_error")
+
+        toml = tmp_path / "car.toml"
+        toml.write_text('name = "car"\n[motor]\nrotor_inertia = -1.0\n')
+        r = c.post("/vehicles", data={"name": "x"}, files={"driveline": ("car.toml", toml.read_bytes())})
+        assert r.status_code == 422 and r.json()["code"] in ("invalid_parameter", "sim_error")
+        _assert_error(c.post("/vehicles", data={"preset": "paper"}), 400, "invalid_input")
+
+        # a real log from another vehicle: decodes nothing the signal map needs
+        create_vehicle(c)
+        foreign = shared_file("python-can-testdata", "test", "data", "issue_1905.blf")
+        r = upload(c, foreign)
+        assert r.status_code == 201, r.text
+        analysis = c.post("/analyses", json={"log_id": r.json()["id"], "vehicle": "ev"}).json()
+        body = wait_for(c, analysis["id"])
+        assert body["status"] == "failed" and body["job"]["error"]["code"] == "missing_signal"
+        _assert_error(c.get(f"/analyses/{analysis['id']}/metrics"), 422, "missing_signal")
+        _assert_error(c.post("/analyses", json={"log_id": r.json()["id"], "vehicle": "ev",
+                                                "options": {"model": "quantum"}}), 400, "invalid_input")
+        assert c.get("/health").status_code == 200
+
+
+@pytest.mark.parametrize("path", ["/logs/nope", "/vehicles/nope", "/analyses/nope", "/nope"])
+def test_unknown_resources_are_json_404(server: Server, path: str) -> None:
+    _assert_error(httpx.get(server.url + path), 404, "not_found")
