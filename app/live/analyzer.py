@@ -32,6 +32,7 @@ import numpy as np
 
 from app.analysis.events import SPEED, TORQUE, Event, EventParams, detect_events
 from app.analysis.metrics import MetricParams, ripple_metrics
+from app.analysis.series import finite_signal
 from app.errors import AppError
 from app.signals import Interp, Signal, SignalSet
 
@@ -73,12 +74,21 @@ class ChannelBuffer:
 
 
 def measured_metrics(signals: SignalSet, event: Event, params: MetricParams | None = None) -> dict[str, Any] | None:
-    """Ripple metrics of the measured motor speed over the event window (None if excluded)."""
+    """Ripple metrics of the measured motor speed over the event window (None if excluded).
+
+    The offline analysis also estimates a torque-to-speed offset pooled over all events of the
+    log (from the simulation) and evaluates the metrics at that offset; a live session cannot know
+    it before the drive ends, so live metrics use zero offset. They equal the offline metrics
+    computed with ``AnalysisOptions(fit_offset=False)``; the analysis stored when the session stops
+    has the offset-corrected values.
+    """
     if not event.included:
         return None
-    w = signals[SPEED].window(event.t_start_s, event.t_end_s)
+    # as app.pipeline.analyze_signals does it, at zero torque-to-speed offset
+    w = finite_signal(signals[SPEED]).window(event.t_start_s, event.t_end_s)
     try:
-        m = ripple_metrics(w.t, w.values, signals[TORQUE], event.t_cross_s, event.direction, params)
+        m = ripple_metrics(w.t, w.values, finite_signal(signals[TORQUE]), event.t_cross_s, event.direction,
+                           params or MetricParams())
     except AppError as exc:
         return {"error": str(exc), "code": exc.code}
     return m.to_dict()

@@ -42,7 +42,7 @@ def messages_to_chunk(msgs: Sequence[can.Message], t0: float, channel: int = 0) 
     ----------
     msgs : sequence of can.Message, length n
     t0 : float
-        Bus time (s) of the measurement start; ``t_ns = round((timestamp - t0) * 1e9)``.
+        Bus time (s) of the measurement start; ``t_ns = int((timestamp - t0) * 1e9)``.
     channel : int
         Channel number recorded for every row (a live session listens on one bus).
 
@@ -70,7 +70,8 @@ def messages_to_chunk(msgs: Sequence[can.Message], t0: float, channel: int = 0) 
         dlc[i] = min(m.dlc, width) if m.is_remote_frame else len(payload)
         if payload:
             data[i, : len(payload)] = np.frombuffer(payload, np.uint8)
-    t_ns = np.rint((t - t0) * 1e9).astype(np.int64)
+    # truncated like python-can's BLFWriter, so live times equal the recording's to the ns
+    t_ns = ((t - t0) * 1e9).astype(np.int64)
     return FrameChunk(t_ns, np.full(n, channel, np.int16), arb, flags, dlc, data)
 
 

@@ -26,7 +26,7 @@ BS_:
 BU_: VCU INV
 
 BO_ 264 Inverter: 8 INV
- SG_ MotorTorque : 0|16@1- (0.1,0) [-3276.8|3276.7] "Nm" VCU
+ SG_ MotorTorque : 0|16@1+ (0.1,-3276.8) [-3276.8|3276.7] "Nm" VCU
  SG_ MotorSpeed : 16|16@1- (0.5,0) [-16384|16383.5] "rpm" VCU
  SG_ InvCounter : 32|4@1+ (1,0) [0|15] "" VCU
 
@@ -66,7 +66,8 @@ def profile(t: np.ndarray, period_s: float) -> tuple[np.ndarray, np.ndarray, np.
     ripple = np.where((t_rev > 0) & (phase > 0),
                       direction * 25.0 * np.exp(-2.5 * t_rev) * np.sin(2 * np.pi * 7.0 * t_rev), 0.0)
     speed = 1500.0 + 20.0 * t + ripple
-    pedal = np.where(drive & (since > 0.45), 35.0, 4.0)
+    # the pedal moves 50 ms ahead of the torque: pressed for drive, released for regen
+    pedal = np.where(drive == (since > 0.45), 35.0, 4.0)
     pedal = np.where(phase == 0, 4.0, pedal)
     return torque, speed, pedal
 
