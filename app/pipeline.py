@@ -118,9 +118,63 @@ class AnalysisResult:
 def decode_log(log_path: Path, database: Path, signal_map: Path,
                progress: ProgressFn = _no_progress) -> tuple[SignalSet, dict[str, Any]]:
     """Read and decode a log into canonical signals; returns the signals and an ingest summary."""
-    from app.pipeline_ingest import decode_log as _decode  # the ingest edge, kept apart from the arithmetic
+    from app.ingest.database import load_database
+    from app.ingest.pipeline_signals import load_signals
+    from app.ingest.readers import open_log
+    from app.ingest.signalmap import load_signal_map
 
-    return _decode(log_path, database, signal_map, REQUIRED, progress)
+    loaded = load_database(database)
+    smap = load_signal_map(signal_map)
+    with open_log(log_path) as reader:
+        signals, report = load_signals(reader, loaded, smap, progress=lambda f: progress("decode", f),
+                                       require=REQUIRED)
+        meta, read_report = reader.meta, reader.report
+    ingest = {
+        "format": meta.format, "frames": read_report.frames, "read_issues": len(read_report.issues),
+        "database": loaded.name, "database_repairs": [asdict(r) for r in loaded.repairs],
+        "decode": _plain(report), "channels": sorted(signals),
+    }
+    return signals, ingest
+
+
+def _plain(obj: Any) -> Any:
+    """A report object as JSON-friendly data (dataclass, mapping or its public attributes)."""
+    from dataclasses import is_dataclass
+
+    if is_dataclass(obj) and not isinstance(obj, type):
+        return asdict(obj)
+    if isinstance(obj, dict):
+        return obj
+    return {k: v for k, v in vars(obj).items() if not k.startswith("_")} if hasattr(obj, "__dict__") else str(obj)
+
+
+def check_vehicle_files(driveline: Path, database: Path, signal_map: Path) -> dict[str, Any]:
+    """Load all three vehicle files and check that the signal map fits the database.
+
+    Raises ParameterError (driveline), DatabaseError, SignalMapError; returns a summary.
+    """
+    from sim import load_vehicle
+
+    vehicle = load_vehicle(driveline)
+    loaded, routes = signal_routes(database, signal_map)
+    missing = [c for c in REQUIRED if c not in routes]
+    if missing:
+        from app.errors import SignalMapError
+        raise SignalMapError(f"signal map {signal_map.name} does not map {missing}, which every analysis needs")
+    return {"vehicle": vehicle.name, "description": vehicle.description, "ratio": vehicle.ratio,
+            "database": database.name, "database_repairs": len(loaded.repairs),
+            "channels": {c: f"{m}.{s}" for c, (m, s) in sorted(routes.items())}}
+
+
+def signal_routes(database: Path, signal_map: Path) -> tuple[Any, dict[str, tuple[str, str]]]:
+    """The loaded database and, per canonical channel, the (message, signal) the map reads it from."""
+    from app.ingest.database import load_database
+    from app.ingest.signalmap import load_signal_map
+
+    loaded = load_database(database)
+    smap = load_signal_map(signal_map)
+    routes = smap.routes(loaded.db)
+    return loaded, dict(routes)
 
 
 def _simulate(vehicle: Vehicle, torque: Signal, speed: Signal, t0: float, t1: float,

@@ -68,4 +68,4 @@ def build_demo_log(path: Path, dbc: Path, signal_map: Path, scenario: Scenario |
 
     loaded, routes = signal_routes(dbc, signal_map)
     channels = measured_channels(load_vehicle("paper"), scenario)
-    return encode_blf(path, channels, routes, loaded)
+    return encode_blf(path, channels, routes, loaded.db)
