@@ -70,7 +70,7 @@ class DiagEvent:
 
     def __post_init__(self) -> None:
         t0 = max(self.t_start - MARGIN_S, float(self.torque_t[0]))
-        n = int(round((self.t_end + MARGIN_S - t0) / FINE_DT)) + 1
+        n = round((self.t_end + MARGIN_S - t0) / FINE_DT) + 1
         object.__setattr__(self, "t_fine", t0 + FINE_DT * np.arange(n, dtype=np.float64))
         # monotone cubic: follows a smooth torque request through its samples without overshoot, where
         # straight lines would cut the corners of every ramp by up to half a CAN period
@@ -177,7 +177,7 @@ def simulate_event(ev: DiagEvent, vehicle: Vehicle, gain: float, effects: Sequen
                    model: str = "multibody", interp: str = "pchip") -> SimOut:
     """One simulator run over the event's fine grid; ``vehicle`` already carries the vehicle effects."""
     tq = torque_input(ev, gain, effects, interp)
-    res = simulate(vehicle, ev.t_fine, tq, model=model, speed0_rpm=ev.speed0(), interp="linear",  # type: ignore[arg-type]
+    res = simulate(vehicle, ev.t_fine, tq, model=model, speed0_rpm=ev.speed0(), interp="linear",
                    output_dt=FINE_DT)
     t_out = np.asarray(res.t, dtype=np.float64)
     sp = np.asarray(res.motor_speed_rpm, dtype=np.float64)
@@ -267,5 +267,5 @@ def input_uncertainty(ev: DiagEvent, vehicle: Vehicle, nuisance: Nuisance, effec
     d = a - b
     if ev.pre.any():
         d = d - float(np.mean(d[ev.pre]))
-    k = max(int(round(smooth_s / max(float(np.median(np.diff(ev.speed_t))), 1e-4))), 1)
+    k = max(round(smooth_s / max(float(np.median(np.diff(ev.speed_t))), 1e-4)), 1)
     return np.asarray(np.convolve(d * d, np.ones(k) / k, mode="same"), dtype=np.float64)

@@ -96,7 +96,8 @@ def band_energy(y: FloatArray, period: float) -> dict[str, float]:
     return {name: float(spec[(f >= lo) & (f < hi)].sum()) for name, lo, hi in BANDS}
 
 
-def coherence_by_band(residuals: Sequence[FloatArray], torques: Sequence[FloatArray], period: float) -> dict[str, float]:
+def coherence_by_band(residuals: Sequence[FloatArray], torques: Sequence[FloatArray],
+                      period: float) -> dict[str, float]:
     """Magnitude-squared residual-torque coherence per band, events as segments (common length)."""
     if len(residuals) < 2:
         return {name: float("nan") for name, _, _ in BANDS}
@@ -128,7 +129,7 @@ def residual_torque_lag(residuals: Sequence[FloatArray], torques: Sequence[Float
     """
     if not residuals:
         return float("nan"), float("nan")
-    m = int(round(max_lag_s / period))
+    m = round(max_lag_s / period)
     acc = np.zeros(2 * m + 1)
     norm_r = norm_q = 0.0
     for r, q in zip(residuals, torques, strict=True):

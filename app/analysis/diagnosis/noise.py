@@ -119,7 +119,7 @@ def estimate_noise_floor(t: FloatArray, values: FloatArray, quiet: npt.NDArray[n
     ok = np.isfinite(v)
     t, v = t[ok], v[ok]
     if t.size < 5:
-        raise InsufficientDataError(f"speed channel has {t.size} valid samples; at least 5 are needed for a noise floor")
+        raise InsufficientDataError(f"speed channel has {t.size} valid samples; a noise floor needs at least 5")
     period = sample_period(t)
     jitter = timestamp_jitter(t, period)
     q = quantisation_step(v)

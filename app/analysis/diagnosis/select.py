@@ -121,6 +121,14 @@ def evaluate(base: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], mode
     return Evaluation(fitted, scores, preds)
 
 
+def with_input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, fitted: FitResult,
+                           model: str) -> list[DiagEvent]:
+    """Events whose sample variances include the torque-reconstruction uncertainty (see
+    :func:`.forward.input_uncertainty`), evaluated with the fitted baseline."""
+    veh = vehicle_with(vehicle, fitted.nuisance, ())
+    return [replace(ev, var=ev.var + input_uncertainty(ev, veh, fitted.nuisance, (), model)) for ev in events]
+
+
 def _merge_start(base: FitResult, *parts: FitResult) -> FitResult:
     values: dict[str, dict[str, float]] = {}
     for p in parts:
@@ -183,9 +191,7 @@ def run_diagnosis(
     say(0.0, f"baseline calibration on {len(cal)} events (held out: {len(ho)})")
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
     # add the input-reconstruction uncertainty to every sample's variance, then recalibrate
-    veh0 = vehicle_with(vehicle, base_fit.nuisance, ())
-    events = [replace(ev, var=ev.var + input_uncertainty(ev, veh0, base_fit.nuisance, (), opts.model))
-              for ev in events]
+    events = with_input_uncertainty(events, vehicle, base_fit, opts.model)
     cal = split.calibration_events(events)
     ho = split.heldout_events(events)
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, start=base_fit, seed=opts.seed)

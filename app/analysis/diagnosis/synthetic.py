@@ -89,8 +89,8 @@ def make_drive(vehicle: Vehicle, rng: np.random.Generator, spec: DriveSpec | Non
     knots_t.append(s.duration_s)
     knots_q.append(knots_q[-1])
     tf = np.arange(0.0, s.duration_s, dt)
-    q = np.interp(tf, knots_t, knots_q)
-    k = max(int(round(s.smooth_s / dt)), 1)
+    q: FloatArray = np.interp(tf, knots_t, knots_q)
+    k = max(round(s.smooth_s / dt), 1)
     if k > 1:
         q = np.convolve(np.pad(q, (k, k), mode="edge"), np.ones(k) / k, mode="same")[k:-k]
     return Drive(tf, q, motor_rpm(vehicle, s.start_kmh))
@@ -99,7 +99,7 @@ def make_drive(vehicle: Vehicle, rng: np.random.Generator, spec: DriveSpec | Non
 def run_truth(vehicle: Vehicle, drive: Drive, model: str = "multibody") -> SimResult:
     """The truth: the simulator on the fine torque trace."""
     return simulate(vehicle, drive.t, drive.torque_nm, model=model, speed0_rpm=drive.speed0_rpm,
-                    interp="linear", output_dt=0.001)  # type: ignore[arg-type]
+                    interp="linear", output_dt=0.001)
 
 
 def _frame_times(duration: float, s: CanSampling, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
@@ -109,7 +109,7 @@ def _frame_times(duration: float, s: CanSampling, rng: np.random.Generator) -> t
     keep = rng.random(t_valid.size) >= s.drop_fraction
     t_valid, t_log = t_valid[keep], t_log[keep]
     order = np.argsort(t_log, kind="stable")
-    return t_valid[order], t_log[order]
+    return np.asarray(t_valid[order], dtype=np.float64), np.asarray(t_log[order], dtype=np.float64)
 
 
 def measure(drive: Drive, truth: SimResult, s: CanSampling, rng: np.random.Generator) -> dict[str, tuple[FloatArray,
