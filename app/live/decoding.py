@@ -10,9 +10,13 @@ canonical channels with the vehicle's signal map, exactly as the offline loader 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from app.errors import InputError
+from app.ingest.database import load_database
 from app.ingest.decode import EXTENDED_KEY, DecodedMessage, VectorDecoder
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.live.session import Feed
@@ -83,3 +87,24 @@ def pairs_mapper(pairs: Mapping[str, tuple[str, str]]) -> Mapper:
         return out
 
     return mapper
+
+
+def source_for(database: Path, signal_map: Path | None) -> tuple[DecodingSource, dict[str, Any]]:
+    """A decoding source for a DBC and, optionally, a vehicle signal map.
+
+    Without a map every decoded signal is a channel ``"Message.Signal"`` (streaming only, no
+    events). Returns the source and the units/interpolation of each canonical channel.
+    """
+    db = load_database(database).db
+    decoder = VectorDecoder(db)
+    if signal_map is None:
+        return DecodingSource(decoder, all_signals_mapper), {}
+    try:
+        from app.ingest import signalmap
+    except ImportError as exc:
+        raise InputError(f"cannot decode with signal map {signal_map}: the signal map module is not available") from exc
+    return signalmap_source(decoder, signalmap.load_signal_map(signal_map))
+
+
+def signalmap_source(decoder: VectorDecoder, smap: Any) -> tuple[DecodingSource, dict[str, Any]]:
+    raise InputError(f"signal map {smap!r} cannot be applied to live frames yet")
