@@ -1,0 +1,136 @@
+"""``lashscope diagnose LOG --vehicle V [--validate OTHER_LOG] [--json]``: where, why and how far.
+
+Decodes the log, finds the tip-in/tip-out events, freezes a calibration/held-out split, fits
+every candidate effect jointly with the nuisance parameters on calibration events, scores them on
+held-out events and prints the decision with its evidence. Progress goes to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: Any) -> None:
+    from sim.effects import EFFECTS
+
+    p: argparse.ArgumentParser = sub.add_parser(
+        "diagnose", help="diagnose the sim-to-real gap: where it lies, which effect explains it",
+        description="Fit candidate unmodelled effects on calibration events of LOG, score them on held-out events "
+        "and decide which one explains the gap between simulated and measured motor speed.")
+    p.add_argument("log", type=Path, help="CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4)")
+    p.add_argument("--vehicle", required=True, help="driveline preset name (e.g. paper) or TOML file")
+    p.add_argument("--dbc", type=Path, default=None, help="database (default: dbc/lashscope_ev.dbc)")
+    p.add_argument("--signal-map", type=Path, default=None, help="signal map (default: dbc/lashscope_ev.map.toml)")
+    p.add_argument("--validate", type=Path, default=None, metavar="OTHER_LOG",
+                   help="another drive: report the shrink of the diagnosed effect there")
+    p.add_argument("--candidates", default=",".join(EFFECTS),
+                   help=f"comma-separated candidate effects (default: all: {','.join(EFFECTS)})")
+    p.add_argument("--seed", type=int, default=0, help="seed of the calibration/held-out split")
+    p.add_argument("--model", choices=["multibody", "two_inertia"], default="multibody")
+    p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write overlay and residual PNGs here")
+    p.add_argument("--out", type=Path, default=None, help="also write the JSON report to this file")
+    p.add_argument("--json", action="store_true", help="print the JSON report instead of the summary")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=run)
+
+
+def _progress(quiet: bool) -> Any:
+    start = time.perf_counter()
+
+    def say(fraction: float, message: str) -> None:
+        if not quiet:
+            print(f"[{100 * fraction:3.0f} % {time.perf_counter() - start:5.1f} s] {message}", file=sys.stderr,
+                  flush=True)
+
+    return say
+
+
+def _pct(iv: dict[str, float] | None) -> str:
+    if not iv:
+        return "-"
+    return f"{100 * iv['value']:.0f} % [{100 * iv['lo']:.0f}, {100 * iv['hi']:.0f}]"
+
+
+def summary(doc: dict[str, Any]) -> str:
+    d = doc["decision"]
+    lines = [f"decision: {d['status'].upper()}" + (f"  top: {' + '.join(d['top'])}" if d["top"] else "")
+             + (f"  confusable: {' / '.join(d['confusable'])}" if d.get("confusable") else ""),
+             f"  {d['reason']}"]
+    sp = doc["split"]
+    lines.append(f"split: seed {sp['seed']}, {len(sp['calibration'])} calibration / {len(sp['heldout'])} held-out "
+                 f"events, sha256 {sp['sha256'][:16]}")
+    nf = doc["noise_floor"]
+    lines.append(f"noise floor: {nf['sigma_rpm']:.2f} rpm white, {nf['quant_step_rpm']:g} rpm steps, "
+                 f"{1e3 * nf['jitter_s']:.2f} ms jitter, {1e3 * nf['period_s']:.1f} ms period")
+    if doc["baseline"]:
+        nu = doc["baseline"]["nuisance"]
+        lines.append(f"baseline nuisance: offset {1e3 * nu['offset_s']:+.1f} ms, gain {nu['gain']:.3f}, "
+                     f"road load {nu['road_load_grade_pct']:+.2f} % grade"
+                     + (f"  AT BOUND: {', '.join(doc['baseline']['at_bound'])}" if doc["baseline"]["at_bound"] else ""))
+    if doc["candidates"]:
+        lines += ["", f"{'candidate':34s} {'held-out shrink':>22s} {'share of gap':>22s} {'improved':>9s}  params"]
+        for c in doc["candidates"] + doc["pairs"]:
+            h = c["heldout"]
+            params = "; ".join(f"{k}={v:.4g}" for vals in c["fit"]["params"].values() for k, v in vals.items())
+            lines.append(f"{c['id']:34s} {_pct(h['shrink']):>22s} {_pct(h['explained_share']):>22s} "
+                         f"{100 * h['improved_fraction']:8.0f}%  {params}")
+    loc = doc.get("localisation")
+    if loc:
+        lines += ["", "where (held-out, baseline): phase  share  residual/noise"]
+        for p in loc["phases"]:
+            r = p["residual_to_noise"]
+            lines.append(f"  {p['phase']:13s} {100 * (p['energy_share'] or 0):5.1f} %  {r if r is not None else '-'}")
+        lines.append("  band      share  coherence with torque")
+        for b in loc["bands"]:
+            lines.append(f"  {b['band']:8s} {100 * (b['energy_share'] or 0):5.1f} %  {b['coherence']}")
+        lines += [f"  note: {n}" for n in loc["notes"]]
+    val = doc.get("validation")
+    if val:
+        lines += ["", f"validation on another drive ({val['events']} events): shrink {_pct(val['shrink'])}, "
+                      f"share of gap {_pct(val['explained_share'])}"]
+    lines.append(f"\n{doc['elapsed_s']:.1f} s")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict, validate_on
+    from app.errors import InputError
+    from app.pipeline import decode_log
+    from app.settings import get_settings
+    from sim import load_vehicle
+
+    dbc_dir = get_settings().dbc_dir
+    dbc = args.dbc or dbc_dir / "lashscope_ev.dbc"
+    smap = args.signal_map or dbc_dir / "lashscope_ev.map.toml"
+    candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
+    if not candidates:
+        raise InputError("--candidates is empty")
+    vehicle = load_vehicle(args.vehicle)
+    options = DiagnosisOptions(candidates=candidates, seed=args.seed, model=args.model)
+    say = _progress(args.quiet)
+    say(0.0, f"decoding {args.log}")
+    signals, _ = decode_log(args.log, dbc, smap)
+    result = diagnose_signals(signals, vehicle, options, say)
+    validation = None
+    if args.validate is not None and result.decision.top:
+        say(0.0, f"decoding {args.validate}")
+        other, _ = decode_log(args.validate, dbc, smap)
+        validation = validate_on(result, other, vehicle, progress=say).to_dict()
+    elif args.validate is not None:
+        validation = {"skipped": f"decision {result.decision.status}: no effect to validate"}
+    doc = report_dict(result, validation)
+    if args.plots is not None and result.baseline is not None:
+        from app.diagnosis_plots import event_overlay_png, residual_chart_png
+
+        doc["plots"] = [str(event_overlay_png(result, args.plots / "diagnosis_events.png")),
+                        str(residual_chart_png(result, args.plots / "diagnosis_residual.png"))]
+    text = json.dumps(doc, indent=1, allow_nan=False, default=str)
+    if args.out is not None:
+        args.out.write_text(text, encoding="utf-8")
+    sys.stdout.write(text + "\n" if args.json else summary(doc) + "\n")
+    return 0
