@@ -1,0 +1,96 @@
+"""Replay in one process (the CLI), live session in another, over the loopback-only TCP bus."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from app.ingest.database import load_database
+from app.ingest.decode import VectorDecoder
+from app.ingest.readers import open_log
+from app.live.analyzer import LiveAnalyzer
+from app.live.bus import BusConfig
+from app.live.decoding import DecodingSource, pairs_mapper
+from app.live.loopback import LoopbackHub
+from app.live.session import LiveSession
+from tests.live import drive
+from tests.live.test_live_events import _same, offline_events
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _lashscope(*args: str) -> list[str]:
+    return [sys.executable, "-m", "app", *args]
+
+
+def test_cli_replay_into_live_session_in_another_process(tmp_path: Path) -> None:
+    dbc = drive.write_dbc(tmp_path)
+    log = drive.write_blf(tmp_path / "drive.blf", drive.drive_messages(duration_s=5.0, period_s=1.6, error_frames=2))
+    original = list(open_log(log).chunks())
+    with LoopbackHub() as hub:
+        source = DecodingSource(VectorDecoder(load_database(dbc).db), pairs_mapper(drive.CHANNELS))
+        session = LiveSession(BusConfig("tcp_loopback", hub.channel), source, record_path=tmp_path / "rec.blf",
+                              analyzer=LiveAnalyzer()).start()
+        try:
+            proc = subprocess.run(_lashscope("replay", str(log), "--interface", "tcp_loopback", "--channel",
+                                             hub.channel, "--json"),
+                                  cwd=REPO, capture_output=True, text=True, timeout=60)
+            assert proc.returncode == 0, proc.stderr
+            summary = json.loads(proc.stdout)
+            assert session.wait_idle()
+        finally:
+            session.stop()
+    recorded = list(open_log(tmp_path / "rec.blf").chunks())
+    n = sum(len(c) for c in original)
+    assert summary["frames_sent"] == n and summary["send_failures"] == 0
+    st = session.status()
+    assert st["frames_received"] == n and st["frames_dropped"] == 0 and st["bus_errors"] == 2
+    assert drive.frames_of(recorded) == drive.frames_of(original)
+    # pacing, measured by the replayer against each frame's send deadline, at rate 1.0
+    assert summary["pacing_p99_ms"] < 2.0, summary
+    # the bus time the hub stamped keeps the original intervals too
+    err_ms = np.abs(np.diff(drive.times_of(recorded)) - np.diff(drive.times_of(original))) / 1e6
+    print(f"recv interval error p50 {np.percentile(err_ms, 50):.3f} ms p99 {np.percentile(err_ms, 99):.3f} ms")
+    assert np.percentile(err_ms, 50) < 1.0
+    expected = offline_events(tmp_path / "rec.blf", dbc)
+    live = [{k: v for k, v in e.items() if k != "provisional"} for e in session.events]
+    assert len(expected) == len(live) == 2
+    for a, b in zip(live, expected, strict=True):
+        assert all(_same(a[k], b[k], key=k) for k in a), (a, b)
+
+
+def test_replay_ctrl_c_stops_cleanly_with_a_summary(tmp_path: Path) -> None:
+    log = drive.write_blf(tmp_path / "drive.blf", drive.drive_messages(duration_s=3.0))
+    with LoopbackHub() as hub:
+        proc = subprocess.Popen(_lashscope("replay", str(log), "-i", "tcp_loopback", "-c", hub.channel, "--loop"),
+                                cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 20
+            while hub.frames_forwarded < 300 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            os.kill(proc.pid, signal.SIGINT)
+            out, err = proc.communicate(timeout=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+    assert proc.returncode == 130, err
+    assert "replay stopped by Ctrl-C" in out and "pacing error p50" in out
+    assert "Traceback" not in err
+
+
+def test_replay_of_a_missing_or_corrupt_log_is_a_one_line_error(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.blf"
+    bad.write_bytes(b"LOGG" + os.urandom(200))
+    for path in (tmp_path / "missing.blf", bad):
+        proc = subprocess.run(_lashscope("replay", str(path), "-i", "virtual", "-c", "x"), cwd=REPO,
+                              capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 2, proc.stderr
+        assert proc.stderr.startswith("lashscope: error [") and "Traceback" not in proc.stderr
