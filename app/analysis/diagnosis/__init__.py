@@ -22,7 +22,9 @@ from app.analysis.diagnosis.select import DiagnosisOptions, DiagnosisResult, Pro
 from app.analysis.diagnosis.validate import (
     Validation,
     augmented_vehicle,
+    chosen_effects,
     diagnose_signals,
+    validate_effects,
     validate_on,
 )
 
@@ -36,8 +38,10 @@ __all__ = [
     "Progress",
     "Validation",
     "augmented_vehicle",
+    "chosen_effects",
     "diagnose_signals",
     "report_dict",
     "run_diagnosis",
+    "validate_effects",
     "validate_on",
 ]

@@ -103,31 +103,41 @@ def validate_on(result: DiagnosisResult, signals: SignalSet, vehicle: Vehicle,
     chosen = effects if effects is not None else chosen_effects(result)
     if not chosen:
         raise AnalysisError(f"diagnosis decided {result.decision.status!r}: there is no effect to validate")
+    return validate_effects(chosen, signals, vehicle, result.options, progress, event_params)
+
+
+def validate_effects(effects: dict[str, dict[str, float]], signals: SignalSet, vehicle: Vehicle,
+                     options: DiagnosisOptions | None = None, progress: Progress | None = None,
+                     event_params: EventParams | None = None) -> Validation:
+    """Shrink of ``vehicle`` + ``effects`` (values frozen) against ``vehicle`` on the drive in ``signals``.
+
+    Each model gets its own nuisance fit (offset, gain, road load) on all events of this drive;
+    nothing about the effect is fitted here.
+    """
+    opts = options or DiagnosisOptions()
     say = progress or (lambda f, m: None)
     evs = detect_events(signals, event_params)
     events, noise, _ = prepare(signals, evs)
-    if len(events) < result.options.rules.min_events_per_side:
+    if len(events) < opts.rules.min_events_per_side:
         raise InsufficientDataError(f"the validation drive has {len(events)} usable events; need at least "
-                                    f"{result.options.rules.min_events_per_side}")
+                                    f"{opts.rules.min_events_per_side}")
     split = _all_calibration(events)
     bounds = Bounds.for_period(noise.period_s)
-    model = result.options.model
+    model = opts.model
     say(0.1, "validation: baseline nuisance fit")
     base_fit = fit(vehicle, events, split, (), bounds=bounds, model=model)
     events = with_input_uncertainty(events, vehicle, base_fit, model)
     base_fit = fit(vehicle, events, split, (), bounds=bounds, model=model, start=base_fit)
     say(0.5, "validation: augmented nuisance fit")
-    aug = apply_effects(vehicle, chosen)
+    aug = apply_effects(vehicle, effects)
     aug_fit = fit(aug, events, split, (), bounds=bounds, model=model, start=base_fit)
     b_eval = evaluate(vehicle, base_fit, events, model, None, noise.period_s)
     a_eval = evaluate(aug, aug_fit, events, model, None, noise.period_s)
     idx = [e.index for e in events]
     b, a = b_eval.chi2(idx), a_eval.chi2(idx)
     n = np.array([e.n for e in events], dtype=np.float64)
-    draws = bootstrap_draws(len(idx), result.options.rules, 7)
+    draws = bootstrap_draws(len(idx), opts.rules, 7)
     say(1.0, "validation done")
-    return Validation(chosen, len(idx), shrink_interval(b, a, draws), explained_interval(b, a, n, draws),
+    return Validation(effects, len(idx), shrink_interval(b, a, draws), explained_interval(b, a, n, draws),
                       float(np.mean(a < b)), float(b.sum() / n.sum()), float(a.sum() / n.sum()),
                       base_fit.nuisance.to_dict(), aug_fit.nuisance.to_dict())
-
-
