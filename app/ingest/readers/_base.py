@@ -31,9 +31,10 @@ _FD = int(FrameFlag.FD)
 class ChunkBuilder:
     """Preallocated columns that fill up to ``cap`` frames, then hand over as one :class:`FrameChunk`.
 
-    The arrays are public so compiled kernels can write rows ``n..cap-1`` directly; the
-    payload buffer is always 64 bytes wide, zero-filled, and narrowed to 8 when no row
-    needs more.
+    The arrays are public so compiled kernels can write rows ``n..cap-1`` directly. The
+    payload buffer is zero-filled and 8 bytes wide until a longer payload arrives (or a
+    kernel that may write one calls :meth:`widen`); chunks without CAN FD payloads come out
+    8 wide.
     """
 
     def __init__(self, cap: int) -> None:
@@ -48,7 +49,14 @@ class ChunkBuilder:
         self.arb_id: npt.NDArray[np.uint32] = np.empty(cap, np.uint32)
         self.flags: npt.NDArray[np.uint8] = np.empty(cap, np.uint8)
         self.dlc: npt.NDArray[np.uint8] = np.empty(cap, np.uint8)
-        self.data: npt.NDArray[np.uint8] = np.zeros((cap, MAX_PAYLOAD), np.uint8)
+        self.data: npt.NDArray[np.uint8] = np.zeros((cap, 8), np.uint8)
+
+    def widen(self) -> None:
+        """Make the payload buffer 64 bytes wide (keeps the rows written so far)."""
+        if self.data.shape[1] < MAX_PAYLOAD:
+            wide = np.zeros((self.cap, MAX_PAYLOAD), np.uint8)
+            wide[: self.n, :8] = self.data[: self.n]
+            self.data = wide
 
     @property
     def full(self) -> bool:
@@ -63,8 +71,32 @@ class ChunkBuilder:
         self.flags[i] = flags
         self.dlc[i] = dlc
         if payload:
+            if len(payload) > self.data.shape[1]:
+                self.widen()
             self.data[i, : len(payload)] = np.frombuffer(payload, np.uint8)
         self.n = i + 1
+
+    def extend(self, t_ns: npt.NDArray[np.int64], channel: npt.NDArray[np.int64], arb_id: npt.NDArray[np.int64],
+               flags: npt.NDArray[np.int64], dlc: npt.NDArray[np.int64],
+               data: npt.NDArray[np.uint8]) -> Iterator[FrameChunk]:
+        """Append rows in bulk, yielding every chunk that fills up on the way."""
+        i, total = 0, len(t_ns)
+        width = data.shape[1]
+        if width > self.data.shape[1]:
+            self.widen()
+        while i < total:
+            k = min(self.cap - self.n, total - i)
+            rows = slice(self.n, self.n + k)
+            self.t_ns[rows] = t_ns[i:i + k]
+            self.channel[rows] = channel[i:i + k]
+            self.arb_id[rows] = arb_id[i:i + k]
+            self.flags[rows] = flags[i:i + k]
+            self.dlc[rows] = dlc[i:i + k]
+            self.data[rows, :width] = data[i:i + k]
+            self.n += k
+            i += k
+            if self.full:
+                yield self.take()
 
     def take(self) -> FrameChunk:
         """The filled rows as a chunk; the builder starts over with fresh arrays."""
@@ -75,7 +107,7 @@ class ChunkBuilder:
         else:  # copies, so the oversized buffers are freed
             cols = (self.t_ns[:n].copy(), self.channel[:n].copy(), self.arb_id[:n].copy(),
                     self.flags[:n].copy(), self.dlc[:n].copy())
-        if wide:
+        if self.data.shape[1] == 8 or wide:
             data = self.data if n == self.cap else self.data[:n].copy()
         else:
             data = np.ascontiguousarray(self.data[:n, :8])

@@ -30,7 +30,6 @@ from datetime import UTC, datetime
 import numpy as np
 
 from app.ingest.frames import FrameChunk, FrameFlag
-from app.ingest.readers import asc_kernel as K
 from app.ingest.readers._base import BaseReader, ChunkBuilder
 from app.ingest.readers._text import BadLine, LineSource, decimal_to_ns, dlc2len, hex_bytes, parse_int, printable
 
@@ -219,6 +218,8 @@ class ASCReader(BaseReader):
 
     # -- the loop -------------------------------------------------------------------------------
     def _iter_chunks(self) -> Iterator[FrameChunk]:
+        from app.ingest.readers import asc_kernel as K  # numba loads on first use only
+
         builder = ChunkBuilder(self.chunk_frames)
         lines = LineSource(self._stream, self._long_line, self.damage)
         self._mismatch = 0

@@ -11,7 +11,9 @@ File layout::
     ...                               inner objects may straddle container boundaries
 
 Containers are read one at a time (memory is bounded by one container plus one chunk),
-inflated with zlib, and walked by the compiled kernel in :mod:`blf_kernel`. Damage is
+inflated with zlib and decoded whole by numpy (:mod:`blf_vector`); a container that is not a
+clean chain of objects is walked object by object by the compiled kernel in
+:mod:`blf_kernel`, which diagnoses what is wrong. Damage is
 reported with the file offset of the enclosing container; reading resumes at the next
 signature. The start time is the header's SYSTEMTIME, which Vector tools write in local
 time (python-can reads it as UTC, its issue 1992): ``start_clock = "blf_header_local"``.
@@ -23,14 +25,16 @@ import struct
 import zlib
 from collections.abc import Iterator
 from datetime import datetime
+from typing import Any
 
 import numpy as np
 
 from app.errors import LogFormatError, TruncatedLogError
 from app.ingest.frames import FrameChunk, ReadIssue
-from app.ingest.readers import blf_kernel as K
+from app.ingest.readers import blf_layout as K
 from app.ingest.readers._base import BaseReader, ChunkBuilder
 from app.ingest.readers._source import StreamDamage
+from app.ingest.readers.blf_vector import decode_run
 
 FILE_HEADER = struct.Struct("<4sLBBBBBBBBQQLL8H8H")
 OBJ_BASE = struct.Struct("<4sHHLL")
@@ -46,6 +50,13 @@ KNOWN_OTHER = {
     96: "GLOBAL_MARKER", 115: "RESTORE_POINT_CONTAINER", 127: "WATER_MARK_EVENT", 128: "TRIGGER_CONDITION",
 }
 DATA_LOST = {125: "DATA_LOST_BEGIN", 126: "DATA_LOST_END"}
+
+
+def _walk_objects() -> Any:
+    """The compiled fallback walker, imported on first need (loading numba costs about a second)."""
+    from app.ingest.readers.blf_kernel import walk_objects
+
+    return walk_objects
 
 
 def _starts_frame(c: bytes) -> bool:
@@ -270,8 +281,17 @@ class BLFReader(BaseReader):
                 self._set_carry(buf, max(0, end - 3), len(carry), off)
                 return
             pos, self._resync_inner = j, False
+        decoded = decode_run(buf, pos)
+        if decoded is not None:
+            self._type_counts += decoded.type_counts
+            yield from builder.extend(decoded.t_ns, decoded.channel, decoded.arb_id, decoded.flags, decoded.dlc,
+                                      decoded.data)
+            self._set_carry(buf, decoded.end, len(carry), off)
+            return
+        walk = _walk_objects()
+        builder.widen()
         while True:
-            st, pos, n, detail = K.walk_objects(arr, pos, end, builder.t_ns, builder.channel, builder.arb_id,
+            st, pos, n, detail = walk(arr, pos, end, builder.t_ns, builder.channel, builder.arb_id,
                                                 builder.flags, builder.dlc, builder.data, builder.n, builder.cap,
                                                 self._type_counts)
             if n > builder.n:
@@ -328,12 +348,13 @@ class BLFReader(BaseReader):
         arr = np.frombuffer(rest, np.uint8)
         pos, resume = 0, False
         while True:
+            builder.widen()
             if not resume:  # skip past the incomplete (or bad) object at ``pos``
                 j = rest.find(b"LOBJ", pos + 4)
                 if j < 0:
                     return
                 pos = j
-            st, pos, n, detail = K.walk_objects(arr, pos, len(rest), builder.t_ns, builder.channel, builder.arb_id,
+            st, pos, n, detail = _walk_objects()(arr, pos, len(rest), builder.t_ns, builder.channel, builder.arb_id,
                                                 builder.flags, builder.dlc, builder.data, builder.n, builder.cap,
                                                 self._type_counts)
             builder.n = n

@@ -1,23 +1,11 @@
-"""Compiled walk over the objects inside decompressed BLF log-container bytes.
+"""Compiled object-by-object walk over decompressed BLF container bytes (the diagnosing fallback).
 
-The kernel decodes CAN objects straight into a :class:`~app.ingest.readers._base.ChunkBuilder`'s
-columns and stops at the first thing it cannot vouch for, returning a status and the byte
-position; the Python driver (``blf.py``) reports, resynchronises and calls it again. Every
-path either advances ``pos`` or returns, so the walk cannot loop forever.
-
-Object layout (little endian; ``hsize`` is 32 for header version 1, 40 for version 2)::
-
-    0   "LOBJ"  u16 header size  u16 header version  u32 object size  u32 object type
-    16  u32 object flags (1: timestamp in 10 us units, 2: in ns)
-    20  u16 client index / u8 timestamp status     22  u16 object version
-    24  u64 timestamp since measurement start        [32 u64 original timestamp: version 2]
-    hsize: the object's payload, e.g. CAN_MESSAGE::
-
-        +0 u16 channel (1-based)  +2 u8 flags (0x01 Tx, 0x80 remote)  +3 u8 DLC
-        +4 u32 id (bit 31: extended)  +8 u8[8] data
-
-Objects are followed by ``size % 4`` padding bytes; the walk tolerates 0 to 3 bytes of
-padding of either convention by looking for the next signature in that window.
+The vectorised fast path (:mod:`blf_vector`) handles healthy containers; this kernel runs
+when it declines. It decodes CAN objects straight into a
+:class:`~app.ingest.readers._base.ChunkBuilder`'s columns and stops at the first thing it
+cannot vouch for, returning a status and the byte position; the Python driver (``blf.py``)
+reports, resynchronises and calls it again. Every path either advances ``pos`` or
+returns, so the walk cannot loop forever. Layouts: :mod:`blf_layout`.
 """
 
 from __future__ import annotations
@@ -27,26 +15,23 @@ from typing import Any
 import numba
 import numpy as np
 
-# object types (Vector binlog object IDs)
-CAN_MESSAGE = 1
-CAN_ERROR = 2
-LOG_CONTAINER = 10
-CAN_ERROR_EXT = 73
-CAN_MESSAGE2 = 86
-CAN_FD_MESSAGE = 100
-CAN_FD_MESSAGE_64 = 101
-CAN_FD_ERROR_64 = 104
-
-# kernel status codes
-ST_END = 0  # every complete object consumed; ``pos`` is the start of an incomplete remainder
-ST_FULL = 1  # the output columns are full; ``pos`` is the next object
-ST_BAD_SIG = 2  # no "LOBJ" signature at ``pos`` (nor within 3 padding bytes)
-ST_BAD_HEADER = 3  # unknown header version or header size; detail = header version
-ST_BAD_SIZE = 4  # object size impossible for its type, or the next object is not where it says; detail = size
-ST_BAD_TS = 5  # timestamp does not fit int64 ns; detail = object size (skip it)
-ST_BAD_FRAME = 6  # a CAN object with impossible content (e.g. > 64 data bytes); detail = object size
-
-MAX_OBJECT_SIZE = 1 << 20  # larger inner objects are corrupt sizes (real ones are at most a few kB)
+from app.ingest.readers.blf_layout import (
+    CAN_ERROR,
+    CAN_ERROR_EXT,
+    CAN_FD_ERROR_64,
+    CAN_FD_MESSAGE,
+    CAN_FD_MESSAGE_64,
+    CAN_MESSAGE,
+    CAN_MESSAGE2,
+    MAX_OBJECT_SIZE,
+    ST_BAD_FRAME,
+    ST_BAD_HEADER,
+    ST_BAD_SIG,
+    ST_BAD_SIZE,
+    ST_BAD_TS,
+    ST_END,
+    ST_FULL,
+)
 
 _SIG = 0x4A424F4C  # b"LOBJ" little endian
 _I64_MAX = 9223372036854775807
@@ -59,9 +44,6 @@ _FLAG_RTR = 8
 _FLAG_BRS = 16
 _FLAG_ESI = 32
 _FLAG_TX = 64
-
-FRAME_TYPES = frozenset({CAN_MESSAGE, CAN_ERROR, CAN_ERROR_EXT, CAN_MESSAGE2, CAN_FD_MESSAGE,
-                         CAN_FD_MESSAGE_64, CAN_FD_ERROR_64})
 
 _DLC_LEN = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64], np.int64)
 
