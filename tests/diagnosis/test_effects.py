@@ -26,13 +26,16 @@ def test_off_values_leave_the_vehicle_unchanged(eid: str) -> None:
     ("torque_lag", {"tau_s": 0.02, "delay_s": 0.005}, "effects.torque_lag.tau_s", 0.02),
     ("speed_sensor", {"tau_s": 0.01, "delay_s": 0.002}, "effects.speed_sensor.delay_s", 0.002),
     ("drag", {"coulomb_nm": 3.0, "viscous_nms": 0.01}, "effects.drag.coulomb_nm", 3.0),
-    ("backlash", {"reducer_scale": 1.0, "halfshaft_scale": 1.5}, "gaps.halfshaft", 0.03),
-    ("housing_mount", {"stiffness_log2": 1.0, "damping_log2": 0.0}, "housing.mount_stiffness", 1.6e5),
+    ("backlash", {"reducer_scale": 1.0, "halfshaft_scale": 1.5}, "gaps.halfshaft", 1.5),
+    ("housing_mount", {"stiffness_log2": 1.0, "damping_log2": 0.0}, "housing.mount_stiffness", 2.0),
 ])
 def test_effects_act_through_the_model_parameters(eid: str, values: dict[str, float], field: str,
                                                   expected: float) -> None:
-    v = apply_effects(load_vehicle("paper"), {eid: values})
-    assert v.get(field) == pytest.approx(expected)
+    """Absolute values for the effect's own fields; factors on the preset's value for scaled fields."""
+    base = load_vehicle("paper")
+    v = apply_effects(base, {eid: values})
+    scaled = field.startswith(("gaps.", "housing."))
+    assert v.get(field) == pytest.approx(expected * base.get(field) if scaled else expected)
 
 
 def test_an_effect_changes_the_simulated_speed() -> None:
