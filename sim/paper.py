@@ -8,16 +8,20 @@ Metrics (see :mod:`sim.metrics`): unloaded time = first gap opening to last clos
 fluctuation = peak to adjacent valley of the resolver speed after the first opening;
 impact-induced fluctuation = peak to peak of (speed with gaps - speed without gaps) over the
 same window. Sensitivity ``S_i = dn_i / dc_i``: drop of the impact-induced fluctuation when
-gap ``i`` is eliminated, per radian of that gap in its own shaft's angle, normalised to S5 = 100.
+gap ``i`` is eliminated, per mm of that gap's circumferential clearance (arc at its contact
+radius, the paper's measure, so that gear pairs and splines compare), normalised to S5 = 100;
+per radian of the gap's own shaft angle as a secondary view.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.errors import ParameterError
 from sim.metrics import impact_induced_fluctuation, peak_to_valley, unloaded_time
 from sim.params import GAP_NAMES, Vehicle
 from sim.simulate import SimResult, simulate
@@ -105,12 +109,18 @@ def reproduce(vehicle: Vehicle) -> tuple[list[Row], dict[str, CaseResult]]:
         ratio = cases[key].fluct_rpm / nom.fluct_rpm
         rows.append(Row(f"fluctuation ratio {key}/nominal", ratio, round(paper_ratio, 2),
                         f"{paper_ratio:.2f} +/- 0.1", abs(ratio - paper_ratio) <= 0.1))
-    sens = sensitivities(vehicle, cases)
+    unit = sensitivity_unit(vehicle)
+    sens = sensitivities(vehicle, cases, per=unit)
     ranking_ok = bool(np.all(np.diff(sens) > 0))
-    rows.append(Row("sensitivity ranking S1<S2<S3<S4<S5", float(ranking_ok), "yes", "same ranking", ranking_ok))
+    rows.append(Row(f"sensitivity ranking S1<S2<S3<S4<S5 (per {unit})", float(ranking_ok), "yes", "same ranking",
+                    ranking_ok))
     for i, (s, p) in enumerate(zip(sens, PAPER_SENSITIVITY, strict=True), start=1):
         ok = p / 1.5 <= s <= p * 1.5 if s > 0 else False
-        rows.append(Row(f"S{i} (S5 = 100)", s, p, f"{p / 1.5:.3g}..{p * 1.5:.3g}", ok))
+        rows.append(Row(f"S{i} per {unit} of clearance (S5 = 100)", s, p, f"{p / 1.5:.3g}..{p * 1.5:.3g}", ok))
+    if unit == "mm":  # secondary view: per radian of each gap's own shaft angle
+        rad = sensitivities(vehicle, cases, per="rad")
+        rows.append(Row("sensitivity ranking per rad of own-shaft angle", float(np.all(np.diff(rad) > 0)), "-",
+                        "reported", None))
     for i in (1, 2, 3):
         d = nom.fluct_rpm - cases[f"no_gap{i}"].fluct_rpm
         rows.append(Row(f"gap {i} eliminated: change in peak-valley (rpm)", d, "< 10", "|change| < 10", abs(d) < 10))
@@ -123,12 +133,52 @@ def reproduce(vehicle: Vehicle) -> tuple[list[Row], dict[str, CaseResult]]:
     return rows, cases
 
 
-def sensitivities(vehicle: Vehicle, cases: dict[str, CaseResult]) -> F64:
-    """S_i = (impact_nominal - impact_without_gap_i) / gap_i (own-angle rad), normalised to S5 = 100."""
+def sensitivity_unit(vehicle: Vehicle) -> Literal["mm", "rad"]:
+    """``"mm"`` when every gap has its contact radius (the paper's definition), else ``"rad"``."""
+    return "mm" if all(r > 0 for r in vehicle.gap_radii_mm) else "rad"
+
+
+def sensitivities(vehicle: Vehicle, cases: dict[str, CaseResult],
+                  per: Literal["mm", "rad", "auto"] = "auto") -> F64:
+    """S_i = (impact_nominal - impact_without_gap_i) / dc_i, normalised to S5 = 100. Shape (5,).
+
+    ``per="mm"``: ``dc_i`` is the gap's circumferential clearance in mm (nominal angle times
+    contact radius), the paper's definition; ``per="rad"``: its angle in its own shaft;
+    ``"auto"``: mm when every gap has a radius (:func:`sensitivity_unit`), else rad.
+    ``cases`` needs ``"nominal"`` and ``"no_gap1"`` .. ``"no_gap5"`` (:func:`run_case`).
+    """
+    unit = sensitivity_unit(vehicle) if per == "auto" else per
+    if unit not in ("mm", "rad"):
+        raise ParameterError("per", per, "must be 'mm', 'rad' or 'auto'")
+    size = vehicle.gaps_mm if unit == "mm" else vehicle.gaps.nominal()
     nom = cases["nominal"].impact_rpm
-    raw = np.array([(nom - cases[f"no_gap{i}"].impact_rpm) / max(getattr(vehicle.gaps, g).nominal, 1e-12)
-                    for i, g in enumerate(GAP_NAMES, start=1)])
+    raw = np.array([(nom - cases[f"no_gap{i}"].impact_rpm) / max(size[i - 1], 1e-12)
+                    for i in range(1, len(GAP_NAMES) + 1)])
     return 100.0 * raw / raw[-1] if raw[-1] != 0 else raw
+
+
+def sensitivity_table(vehicle: Vehicle, cases: dict[str, CaseResult]) -> str:
+    """Per-gap detail: sizes, contact radii, S per mm and per rad, and the radius the paper's S_i implies.
+
+    The last column holds every other radius fixed and asks which contact radius of gap ``i``
+    would make our S_i (per mm) equal the paper's: ``r_i * S_i / S_i,paper``.
+    """
+    per_rad = sensitivities(vehicle, cases, per="rad")
+    have_mm = sensitivity_unit(vehicle) == "mm"
+    per_mm = sensitivities(vehicle, cases, per="mm") if have_mm else np.full(len(GAP_NAMES), np.nan)
+    nom = cases["nominal"].impact_rpm
+    head = (f"{'gap':<14} {'rad (own)':>9} {'r (mm)':>7} {'arc (mm)':>8} {'motor rad/mm':>12} {'dn (rpm)':>8} "
+            f"{'S/mm':>6} {'S/rad':>6} {'paper':>6} {'r for paper S (mm)':>18}")
+    lines = [head, "-" * len(head)]
+    for i, g in enumerate(GAP_NAMES):
+        gap = getattr(vehicle.gaps, g)
+        dn = nom - cases[f"no_gap{i + 1}"].impact_rpm
+        arc = gap.nominal * gap.radius_mm if have_mm else np.nan
+        cost = vehicle.motor_angle_per_mm[i] if have_mm else np.nan
+        need = gap.radius_mm * per_mm[i] / PAPER_SENSITIVITY[i] if have_mm else np.nan
+        lines.append(f"{i + 1} {g:<12} {gap.nominal:>9.4f} {gap.radius_mm:>7.2f} {arc:>8.3f} {cost:>12.4f} "
+                     f"{dn:>8.1f} {per_mm[i]:>6.3g} {per_rad[i]:>6.3g} {PAPER_SENSITIVITY[i]:>6g} {need:>18.3g}")
+    return "\n".join(lines)
 
 
 def format_table(rows: list[Row]) -> str:

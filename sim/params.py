@@ -8,7 +8,9 @@ constraint in the dataclass field metadata; :func:`_check` turns a violation int
 the offending value.
 
 Angles are radians, torques N m, inertias kg m^2, stiffness N m/rad, damping N m s/rad.
-Each backlash is the **total** clearance (2 alpha) measured in its own shaft's angle.
+Each backlash is the **total** clearance (2 alpha) measured in its own shaft's angle; with its
+contact radius (``radius_mm``) it may also be given and read as a circumferential clearance in
+mm of arc (the paper's measure for comparing gear pairs and splines).
 """
 
 from __future__ import annotations
@@ -17,19 +19,12 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import Any
 
 from sim.errors import ParameterError
-
-# Constraint tags used in field metadata.
-POS = "positive"
-NONNEG = "nonnegative"
-ANY = "finite"
-INT_POS = "integer >= 1"
-
-
-def _f(unit: str, rule: str = POS, default: Any = dataclasses.MISSING) -> Any:
-    return field(default=default, metadata={"unit": unit, "rule": rule})
+from sim.fields import ANY, INT_POS, NONNEG, POS, build, check, flag, to_plain, validate
+from sim.fields import num as _f
+from sim.optional import Drag, Effects, ProgressiveStiffness, SpeedSensor, TorqueLag, TyreSlip
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -106,24 +101,66 @@ class Body:
 class Housing:
     """Drive-unit housing rolling on its mounts about an axis parallel to the shafts."""
 
-    enabled: bool = field(default=True, metadata={"unit": "-", "rule": "bool"})
+    enabled: bool = flag(True)
     inertia: float = _f("kg m^2", POS, 2.5)
     mount_stiffness: float = _f("N m/rad", POS, 8.0e4)
     mount_damping: float = _f("N m s/rad", NONNEG, 150.0)
 
 
+MM_FIELDS = ("nominal_mm", "min_mm", "max_mm")
+
+
 @dataclass(frozen=True, kw_only=True)
 class Gap:
-    """Total clearance (2 alpha) in its own shaft's angle, rad, with its tolerance band."""
+    """Total clearance (2 alpha) in its own shaft's angle, rad, with its tolerance band.
+
+    ``radius_mm`` is the contact (pitch) radius at which the clearance is a circumferential
+    arc: gear pairs the driven gear's pitch radius (the arc backlash is the same on both
+    gears), splines their pitch radius. With it the gap can be given in mm of arc
+    (``nominal_mm``, ``min_mm``, ``max_mm`` in the file, converted to rad on reading) and read
+    back in mm (:meth:`arc_mm`). 0 means not given.
+    """
 
     nominal: float = _f("rad", NONNEG)
     min: float = _f("rad", NONNEG, -1.0)  # omitted (-1) -> same as nominal
     max: float = _f("rad", NONNEG, -1.0)
+    radius_mm: float = _f("mm", NONNEG, 0.0)
 
     def __post_init__(self) -> None:
         for side in ("min", "max"):
             if getattr(self, side) == -1.0:
                 object.__setattr__(self, side, self.nominal)
+
+    def arc_mm(self, angle_rad: float | None = None, *, name: str = "gap") -> float:
+        """Circumferential clearance (mm) of ``angle_rad`` (default: the nominal) at ``radius_mm``.
+
+        Raises ParameterError naming ``gaps.<name>.radius_mm`` when the radius is not given.
+        """
+        if self.radius_mm <= 0:
+            raise ParameterError(f"gaps.{name}.radius_mm", self.radius_mm,
+                                 "contact radius not given; needed for a clearance in mm")
+        return (self.nominal if angle_rad is None else angle_rad) * self.radius_mm
+
+
+def gap_from_mm(value: Mapping[str, Any], path: str) -> dict[str, Any]:
+    """A gap table with ``nominal_mm``/``min_mm``/``max_mm`` rewritten to rad via ``radius_mm``."""
+    out = dict(value)
+    if not any(k in out for k in MM_FIELDS):
+        return out
+    radius = out.get("radius_mm")
+    if radius is None:
+        raise ParameterError(f"{path}radius_mm", None, "needed to give the gap in mm of circumferential clearance")
+    check(f"{path}radius_mm", radius, POS)
+    for key in MM_FIELDS:
+        if key not in out:
+            continue
+        rad_key = key[:-3]
+        mm = out.pop(key)
+        if rad_key in out:
+            raise ParameterError(f"{path}{key}", mm, f"give {rad_key} (rad) or {key} (mm), not both")
+        check(f"{path}{key}", mm, NONNEG)
+        out[rad_key] = mm / radius
+    return out
 
 
 GAP_NAMES: tuple[str, ...] = ("spline", "mesh1", "mesh2", "differential", "halfshaft")
@@ -139,39 +176,6 @@ class Gaps:
 
     def nominal(self) -> tuple[float, ...]:
         return tuple(getattr(self, n).nominal for n in GAP_NAMES)
-
-
-@dataclass(frozen=True, kw_only=True)
-class TorqueLag:
-    """Air-gap torque = first-order lag (tau) of the CAN torque delayed by ``delay_s``. Off at zeros."""
-
-    delay_s: float = _f("s", NONNEG, 0.0)
-    tau_s: float = _f("s", NONNEG, 0.0)
-
-
-@dataclass(frozen=True, kw_only=True)
-class SpeedSensor:
-    """Inverter speed signal: first-order filter, transport delay, sample-and-hold, quantisation. Off at zeros."""
-
-    tau_s: float = _f("s", NONNEG, 0.0)
-    delay_s: float = _f("s", NONNEG, 0.0)
-    sample_s: float = _f("s", NONNEG, 0.0)
-    resolution_rpm: float = _f("rpm", NONNEG, 0.0)
-
-
-@dataclass(frozen=True, kw_only=True)
-class Drag:
-    """Extra rotor drag: Coulomb (bearing/seal/churning) plus viscous. Off at zeros."""
-
-    coulomb_nm: float = _f("N m", NONNEG, 0.0)
-    viscous_nms: float = _f("N m s/rad", NONNEG, 0.0)
-
-
-@dataclass(frozen=True, kw_only=True)
-class Effects:
-    torque_lag: TorqueLag = field(default_factory=TorqueLag)
-    speed_sensor: SpeedSensor = field(default_factory=SpeedSensor)
-    drag: Drag = field(default_factory=Drag)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -192,7 +196,7 @@ class Vehicle:
     tolerances: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        _validate(self, "")
+        validate(self, "", _cross_checks)
         for path, band in self.tolerances.items():
             value = self.get(path)  # raises ParameterError for unknown paths
             if not isinstance(value, int | float) or isinstance(value, bool):
@@ -203,7 +207,7 @@ class Vehicle:
     # ---- dict round trip -------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (tuples as lists) that :meth:`from_dict` accepts; JSON/TOML friendly."""
-        out = _to_plain(self)
+        out = to_plain(self)
         out["tolerances"] = {k: [float(a), float(b)] for k, (a, b) in self.tolerances.items()}
         return out
 
@@ -211,7 +215,7 @@ class Vehicle:
     def from_dict(cls, data: Mapping[str, Any]) -> Vehicle:
         if not isinstance(data, Mapping):
             raise ParameterError("vehicle", type(data).__name__, "must be a table/dict")
-        return _build(cls, data, "")
+        return build(cls, data, "", _nested_type, _preprocess)
 
     # ---- dotted access and what-ifs ---------------------------------------------------
     def get(self, path: str) -> Any:
@@ -228,7 +232,9 @@ class Vehicle:
     def with_changes(self, changes: Mapping[str, Any] | None = None, **kw: Any) -> Vehicle:
         """A copy with dotted fields replaced; ``"gaps.<name>"`` sets that gap's nominal size.
 
-        Example: ``v.with_changes({"gaps.halfshaft": 0.0, "body.mass": 2000.0})``.
+        Example: ``v.with_changes({"gaps.halfshaft": 0.0, "body.mass": 2000.0})``. Gap sizes may
+        also be set in mm of circumferential clearance: ``{"gaps.mesh2.nominal_mm": 0.1}``
+        (needs the gap's ``radius_mm``).
         Keyword form uses ``__`` for dots: ``v.with_changes(body__mass=2000.0)``.
         """
         all_changes = dict(changes or {})
@@ -238,6 +244,12 @@ class Vehicle:
             parts = path.split(".")
             if parts[0] == "gaps" and len(parts) == 2:
                 parts.append("nominal")
+            if parts[0] == "gaps" and len(parts) == 3 and parts[2] in MM_FIELDS:
+                self.get(".".join(parts[:2]))  # validates the gap name
+                gap = data["gaps"][parts[1]]
+                gap.pop(parts[2][:-3], None)  # converted with the (possibly changed) radius on rebuild
+                gap[parts[2]] = value
+                continue
             self.get(".".join(parts[:-1]) if len(parts) > 1 else parts[0])  # validates prefix
             node: Any = data
             for p in parts[:-1]:
@@ -259,116 +271,60 @@ class Vehicle:
         return tuple(g * m for g, m in zip(self.gaps.nominal(), mult, strict=True))
 
 
-# ---- generic machinery -------------------------------------------------------------------
-T = TypeVar("T")
+
+    @property
+    def gap_radii_mm(self) -> tuple[float, ...]:
+        """Contact (pitch) radius of each gap, mm, in :data:`GAP_NAMES` order (0 = not given)."""
+        return tuple(getattr(self.gaps, g).radius_mm for g in GAP_NAMES)
+
+    @property
+    def gaps_mm(self) -> tuple[float, ...]:
+        """Each gap's nominal circumferential clearance, mm. Raises ParameterError if a radius is missing."""
+        return tuple(getattr(self.gaps, g).arc_mm(name=g) for g in GAP_NAMES)
+
+    @property
+    def motor_angle_per_mm(self) -> tuple[float, ...]:
+        """Motor angle (rad) one mm of each gap's circumferential clearance costs: ``k_i / r_i``.
+
+        ``k_i`` is the speed ratio motor / gap shaft (1, r1, r1 r2, r1 r2, r1 r2), ``r_i`` the
+        contact radius in mm. Raises ParameterError if a radius is missing.
+        """
+        r1, r2 = self.reducer.ratio1, self.reducer.ratio2
+        mult = (1.0, r1, r1 * r2, r1 * r2, r1 * r2)
+        return tuple(m / getattr(self.gaps, g).arc_mm(1.0, name=g) for m, g in zip(mult, GAP_NAMES, strict=True))
 
 
-def _check(path: str, value: Any, rule: str) -> None:
-    if rule == "bool":
-        if not isinstance(value, bool):
-            raise ParameterError(path, value, "must be true or false")
-        return
-    if isinstance(value, tuple):
-        for i, v in enumerate(value):
-            _check(f"{path}[{i}]", v, rule)
-        return
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ParameterError(path, value, "must be a number")
-    if not math.isfinite(value):
-        raise ParameterError(path, value, "must be finite")
-    if rule == POS and value <= 0:
-        raise ParameterError(path, value, "must be > 0")
-    if rule == NONNEG and value < 0:
-        raise ParameterError(path, value, "must be >= 0")
-    if rule == INT_POS and (not isinstance(value, int) or value < 1):
-        raise ParameterError(path, value, "must be an integer >= 1")
-
-
-def _validate(obj: Any, prefix: str) -> None:
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        path = f"{prefix}{f.name}"
-        if "rule" in f.metadata:
-            _check(path, value, f.metadata["rule"])
-        elif dataclasses.is_dataclass(value):
-            _validate(value, path + ".")
+def _cross_checks(obj: Any, prefix: str) -> None:
     if isinstance(obj, Gap) and obj.min > obj.max:
         raise ParameterError(f"{prefix}min", obj.min, f"must be <= {prefix}max = {obj.max}")
     if isinstance(obj, Halfshaft) and obj.count > 2:
         raise ParameterError(f"{prefix}count", obj.count, "must be 1 or 2 driven half-shafts")
 
 
-def _to_plain(obj: Any) -> Any:
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: _to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
-    if isinstance(obj, tuple):
-        return [_to_plain(v) for v in obj]
-    if isinstance(obj, Mapping):
-        return {k: _to_plain(v) for k, v in obj.items()}
-    return obj
-
-
-def _coerce(path: str, value: Any, f: dataclasses.Field[Any]) -> Any:
-    rule = f.metadata.get("rule")
-    default = f.default
-    if isinstance(default, tuple) or f.name == "teeth":
-        if not isinstance(value, list | tuple) or len(value) != 4:
-            raise ParameterError(path, value, "must be a list of 4 numbers")
-        return tuple(value)
-    if rule in (POS, NONNEG, ANY) and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    return value
-
-
-def _build(cls: type[T], data: Mapping[str, Any], prefix: str) -> T:
-    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise ParameterError(f"{prefix}{unknown[0]}", data[unknown[0]], f"unknown field; known: {sorted(fields)}")
-    kwargs: dict[str, Any] = {}
-    for name, f in fields.items():
-        path = f"{prefix}{name}"
-        if name not in data:
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise ParameterError(path, None, "required field missing")
-            continue
-        value = data[name]
-        sub = _nested_type(cls, name)
-        if sub is Gap and isinstance(value, int | float) and not isinstance(value, bool):
-            value = {"nominal": value}
-        if sub is not None:
-            if not isinstance(value, Mapping):
-                raise ParameterError(path, value, "must be a table")
-            kwargs[name] = _build(sub, value, path + ".")
-        elif name == "tolerances":
-            if not isinstance(value, Mapping):
-                raise ParameterError(path, value, "must be a table of [min, max]")
-            kwargs[name] = {k: _band(f"{path}.{k}", v) for k, v in value.items()}
-        else:
-            kwargs[name] = _coerce(path, value, f)
-    try:
-        return cls(**kwargs)
-    except TypeError as exc:  # wrong types reaching the constructor
-        raise ParameterError(prefix.rstrip(".") or "vehicle", data, str(exc)) from exc
-
-
-def _band(path: str, value: Any) -> tuple[float, float]:
-    if not isinstance(value, list | tuple) or len(value) != 2:
-        raise ParameterError(path, value, "must be [min, max]")
-    try:
-        return float(value[0]), float(value[1])
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(path, value, "must be two numbers") from exc
-
-
-_NESTED: dict[str, type] = {
-    "motor": Motor, "reducer": Reducer, "halfshaft": Halfshaft, "wheel": Wheel, "body": Body,
-    "gaps": Gaps, "housing": Housing, "effects": Effects, "torque_lag": TorqueLag,
-    "speed_sensor": SpeedSensor, "drag": Drag,
-}
+_TABLES: dict[str, type] = {c.__name__: c for c in (
+    Motor, Reducer, Halfshaft, Wheel, Body, Gaps, Gap, Housing, Effects, TorqueLag, SpeedSensor, Drag,
+    ProgressiveStiffness, TyreSlip,
+)}
 
 
 def _nested_type(cls: type, name: str) -> type | None:
-    if cls is Gaps:
-        return Gap
-    return _NESTED.get(name) if name != "tolerances" else None
+    """The dataclass of sub-table ``name`` of ``cls`` (from the field's annotation), or None."""
+    for f in dataclasses.fields(cls):
+        if f.name == name:
+            return _TABLES.get(str(f.type))
+    return None
+
+
+def _preprocess(sub: type, value: Any, path: str) -> Any:
+    """Gap shorthand (a bare number is the nominal) and gap sizes given in mm."""
+    if sub is Gap and isinstance(value, int | float) and not isinstance(value, bool):
+        return {"nominal": value}
+    if sub is Gap and isinstance(value, Mapping):
+        return gap_from_mm(value, path)
+    return value
+
+
+__all__ = [
+    "ANY", "GAP_NAMES", "Body", "Drag", "Effects", "Gap", "Gaps", "Halfshaft", "Housing", "Motor",
+    "ProgressiveStiffness", "Reducer", "SpeedSensor", "TorqueLag", "TyreSlip", "Vehicle", "Wheel",
+]

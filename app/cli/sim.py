@@ -13,7 +13,7 @@ import numpy as np
 from app.errors import InputError
 from sim import load_vehicle, simulate
 from sim.metrics import peak_to_valley, unloaded_intervals
-from sim.paper import format_table, reproduce
+from sim.paper import format_table, reproduce, sensitivity_table
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -34,11 +34,15 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 
 def _reproduce(args: argparse.Namespace) -> int:
-    rows, _ = reproduce(load_vehicle(args.vehicle))
+    vehicle = load_vehicle(args.vehicle)
+    rows, cases = reproduce(vehicle)
     if args.json:
         print(json.dumps([r.__dict__ for r in rows], indent=2))
     else:
         print(format_table(rows))
+        print()
+        print("Sensitivity detail (dn = drop of the impact-induced fluctuation when the gap is eliminated):")
+        print(sensitivity_table(vehicle, cases))
     return 0
 
 

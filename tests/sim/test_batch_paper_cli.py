@@ -8,7 +8,7 @@ import pytest
 from app.cli import main
 from sim import ParameterError, WhatIf, load_vehicle, simulate
 from sim.batch import simulate_batch, tolerance_analysis
-from sim.paper import reproduce, tip_in_torque
+from sim.paper import reproduce, sensitivities, sensitivity_table, sensitivity_unit, tip_in_torque
 
 PAPER = load_vehicle("paper")
 
@@ -56,15 +56,27 @@ def test_reproduce_paper_targets() -> None:
     by = {r.quantity: r for r in rows}
     for key in ("unloaded time, nominal gaps (ms)", "unloaded time, all gaps halved (ms)",
                 "unloaded time, torque halved (ms)", "fluctuation ratio half_gaps/nominal",
-                "fluctuation ratio half_torque/nominal", "sensitivity ranking S1<S2<S3<S4<S5",
-                "gaps 4+5 eliminated: impact-induced / nominal (%)"):
+                "fluctuation ratio half_torque/nominal", "gaps 4+5 eliminated: impact-induced / nominal (%)",
+                "gap 1 eliminated: change in peak-valley (rpm)", "gap 3 eliminated: change in peak-valley (rpm)"):
         assert by[key].ok, (key, by[key].ours)
     assert cases["zero_gaps"].unloaded_ms == 0.0
+    # sensitivities: per mm of circumferential clearance (the paper's measure) and per own-shaft radian
+    assert sensitivity_unit(PAPER) == "mm"
+    per_mm, per_rad = sensitivities(PAPER, cases), sensitivities(PAPER, cases, per="rad")
+    radii = np.array(PAPER.gap_radii_mm)
+    assert np.allclose(per_mm, per_rad * radii[-1] / radii)
+    assert by["sensitivity ranking per rad of own-shaft angle"].ours == 1.0
+    # a lumped chain: a gap's effect follows the motor angle it costs, k_i / r_i per mm
+    cost = np.array(PAPER.motor_angle_per_mm)
+    assert np.allclose(per_mm, 100 * cost / cost[-1], rtol=0.15)
+    detail = sensitivity_table(PAPER, cases)
+    assert "r for paper S" in detail and len(detail.splitlines()) == 7
 
 
 def test_cli_reproduce_and_simulate(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
     assert main(["reproduce-paper"]) == 0
-    assert "targets met" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "targets met" in printed and "S/rad" in printed
     csv_in = tmp_path / "torque.csv"
     t, q = tip_in_torque(duration_s=0.4)
     csv_in.write_text("t_s,torque_nm\n" + "".join(f"{a},{b}\n" for a, b in zip(t, q, strict=True)))
