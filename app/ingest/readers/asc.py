@@ -17,8 +17,9 @@ The common classic line goes through the compiled fast path (:mod:`asc_kernel`);
 other lines through :meth:`ASCReader.parse_line`, which also diagnoses damaged lines.
 Frame semantics follow python-can's ``ASCReader`` (channel = number - 1, DLC via
 ``dlc2len``, at most 8 bytes on classic frames), except that damaged lines are reported
-and skipped instead of aborting or being silently shortened, and that
-``timestamps relative`` is honoured (python-can ignores it).
+and skipped instead of aborting or being silently shortened, that ``timestamps relative``
+is honoured (python-can ignores it), and that a CANFD line with DLC 0 and no data is an
+empty data frame (python-can makes every zero-length CANFD line a remote frame).
 """
 
 from __future__ import annotations
@@ -209,7 +210,7 @@ class ASCReader(BaseReader):
         length = parse_int(len_tok, 10, "data length")
         if code > 15 or length > 64:
             raise BadLine("bad_line", f"CANFD DLC {dlc_tok} / data length {len_tok} out of range")
-        if length == 0:
+        if length == 0 and code != 0:  # no data for a non-zero DLC: a remote frame (python-can: any length 0)
             return ts, ch, ident, fl | RTR, code, b""
         payload = hex_bytes(rest[4:], length, base=self.base)
         if dlc2len(code) != length:
