@@ -1,0 +1,260 @@
+"""Bus statistics while streaming a log: per-ID counts, periods and jitter, counter gaps, time anomalies.
+
+Everything is accumulated chunk by chunk (memory independent of log length) and ends in a
+:class:`DecodeReport`, a plain dataclass tree the service stores as JSON and the CLI prints.
+
+* **Per-ID periods**: for each (bus channel, ID, extended flag) the mean and standard deviation
+  (jitter) of the time between consecutive frames, with the smallest and largest gap.
+* **Counter gaps**: alive/rolling counters (unsigned, unscaled, 2..8 bits, named like
+  ``alive``, ``counter``, ``cnt``, ``rolling``, ``seq``) must advance by one modulo their range
+  (``maximum + 1`` when the DBC says the counter stops short of the top value, else
+  ``2**length``). A step of ``k > 1`` means ``k - 1`` frames were lost; a step of 0 is a repeat.
+* **Timestamp anomalies**, per bus channel in file order: time going backwards, and jumps
+  (no frame on the channel for more than ``jump_s``).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from cantools.database.can import Database as CanDatabase
+from cantools.database.can import Signal as CanSignal
+
+from app.ingest.database import Repair
+from app.ingest.decode import EXTENDED_KEY, DecodedMessage
+from app.ingest.frames import FrameChunk, FrameFlag, ReadIssue
+
+_COUNTER_NAME = re.compile(r"(alive|counter|cntr|cnt|rolling|rlc|seq(uence)?)(_?\d+)?$|^(alive|counter|cnt|rc)",
+                           re.IGNORECASE)
+MAX_LISTED = 50  # anomalies listed individually; the rest are counted
+
+
+@dataclass(slots=True)
+class IdStats:
+    channel: int
+    arb_id: int
+    extended: bool
+    message: str | None  # database message name; None for IDs the database does not know
+    count: int
+    period_ms: float | None  # mean time between frames
+    jitter_ms: float | None  # standard deviation of the time between frames
+    min_gap_ms: float | None
+    max_gap_ms: float | None
+    cycle_ms: float | None = None  # what the database says
+
+
+@dataclass(slots=True)
+class CounterGaps:
+    message: str
+    signal: str
+    channel: int
+    frames: int
+    modulus: int
+    gaps: int  # steps larger than one
+    missed: int  # frames lost according to the counter
+    repeats: int  # steps of zero
+    first_gap_s: float | None
+
+
+@dataclass(slots=True)
+class TimestampAnomaly:
+    kind: str  # "backwards" or "jump"
+    channel: int
+    frame: int  # 0-based frame index in the log
+    t_s: float
+    dt_s: float
+
+
+@dataclass(slots=True)
+class DecodeReport:
+    """What decoding a log found, for the service and the ``decode`` command."""
+
+    source: str = ""
+    format: str = ""
+    database: str = ""
+    frames_read: int = 0
+    frames_decoded: int = 0
+    frames_unknown_id: int = 0
+    error_frames: int = 0
+    remote_frames: int = 0
+    duration_s: float = 0.0
+    ids: list[IdStats] = field(default_factory=list)
+    decode_errors: dict[str, dict[str, int]] = field(default_factory=dict)
+    counter_gaps: list[CounterGaps] = field(default_factory=list)
+    timestamp_anomalies: list[TimestampAnomaly] = field(default_factory=list)
+    anomaly_counts: dict[str, int] = field(default_factory=dict)
+    reader_issues: list[ReadIssue] = field(default_factory=list)
+    database_repairs: list[Repair] = field(default_factory=list)
+    channels: dict[str, int] = field(default_factory=dict)  # canonical channel -> samples
+    # frames whose ID is a database message's but with the other ID type (11 vs 29 bit): not decoded
+    id_type_mismatch: dict[str, int] = field(default_factory=dict)
+
+
+def counter_modulus(sig: CanSignal) -> int | None:
+    """The counting range of an alive counter signal, or None when ``sig`` is not one."""
+    if (sig.is_float or sig.is_signed or not 2 <= sig.length <= 8 or sig.scale != 1 or sig.offset != 0
+            or sig.is_multiplexer or not _COUNTER_NAME.search(sig.name)):
+        return None
+    top = 2 ** sig.length
+    if isinstance(sig.maximum, (int, float)) and 0 < sig.maximum < top - 1 and float(sig.maximum).is_integer():
+        return int(sig.maximum) + 1
+    return top
+
+
+class _Run:
+    __slots__ = ("count", "last", "max", "min", "n", "s1", "s2")
+
+    def __init__(self) -> None:
+        self.count, self.n = 0, 0
+        self.last: int | None = None
+        self.s1 = self.s2 = 0.0
+        self.min, self.max = np.inf, -np.inf
+
+
+class StatsAccumulator:
+    """Feed chunks (and their decoded messages); :meth:`fill` writes the totals into a report."""
+
+    def __init__(self, db: CanDatabase | None = None, *, jump_s: float = 1.0) -> None:
+        self.jump_s = jump_s
+        self._runs: dict[tuple[int, int], _Run] = {}
+        self._last_t: dict[int, int] = {}  # channel -> last t_ns seen
+        self._frames = 0
+        self._t_first: int | None = None
+        self._t_last: int | None = None
+        self._error = self._remote = 0
+        self._anomalies: list[TimestampAnomaly] = []
+        self._anomaly_counts: dict[str, int] = {}
+        self._names: dict[int, tuple[str, float | None]] = {}
+        self._counters: dict[str, list[tuple[str, int]]] = {}
+        self._counter_state: dict[tuple[str, str, int], list[float]] = {}
+        self._gaps: dict[tuple[str, str, int], CounterGaps] = {}
+        if db is not None:
+            for msg in db.messages:
+                key = msg.frame_id | (EXTENDED_KEY if msg.is_extended_frame else 0)
+                self._names[key] = (msg.name, float(msg.cycle_time) if msg.cycle_time else None)
+                found = [(s.name, m) for s in msg.signals if (m := counter_modulus(s)) is not None]
+                if found:
+                    self._counters[msg.name] = found
+
+    @property
+    def frames(self) -> int:
+        """Frames seen so far."""
+        return self._frames
+
+    def add_chunk(self, chunk: FrameChunk) -> None:
+        n = len(chunk)
+        if n == 0:
+            return
+        start = self._frames
+        self._frames += n
+        t = chunk.t_ns
+        lo, hi = int(t.min()), int(t.max())
+        self._t_first = lo if self._t_first is None else min(self._t_first, lo)
+        self._t_last = hi if self._t_last is None else max(self._t_last, hi)
+        self._error += int(np.count_nonzero(chunk.flags & FrameFlag.ERROR))
+        self._remote += int(np.count_nonzero(chunk.flags & FrameFlag.REMOTE))
+        self._timestamps(chunk, start)
+        usable = (chunk.flags & np.uint8(FrameFlag.ERROR)) == 0
+        key = chunk.arb_id.astype(np.int64) | np.where(chunk.flags & FrameFlag.EXTENDED, EXTENDED_KEY, 0)
+        key = (chunk.channel.astype(np.int64) + 1) << 33 | key
+        key = key[usable]
+        tt = t[usable]
+        order = np.argsort(key, kind="stable")
+        ks, ts = key[order], tt[order]
+        bounds = np.flatnonzero(np.diff(ks)) + 1
+        for a, b in zip(np.r_[0, bounds], np.r_[bounds, ks.size], strict=True):
+            if a == b:
+                continue
+            k = int(ks[a])
+            run = self._runs.setdefault(((k >> 33) - 1, k & ((1 << 33) - 1)), _Run())
+            seg = ts[a:b]
+            dt = np.diff(seg) if run.last is None else np.diff(np.r_[run.last, seg])
+            dt = dt.astype(np.float64)
+            run.count += int(b - a)
+            run.last = int(seg[-1])
+            if dt.size:
+                run.n += dt.size
+                run.s1 += float(dt.sum())
+                run.s2 += float(np.dot(dt, dt))
+                run.min = min(run.min, float(dt.min()))
+                run.max = max(run.max, float(dt.max()))
+
+    def _timestamps(self, chunk: FrameChunk, start: int) -> None:
+        for ch in np.unique(chunk.channel).tolist():
+            rows = np.flatnonzero(chunk.channel == ch)
+            t = chunk.t_ns[rows]
+            prev = self._last_t.get(ch)
+            full = t if prev is None else np.r_[prev, t]
+            dt = np.diff(full)
+            base = 0 if prev is None else 1
+            for kind, hit in (("backwards", dt < 0), ("jump", dt > self.jump_s * 1e9)):
+                idx = np.flatnonzero(hit)
+                if not idx.size:
+                    continue
+                self._anomaly_counts[kind] = self._anomaly_counts.get(kind, 0) + int(idx.size)
+                for i in idx[: max(0, MAX_LISTED - len(self._anomalies))].tolist():
+                    r = i + 1 - base
+                    self._anomalies.append(TimestampAnomaly(kind, int(ch), start + int(rows[r]),
+                                                            float(t[r]) / 1e9, float(dt[i]) / 1e9))
+            self._last_t[ch] = int(t[-1])
+
+    def add_decoded(self, decoded: Mapping[str, DecodedMessage]) -> None:
+        """Check alive counters of the decoded messages for gaps and repeats."""
+        for dm in decoded.values():
+            base_name = dm.name.split("@", 1)[0]
+            for sig, modulus in self._counters.get(base_name, []):
+                values = dm.signals.get(sig)
+                if values is None or not len(dm):
+                    continue
+                for ch in np.unique(dm.channel).tolist():
+                    m = (dm.channel == ch) & np.isfinite(values)
+                    v, t = values[m], dm.t_ns[m]
+                    key = (dm.name, sig, int(ch))
+                    state = self._counter_state.get(key)
+                    seq = v if state is None else np.r_[state[0], v]
+                    gaps = self._gaps.setdefault(key, CounterGaps(dm.name, sig, int(ch), 0, modulus, 0, 0, 0, None))
+                    gaps.frames += int(v.size)
+                    if seq.size >= 2:
+                        step = np.mod(np.diff(seq), modulus)
+                        jump = step > 1
+                        gaps.gaps += int(jump.sum())
+                        gaps.missed += int((step[jump] - 1).sum())
+                        gaps.repeats += int((step == 0).sum())
+                        if gaps.first_gap_s is None and jump.any():
+                            # step i leads to seq[i + 1], which is v[i] when a previous value led seq
+                            first = int(np.flatnonzero(jump)[0]) + (1 if state is None else 0)
+                            gaps.first_gap_s = float(t[first]) / 1e9
+                    if v.size:
+                        self._counter_state[key] = [float(v[-1])]
+
+    def fill(self, report: DecodeReport, decode_errors: Mapping[str, Mapping[str, int]] | None = None) -> DecodeReport:
+        """Write the totals into ``report`` (returned for chaining)."""
+        report.frames_read = self._frames
+        report.error_frames, report.remote_frames = self._error, self._remote
+        if self._t_first is not None and self._t_last is not None:
+            report.duration_s = (self._t_last - self._t_first) / 1e9
+        unknown = 0
+        ids = []
+        for (ch, key), run in sorted(self._runs.items()):
+            name, cycle = self._names.get(key, (None, None))
+            if name is None:
+                unknown += run.count
+                other = self._names.get(key ^ EXTENDED_KEY)
+                if other is not None:
+                    report.id_type_mismatch[other[0]] = report.id_type_mismatch.get(other[0], 0) + run.count
+            mean = run.s1 / run.n if run.n else None
+            std = float(np.sqrt(max(run.s2 / run.n - mean * mean, 0.0))) if mean is not None else None
+            ids.append(IdStats(ch, key & 0x1FFF_FFFF, bool(key & EXTENDED_KEY), name, run.count,
+                               None if mean is None else mean / 1e6, None if std is None else std / 1e6,
+                               None if not run.n else run.min / 1e6, None if not run.n else run.max / 1e6, cycle))
+        report.ids = ids
+        report.frames_unknown_id = unknown
+        report.counter_gaps = sorted(self._gaps.values(), key=lambda g: (-g.missed, g.message, g.signal))
+        report.timestamp_anomalies = list(self._anomalies)
+        report.anomaly_counts = dict(self._anomaly_counts)
+        if decode_errors:
+            report.decode_errors = {k: dict(v) for k, v in decode_errors.items() if v}
+        return report
