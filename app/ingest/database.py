@@ -39,6 +39,7 @@ _RE_VAL = re.compile(r"^\s*VAL_\s+(\d+)\s+(\w+)\b")
 _RE_NOT_FIT = re.compile(r"The signal (\w+) does not fit in message (\w+)\.")
 _RE_OVERLAP = re.compile(r"The signals (\w+) and (\w+) are overlapping in message (\w+)\.")
 _RE_SYNTAX_LINE = re.compile(r"line (\d+)")
+_RE_TOP = re.compile(r"^(BO_|BU_|BS_|CM_|BA_|VAL_|SIG_|EV_|NS_|VERSION)\b")  # starts a new statement
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,14 +153,14 @@ class _DbcText:
             return self.origin[current_line - 1]
         return None
 
-    def drop(self, index: int) -> None:
-        # Blank the statement (possibly several lines up to ';') rather than delete, keeping numbering.
+    def drop(self, index: int, *, statement: bool = False) -> None:
+        """Blank a line (or, for ``statement``, the lines up to its closing ';'), keeping numbering."""
         i = index
         while i < len(self.lines):
-            done = ";" in self.lines[i]
+            done = not statement or ";" in self.lines[i]
             self.lines[i] = ""
             i += 1
-            if done:
+            if done or (i < len(self.lines) and _RE_TOP.match(self.lines[i])):
                 break
 
     def insert(self, index: int, line: str) -> None:
@@ -240,7 +241,7 @@ def _drop_unused_vals(doc: _DbcText, repairs: list[Repair]) -> None:
         else:
             continue
         repairs.append(Repair("unused_val", doc.origin[i], why))
-        doc.drop(i)
+        doc.drop(i, statement=True)
 
 
 def _load_dbc(src: Path, raw: bytes, tolerant: bool) -> LoadedDatabase:
