@@ -97,6 +97,7 @@ class BLFReader(BaseReader):
         start, stop = systemtime(h[14:22]), systemtime(h[22:30])
         self.meta.start_time = start
         self.meta.start_clock = "blf_header_local" if start else "unknown"
+        self._declared_size = 0 if self._stream.compressed else int(h[10])
         self.meta.extra.update({
             "application_id": str(h[2]), "application_version": f"{h[3]}.{h[4]}.{h[5]}",
             "header_object_count": str(h[12]),
@@ -152,7 +153,11 @@ class BLFReader(BaseReader):
         self._inner_resync: ReadIssue | None = None
         builder = ChunkBuilder(self.chunk_frames)
         try:
-            self._read(self._header_size)
+            got = len(self._read(self._header_size))
+            if got < self._header_size:
+                self.problem("truncated", f"the file ends inside its {self._header_size}-byte header", offset=got,
+                             truncated=True)
+                self._truncation_reported = True
             yield from self._containers(builder)
         except StreamDamage as exc:
             self.damage(exc)
@@ -160,6 +165,9 @@ class BLFReader(BaseReader):
         yield from self._finish(builder)
         if builder.n:
             yield builder.take()
+        if not self._truncation_reported and self._off < self._declared_size:
+            self.problem("truncated", f"the file ends after {self._off} bytes but its header declares "
+                         f"{self._declared_size}", offset=self._off, truncated=True)
         self._summarise_objects()
 
     def _containers(self, builder: ChunkBuilder) -> Iterator[FrameChunk]:
