@@ -40,8 +40,9 @@ _RULES: dict[str, list[tuple[set[str], float]]] = {
     "brake": [({"brake", "brk"}, 3.0), ({"pressure", "press", "pres", "pedal", "travel", "force"}, 1.5)],
     "brake_pressed": [({"brake", "brk"}, 3.0), ({"pressed", "switch", "sw", "applied", "status", "on"}, 1.5)],
 }
-for _corner, _words in (("fl", {"fl", "lf"}), ("fr", {"fr", "rf"}), ("rl", {"rl", "lr"}), ("rr", {"rr"})):
-    _RULES[f"wheel_speed_{_corner}_rpm"] = [({"wheel", "whl", "wh", "ws", "wheelspeed"}, 3.0), (_words, 3.0),
+_WHEEL = {"wheel", "whl", "wh", "ws", "wheelspeed"}
+for _corner, _corner_words in (("fl", {"fl", "lf"}), ("fr", {"fr", "rf"}), ("rl", {"rl", "lr"}), ("rr", {"rr"})):
+    _RULES[f"wheel_speed_{_corner}_rpm"] = [(_WHEEL, 3.0), (_corner_words, 3.0),
                                             ({"speed", "spd", "rpm", "velocity"}, 1.0)]
 
 
@@ -96,8 +97,10 @@ def _score(channel: str, msg: Message, sig: CanSignal, period_s: float | None) -
         score -= 1.0
     if channel.startswith(("motor_", "pedal")) and sig.length < 6:
         score -= 2.0
+    if channel == "vehicle_speed_kmh" and plain & _WHEEL:
+        score -= 3.0
     if channel.startswith("motor_"):
-        if channel == "motor_speed_rpm" and "wheel" in plain:
+        if channel == "motor_speed_rpm" and plain & _WHEEL:
             score -= 3.0
         period = period_s if period_s is not None else (msg.cycle_time / 1000.0 if msg.cycle_time else None)
         if period is not None:
