@@ -18,7 +18,7 @@ from app.errors import AppError
 from sim.errors import SimError
 
 # Subcommand modules, in the order they appear in --help.
-COMMANDS: tuple[str, ...] = ("sim", "serve", "analyze", "diagnose", "demo", "replay", "live")
+COMMANDS: tuple[str, ...] = ("decode", "sim", "serve", "analyze", "diagnose", "demo", "replay", "live")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,206 @@
+"""``lashscope decode LOG --dbc DBC [--map MAP] [--out DIR] [--format parquet,csv] [--strict]``.
+
+With a signal map the canonical channels are written as one long table (``signals.parquet``
+/ ``signals.csv``: channel, t_s, value, unit). Without one every database message is decoded
+into its own wide table under ``messages/`` (t_s, bus, one column per signal) and signal-map
+candidates are printed. Either way the decode report is printed: frames read, per-ID counts
+and periods with jitter, decode errors, counter gaps, timestamp anomalies, and every skipped or
+corrupt region of the log with its byte offset or line number.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.errors import InputError, StorageError
+from app.ingest.database import LoadedDatabase, load_database
+from app.ingest.decode import DecodedMessage, VectorDecoder
+from app.ingest.pipeline_signals import load_signals
+from app.ingest.readers import open_log
+from app.ingest.signalmap import load_signal_map
+from app.ingest.stats import DecodeReport, StatsAccumulator
+from app.ingest.suggest import suggest_candidates, suggest_signal_map
+from app.signals.signal import SignalSet
+
+FORMATS = ("parquet", "csv")
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser("decode", help="decode a CAN log with a DBC (and signal map); print the bus report",
+                              description=__doc__.split("\n\n", 1)[1] if __doc__ else None)
+    p.add_argument("log", type=Path, help="BLF, ASC, candump -L, TRC, SavvyCAN CSV or MF4 log (format from content)")
+    p.add_argument("--dbc", type=Path, required=True, help="DBC, KCD, SYM or ARXML database")
+    p.add_argument("--map", type=Path, default=None, help="signal map TOML (canonical channels)")
+    p.add_argument("--out", type=Path, default=None, help="write decoded tables to this folder")
+    p.add_argument("--format", default="parquet,csv", help="comma-separated: parquet, csv (default both)")
+    p.add_argument("--strict", action="store_true",
+                   help="no DBC repairs and stop at the first damaged log record")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    formats = [f.strip().lower() for f in str(args.format).split(",") if f.strip()]
+    bad = [f for f in formats if f not in FORMATS]
+    if bad or not formats:
+        raise InputError(f"--format {args.format!r}: choose from {', '.join(FORMATS)}")
+    loaded = load_database(args.dbc, tolerant=not args.strict)
+    if args.map is not None:
+        smap = load_signal_map(args.map)
+        signals, report = load_signals(args.log, loaded, smap, strict=args.strict)
+        print(format_report(report))
+        print(format_channels(signals))
+        if args.out is not None:
+            for path in write_signals(signals, args.out, formats):
+                print(f"wrote {path}")
+        return 0
+    messages, report = decode_all(args.log, loaded, strict=args.strict)
+    print(format_report(report))
+    periods = {i.arb_id: i.period_ms / 1000.0 for i in report.ids if i.period_ms and i.message}
+    print(format_suggestions(loaded, periods))
+    if args.out is not None:
+        for path in write_messages(messages, args.out, formats):
+            print(f"wrote {path}")
+    return 0
+
+
+def decode_all(log: Path, loaded: LoadedDatabase, *, strict: bool = False,
+               ) -> tuple[dict[str, DecodedMessage], DecodeReport]:
+    """Decode every message of the database; the messages (all chunks joined) and the report."""
+    decoder = VectorDecoder(loaded.db)
+    stats = StatsAccumulator(loaded.db)
+    parts: dict[str, list[DecodedMessage]] = {}
+    with open_log(log, strict=strict) as reader:
+        for chunk in reader.chunks():
+            stats.add_chunk(chunk)
+            decoded = decoder.decode(chunk)
+            stats.add_decoded(decoded)
+            for name, dm in decoded.items():
+                parts.setdefault(name, []).append(dm)
+        report = DecodeReport(source=str(log), format=reader.meta.format, database=loaded.name,
+                              database_repairs=list(loaded.repairs), reader_issues=list(reader.report.issues))
+    messages = {name: DecodedMessage.concat(p) for name, p in parts.items()}
+    errors = {name: m.errors for name, m in messages.items() if m.errors}
+    stats.fill(report, errors)
+    report.frames_decoded = sum(len(m) for m in messages.values())
+    return messages, report
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.@-]+", "_", name) or "message"
+
+
+def _write(table: Any, base: Path, formats: Iterable[str]) -> list[Path]:
+    import pyarrow.csv as pacsv
+    import pyarrow.parquet as pq
+
+    written = []
+    try:
+        base.parent.mkdir(parents=True, exist_ok=True)
+        for fmt in formats:
+            path = base.with_suffix(f".{fmt}")
+            if fmt == "parquet":
+                pq.write_table(table, path)
+            else:
+                pacsv.write_csv(table, path)
+            written.append(path)
+    except OSError as exc:
+        raise StorageError(f"cannot write decoded data to {base.parent}: {exc.strerror or exc}") from exc
+    return written
+
+
+def write_signals(signals: SignalSet, out: Path, formats: Iterable[str]) -> list[Path]:
+    """Canonical channels as one long table ``signals.<fmt>`` (channel, t_s, value, unit)."""
+    import pyarrow as pa
+
+    names = list(signals)
+    lengths = [len(signals[n]) for n in names]
+    table = pa.table({
+        "channel": pa.array(np.repeat(np.array(names, dtype=object), lengths).tolist() if names else [],
+                            pa.string()).dictionary_encode(),
+        "t_s": pa.array(np.concatenate([signals[n].t for n in names]) if names else np.empty(0)),
+        "value": pa.array(np.concatenate([signals[n].values for n in names]) if names else np.empty(0)),
+        "unit": pa.array(np.repeat(np.array([signals[n].unit for n in names], dtype=object), lengths).tolist()
+                         if names else [], pa.string()).dictionary_encode(),
+    })
+    return _write(table, out / "signals", formats)
+
+
+def write_messages(messages: dict[str, DecodedMessage], out: Path, formats: Iterable[str]) -> list[Path]:
+    """One wide table per message under ``messages/``: t_s, bus, one column per signal."""
+    import pyarrow as pa
+
+    written = []
+    for name, dm in sorted(messages.items()):
+        if not len(dm):
+            continue
+        cols: dict[str, Any] = {"t_s": dm.t_ns / 1e9, "bus": dm.channel}
+        cols.update({s: v for s, v in dm.signals.items() if s not in cols})
+        written += _write(pa.table(cols), out / "messages" / _safe(name), formats)
+    return written
+
+
+def _ms(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+def format_report(r: DecodeReport) -> str:
+    """The decode report as text for a terminal."""
+    lines = [f"log {r.source} ({r.format}), database {r.database}",
+             f"frames read {r.frames_read}, decoded {r.frames_decoded}, unknown ID {r.frames_unknown_id}, "
+             f"error frames {r.error_frames}, remote frames {r.remote_frames}, duration {r.duration_s:.3f} s"]
+    for rep in r.database_repairs:
+        lines.append(f"  database repair line {rep.line if rep.line is not None else '?'}: {rep.kind}: {rep.message}")
+    lines += ["", "per ID (bus, ID, message): count, period ms (mean), jitter ms (std), min/max gap ms, DBC cycle ms"]
+    for s in r.ids:
+        ident = f"0x{s.arb_id:08X}x" if s.extended else f"0x{s.arb_id:03X}"
+        lines.append(f"  {s.channel:>3} {ident:<12} {s.message or '?':<28} {s.count:>9} {_ms(s.period_ms):>10} "
+                     f"{_ms(s.jitter_ms):>9} {_ms(s.min_gap_ms):>9}/{_ms(s.max_gap_ms):<9} "
+                     f"{'-' if s.cycle_ms is None else f'{s.cycle_ms:g}'}")
+    for name, n in sorted(r.id_type_mismatch.items()):
+        lines.append(f"  {n} frames carry the ID of {name} with the other ID type (11/29 bit): not decoded")
+    lines += ["", "decode errors:" if r.decode_errors else "decode errors: none"]
+    for name, kinds in sorted(r.decode_errors.items()):
+        lines.append(f"  {name}: " + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items())))
+    lines.append("counter gaps:" if r.counter_gaps else "counter gaps: no alive counters decoded")
+    for g in r.counter_gaps:
+        state = "stuck (never changes)" if g.frames > 1 and g.repeats == g.frames - 1 else (
+            f"{g.gaps} gaps, {g.missed} frames missed, {g.repeats} repeats"
+            + (f", first gap at {g.first_gap_s:.3f} s" if g.first_gap_s is not None else ""))
+        lines.append(f"  bus {g.channel} {g.message}.{g.signal} (mod {g.modulus}, {g.frames} frames): {state}")
+    counts = ", ".join(f"{k} {v}" for k, v in sorted(r.anomaly_counts.items())) or "none"
+    lines.append(f"timestamp anomalies (per bus): {counts}")
+    for a in r.timestamp_anomalies:
+        lines.append(f"  {a.kind}: bus {a.channel} frame {a.frame} at {a.t_s:.6f} s (step {a.dt_s:+.6f} s)")
+    lines.append("skipped or corrupt regions:" if r.reader_issues else "skipped or corrupt regions: none")
+    for i in r.reader_issues:
+        where = f"byte {i.offset}" if i.offset is not None else (f"line {i.line}" if i.line is not None else "-")
+        lost = f", {i.frames_lost} frames lost" if i.frames_lost else ""
+        times = f" (x{i.count})" if i.count > 1 else ""
+        lines.append(f"  {where}: {i.kind}{times}: {i.message}{lost}")
+    return "\n".join(lines)
+
+
+def format_channels(signals: SignalSet) -> str:
+    lines = ["", "canonical channels: samples, span s, NaN (not available)"]
+    for name, s in signals.items():
+        span = f"{s.t[0]:.3f}..{s.t[-1]:.3f}" if len(s) else "-"
+        lines.append(f"  {name:<20} {len(s):>9} {span:>20} {int(np.isnan(s.values).sum()):>7} {s.unit}")
+    return "\n".join(lines)
+
+
+def format_suggestions(loaded: LoadedDatabase, periods: dict[int, float]) -> str:
+    lines = ["", "no --map given; signal map candidates (score: reasons):"]
+    for channel, cands in suggest_candidates(loaded.db, periods, limit=3).items():
+        lines.append(f"  {channel}:" + ("" if cands else " no candidate"))
+        for c in cands:
+            lines.append(f"    {c.message}.{c.signal} [{c.unit}] {c.score:g}: {'; '.join(c.reasons)}")
+    draft = suggest_signal_map(loaded.db, periods).to_toml()
+    lines += ["", "draft map (check signs, units and scale before use):", draft]
+    return "\n".join(lines)
+
