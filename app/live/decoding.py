@@ -4,7 +4,8 @@
 session hands it, counts frames whose ID the database does not define (counted, not
 errors: a real bus carries many messages a vehicle DBC leaves out), adds the decoder's
 error counts (short frames, undefined multiplexer values), and maps decoded signals to
-canonical channels with the vehicle's signal map, exactly as the offline loader does.
+canonical channels with the vehicle's signal map through the offline loader's own
+:func:`app.ingest.pipeline_signals.map_decoded`, so live samples equal offline ones.
 """
 
 from __future__ import annotations
@@ -15,10 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from app.errors import InputError
 from app.ingest.database import load_database
 from app.ingest.decode import EXTENDED_KEY, DecodedMessage, VectorDecoder
 from app.ingest.frames import FrameChunk, FrameFlag
+from app.ingest.pipeline_signals import map_decoded
+from app.ingest.signalmap import load_signal_map
 from app.live.session import Feed
 
 Mapper = Callable[[Mapping[str, DecodedMessage]], dict[str, tuple[np.ndarray, np.ndarray]]]
@@ -73,22 +75,6 @@ def all_signals_mapper(decoded: Mapping[str, DecodedMessage]) -> dict[str, tuple
     return out
 
 
-def pairs_mapper(pairs: Mapping[str, tuple[str, str]]) -> Mapper:
-    """Channel -> (message, signal) pairs without conversion (the signal map adds units and signs)."""
-
-    def mapper(decoded: Mapping[str, DecodedMessage]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        for channel, (message, signal) in pairs.items():
-            dm = decoded.get(message)
-            if dm is None or signal not in dm.signals:
-                continue
-            present = dm.is_present(signal)
-            out[channel] = (dm.t_ns[present] / 1e9, dm.signals[signal][present])
-        return out
-
-    return mapper
-
-
 def source_for(database: Path, signal_map: Path | None) -> tuple[DecodingSource, dict[str, Any]]:
     """A decoding source for a DBC and, optionally, a vehicle signal map.
 
@@ -99,12 +85,11 @@ def source_for(database: Path, signal_map: Path | None) -> tuple[DecodingSource,
     decoder = VectorDecoder(db)
     if signal_map is None:
         return DecodingSource(decoder, all_signals_mapper), {}
-    try:
-        from app.ingest import signalmap
-    except ImportError as exc:
-        raise InputError(f"cannot decode with signal map {signal_map}: the signal map module is not available") from exc
-    return signalmap_source(decoder, signalmap.load_signal_map(signal_map))
+    resolved = load_signal_map(signal_map).resolve(db)
+    decoder = VectorDecoder(db, messages={r.message.name for r in resolved.values()})
 
+    def mapper(decoded: Mapping[str, DecodedMessage]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        return {c: (t_ns / 1e9, v) for c, (t_ns, v) in map_decoded(decoded, resolved).items()}
 
-def signalmap_source(decoder: VectorDecoder, smap: Any) -> tuple[DecodingSource, dict[str, Any]]:
-    raise InputError(f"signal map {smap!r} cannot be applied to live frames yet")
+    units = {c: (r.unit, r.interp) for c, r in resolved.items()}
+    return DecodingSource(decoder, mapper), units

@@ -47,9 +47,18 @@ UNKNOWN_ID = 0x7DF
 
 
 def write_dbc(folder: Path) -> Path:
+    """The DBC, and beside it ``drive.map.toml``, the signal map to the canonical channels."""
     path = folder / "drive.dbc"
     path.write_text(DBC, encoding="ascii")
+    lines = ['[vehicle]', 'name = "synthetic test drive"', '']
+    for channel, (message, signal) in CHANNELS.items():
+        lines += [f"[channels.{channel}]", f'message = "{message}"', f'signal = "{signal}"', ""]
+    (folder / "drive.map.toml").write_text("\n".join(lines), encoding="ascii")
     return path
+
+
+def map_of(dbc: Path) -> Path:
+    return dbc.parent / "drive.map.toml"
 
 
 def profile(t: np.ndarray, period_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

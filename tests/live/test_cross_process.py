@@ -12,12 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from app.ingest.database import load_database
-from app.ingest.decode import VectorDecoder
 from app.ingest.readers import open_log
 from app.live.analyzer import LiveAnalyzer
 from app.live.bus import BusConfig
-from app.live.decoding import DecodingSource, pairs_mapper
+from app.live.decoding import source_for
 from app.live.loopback import LoopbackHub
 from app.live.session import LiveSession
 from tests.live import drive
@@ -35,7 +33,7 @@ def test_cli_replay_into_live_session_in_another_process(tmp_path: Path) -> None
     log = drive.write_blf(tmp_path / "drive.blf", drive.drive_messages(duration_s=5.0, period_s=1.6, error_frames=2))
     original = list(open_log(log).chunks())
     with LoopbackHub() as hub:
-        source = DecodingSource(VectorDecoder(load_database(dbc).db), pairs_mapper(drive.CHANNELS))
+        source = source_for(dbc, drive.map_of(dbc))[0]
         session = LiveSession(BusConfig("tcp_loopback", hub.channel), source, record_path=tmp_path / "rec.blf",
                               analyzer=LiveAnalyzer()).start()
         try:

@@ -10,18 +10,16 @@ import can
 import numpy as np
 import pytest
 
-from app.ingest.database import load_database
-from app.ingest.decode import VectorDecoder
 from app.ingest.readers import open_log
 from app.live.bus import BusConfig, BusLink
-from app.live.decoding import DecodingSource, pairs_mapper
+from app.live.decoding import source_for
 from app.live.replay import Replayer
 from app.live.session import LiveSession
 from tests.live import drive
 
 
 def _record(tmp_path: Path, log: Path, dbc: Path, channel: str, name: str, rate: float = 1.0) -> LiveSession:
-    source = DecodingSource(VectorDecoder(load_database(dbc).db), pairs_mapper(drive.CHANNELS))
+    source = source_for(dbc, drive.map_of(dbc))[0]
     session = LiveSession(BusConfig("virtual", channel), source, record_path=tmp_path / name).start()
     link = BusLink(BusConfig("virtual", channel))
     link.open()
@@ -58,7 +56,7 @@ def test_recording_read_by_python_can_and_played_by_can_player(tmp_path: Path,
 
     # can.player (its command-line entry point, run in this process so the virtual bus is shared)
     # plays our recording into a live session, error frames included
-    source = DecodingSource(VectorDecoder(load_database(dbc).db), pairs_mapper(drive.CHANNELS))
+    source = source_for(dbc, drive.map_of(dbc))[0]
     listener = LiveSession(BusConfig("virtual", "interop-play"), source, record_path=tmp_path / "played.blf").start()
     monkeypatch.setattr(sys, "argv", ["can.player", "-i", "virtual", "-c", "interop-play", "--error-frames",
                                       str(tmp_path / "rec.blf")])

@@ -11,28 +11,22 @@ import pytest
 
 from app.analysis.events import detect_events
 from app.ingest.database import load_database
-from app.ingest.decode import VectorDecoder
+from app.ingest.pipeline_signals import load_signals
 from app.ingest.readers import open_log
+from app.ingest.signalmap import load_signal_map
 from app.live.analyzer import LiveAnalyzer, measured_metrics
 from app.live.bus import BusConfig, BusLink
-from app.live.decoding import DecodingSource, pairs_mapper
+from app.live.decoding import source_for
 from app.live.replay import Replayer
 from app.live.session import LiveSession
-from app.signals import Signal, SignalSet
+from app.signals import SignalSet
 from tests.live import drive
 
 
 def offline_signals(log: Path, dbc: Path) -> SignalSet:
-    dec = VectorDecoder(load_database(dbc).db)
-    mapper = pairs_mapper(drive.CHANNELS)
-    parts: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for chunk in open_log(log).chunks():
-        for name, tv in mapper(dec.decode(chunk)).items():
-            parts.setdefault(name, []).append(tv)
-    out = SignalSet()
-    for name, tv in parts.items():
-        out.add(Signal.from_samples(name, np.concatenate([p[0] for p in tv]), np.concatenate([p[1] for p in tv])))
-    return out
+    """The offline loader the service pipeline uses."""
+    signals, _ = load_signals(log, load_database(dbc), load_signal_map(drive.map_of(dbc)))
+    return signals
 
 
 def offline_events(log: Path, dbc: Path) -> list[dict[str, Any]]:
@@ -60,8 +54,8 @@ def _same(a: Any, b: Any, rel: float = 1e-9, shift: float = 0.0, key: str = "") 
 def test_live_events_equal_offline_analysis_of_the_recording_and_of_the_log(tmp_path: Path) -> None:
     dbc = drive.write_dbc(tmp_path)
     log = drive.write_blf(tmp_path / "drive.blf", drive.drive_messages(duration_s=7.0, period_s=1.6))
-    source = DecodingSource(VectorDecoder(load_database(dbc).db), pairs_mapper(drive.CHANNELS))
-    analyzer = LiveAnalyzer()
+    source, units = source_for(dbc, drive.map_of(dbc))
+    analyzer = LiveAnalyzer(units)
     session = LiveSession(BusConfig("virtual", "live-events"), source, record_path=tmp_path / "rec.blf",
                           analyzer=analyzer)
     seen_while_running: list[float] = []

@@ -10,18 +10,16 @@ import can
 import numpy as np
 import pytest
 
-from app.ingest.database import load_database
-from app.ingest.decode import VectorDecoder
 from app.ingest.readers import open_log
 from app.live.bus import BusConfig, BusLink
-from app.live.decoding import DecodingSource, pairs_mapper
+from app.live.decoding import DecodingSource, source_for
 from app.live.replay import Replayer
 from app.live.session import LiveSession, SessionOptions
 from tests.live import drive
 
 
 def _source(dbc: Path) -> DecodingSource:
-    return DecodingSource(VectorDecoder(load_database(dbc).db), pairs_mapper(drive.CHANNELS))
+    return source_for(dbc, drive.map_of(dbc))[0]
 
 
 def _chunks(path: Path) -> list:

@@ -11,11 +11,9 @@ from pathlib import Path
 import pytest
 
 from app.errors import LiveBusError
-from app.ingest.database import load_database
-from app.ingest.decode import VectorDecoder
 from app.ingest.readers import open_log
 from app.live.bus import BusConfig, BusLink, can_sockets_available, open_bus
-from app.live.decoding import DecodingSource, pairs_mapper
+from app.live.decoding import source_for
 from app.live.replay import Replayer
 from app.live.session import LiveSession
 from tests.live import drive
@@ -32,7 +30,7 @@ def test_replay_into_live_session_over_vcan(tmp_path: Path) -> None:
     dbc = drive.write_dbc(tmp_path)
     log = drive.write_blf(tmp_path / "drive.blf", drive.drive_messages(duration_s=3.0))
     original = list(open_log(log).chunks())
-    source = DecodingSource(VectorDecoder(load_database(dbc).db), pairs_mapper(drive.CHANNELS))
+    source = source_for(dbc, drive.map_of(dbc))[0]
     session = LiveSession(BusConfig("socketcan", VCAN), source, record_path=tmp_path / "rec.blf").start()
     link = BusLink(BusConfig("socketcan", VCAN))
     link.open()
