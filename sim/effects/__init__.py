@@ -7,12 +7,28 @@ which is how a diagnosed effect becomes a new vehicle version.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
-from sim.effects import backlash, drag, housing_mount, speed_sensor, torque_lag
+from sim import params
+from sim.effects import (
+    backlash,
+    drag,
+    housing_mount,
+    progressive_stiffness,
+    speed_sensor,
+    torque_lag,
+    tyre_slip,
+)
 from sim.effects.base import Effect, ParamSpec
 from sim.errors import ParameterError
+
+
+def _model_has(section: str) -> bool:
+    """Whether the simulator's vehicle description has ``effects.<section>`` (newer model hooks)."""
+    return section in {f.name for f in dataclasses.fields(params.Effects)}
+
 
 EFFECTS: dict[str, Effect] = {
     e.id: e
@@ -22,7 +38,10 @@ EFFECTS: dict[str, Effect] = {
         torque_lag.EFFECT,
         speed_sensor.EFFECT,
         drag.EFFECT,
+        progressive_stiffness.EFFECT,
+        tyre_slip.EFFECT,
     )
+    if e.id not in ("progressive_stiffness", "tyre_slip") or _model_has(e.id)
 }
 
 

@@ -37,7 +37,7 @@ def test_partial_when_most_is_left_over() -> None:
 
 
 def test_ambiguous_names_the_confusable_pair() -> None:
-    status, top, pair = run([cand("torque_lag", BASE, 0.05, spread=0.05),
+    status, _, pair = run([cand("torque_lag", BASE, 0.05, spread=0.05),
                              cand("speed_sensor", BASE, 0.06, spread=0.05, seed=1)])
     assert status == "ambiguous"
     assert set(pair) == {"torque_lag", "speed_sensor"}

@@ -1,0 +1,42 @@
+"""``progressive_stiffness``: hardening half-shaft and mount springs.
+
+Rubber-bushed mounts and, to a lesser degree, shafts with splines stiffen as they deflect. The
+simulator adds a cubic term ``k3 x^3`` to a coupling's spring ``k x``
+(``effects.progressive_stiffness.<coupling>``). The parameters here are the *relative stiffness
+increase at a reference deflection* (more readable than ``k3`` in N m/rad^3)::
+
+    k3 = rel * k / x_ref^2      (the tangent stiffness is k (1 + 3 rel) at x = x_ref)
+
+with ``x_ref = 0.1 rad`` for a half-shaft (its wind-up under full drive torque) and
+``x_ref = 0.02 rad`` for the housing roll mount. Priors: 0 to 2 (no hardening to a spring three
+times stiffer in tangent at the reference deflection... and seven times at twice it).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sim.effects.base import Effect, ParamSpec, Values
+
+HALFSHAFT_REF_RAD = 0.1
+MOUNT_REF_RAD = 0.02
+
+
+def _apply(vehicle: Any, v: Values) -> Any:
+    return vehicle.with_changes({
+        "effects.progressive_stiffness.halfshaft": v["halfshaft_rel"] * vehicle.halfshaft.stiffness
+        / HALFSHAFT_REF_RAD**2,
+        "effects.progressive_stiffness.mount": v["mount_rel"] * vehicle.housing.mount_stiffness / MOUNT_REF_RAD**2,
+    })
+
+
+EFFECT = Effect(
+    id="progressive_stiffness",
+    title="Progressive (hardening) half-shaft and mount stiffness",
+    params=(
+        ParamSpec("halfshaft_rel", "-", 0.0, 2.0, 0.0, "half-shaft k3 as relative hardening at 0.1 rad"),
+        ParamSpec("mount_rel", "-", 0.0, 2.0, 0.0, "mount roll k3 as relative hardening at 0.02 rad"),
+    ),
+    vehicle_change=_apply,
+    model="multibody",
+)
