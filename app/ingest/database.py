@@ -315,11 +315,11 @@ def _dbc_error(src: Path, doc: _DbcText, exc: Exception) -> DatabaseError:
             idx = doc.find_signal(m.group(group[0]), m.group(group[1]))
             line = doc.origin[idx] if idx is not None else None
             return DatabaseError(f"{src}:{line or '?'}: cannot load DBC: {reason}")
-    m = re.search(r"VAL_ (\d+) (\w+)", reason)
-    if m:
+    listed = set(re.findall(r"VAL_ (\d+) (\w+)", reason))
+    if listed:
         for i, ln in enumerate(doc.lines):
             vm = _RE_VAL.match(ln)
-            if vm and vm.group(1) == m.group(1) and vm.group(2) == m.group(2):
+            if vm and (vm.group(1), vm.group(2)) in listed:
                 return DatabaseError(f"{src}:{doc.origin[i] or '?'}: cannot load DBC: {reason}")
     m = re.search(r"in message (\w+)", reason)
     if m:

@@ -1,0 +1,142 @@
+"""Database loading: every cantools test file, the production DBCs, repairs with line numbers, typed errors."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import cantools
+import pytest
+
+from app.errors import DatabaseError
+from app.ingest.database import load_database
+from tests.conftest import DATA, shared_file
+
+TESTFILES = DATA / "cantools-testfiles"
+ALL_TESTFILES = sorted(TESTFILES.glob("*/*")) if TESTFILES.is_dir() else []
+
+
+def _cantools_loads(path: Path) -> bool:
+    try:
+        cantools.database.load_file(str(path))
+    except Exception:
+        return False
+    return True
+
+
+@pytest.mark.skipif(not ALL_TESTFILES, reason=f"cantools test files not found under {TESTFILES}")
+@pytest.mark.parametrize("path", ALL_TESTFILES, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_cantools_testfiles_load_or_fail_typed(path: Path) -> None:
+    if _cantools_loads(path):
+        for tolerant in (False, True):
+            loaded = load_database(path, tolerant=tolerant)
+            assert loaded.repairs == []
+            assert len(loaded.db.messages) == len(cantools.database.load_file(str(path)).messages)
+    else:
+        with pytest.raises(DatabaseError, match=re.escape(str(path))):
+            load_database(path, tolerant=False)
+        try:  # tolerant: repaired (with a report) or still a DatabaseError, never another exception
+            loaded = load_database(path, tolerant=True)
+        except DatabaseError:
+            return
+        assert loaded.repairs, f"{path} loaded tolerantly without reporting a repair"
+
+
+# file, tolerant repair kinds expected, messages after repair (= BO_ lines in the file)
+PRODUCTION = [
+    (("kona-ev", "dbc", "pcan.dbc"), {"missing_bu", "missing_bs"}, 107),
+    (("kona-ev", "dbc", "ccan.dbc"), {"missing_bu", "missing_bs"}, 2),
+    (("opendbc", "opendbc", "dbc", "tesla_can.dbc"), {"unused_val"}, 44),
+    (("opendbc", "opendbc", "dbc", "rivian_primary_actuator.dbc"), {"unused_val"}, 67),
+    (("opendbc", "opendbc", "dbc", "gwm_haval_h6_phev_2024.dbc"), {"signal_overlap"}, 27),
+    (("model3dbc", "Model3CAN.dbc"), {"signal_outside", "unused_val"}, 148),
+    (("opendbc", "opendbc", "dbc", "tesla_powertrain.dbc"), set(), 6),
+    (("opendbc", "opendbc", "dbc", "tesla_model3_party.dbc"), set(), 21),
+]
+
+
+@pytest.mark.parametrize(("parts", "kinds", "messages"), PRODUCTION, ids=lambda v: "/".join(v) if
+                         isinstance(v, tuple) else None)
+def test_production_dbcs(parts: tuple[str, ...], kinds: set[str], messages: int) -> None:
+    path = shared_file(*parts)
+    loaded = load_database(path)
+    assert {r.kind for r in loaded.repairs} == kinds
+    assert len(loaded.db.messages) == messages
+    text = path.read_text(encoding="utf-8").splitlines()
+    for r in loaded.repairs:
+        assert r.line is not None and 1 <= r.line <= len(text) + 1
+        if r.kind == "unused_val":
+            assert text[r.line - 1].startswith("VAL_"), r
+        if r.kind in ("signal_outside", "signal_overlap"):
+            assert text[r.line - 1].lstrip().startswith("SG_"), r
+    if kinds:
+        with pytest.raises(DatabaseError, match=r":\d+: cannot load DBC"):
+            load_database(path, tolerant=False)
+
+
+def test_kona_missing_sections_reported_at_first_message(tmp_path: Path) -> None:
+    loaded = load_database(shared_file("kona-ev", "dbc", "pcan.dbc"))
+    assert [(r.kind, r.line) for r in loaded.repairs] == [("missing_bu", 6), ("missing_bs", 6)]
+    assert loaded.db.get_message_by_name("VCU_291").get_signal_by_name("Speed_signed").unit == "rpm"
+
+
+def _dbc(tmp_path: Path, body: str, name: str = "t.dbc", encoding: str = "utf-8") -> Path:
+    path = tmp_path / name
+    path.write_bytes(body.encode(encoding))
+    return path
+
+
+HEADER = 'VERSION ""\n\nNS_ :\n\tCM_\n\nBS_:\n\nBU_: A\n\n'
+MSG = 'BO_ 256 Foo: 8 A\n SG_ Bar : 0|8@1+ (1,0) [0|255] "" A\n\n'
+
+
+def test_val_for_unknown_message_and_signal(tmp_path: Path) -> None:
+    body = HEADER + MSG + 'VAL_ 256 Bar 1 "One" ;\nVAL_ 999 Bar 1 "One" ;\nVAL_ 256 Nope 2 "Two" ;\n'
+    loaded = load_database(_dbc(tmp_path, body))
+    assert [(r.kind, r.line) for r in loaded.repairs] == [("unused_val", 14), ("unused_val", 15)]
+    assert "999" in loaded.repairs[0].message and "Nope" in loaded.repairs[1].message
+    assert loaded.db.get_message_by_name("Foo").get_signal_by_name("Bar").choices == {1: "One"}
+    with pytest.raises(DatabaseError, match=r"t\.dbc:14: .*unused VAL_"):
+        load_database(_dbc(tmp_path, body), tolerant=False)
+
+
+def test_syntax_error_names_original_line(tmp_path: Path) -> None:
+    body = 'VERSION ""\n\nNS_ :\n\nBO_ 256 Foo: 8 A\n SG_ Bar : 0|8@1+ (1,0) [0|255] "" A\n SG_ Broken : x|y\n'
+    with pytest.raises(DatabaseError, match=r"t\.dbc:7: cannot load DBC: .*line 7"):
+        load_database(_dbc(tmp_path, body))
+
+
+def test_cp1252_text_loads(tmp_path: Path) -> None:
+    body = HEADER + MSG + 'CM_ SG_ 256 Bar "Drehzahl \u00b0C \u00e4\u00f6\u00fc";\n'
+    loaded = load_database(_dbc(tmp_path, body, encoding="cp1252"))
+    assert loaded.encoding == "cp1252"
+    comment = loaded.db.get_message_by_name("Foo").get_signal_by_name("Bar").comment
+    assert comment == "Drehzahl \u00b0C \u00e4\u00f6\u00fc"
+
+
+@pytest.mark.parametrize(("name", "content", "match"), [
+    ("missing.dbc", None, "cannot read"),
+    ("random.bin", b"\x00\x01garbage\xff" * 20, "not a DBC, KCD, SYM or ARXML"),
+    ("binary.dbc", bytes(range(256)) * 4, "cannot load DBC"),
+    ("bad.kcd", b"<NetworkDefinition><Bus", "cannot load KCD"),
+    ("bad.arxml", b"<?xml version='1.0'?><AUTOSAR>", "cannot load ARXML"),
+])
+def test_bad_files_give_database_error(tmp_path: Path, name: str, content: bytes | None, match: str) -> None:
+    path = tmp_path / name
+    if content is not None:
+        path.write_bytes(content)
+    with pytest.raises(DatabaseError, match=match):
+        load_database(path)
+
+
+def test_format_from_content_when_suffix_is_unknown(tmp_path: Path) -> None:
+    path = tmp_path / "vehicle.txt"
+    path.write_text(HEADER + MSG)
+    loaded = load_database(path)
+    assert loaded.format == "dbc" and loaded.db.get_message_by_name("Foo").frame_id == 256
+
+
+def test_reference_dbc_loads_strictly() -> None:
+    loaded = load_database(Path(__file__).resolve().parents[2] / "dbc" / "lashscope_ev.dbc", tolerant=False)
+    assert {m.name for m in loaded.db.messages} >= {"MCU_Torque", "MCU_Speed", "MCU_Fast", "VCU_Pedal"}
+    assert loaded.db.get_message_by_name("MCU_Fast").cycle_time == 1
