@@ -79,6 +79,11 @@ class ByteStream:
         self._closers = closers
         self._pending: StreamDamage | None = None
         self._dead = False
+        # gzip: read1 hands out what one inflate step produced, so the bytes before damage are
+        # returned first (a buffered read(n) would discard them together with the error)
+        self._read = getattr(raw, "read1", None) if compressed else None
+        if self._read is None:
+            self._read = raw.read
 
     def read(self, n: int) -> bytes:
         """Up to ``n`` bytes; fewer only at the end of the stream or just before damage.
@@ -95,7 +100,7 @@ class ByteStream:
         want = n
         while want > 0:
             try:
-                data = self._raw.read(want)
+                data = self._read(want)
             except EOFError as exc:  # gzip: member ended before its end-of-stream marker
                 damage = StreamDamage(f"compressed stream ends early after {self.offset} bytes ({exc})",
                                       truncated=True)

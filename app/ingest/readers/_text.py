@@ -107,6 +107,7 @@ class LineSource:
                 data = self._stream.read(BLOCK_BYTES)
             except StreamDamage as exc:
                 self._on_damage(exc)
+                carry = b""  # the line cut by the damage is part of what the damage report covers
                 data = b""
             if not data:
                 if carry and not skipping:

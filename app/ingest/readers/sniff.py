@@ -104,8 +104,6 @@ def sniff_format(head: bytes, name: str | None = None) -> str:
     if head[:12] == b"Generic File":
         raise unsupported(name, "this is a CANedge compressed or encrypted MF4 container (MFC/MFE), which needs "
                           "the vendor's decompression/decryption first")
-    if b"\0" in head[:4096]:
-        raise unsupported(name, "binary content with no known signature")
     text = head.decode("latin-1")
     lines = text.splitlines()[:200]
     if len(head) >= 65536 and len(lines) > 1:
@@ -114,6 +112,8 @@ def sniff_format(head: bytes, name: str | None = None) -> str:
               for fmt, rules in _LINE_RULES.items()}
     best = max(scores.values())
     if best == 0:
+        if b"\0" in head[:4096]:
+            raise unsupported(name, "binary content with no known signature")
         raise unsupported(name, "no line has the shape of a supported text log")
     leaders = [fmt for fmt, s in scores.items() if s == best]
     suffix = _suffix_format(name)

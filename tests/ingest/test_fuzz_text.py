@@ -1,0 +1,130 @@
+"""Damaged text logs: every bad line is reported with its number and skipped; strict mode stops there.
+
+Covers binary garbage inside an ASC, non-hex bytes, lines shorter than their DLC, negative
+timestamps, over-long lines, and the same kinds of damage in candump, TRC and GVRET CSV.
+Every case runs with a deadline (see ``run_bounded``) so a hang fails instead of stalling.
+"""
+
+from __future__ import annotations
+
+import functools
+import gzip
+import tempfile
+from pathlib import Path
+
+import can
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from app.errors import LogFormatError, TruncatedLogError
+from tests.ingest.test_fuzz_blf import run_bounded
+from tests.ingest.test_readers_roundtrip import make_messages
+
+
+@functools.cache
+def _asc_text() -> bytes:
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "base.asc"
+        with can.ASCWriter(path) as w:
+            for m in make_messages(200, fd=True, remote=True, errors=True, seed=3):
+                w.on_message_received(m)
+        return path.read_bytes()
+
+
+def _asc_lines() -> list[bytes]:
+    """python-can's ASCWriter output for 200 mixed frames, as lines (generated once)."""
+    return _asc_text().splitlines(keepends=True)
+
+
+ASC_DAMAGE = [  # (line, expected issue kind)
+    (b"\x00\xff\xfe\x01garbage\x02\x03\n", "bad_line"),
+    (b"   1.000000 1  123             Rx   d 8 00 11 22 ZZ 44 55 66 77\n", "non_hex"),
+    (b"   1.000000 1  123             Rx   d 8 00 11 22\n", "short_data"),
+    (b"  -1.000000 1  123             Rx   d 1 00\n", "bad_timestamp"),
+    (b"   1.000000 1  12G             Rx   d 1 00\n", "non_hex"),
+    (b"   1.000000 1  123             Rx   d Q 00\n", "non_hex"),
+    (b"   1.000000 CANFD   1 Rx 123 1 0 f 64 00 11\n", "short_data"),
+    (b"   1.000000 1  123             Rx   d 2 100 11\n", "non_hex"),
+    (b"%" * 200_000 + b"\n", "bad_line"),
+    (b"this is not an asc line\n", "bad_line"),
+]
+
+
+def test_asc_damage_reported_with_line_numbers() -> None:
+    lines = _asc_lines()
+    good = run_bounded(b"".join(lines))
+    assert good.chunk is not None and good.report is not None and good.report.ok
+    damaged = list(lines)
+    where = {}
+    for k, (bad, kind) in enumerate(ASC_DAMAGE):
+        at = 20 + 15 * k  # 0-based insertion index; with earlier insertions accounted for below
+        damaged.insert(at, bad)
+        where[at + 1] = kind
+    out = run_bounded(b"".join(damaged))
+    assert out.chunk is not None and out.report is not None
+    assert len(out.chunk) == len(good.chunk)
+    got = {i.line: i.kind for i in out.report.issues}
+    assert got == where
+    assert all(i.line is not None and i.offset is None for i in out.report.issues)
+    # strict: the first damaged line stops the read and is named
+    strict = run_bounded(b"".join(damaged), strict=True)
+    assert isinstance(strict.error, LogFormatError) and f"line {min(where)}" in str(strict.error)
+
+
+def test_asc_gzip_truncated_salvages_and_reports() -> None:
+    packed = gzip.compress(_asc_text())
+    out = run_bounded(packed[: len(packed) * 2 // 3])
+    assert out.chunk is not None and out.report is not None and 0 < len(out.chunk) < 200
+    assert [i.kind for i in out.report.issues] == ["truncated"]
+    assert isinstance(run_bounded(packed[: len(packed) * 2 // 3], strict=True).error, TruncatedLogError)
+
+
+@pytest.mark.parametrize(("fmt_text", "bad", "kind"), [
+    ("(1.000001) can0 123#00\n", "(abc) can0 123#00\n", "bad_timestamp"),
+    ("(1.000001) can0 123#00\n", "(1.000002) can0 12G#00\n", "non_hex"),
+    ("(1.000001) can0 123#00\n", "(1.000002) can0 123#0\n", "non_hex"),
+    ("(1.000001) can0 123#00\n", "(1.000002) can0 123#112233445566778899\n", "bad_line"),
+    ("(1.000001) can0 123#00\n", "(-1.000002) can0 123#00\n", "bad_timestamp"),
+    ("Time Stamp,ID,Extended,Bus,LEN,D1,D2,D3,D4,D5,D6,D7,D8\n1,00000100,false,0,1,AA\n",
+     "2,00000100,false,0,8,AA,BB\n", "short_data"),
+    ("Time Stamp,ID,Extended,Bus,LEN,D1,D2,D3,D4,D5,D6,D7,D8\n1,00000100,false,0,1,AA\n",
+     "2,00000100,false,0,2,AA,XY\n", "non_hex"),
+    ("Time Stamp,ID,Extended,Bus,LEN,D1,D2,D3,D4,D5,D6,D7,D8\n1,00000100,false,0,1,AA\n",
+     "2,00000100,maybe,0,1,AA\n", "bad_line"),
+    (";$FILEVERSION=2.1\n;$STARTTIME=44548.5\n;$COLUMNS=N,O,T,B,I,d,R,L,D\n      1 1.000 DT 1 0100 Rx -  1 AA\n",
+     "      2 2.000 DT 1 0100 Rx -  4 AA BB\n", "short_data"),
+    (";$FILEVERSION=1.1\n;$STARTTIME=44548.5\n     1)  1.0  Rx  0100  1  AA\n",
+     "     2)  2.0  Rx  0100  2  AA QQ\n", "non_hex"),
+])
+def test_other_text_formats_damage(fmt_text: str, bad: str, kind: str) -> None:
+    good_line = fmt_text.splitlines()[-1] + "\n"
+    text = fmt_text + bad + good_line
+    out = run_bounded(text.encode())
+    assert out.chunk is not None and out.report is not None, out.error
+    assert len(out.chunk) == 2
+    bad_line_no = fmt_text.count("\n") + 1
+    assert [(i.kind, i.line) for i in out.report.issues] == [(kind, bad_line_no)]
+    strict = run_bounded(text.encode(), strict=True)
+    assert isinstance(strict.error, LogFormatError) and f"line {bad_line_no}" in str(strict.error)
+
+
+def test_only_garbage_lines_is_an_error() -> None:
+    text = b"(1.0) can0 123#00\n" + b"(x) y z\n" * 50
+    out = run_bounded(text[18:], fmt="candump")
+    assert isinstance(out.error, LogFormatError) and "no frames could be read" in str(out.error)
+
+
+LINE = st.text(alphabet=st.characters(codec="latin-1", exclude_characters="\r\n"), max_size=120).filter(
+    lambda s: not s.strip().lower().startswith(("base", "date")))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.integers(0, 260), LINE), max_size=8))
+def test_random_lines_inside_an_asc_never_cost_valid_frames(inserts: list[tuple[int, str]]) -> None:
+    lines = _asc_lines()
+    for at, text in sorted(inserts, reverse=True):
+        lines.insert(min(at, len(lines)), text.encode("latin-1") + b"\n")
+    out = run_bounded(b"".join(lines), fmt="asc")
+    assert out.chunk is not None and out.report is not None
+    assert len(out.chunk) >= 200
