@@ -13,7 +13,7 @@ from sim.errors import InstabilityError, ParameterError
 from sim.inputs import prepare_input
 from sim.integrate import STATUS_OK, run_chain_batch
 from sim.metrics import peak_to_valley, unloaded_time
-from sim.model import build_chain, deflections, quasi_static_state
+from sim.model import build_chain, deflections, quasi_static_full
 from sim.params import GAP_NAMES, Vehicle
 from sim.simulate import RPM, _grid, _pair_events, choose_step, initial_speed
 
@@ -70,8 +70,11 @@ def simulate_batch(
     t0, n_out = _grid(inp, output_dt)
     nv = len(chains)
     w0 = initial_speed(vehicle, speed0_rpm)
-    steps = [choose_step(c, output_dt) for c in chains]
-    states = [quasi_static_state(c, float(inp.torque[0]), w0) for c in chains]
+    states = [quasi_static_full(c, float(inp.torque[0]), w0) for c in chains]
+    q_max = float(np.max(np.abs(inp.torque)))
+    steps = [choose_step(c, output_dt, torque_max=q_max,
+                         omega_vehicle=float(s[1][c.vehicle]) if c.vehicle >= 0 else 0.0)
+             for c, s in zip(chains, states, strict=True)]
 
     def stack(name: str) -> F64:
         return np.ascontiguousarray(np.stack([getattr(c, name) for c in chains]))
@@ -87,6 +90,7 @@ def simulate_batch(
         stack("inertia"), ref.ca, ref.cb, ref.cr, ref.ce, stack("ck"), stack("ck3"), stack("cc"), stack("chalf"),
         ref.rotor, ref.housing, ref.wheel, stack("road"), stack("rotor_drag"),
         np.array([eff.torque_lag.delay_s, eff.torque_lag.tau_s]), eff.speed_sensor.tau_s,
+        ref.vehicle, np.stack([[c.tyre[0], c.tyre[1], s[2]] for c, s in zip(chains, states, strict=True)]),
         inp.t, inp.torque, inp.linear, t0, np.array([s[0] for s in steps]), n_out,
         np.array([s[1] for s in steps], dtype=np.int64),
         np.stack([s[0] for s in states]), np.stack([s[1] for s in states]), 20.0 * abs(w0) + 5000.0,

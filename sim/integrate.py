@@ -69,9 +69,18 @@ def input_at(tin: np.ndarray, tq: np.ndarray, linear: bool, t: float, k: int) ->
 
 @njit(cache=True, inline="always")
 def road_torque(road: np.ndarray, omega_w: float) -> float:
+    """Road load plus brake (N m at the wheels) with the vehicle folded into the wheels."""
     v = omega_w * road[0]
     force = road[2] * road[1] * GRAVITY * math.tanh(v / 0.1) + road[3] * v * abs(v) + road[1] * GRAVITY * road[4]
     return road[0] * force + road[5] * math.tanh(omega_w / 0.05)
+
+
+@njit(cache=True, inline="always")
+def road_load_torque(road: np.ndarray, omega_v: float) -> float:
+    """Rolling, aero and grade load (N m at the wheel axle) on the vehicle body (tyre slip on)."""
+    v = omega_v * road[0]
+    force = road[2] * road[1] * GRAVITY * math.tanh(v / 0.1) + road[3] * v * abs(v) + road[1] * GRAVITY * road[4]
+    return road[0] * force
 
 
 @njit(cache=True)
@@ -79,7 +88,7 @@ def run_chain(
     inertia: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
     ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray,
     rotor: int, housing: int, wheel: int, road: np.ndarray, rotor_drag: np.ndarray,
-    lag: np.ndarray, sensor_tau: float,
+    lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray,
     tin: np.ndarray, tq: np.ndarray, linear: bool,
     t0: float, dt: float, n_out: int, sub: int, theta0: np.ndarray, omega0: np.ndarray, speed_limit: float,
     out_res: np.ndarray, out_sensor: np.ndarray, out_torque: np.ndarray, out_omega: np.ndarray,
@@ -88,8 +97,10 @@ def run_chain(
     """Integrate one vehicle; fills the ``out_*`` arrays (row i at ``t0 + i*sub*dt``).
 
     ``out_omega``/``out_tau``/``out_open`` may have zero rows (batch mode: resolver speed only).
-    ``lag = [delay_s, tau_s]`` of the air-gap torque. Gap events (coupling index, time, 1=open
-    0=close) go to ``ev_*`` up to their length. Returns ``(status, t_fail, n_events)``.
+    ``lag = [delay_s, tau_s]`` of the air-gap torque. Tyre slip (``vehicle >= 0``): ``tyre =
+    [k_t, R/sigma, tau_t at t0]``; its torque goes to column ``nc`` of ``out_tau`` if present.
+    Gap events (coupling index, time, 1=open 0=close) go to ``ev_*`` up to their length.
+    Returns ``(status, t_fail, n_events)``.
     """
     nb = inertia.size
     nc = ca.size
@@ -116,6 +127,8 @@ def run_chain(
     sensor = res
     n_ev = 0
     t = t0
+    tyre_tau = tyre[2] if vehicle >= 0 else 0.0
+    out_tyre = full and out_tau.shape[1] > nc
     for i in range(n_out):
         if i > 0:
             for _ in range(sub):
@@ -154,10 +167,17 @@ def run_chain(
                 acc[rotor] += t_air - rotor_drag[0] * w_r - rotor_drag[1] * math.tanh(w_r / 1.0)
                 if housing >= 0:
                     acc[housing] -= t_air
-                acc[wheel] -= road_torque(road, omega[wheel])
+                if vehicle >= 0:
+                    acc[wheel] -= tyre_tau + road[5] * math.tanh(omega[wheel] / 0.05)
+                    acc[vehicle] += tyre_tau - road_load_torque(road, omega[vehicle])
+                else:
+                    acc[wheel] -= road_torque(road, omega[wheel])
                 for b in range(nb):
                     omega[b] += dt * acc[b] / inertia[b]
                     theta[b] += dt * omega[b]
+                if vehicle >= 0:  # relaxation-length tyre, driven by the updated speeds
+                    w_v = omega[vehicle]
+                    tyre_tau += dt * (tyre[0] * (omega[wheel] - w_v) - tyre[1] * abs(w_v) * tyre_tau)
                 res = omega[rotor] - (omega[housing] if housing >= 0 else 0.0)
                 sensor += a_sen * (res - sensor)
                 t += dt
@@ -175,6 +195,8 @@ def run_chain(
             for j in range(nc):
                 out_tau[i, j] = tau[j]
                 out_open[i, j] = is_open[j]
+            if out_tyre:
+                out_tau[i, nc] = tyre_tau
     return STATUS_OK, t, n_ev
 
 
@@ -183,12 +205,13 @@ def run_chain_batch(
     inertia: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
     ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray,
     rotor: int, housing: int, wheel: int, road: np.ndarray, rotor_drag: np.ndarray,
-    lag: np.ndarray, sensor_tau: float, tin: np.ndarray, tq: np.ndarray, linear: bool,
+    lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray, tin: np.ndarray, tq: np.ndarray, linear: bool,
     t0: float, dt: np.ndarray, n_out: int, sub: np.ndarray, theta0: np.ndarray, omega0: np.ndarray,
     speed_limit: float, out_res: np.ndarray, ev_gap: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray,
     status: np.ndarray, n_events: np.ndarray,
 ) -> None:
-    """Variant ``v`` uses row ``v`` of every 2-D parameter array; resolver speed to ``out_res[v]``."""
+    """Variant ``v`` uses row ``v`` of every 2-D parameter array (``tyre``: (nv, 3)); resolver speed to
+    ``out_res[v]``."""
     nv = inertia.shape[0]
     nb = inertia.shape[1]
     nc = ca.size
@@ -200,7 +223,8 @@ def run_chain_batch(
     for v in range(nv):
         st, _, ne = run_chain(
             inertia[v], ca, cb, cr, ce, ck[v], ck3[v], cc[v], chalf[v], rotor, housing, wheel, road[v],
-            rotor_drag[v], lag, sensor_tau, tin, tq, linear, t0, dt[v], n_out, sub[v], theta0[v], omega0[v],
+            rotor_drag[v], lag, sensor_tau, vehicle, tyre[v], tin, tq, linear, t0, dt[v], n_out, sub[v],
+            theta0[v], omega0[v],
             speed_limit, out_res[v], sens, torq, dummy_f, dummy_t, dummy_o, ev_gap[v], ev_t[v], ev_kind[v],
         )
         status[v] = st

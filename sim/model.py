@@ -28,12 +28,21 @@ reads ``omega_0 - omega_H``.
 
 Every coupling stores its values in ``a``'s angle; the Vehicle gives each gap and mesh
 stiffness in its *own* shaft's angle (gear pairs: the driven gear) and they are converted
-here (gap * r, stiffness / r^2). Reported coupling torques are those at the driven member.
+here (gap * r, stiffness / r^2, cubic stiffness / r^4). Reported coupling torques are those at
+the driven member.
+
+Optional tyre slip (``effects.tyre_slip``): the vehicle mass becomes its own body [V] (inertia
+``M R^2`` in wheel angle, speed ``V / R``) behind the tyres, and the road load acts on it. The
+tyre torque ``tau_t`` (all driven tyres, at the wheel axle) is a state of its own::
+
+    d tau_t / dt = k_t (omega_W - omega_V) - (R / sigma) |omega_V| tau_t,   k_t = n C R^2 / sigma
+
+the relaxation-length tyre: a spring ``k_t`` in series with a damper ``n C R^2 / |V|``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -67,6 +76,8 @@ class ChainModel:
     speed_ratio: F64  # (nb,) omega_k / omega_rotor for a rigid chain (housing: 0)
     road: F64  # (6,) radius, mass, rolling coeff, 0.5*rho*CdA, sin(grade), brake torque
     rotor_drag: F64  # (2,) viscous N m s/rad, Coulomb N m
+    vehicle: int = -1  # vehicle body behind the tyres (tyre slip on), -1 = folded into the wheels
+    tyre: F64 = field(default_factory=lambda: np.zeros(2))  # (2,) k_t N m/rad, R/sigma 1/rad
 
     @property
     def n_bodies(self) -> int:
@@ -88,10 +99,19 @@ def build_chain(v: Vehicle) -> ChainModel:
                red.differential_inertia, red.side_gears_inertia + 0.5 * j_seg]
     names += [f"halfshaft_node{i}" for i in range(1, seg)]
     inertia += [j_seg] * (seg - 1)
-    wheel_j = n * v.wheel.inertia + v.body.mass * v.wheel.radius**2 + 0.5 * j_seg  # I_W = I_w + M R^2 / 2 per wheel
+    tyre = v.effects.tyre_slip
+    vehicle_j = v.body.mass * v.wheel.radius**2
+    wheel_j = n * v.wheel.inertia + 0.5 * j_seg
+    if not tyre.enabled:
+        wheel_j = n * v.wheel.inertia + vehicle_j + 0.5 * j_seg  # I_W = I_w + M R^2 / 2 per wheel
     names.append("wheels")
     inertia.append(wheel_j)
     wheel = len(names) - 1
+    vehicle = -1
+    if tyre.enabled:
+        names.append("vehicle")
+        inertia.append(vehicle_j)
+        vehicle = len(names) - 1
     housing = -1
     if v.housing.enabled:
         names.append("housing")
@@ -99,23 +119,28 @@ def build_chain(v: Vehicle) -> ChainModel:
         housing = len(names) - 1
 
     g = v.gaps
+    ps = v.effects.progressive_stiffness
     k_seg, c_seg = n * hs.stiffness * seg, n * hs.damping * seg
-    # name, a, b, r, e, k (a angle), c (a angle), half gap (a angle), report factor
-    rows: list[tuple[str, int, int, float, float, float, float, float, float]] = [
-        ("spline", 0, 1, 1.0, 0.0, red.spline_stiffness, red.spline_damping, g.spline.nominal / 2, 1.0),
+    # name, a, b, r, e, k (a angle), c (a angle), half gap (a angle), report factor, cubic k3 (a angle)
+    rows: list[tuple[str, int, int, float, float, float, float, float, float, float]] = [
+        ("spline", 0, 1, 1.0, 0.0, red.spline_stiffness, red.spline_damping, g.spline.nominal / 2, 1.0, ps.spline),
         ("gear1", 1, 2, r1, 1.0 + r1, red.mesh1_stiffness / r1**2, red.mesh1_damping / r1**2,
-         g.mesh1.nominal * r1 / 2, r1),
+         g.mesh1.nominal * r1 / 2, r1, ps.mesh1 / r1**4),
         ("gear2", 2, 3, r2, -(1.0 + r2), red.mesh2_stiffness / r2**2, red.mesh2_damping / r2**2,
-         g.mesh2.nominal * r2 / 2, r2),
-        ("diff", 3, 4, 1.0, 0.0, red.diff_stiffness, red.diff_damping, g.differential.nominal / 2, 1.0),
+         g.mesh2.nominal * r2 / 2, r2, ps.mesh2 / r2**4),
+        ("diff", 3, 4, 1.0, 0.0, red.diff_stiffness, red.diff_damping, g.differential.nominal / 2, 1.0,
+         ps.differential),
     ]
     chain_nodes = [4, *range(5, 5 + seg - 1), wheel]
     for i in range(seg):
         name = "halfshaft" if seg == 1 else f"halfshaft{i + 1}"
         half = g.halfshaft.nominal / 2 if i == 0 else 0.0
-        rows.append((name, chain_nodes[i], chain_nodes[i + 1], 1.0, 0.0, k_seg, c_seg, half, 1.0))
+        # seg equal pieces in series: each deflects x/seg, so k -> k seg and k3 -> k3 seg^3
+        rows.append((name, chain_nodes[i], chain_nodes[i + 1], 1.0, 0.0, k_seg, c_seg, half, 1.0,
+                     n * ps.halfshaft * seg**3))
     if housing >= 0:
-        rows.append(("mount", housing, -1, 1.0, 0.0, v.housing.mount_stiffness, v.housing.mount_damping, 0.0, -1.0))
+        rows.append(("mount", housing, -1, 1.0, 0.0, v.housing.mount_stiffness, v.housing.mount_damping, 0.0, -1.0,
+                     ps.mount))
     cols = list(zip(*rows, strict=True))
 
     ratio = np.zeros(len(names))
@@ -123,6 +148,8 @@ def build_chain(v: Vehicle) -> ChainModel:
     for _, a, b, r, *_rest in rows:
         if b >= 0 and a != housing:
             ratio[b] = ratio[a] / r
+    if vehicle >= 0:
+        ratio[vehicle] = ratio[wheel]
     half_rho_cda = 0.5 * v.body.air_density * v.body.drag_area
     sin_grade = float(np.sin(np.arctan(v.body.grade_percent / 100.0)))
     eff = v.effects.drag
@@ -135,7 +162,7 @@ def build_chain(v: Vehicle) -> ChainModel:
         cr=np.asarray(cols[3], dtype=np.float64),
         ce=np.asarray(cols[4], dtype=np.float64) * (1.0 if housing >= 0 else 0.0),
         ck=np.asarray(cols[5], dtype=np.float64),
-        ck3=np.zeros(len(rows)),
+        ck3=np.asarray(cols[9], dtype=np.float64),
         cc=np.asarray(cols[6], dtype=np.float64),
         chalf=np.asarray(cols[7], dtype=np.float64),
         creport=np.asarray(cols[8], dtype=np.float64),
@@ -147,49 +174,28 @@ def build_chain(v: Vehicle) -> ChainModel:
         road=np.array([v.wheel.radius, v.body.mass, v.body.rolling_resistance, half_rho_cda, sin_grade,
                        v.body.brake_torque]),
         rotor_drag=np.array([v.motor.viscous_damping + eff.viscous_nms, eff.coulomb_nm]),
+        vehicle=vehicle,
+        tyre=np.array([n * tyre.slip_stiffness * v.wheel.radius**2 / tyre.relaxation_length,
+                       v.wheel.radius / tyre.relaxation_length]) if tyre.enabled else np.zeros(2),
     )
 
 
 def road_torque(road: F64, omega_w: float) -> float:
-    """Road load at the wheels (N m) for wheel speed ``omega_w`` (rad/s); mirrors the kernel."""
-    radius, mass, crr, half_rho_cda, sin_grade, brake = road
-    v = omega_w * radius
+    """Road load plus brake at the wheels (N m) for wheel speed ``omega_w`` (rad/s); mirrors the kernel."""
+    return road_load_torque(road, omega_w) + brake_torque(road, omega_w)
+
+
+def road_load_torque(road: F64, omega_v: float) -> float:
+    """Rolling, aero and grade load (N m at the wheel axle) at vehicle speed ``omega_v * R``."""
+    radius, mass, crr, half_rho_cda, sin_grade, _ = road
+    v = omega_v * radius
     force = crr * mass * GRAVITY * np.tanh(v / 0.1) + half_rho_cda * v * abs(v) + mass * GRAVITY * sin_grade
-    return float(radius * force + brake * np.tanh(omega_w / 0.05))
+    return float(radius * force)
 
 
-def linear_matrices(m: ChainModel) -> tuple[F64, F64, F64]:
-    """Mass, stiffness and damping matrices (nb x nb) with every gap closed and no clamping."""
-    nb = m.n_bodies
-    K = np.zeros((nb, nb))
-    C = np.zeros((nb, nb))
-    for j in range(m.n_couplings):
-        g = np.zeros(nb)
-        g[m.ca[j]] += 1.0
-        if m.cb[j] >= 0:
-            g[m.cb[j]] -= m.cr[j]
-        if m.housing >= 0:
-            g[m.housing] -= m.ce[j]
-        K += m.ck[j] * np.outer(g, g)
-        C += m.cc[j] * np.outer(g, g)
-    C[m.rotor, m.rotor] += m.rotor_drag[0]
-    return np.diag(m.inertia), K, C
-
-
-def modal_frequencies_hz(m: ChainModel) -> F64:
-    """Undamped natural frequencies (Hz, ascending, rigid-body mode included as ~0)."""
-    M, K, _ = linear_matrices(m)
-    lam = np.linalg.eigvals(np.linalg.solve(M, K))
-    return np.sort(np.sqrt(np.abs(lam.real))) / (2 * np.pi)
-
-
-def max_rate(m: ChainModel) -> float:
-    """Largest |eigenvalue| (rad/s) of the damped linear system; sets the explicit step."""
-    M, K, C = linear_matrices(m)
-    nb = m.n_bodies
-    Minv = np.diag(1.0 / np.diag(M))
-    A = np.block([[np.zeros((nb, nb)), np.eye(nb)], [-Minv @ K, -Minv @ C]])
-    return float(np.max(np.abs(np.linalg.eigvals(A))))
+def brake_torque(road: F64, omega_w: float) -> float:
+    """Brake torque (N m) at wheel speed ``omega_w``, smoothed through zero speed."""
+    return float(road[5] * np.tanh(omega_w / 0.05))
 
 
 def quasi_static_state(m: ChainModel, torque: float, omega_rotor: float) -> tuple[F64, F64]:
@@ -199,14 +205,44 @@ def quasi_static_state(m: ChainModel, torque: float, omega_rotor: float) -> tupl
     accelerates the bodies downstream of it against the road load, so each gap sits closed on
     the flank that torque loads (centred when the torque is exactly zero). The housing is at
     rest, deflected on its mounts by the reaction. The wheel angle is the zero reference.
+    With tyre slip the vehicle runs behind the wheels by the steady slip of the tyre torque
+    (:func:`quasi_static_full` also returns that torque).
     """
+    theta, omega, _ = quasi_static_full(m, torque, omega_rotor)
+    return theta, omega
+
+
+def spring_deflection(k: F64, k3: F64, tau: F64) -> F64:
+    """Penetration ``x`` with ``k x + k3 x^3 = tau`` (elementwise; unique since k > 0, k3 >= 0)."""
+    linear = tau / k
+    if not np.any(k3):
+        return np.asarray(linear, dtype=np.float64)
+    x = linear
+    for _ in range(60):  # Newton from the linear guess: monotone for a hardening spring
+        f = k * x + k3 * x**3 - tau
+        step = f / (k + 3.0 * k3 * x**2)
+        x = x - step
+        if np.all(np.abs(step) <= 1e-15 * (1.0 + np.abs(x))):
+            break
+    return np.asarray(np.where(k3 == 0.0, linear, x), dtype=np.float64)
+
+
+def quasi_static_full(m: ChainModel, torque: float, omega_rotor: float) -> tuple[F64, F64, float]:
+    """:func:`quasi_static_state` plus the tyre torque state (N m, 0 without tyre slip)."""
     nb = m.n_bodies
     ratio = m.speed_ratio
     omega = omega_rotor * ratio
     drag = m.rotor_drag[0] * omega_rotor + m.rotor_drag[1] * np.tanh(omega_rotor / 1.0)
-    load = road_torque(m.road, float(omega[m.wheel]))
+    w_w = float(omega[m.wheel])
+    load = road_torque(m.road, w_w)
     j_eq = float(np.sum(m.inertia * ratio**2))  # housing has ratio 0
     acc0 = (torque - drag - load * ratio[m.wheel]) / j_eq
+    tyre_tau = 0.0
+    if m.vehicle >= 0:  # the tyre accelerates the vehicle body against the road load
+        tyre_tau = m.inertia[m.vehicle] * acc0 * ratio[m.vehicle] + road_load_torque(m.road, w_w)
+        s = m.tyre[1] * tyre_tau / m.tyre[0]  # steady slip: omega_W - omega_V = s |omega_V|
+        denom = 1.0 + s if w_w >= 0 else 1.0 - s
+        omega[m.vehicle] = w_w / denom if denom > 0 else w_w
     tau = np.zeros(m.n_couplings)
     inflow = np.zeros(nb)
     inflow[m.rotor] = torque - drag
@@ -217,11 +253,13 @@ def quasi_static_state(m: ChainModel, torque: float, omega_rotor: float) -> tupl
         tau[j] = inflow[a] - m.inertia[a] * acc0 * ratio[a]
         inflow[b] += m.cr[j] * tau[j]
     theta_h = 0.0
-    if m.housing >= 0:
-        reaction = -torque + float(np.sum(m.ce * tau))
-        j_mount = int(np.nonzero(m.ca == m.housing)[0][0])
-        theta_h = reaction / m.ck[j_mount]
-        tau[j_mount] = reaction
+    mount = np.flatnonzero(m.ca == m.housing) if m.housing >= 0 else np.zeros(0, dtype=np.int64)
+    if mount.size:
+        j_mount = int(mount[0])
+        tau[j_mount] = -torque + float(np.sum(m.ce * tau))
+        theta_h = float(spring_deflection(m.ck[j_mount:j_mount + 1], m.ck3[j_mount:j_mount + 1],
+                                          tau[j_mount:j_mount + 1])[0])
+    x = spring_deflection(m.ck, m.ck3, tau)
     theta = np.zeros(nb)
     if m.housing >= 0:
         theta[m.housing] = theta_h
@@ -229,9 +267,9 @@ def quasi_static_state(m: ChainModel, torque: float, omega_rotor: float) -> tupl
         a, b = m.ca[j], m.cb[j]
         if a == m.housing:
             continue
-        delta = np.sign(tau[j]) * m.chalf[j] + tau[j] / m.ck[j]
+        delta = np.sign(tau[j]) * m.chalf[j] + x[j]
         theta[a] = delta + m.cr[j] * theta[b] + m.ce[j] * theta_h
-    return theta, omega
+    return theta, omega, tyre_tau
 
 
 def deflections(m: ChainModel, theta: F64) -> F64:

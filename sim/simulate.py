@@ -8,11 +8,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sim.errors import InputSignalError, InstabilityError, ParameterError
+from sim.errors import InputSignalError, ParameterError
 from sim.inputs import TorqueInput, prepare_input
-from sim.integrate import STATUS_NONFINITE, STATUS_OK, run_chain
-from sim.model import ChainModel, build_chain, max_rate, quasi_static_state
+from sim.linear import max_rate, tangent_stiffness
+from sim.model import ChainModel, build_chain, quasi_static_full
 from sim.params import GAP_NAMES, Vehicle
+from sim.runner import MAX_EVENTS, raise_status, run_from_state
 from sim.sensor import delay_sample_quantize
 from sim.two_inertia import pack, project, quasi_static, run_two_inertia
 from sim.whatif import WhatIf
@@ -20,7 +21,6 @@ from sim.whatif import WhatIf
 F64 = NDArray[np.float64]
 RPM = 30.0 / math.pi  # rad/s -> rpm
 STEP_SAFETY = 0.3  # fraction of the explicit stability limit 2/|lambda|max
-MAX_EVENTS = 20000
 
 
 @dataclass(frozen=True)
@@ -35,7 +35,8 @@ class SimResult:
     rotor_speed_rpm, wheel_speed_rpm, vehicle_speed_kmh : (n,) absolute
     airgap_torque_nm : (n,) torque acting on the rotor (after the optional torque lag)
     coupling_torques : name -> (n,) N m at the driven member (gear pairs: the large gear;
-        half-shafts: per shaft; ``mount``: housing roll reaction)
+        half-shafts: per shaft; ``mount``: housing roll reaction; ``tyre``: all driven tyres at
+        the wheel axle, only with tyre slip on)
     gap_open : gap name -> (n,) bool, the gap's dead zone is open (no contact)
     gap_events : (gap, t_open, t_close) at integrator-step resolution; t_close is nan if open at the end
     dt : integrator step (s); input_gaps : spans of missing torque samples
@@ -56,11 +57,18 @@ class SimResult:
     body_speeds_rpm: dict[str, F64] = field(default_factory=dict)
 
 
-def choose_step(chain: ChainModel, output_dt: float, dt: float | None = None) -> tuple[float, int]:
-    """Integrator step (s) dividing ``output_dt`` and steps per output sample."""
+def choose_step(chain: ChainModel, output_dt: float, dt: float | None = None, *, torque_max: float = 0.0,
+                omega_vehicle: float = 0.0) -> tuple[float, int]:
+    """Integrator step (s) dividing ``output_dt`` and steps per output sample.
+
+    Without ``dt`` the step is a fraction of the explicit limit ``2 / |lambda|max`` of the
+    linearised chain; progressive springs count with their tangent stiffness at the deflection
+    ``torque_max`` (N m, largest input torque) can cause, the tyre at ``omega_vehicle`` (rad/s).
+    """
     if output_dt <= 0 or not math.isfinite(output_dt):
         raise ParameterError("output_dt", output_dt, "must be a positive number of seconds")
-    dt_max = dt if dt is not None else STEP_SAFETY * 2.0 / max_rate(chain)
+    dt_max = dt if dt is not None else STEP_SAFETY * 2.0 / max_rate(
+        chain, omega_vehicle, tangent_stiffness(chain, torque_max))
     if dt_max <= 0 or not math.isfinite(dt_max):
         raise ParameterError("dt", dt_max, "must be a positive number of seconds")
     sub = max(1, math.ceil(output_dt / dt_max - 1e-9))
@@ -118,55 +126,36 @@ def simulate(
     if model != "multibody":
         raise ParameterError("model", model, "must be 'multibody' or 'two_inertia'")
     chain = build_chain(vehicle)
-    step, sub = choose_step(chain, output_dt, dt)
+    theta0, omega0, tyre0 = quasi_static_full(chain, float(inp.torque[0]), w0)
+    step, sub = choose_step(chain, output_dt, dt, torque_max=float(np.max(np.abs(inp.torque))),
+                            omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
     t0, n_out = _grid(inp, output_dt)
-    theta0, omega0 = quasi_static_state(chain, float(inp.torque[0]), w0)
-    nb, nc = chain.n_bodies, chain.n_couplings
-    out_res, out_sens, out_torque = np.zeros(n_out), np.zeros(n_out), np.zeros(n_out)
-    out_omega, out_tau = np.zeros((n_out, nb)), np.zeros((n_out, nc))
-    out_open = np.zeros((n_out, nc), dtype=np.bool_)
-    ev_gap = np.zeros(MAX_EVENTS, dtype=np.int64)
-    ev_t = np.zeros(MAX_EVENTS)
-    ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
     eff = vehicle.effects
-    lag = np.array([eff.torque_lag.delay_s, eff.torque_lag.tau_s])
-    limit = 20.0 * abs(w0) + 5000.0
-    status, t_fail, n_ev = run_chain(
-        chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf,
-        chain.rotor, chain.housing, chain.wheel, chain.road, chain.rotor_drag, lag, eff.speed_sensor.tau_s,
-        inp.t, inp.torque, inp.linear, t0, step, n_out, sub, theta0, omega0, limit,
-        out_res, out_sens, out_torque, out_omega, out_tau, out_open, ev_gap, ev_t, ev_kind,
-    )
-    _raise_status(status, t_fail, step)
+    raw = run_from_state(chain, inp.t, inp.torque, inp.linear, t0, step, sub, n_out, theta0, omega0, tyre0,
+                         lag=(eff.torque_lag.delay_s, eff.torque_lag.tau_s), sensor_tau=eff.speed_sensor.tau_s,
+                         speed_limit=20.0 * abs(w0) + 5000.0)
     t = np.asarray(t0 + np.arange(n_out) * output_dt, dtype=np.float64)
     sens = eff.speed_sensor
-    speed = delay_sample_quantize(t, out_sens * RPM, sens.delay_s, sens.sample_s, sens.resolution_rpm)
-    torques = {name: out_tau[:, j] * chain.creport[j] for j, name in enumerate(chain.coupling_names)}
+    speed = delay_sample_quantize(t, raw.sensor * RPM, sens.delay_s, sens.sample_s, sens.resolution_rpm)
+    torques = {name: raw.tau[:, j] * chain.creport[j] for j, name in enumerate(chain.coupling_names)}
     n_hs = vehicle.halfshaft.count
     for name in torques:
         if name.startswith("halfshaft"):
             torques[name] = torques[name] / n_hs
-    gap_open = {g: out_open[:, chain.gap_coupling[g]].copy() for g in GAP_NAMES}
-    events = _pair_events(
-        [(GAP_NAMES[int(ev_gap[k])], float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)],
-        {g: bool(out_open[0, chain.gap_coupling[g]]) for g in GAP_NAMES}, t0,
-    )
-    w_wheel = out_omega[:, chain.wheel]
+    if chain.vehicle >= 0:
+        torques["tyre"] = raw.tyre
+    gap_open = {g: raw.is_open[:, chain.gap_coupling[g]].copy() for g in GAP_NAMES}
+    events = _pair_events([(GAP_NAMES[j], tk, kind) for j, tk, kind in raw.events],
+                          {g: bool(raw.is_open[0, chain.gap_coupling[g]]) for g in GAP_NAMES}, t0)
+    w_wheel = raw.omega[:, chain.wheel]
+    w_vehicle = raw.omega[:, chain.vehicle] if chain.vehicle >= 0 else w_wheel
     return SimResult(
-        t=t, motor_speed_rpm=speed, rotor_speed_rpm=out_omega[:, chain.rotor] * RPM,
-        wheel_speed_rpm=w_wheel * RPM, vehicle_speed_kmh=w_wheel * vehicle.wheel.radius * 3.6,
-        airgap_torque_nm=out_torque, coupling_torques=torques, gap_open=gap_open, gap_events=events,
+        t=t, motor_speed_rpm=speed, rotor_speed_rpm=raw.omega[:, chain.rotor] * RPM,
+        wheel_speed_rpm=w_wheel * RPM, vehicle_speed_kmh=w_vehicle * vehicle.wheel.radius * 3.6,
+        airgap_torque_nm=raw.torque, coupling_torques=torques, gap_open=gap_open, gap_events=events,
         model="multibody", dt=step, input_gaps=inp.gaps,
-        body_speeds_rpm={name: out_omega[:, b] * RPM for b, name in enumerate(chain.body_names)},
+        body_speeds_rpm={name: raw.omega[:, b] * RPM for b, name in enumerate(chain.body_names)},
     )
-
-
-def _raise_status(status: int, t_fail: float, step: float) -> None:
-    if status == STATUS_OK:
-        return
-    what = "non-finite state" if status == STATUS_NONFINITE else "diverging speed"
-    raise InstabilityError(f"{what} at t = {t_fail:.6f} s with step dt = {step:.3g} s; reduce dt or check "
-                           "stiffness/inertia values")
 
 
 def _pair_events(
@@ -198,7 +187,7 @@ def _simulate_two_inertia(vehicle: Vehicle, inp: TorqueInput, w0: float, dt: flo
     ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
     status, t_fail, n_ev = run_two_inertia(arr, road, inp.t, inp.torque, inp.linear, t0, step, n_out, sub, state0,
                                            20.0 * abs(w0) + 5000.0, out, ev_t, ev_kind)
-    _raise_status(status, t_fail, step)
+    raise_status(status, t_fail, step)
     t = np.asarray(t0 + np.arange(n_out) * output_dt, dtype=np.float64)
     is_open = out[:, 3] > 0.5
     events = _pair_events([("lumped", float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)],

@@ -57,8 +57,13 @@ def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaPara
 
     Reducer inertias are referred to the motor (paper: "equivalent to the motor inertia"), half
     of the half-shaft inertia to each end, all coupling compliances added in series and
-    referred to the half-shaft, and all five clearances summed in half-shaft angle.
+    referred to the half-shaft, and all five clearances summed in half-shaft angle. The
+    paper's model has no tyre compliance and linear springs: tyre slip and progressive
+    stiffness are left out of the projection.
     """
+    if vehicle.effects.tyre_slip.enabled:
+        vehicle = vehicle.with_changes({"effects.tyre_slip.enabled": False})
+        chain = None
     m = chain or build_chain(vehicle)
     i = vehicle.ratio
     n = vehicle.halfshaft.count

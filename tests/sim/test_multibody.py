@@ -7,11 +7,12 @@ import pytest
 from scipy.linalg import expm
 
 from sim import InputSignalError, InstabilityError, load_vehicle, simulate
-from sim.integrate import run_chain
+from sim.linear import linear_matrices, modal_frequencies_hz
 from sim.metrics import peak_to_valley, unloaded_time
-from sim.model import build_chain, deflections, linear_matrices, modal_frequencies_hz
+from sim.model import build_chain, deflections
 from sim.paper import tip_in_torque
 from sim.reference import coupling_matrix, solve_reference
+from sim.runner import run_from_state
 from sim.simulate import RPM, choose_step
 
 PAPER = load_vehicle("paper")
@@ -56,18 +57,9 @@ def _run_raw(v, theta0, omega0, torque: float, t_end: float, dt: float | None = 
     m = build_chain(v)
     step, sub = choose_step(m, 1e-3, dt)
     n_out = round(t_end / 1e-3) + 1
-    nb, nc = m.n_bodies, m.n_couplings
-    om = np.zeros((n_out, nb))
-    th = np.zeros((n_out, nc))
-    op = np.zeros((n_out, nc), dtype=np.bool_)
-    z = np.zeros(n_out)
-    status, _, _ = run_chain(m.inertia, m.ca, m.cb, m.cr, m.ce, m.ck, m.ck3, m.cc, m.chalf, m.rotor, m.housing,
-                             m.wheel, m.road, m.rotor_drag, np.zeros(2), 0.0, np.array([0.0, 100.0]),
-                             np.array([torque, torque]), False, 0.0, step, n_out, sub, theta0, omega0, 1e7,
-                             z, z.copy(), z.copy(), om, th, op, np.zeros(10, dtype=np.int64), np.zeros(10),
-                             np.zeros(10, dtype=np.int64))
-    assert status == 0
-    return m, om, th
+    run = run_from_state(m, np.array([0.0, 100.0]), np.array([torque, torque]), False, 0.0, step, sub, n_out,
+                         theta0, omega0)
+    return m, run.omega, run.tau
 
 
 @pytest.mark.parametrize("gap_scale", [0.0, 1.0])
@@ -78,7 +70,8 @@ def test_energy_conserved_without_damping(gap_scale: float) -> None:
     is still conservative. A tenth of the usual step keeps the symplectic scheme's bounded
     energy oscillation (order omega*dt) small.
     """
-    from sim.model import max_rate, quasi_static_state
+    from sim.linear import max_rate
+    from sim.model import quasi_static_state
 
     v = _free_vehicle(gap_scale)
     m = build_chain(v)

@@ -1,0 +1,85 @@
+"""One call of the compiled chain kernel from a given state: the layer between ``simulate`` and numba.
+
+:func:`run_from_state` owns the kernel's argument list and output buffers, so callers (the
+simulator, tests that start from a mode shape) never depend on the kernel signature.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.errors import InstabilityError
+from sim.integrate import STATUS_NONFINITE, STATUS_OK, run_chain
+from sim.model import ChainModel
+
+F64 = NDArray[np.float64]
+MAX_EVENTS = 20000
+
+
+@dataclass(frozen=True)
+class RawRun:
+    """Kernel output on the output grid (row ``i`` at ``t0 + i * sub * dt``), SI units.
+
+    resolver : (n,) rad/s, rotor relative to housing; sensor : (n,) after the speed filter
+    torque : (n,) N m air-gap torque; omega : (n, nb) rad/s body speeds
+    tau : (n, nc) N m coupling torques in each coupling's ``a`` angle; tyre : (n,) N m (zeros if off)
+    is_open : (n, nc) dead zone open; events : (coupling, t, 1 = open / 0 = close)
+    """
+
+    resolver: F64
+    sensor: F64
+    torque: F64
+    omega: F64
+    tau: F64
+    tyre: F64
+    is_open: NDArray[np.bool_]
+    events: list[tuple[int, float, int]]
+
+
+def run_from_state(
+    chain: ChainModel, t_in: F64, q_in: F64, linear: bool, t0: float, step: float, sub: int, n_out: int,
+    theta0: F64, omega0: F64, tyre0: float = 0.0, *, lag: tuple[float, float] = (0.0, 0.0),
+    sensor_tau: float = 0.0, speed_limit: float = math.inf,
+) -> RawRun:
+    """Integrate ``chain`` from ``(theta0, omega0, tyre0)`` at ``t0`` with step ``step``, ``sub`` steps per row.
+
+    Raises
+    ------
+    InstabilityError : a state became non-finite or a speed exceeded ``speed_limit`` (rad/s)
+    """
+    nb, nc = chain.n_bodies, chain.n_couplings
+    tyre_on = chain.vehicle >= 0
+    out_res, out_sens, out_torque = np.zeros(n_out), np.zeros(n_out), np.zeros(n_out)
+    out_omega, out_tau = np.zeros((n_out, nb)), np.zeros((n_out, nc + int(tyre_on)))
+    out_open = np.zeros((n_out, nc), dtype=np.bool_)
+    ev_gap = np.zeros(MAX_EVENTS, dtype=np.int64)
+    ev_t = np.zeros(MAX_EVENTS)
+    ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
+    status, t_fail, n_ev = run_chain(
+        chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf,
+        chain.rotor, chain.housing, chain.wheel, chain.road, chain.rotor_drag, np.array(lag, dtype=np.float64),
+        float(sensor_tau), chain.vehicle, np.array([chain.tyre[0], chain.tyre[1], tyre0]),
+        np.ascontiguousarray(t_in, dtype=np.float64), np.ascontiguousarray(q_in, dtype=np.float64), linear,
+        float(t0), float(step), int(n_out), int(sub), np.array(theta0, dtype=np.float64),
+        np.array(omega0, dtype=np.float64), float(speed_limit),
+        out_res, out_sens, out_torque, out_omega, out_tau, out_open, ev_gap, ev_t, ev_kind,
+    )
+    raise_status(status, t_fail, step)
+    return RawRun(
+        resolver=out_res, sensor=out_sens, torque=out_torque, omega=out_omega, tau=out_tau[:, :nc],
+        tyre=out_tau[:, nc].copy() if tyre_on else np.zeros(n_out), is_open=out_open,
+        events=[(int(ev_gap[k]), float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)],
+    )
+
+
+def raise_status(status: int, t_fail: float, step: float) -> None:
+    """Turn a kernel status code into :class:`InstabilityError` (no-op when OK)."""
+    if status == STATUS_OK:
+        return
+    what = "non-finite state" if status == STATUS_NONFINITE else "diverging speed"
+    raise InstabilityError(f"{what} at t = {t_fail:.6f} s with step dt = {step:.3g} s; reduce dt or check "
+                           "stiffness/inertia values")
