@@ -12,6 +12,7 @@ import gzip
 import io
 import os
 import zlib
+from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO, Protocol, cast
 
@@ -81,9 +82,8 @@ class ByteStream:
         self._dead = False
         # gzip: read1 hands out what one inflate step produced, so the bytes before damage are
         # returned first (a buffered read(n) would discard them together with the error)
-        self._read = getattr(raw, "read1", None) if compressed else None
-        if self._read is None:
-            self._read = raw.read
+        read1 = getattr(raw, "read1", None) if compressed else None
+        self._read: Callable[[int], bytes] = read1 if callable(read1) else raw.read
 
     def read(self, n: int) -> bytes:
         """Up to ``n`` bytes; fewer only at the end of the stream or just before damage.
