@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import numpy.typing as npt
 from scipy.signal import find_peaks
 
 from app.analysis.series import FloatArray, median_period, noise_rms, parabolic_vertex
@@ -94,16 +95,39 @@ def rigid_trend(
     return trend + (gain * integral if gain is not None else 0.0)
 
 
-def _first_peak(y: FloatArray, i0: int, i1: int, prom: float) -> int | None:
+def _adjacent_valley(y: FloatArray, ip: int, peaks: npt.NDArray[np.intp], prom: float) -> int | None:
+    """Lowest point between the peak ``ip`` and the next significant peak (None: no real swing)."""
+    nxt = peaks[peaks > ip]
+    stop = int(nxt[0]) if nxt.size else y.size
+    if stop <= ip + 1:
+        return None
+    iv = ip + 1 + int(np.argmin(y[ip + 1:stop]))
+    if iv >= y.size - 1 or y[ip] - y[iv] < prom:
+        return None  # still falling at the end of the window, or no real swing
+    return iv
+
+
+def _impact_peak(y: FloatArray, i0: int, i1: int, prom: float) -> tuple[int, int | None] | None:
+    """The significant maximum in ``y[i0..i1]`` with the largest swing to its adjacent valley.
+
+    That is the top of the gap-open excursion: a smaller wiggle from the shafts unwinding
+    before it has a smaller swing. Returns (peak index, valley index or None).
+    """
     peaks, _ = find_peaks(y, prominence=prom)
     inside = peaks[(peaks >= i0) & (peaks <= i1)]
-    if inside.size:
-        return int(inside[0])
+    best: tuple[float, int, int | None] | None = None
+    for ip in inside:
+        iv = _adjacent_valley(y, int(ip), peaks, prom)
+        swing = float(y[ip] - y[iv]) if iv is not None else float(y[ip]) - float(np.min(y[ip:]))
+        if best is None or swing > best[0]:
+            best = (swing, int(ip), iv)
+    if best is not None:
+        return best[1], best[2]
     if i1 <= i0:
         return None
     j = i0 + int(np.argmax(y[i0:i1 + 1]))
     rises = y[j] - float(np.min(y[i0:j + 1])) >= prom
-    return j if i0 < j < y.size - 1 and rises else None
+    return (j, _adjacent_valley(y, j, peaks, prom)) if i0 < j < y.size - 1 and rises else None
 
 
 def _knee_fit(t: FloatArray, y: FloatArray) -> tuple[float, float]:
@@ -189,20 +213,14 @@ def ripple_metrics(
     i1 = int(np.searchsorted(t, t_cross + p.peak_search_s, side="right")) - 1
     span = float(np.ptp(y[i0:])) if i0 < y.size else 0.0
     prom = max(p.min_prominence_rpm, 4.0 * noise, 0.1 * span)
-    ip = _first_peak(y, i0, min(i1, y.size - 1), prom)
+    found = _impact_peak(y, i0, min(i1, y.size - 1), prom)
     nan_result = RippleMetrics(NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, noise, dt)
-    if ip is None:
+    if found is None:
         return nan_result
+    ip, iv = found
     off_p, y_peak = parabolic_vertex(y, ip)
     t_peak = float(t[ip] + off_p * dt)
 
-    # the adjacent valley: the lowest point between the impact peak and the next significant peak
-    peaks, _ = find_peaks(y, prominence=prom)
-    nxt = peaks[peaks > ip]
-    stop = int(nxt[0]) if nxt.size else y.size
-    iv = ip + 1 + int(np.argmin(y[ip + 1:stop])) if stop > ip + 1 else None
-    if iv is not None and (iv >= y.size - 1 or y[ip] - y[iv] < prom):
-        iv = None  # still falling at the end of the window, or no real swing
     y_valley, t_valley = NAN, NAN
     if iv is not None:
         off_v, y_valley = parabolic_vertex(y, iv)

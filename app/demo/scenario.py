@@ -7,8 +7,8 @@ releases the pedal repeatedly at 15-35 km/h, as in the paper's Section 3 test; o
 release happens with the brake applied (an event the analysis must exclude).
 
 Sensor effects applied to the simulated truth: torque and motor speed reported every
-10 ms (speed 8 ms late through inverter filtering/CAN scheduling), pedal and vehicle speed
-every 20 ms, white noise, timestamp jitter; quantisation is left to the DBC encoding.
+10 ms (speed 8 ms late through inverter filtering/CAN scheduling), like every other message
+of the reference DBC; white noise, timestamp jitter; quantisation is left to the DBC encoding.
 """
 
 from __future__ import annotations
@@ -97,11 +97,15 @@ def measured_channels(nominal: Vehicle, sc: Scenario | None = None) -> dict[str,
     res = simulate(truth, t, torque, model="multibody", interp="linear", output_dt=0.001)
     rng = np.random.default_rng(sc.seed + 1)
     end = float(res.t[-1])
+    wheel = res.wheel_speed_rpm
     return {
         "motor_torque_nm": _report(rng, t, torque, 0.01, 0.002, 0.0, sc.torque_noise_nm, sc.jitter_s, end),
         "motor_speed_rpm": _report(rng, res.t, res.motor_speed_rpm, 0.01, 0.004, sc.speed_lag_s,
                                    sc.speed_noise_rpm, sc.jitter_s, end),
-        "pedal_pct": _report(rng, t, pedal, 0.02, 0.006, 0.0, 0.0, sc.jitter_s, end),
-        "vehicle_speed_kmh": _report(rng, res.t, res.vehicle_speed_kmh, 0.02, 0.008, 0.0, 0.02, sc.jitter_s, end),
-        "brake_pressed": _report(rng, t, brake, 0.02, 0.010, 0.0, 0.0, sc.jitter_s, end),
+        "pedal_pct": _report(rng, t, pedal, 0.01, 0.006, 0.0, 0.0, sc.jitter_s, end),
+        "brake_pressed": _report(rng, t, brake, 0.01, 0.006, 0.0, 0.0, sc.jitter_s, end),
+        "vehicle_speed_kmh": _report(rng, res.t, res.vehicle_speed_kmh, 0.01, 0.008, 0.0, 0.02, sc.jitter_s, end),
+        "brake": _report(rng, t, 15.0 * brake, 0.01, 0.008, 0.0, 0.0, sc.jitter_s, end),  # bar
+        **{f"wheel_speed_{w}_rpm": _report(rng, res.t, wheel, 0.01, 0.009, 0.0, 0.3, sc.jitter_s, end)
+           for w in ("fl", "fr", "rl", "rr")},
     }
