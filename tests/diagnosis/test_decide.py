@@ -71,3 +71,12 @@ def test_insufficient_data_with_reason(n_cal: int, n_ho: int) -> None:
     d = decide(base, n, [], [], bootstrap_draws(n_ho, RULES, 1), RULES, n_cal)
     assert d.status == "insufficient_data"
     assert "at least 3" in d.reason
+
+
+def test_a_close_lookalike_leaving_a_clear_remainder_is_partial() -> None:
+    """90 % of a large gap removed but the rest is still 14x the noise: not an explanation."""
+    big = N * np.array([120.0, 150.0, 130.0, 160.0, 140.0, 125.0, 135.0, 145.0])
+    assert run([cand("speed_sensor", big, 0.09, spread=0.01)], base=big)[:2] == ("partial", ("speed_sensor",))
+    # the same share with the remainder near the noise floor is explained
+    small = N * np.array([8.0, 12.0, 9.0, 15.0, 10.0, 7.0, 11.0, 13.0])
+    assert run([cand("speed_sensor", small, 0.09, spread=0.01)], base=small)[0] == "explained"

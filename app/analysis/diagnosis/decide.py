@@ -15,7 +15,11 @@ rules, in order (thresholds in :class:`DecisionRules`):
    ``ambiguous_margin``): the pair is named;
 5. ``explained`` -- the best single effect (or greedy pair) removes at least ``explained_share`` of
    the residual above the noise floor, with the interval's lower end at least
-   ``explained_share_lo``; otherwise ``partial``.
+   ``explained_share_lo``, *and* what is left is small: a residual-to-noise ratio of at most
+   ``max_left_ratio`` or at most ``max_left_share`` of the original excess; otherwise ``partial``.
+   The second condition is what keeps a close look-alike (an output filter standing in for an
+   input lag, say) from being called an explanation when the true effect is not in the library: it
+   removes most of the gap but leaves a clear, structured remainder.
 
 A share of the residual *above the noise floor* is used instead of a plain shrink: with the true
 effect outside the library, a look-alike easily removes 30 % of the raw residual, but it leaves
@@ -50,6 +54,8 @@ class DecisionRules:
     prefer_probability: float = 0.95
     ambiguous_margin: float = 0.15
     pair_gain: float = 0.15
+    max_left_ratio: float = 2.0
+    max_left_share: float = 0.05
     n_boot: int = 2000
     level: float = 0.9
 
@@ -187,11 +193,14 @@ def decide(
             pair_note = f"; adding {pair.effects[1]} explains {100 * pair.explained.value:.0f} % (p = {p:.2f})"
         break
     share = chosen.explained
-    if share.value >= rules.explained_share and share.lo >= rules.explained_share_lo:
+    left_ratio = float(chosen.chi2.sum() / max(n.sum(), 1.0))
+    small_left = left_ratio <= rules.max_left_ratio or 1.0 - share.value <= rules.max_left_share
+    if share.value >= rules.explained_share and share.lo >= rules.explained_share_lo and small_left:
         status = "explained"
     else:
         status = "partial"
     reason = (f"{' + '.join(chosen.effects)} removes {100 * share.value:.0f} % of the residual above the noise "
               f"floor on held-out events (90 % interval {100 * share.lo:.0f}-{100 * share.hi:.0f} %), "
-              f"{100 * chosen.improved_fraction:.0f} % of events improved{pair_note}")
+              f"{100 * chosen.improved_fraction:.0f} % of events improved{pair_note}; the residual left is "
+              f"{left_ratio:.2f}x the noise floor")
     return Decision(status, top=chosen.effects, gap_ratio=ratio, best=chosen, reason=reason)
