@@ -21,6 +21,7 @@ to the moment its decoded samples are in the channel buffers.
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 import uuid
@@ -42,6 +43,7 @@ from app.live.recorder import FlushingBLFWriter
 from app.live.stream import StreamHub
 
 F64 = np.ndarray
+SWITCH_INTERVAL_S = 0.0005
 
 
 @dataclass
@@ -126,6 +128,9 @@ class LiveSession:
         if self.state != "created":
             raise ConflictError(f"live session {self.id} is {self.state}; it can be started once")
         self.link.open()  # a wrong interface/channel fails here, at once
+        # The receiver holds the GIL while it parses a burst of frames; with the default 5 ms switch
+        # interval the worker (and its latency) waits that long. Process-wide, so only ever lowered.
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
         self.t0 = time.time()
         self.started_at = datetime.fromtimestamp(self.t0, UTC)
         if self.record_path is not None:
