@@ -15,6 +15,7 @@ import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
+from urllib.parse import parse_qsl
 
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect, Request
@@ -143,10 +144,23 @@ async def _drain(request: Request, limit: int) -> None:
 
 
 async def receive_upload(request: Request, new_path: object, cap: int, drain_bytes: int,
-                         raw_filename: str | None = None) -> UploadResult:
-    """Stream the request body into files created by ``new_path(suffix)``; see the module docstring."""
+                         raw_filename: str | None = None, urlencoded_form: bool = False) -> UploadResult:
+    """Stream the request body into files created by ``new_path(suffix)``; see the module docstring.
+
+    With ``urlencoded_form``, an ``application/x-www-form-urlencoded`` body is read as form
+    fields (no files); otherwise such a body is the raw file (curl ``--data-binary`` sends
+    that content type by default).
+    """
     ctype = request.headers.get("content-type", "")
     result = UploadResult()
+    if urlencoded_form and ctype.startswith("application/x-www-form-urlencoded"):
+        body = b""
+        async for chunk in request.stream():
+            body += chunk
+            if len(body) > MAX_FIELD_BYTES:
+                raise InputError(f"form is longer than {MAX_FIELD_BYTES} bytes")
+        result.fields = dict(parse_qsl(body.decode("utf-8", "replace"), keep_blank_values=True))
+        return result
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > cap + drain_bytes + MAX_FIELD_BYTES:
         raise UploadTooLargeError(f"upload of {int(declared) / 2**20:.1f} MiB is larger than the "

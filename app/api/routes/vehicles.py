@@ -41,7 +41,7 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
     """Every file is checked before anything is stored: the driveline must load in the simulator,
     the database must load, and the signal map must fit the database. Identical content to the
     latest version returns that version (200, ``unchanged: true``)."""
-    up = await receive_upload(request, store.temp_path, 64 * 2**20, 0)
+    up = await receive_upload(request, store.temp_path, 64 * 2**20, 0, urlencoded_form=True)
     files = {f.field_name: f.path for f in up.files}
     try:
         name = up.fields.get("name", "").strip()
