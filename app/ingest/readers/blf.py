@@ -10,19 +10,19 @@ File layout::
                                       4 reserved, then the (compressed) bytes of inner objects
     ...                               inner objects may straddle container boundaries
 
-Containers are read one at a time (memory is bounded by one container plus one chunk),
-inflated with zlib and decoded whole by numpy (:mod:`blf_vector`); a container that is not a
-clean chain of objects is walked object by object by the compiled kernel in
-:mod:`blf_kernel`, which diagnoses what is wrong. Damage is
-reported with the file offset of the enclosing container; reading resumes at the next
-signature. The start time is the header's SYSTEMTIME, which Vector tools write in local
-time (python-can reads it as UTC, its issue 1992): ``start_clock = "blf_header_local"``.
+Containers are read one at a time (:mod:`blf_containers`; memory is bounded by a few
+containers plus one chunk), inflated with zlib on a worker thread and decoded whole by
+numpy (:mod:`blf_vector`). A container that is not a clean chain of objects is walked
+object by object by the compiled kernel in :mod:`blf_kernel`, which diagnoses what is
+wrong. Damage is reported with the file offset of the enclosing container; reading
+resumes at the next signature. The start time is the header's SYSTEMTIME, which Vector
+tools write in local time (python-can reads it as UTC, its issue 1992):
+``start_clock = "blf_header_local"``.
 """
 
 from __future__ import annotations
 
 import struct
-import zlib
 from collections.abc import Iterator
 from datetime import datetime
 from typing import Any
@@ -33,14 +33,18 @@ from app.errors import LogFormatError, TruncatedLogError
 from app.ingest.frames import FrameChunk, ReadIssue
 from app.ingest.readers import blf_layout as K
 from app.ingest.readers._base import BaseReader, ChunkBuilder
-from app.ingest.readers._source import StreamDamage
+from app.ingest.readers.blf_containers import (
+    CONTAINER_HEADER,
+    Container,
+    ContainerStream,
+    Loose,
+    Problem,
+    inflate,
+    read_ahead,
+)
 from app.ingest.readers.blf_vector import decode_run
 
 FILE_HEADER = struct.Struct("<4sLBBBBBBBBQQLL8H8H")
-OBJ_BASE = struct.Struct("<4sHHLL")
-CONTAINER_HEADER = struct.Struct("<H6xL4x")
-MAX_CONTAINER = 64 << 20  # containers are 128 kB in practice; larger sizes are corrupt
-SCAN_BLOCK = 1 << 16
 
 # Non-CAN objects skipped without an issue (they carry no frames); other types get an
 # "unknown_object" entry. DATA_LOST_* mean the logger itself dropped data: reported.
@@ -78,8 +82,6 @@ class BLFReader(BaseReader):
     """Vector BLF reader; see the module docstring for the layout and policies."""
 
     fmt = "blf"
-    _back: bytes = b""  # pushed-back bytes, read again before the stream
-    _off: int = 0  # file offset of the next byte ``_read`` returns
 
     def _open(self) -> None:
         head = self._head
@@ -105,46 +107,8 @@ class BLFReader(BaseReader):
         if stop is not None:
             self.meta.extra["stop_time_local"] = stop.isoformat()
 
-    # -- byte access with push-back (offsets stay exact for resync reports) -----------------------
-    def _read(self, n: int) -> bytes:
-        if self._back:
-            out = self._back[:n]
-            self._back = self._back[n:]
-            if len(out) < n:
-                out += self._stream.read(n - len(out))
-        else:
-            out = self._stream.read(n)
-        self._off += len(out)
-        return out
-
-    def _unread(self, data: bytes) -> None:
-        self._back = data + self._back
-        self._off -= len(data)
-
-    def _scan_signature(self, start_off: int, reason: str) -> bool:
-        """Skip forward to the next ``LOBJ`` (pushed back); report the skipped region. False at EOF."""
-        tail = b""
-        while True:
-            block = self._read(SCAN_BLOCK)
-            if not block:
-                break
-            buf = tail + block
-            j = buf.find(b"LOBJ")
-            if j >= 0:
-                found = self._off - len(buf) + j
-                self._unread(buf[j:])
-                self.problem("bad_signature", f"{reason}; skipped {found - start_off} bytes to the next object "
-                             "signature", offset=start_off)
-                return True
-            tail = buf[-3:]
-        self.problem("bad_signature", f"{reason}; no further object signature in the remaining "
-                     f"{self._off - start_off} bytes", offset=start_off, truncated=True)
-        return False
-
     # -- outer loop ------------------------------------------------------------------------------
     def _iter_chunks(self) -> Iterator[FrameChunk]:
-        self._back = b""
-        self._off = 0
         self._carry = b""
         self._carry_src = (0, 0)  # (container offset, byte inside it) where the carry starts
         self._resync_inner = False
@@ -152,66 +116,28 @@ class BLFReader(BaseReader):
         self._type_counts = np.zeros(256, np.int64)
         self._inner_resync: ReadIssue | None = None
         builder = ChunkBuilder(self.chunk_frames)
-        try:
-            got = len(self._read(self._header_size))
-            if got < self._header_size:
-                self.problem("truncated", f"the file ends inside its {self._header_size}-byte header", offset=got,
-                             truncated=True)
+        top = ContainerStream(self._stream)
+        for ev in read_ahead(top.events(self._header_size)):
+            if isinstance(ev, Container):
+                yield from self._container(ev, builder)
+            elif isinstance(ev, Loose):
+                yield from self._loose_object(ev.off, ev.obj, builder)
+            elif isinstance(ev, Problem):
+                self.problem(ev.kind, ev.message, offset=ev.offset, truncated=ev.truncated)
+                self._truncation_reported |= ev.truncated
+            else:
+                self.damage(ev.exc)
                 self._truncation_reported = True
-            yield from self._containers(builder)
-        except StreamDamage as exc:
-            self.damage(exc)
-            self._truncation_reported = True
         yield from self._finish(builder)
         if builder.n:
             yield builder.take()
-        if not self._truncation_reported and self._off < self._declared_size:
-            self.problem("truncated", f"the file ends after {self._off} bytes but its header declares "
-                         f"{self._declared_size}", offset=self._off, truncated=True)
+        if not self._truncation_reported and top.off < self._declared_size:
+            self.problem("truncated", f"the file ends after {top.off} bytes but its header declares "
+                         f"{self._declared_size}", offset=top.off, truncated=True)
         self._summarise_objects()
 
-    def _containers(self, builder: ChunkBuilder) -> Iterator[FrameChunk]:
-        while True:
-            off = self._off
-            hdr = self._read(16)
-            if not hdr:
-                return
-            if hdr[:4] != b"LOBJ":
-                k = hdr.find(b"LOBJ", 1, 8)
-                if 0 < k <= 3:  # padding after the previous object
-                    self._unread(hdr[k:])
-                    continue
-                if len(hdr) < 16 and not hdr.strip(b"\0"):
-                    return  # trailing padding
-                self._unread(hdr[1:])
-                if not self._scan_signature(off, f"no object signature at byte offset {off}"):
-                    return
-                continue
-            if len(hdr) < 16:
-                self.problem("truncated", f"file ends inside an object header ({len(hdr)} of 16 bytes)",
-                             offset=off, truncated=True)
-                self._truncation_reported = True
-                return
-            _sig, _hsize, _hver, size, otype = OBJ_BASE.unpack(hdr)
-            limit = MAX_CONTAINER if otype == K.LOG_CONTAINER else K.MAX_OBJECT_SIZE
-            if size < (32 if otype == K.LOG_CONTAINER else 16) or size > limit:
-                self._unread(hdr[4:])
-                if not self._scan_signature(off, f"object at byte offset {off} declares an impossible size "
-                                            f"{size} (type {otype})"):
-                    return
-                continue
-            body = self._read(size - 16)
-            cut = len(body) < size - 16
-            if cut:
-                self.problem("truncated", f"file ends inside the object at byte offset {off}: it declares {size} "
-                             f"bytes, {16 + len(body)} are present", offset=off, truncated=True)
-                self._truncation_reported = True
-            if otype == K.LOG_CONTAINER:
-                yield from self._container(off, body, builder, cut)
-            else:
-                yield from self._loose_object(off, hdr + body, builder)
-
-    def _container(self, off: int, body: bytes, builder: ChunkBuilder, cut: bool) -> Iterator[FrameChunk]:
+    def _container(self, ev: Container, builder: ChunkBuilder) -> Iterator[FrameChunk]:
+        off, body, cut = ev.off, ev.body, ev.cut
         if len(body) < CONTAINER_HEADER.size:
             return  # truncation already reported
         method, unc_size = CONTAINER_HEADER.unpack_from(body)
@@ -220,7 +146,7 @@ class BLFReader(BaseReader):
         if method == 0:
             data = payload
         elif method == 2:
-            data, error = self._inflate(payload, unc_size)
+            data, error = ev.inflated.result() if ev.inflated is not None else inflate(payload, unc_size)
             broken = broken or error is not None
             if error is not None and not cut:
                 self.problem("corrupt_zlib", f"log container at byte offset {off}: {error}; recovered "
@@ -234,26 +160,6 @@ class BLFReader(BaseReader):
         yield from self._walk(data, off, builder)
         if broken:
             self._drop_carry(off)
-
-    def _inflate(self, payload: bytes, unc_size: int) -> tuple[bytes, str | None]:
-        """zlib-inflate a container in pieces, keeping whatever precedes damage; cap the output size."""
-        d = zlib.decompressobj()
-        out: list[bytes] = []
-        produced = 0
-        try:
-            for i in range(0, len(payload), SCAN_BLOCK):
-                piece = d.decompress(payload[i:i + SCAN_BLOCK], MAX_CONTAINER - produced + 1)
-                out.append(piece)
-                produced += len(piece)
-                if produced > MAX_CONTAINER or d.unconsumed_tail:
-                    return b"".join(out)[:MAX_CONTAINER], f"inflates beyond {MAX_CONTAINER} bytes"
-                if d.eof:
-                    break
-        except zlib.error as exc:
-            return b"".join(out), f"corrupt zlib data ({exc})"
-        if not d.eof:
-            return b"".join(out), "zlib data ends before its end-of-stream marker"
-        return b"".join(out), None
 
     def _drop_carry(self, off: int) -> None:
         """After a damaged container the bytes that straddle into the next one are meaningless."""

@@ -52,11 +52,10 @@ for _t, (_lo, _hi) in {K.CAN_MESSAGE: (16, 16), K.CAN_ERROR: (4, 16), K.CAN_ERRO
 EXT, FD, ERR, RTR, BRS, ESI, TX = 1, 2, 4, 8, 16, 32, 64
 _I64_MAX = np.uint64(2**63 - 1)
 _MAX_10US = np.uint64((2**63 - 1) // 10000)
-_SIG = 0x4A424F4C  # b"LOBJ" little endian
 _UNIFORM = {
-    size: np.dtype({"names": ["sig", "hsize", "hver", "size", "type", "oflags", "ts", "ch", "fl", "dlc", "id", "data"],
-                    "formats": ["<u4", "<u2", "<u2", "<u4", "<u4", "<u4", "<u8", "<u2", "u1", "u1", "<u4", ("u1", 8)],
-                    "offsets": [0, 4, 6, 8, 12, 16, 24, 32, 34, 35, 36, 40], "itemsize": size})
+    size: np.dtype({"names": ["h0", "h1", "oflags", "ts", "ch", "fl", "dlc", "id", "data"],
+                    "formats": ["<u8", "<u8", "<u4", "<u8", "<u2", "u1", "u1", "<u4", ("u1", 8)],
+                    "offsets": [0, 8, 16, 24, 32, 34, 35, 36, 40], "itemsize": size})
     for size in (48, 56)
 }
 
@@ -100,7 +99,7 @@ def decode_run(buf: bytes, start: int) -> Decoded | None:
     one strided structured view; whatever follows goes through the general gather path.
     """
     head = _uniform_run(buf, start)
-    if head is not None and head.end >= len(buf) - 3:
+    if head is not None and (head.end >= len(buf) - 3 or _incomplete_tail(buf, head.end)):
         return head
     rest_start = head.end if head is not None else start
     rest = _decode_general(buf[rest_start:], 0)
@@ -121,23 +120,37 @@ def decode_run(buf: bytes, start: int) -> Decoded | None:
                    head.type_counts + rest.type_counts)
 
 
+def _incomplete_tail(buf: bytes, pos: int) -> bool:
+    """True when ``buf[pos:]`` is just the start of one plausible object (carried to the next container)."""
+    j = buf.find(b"LOBJ", pos, pos + 7)
+    if j < 0 or j - pos > 3:
+        return False
+    if len(buf) - j < 16:
+        return True
+    hsize, hver, size, otype = struct.unpack_from("<HHLL", buf, j + 4)
+    t = min(otype, 255)
+    return (j + size > len(buf) and hver in (1, 2) and hsize in (32, 40)
+            and _PAY_MIN[t] <= size - hsize <= _PAY_MAX[t] and size <= K.MAX_OBJECT_SIZE)
+
+
 def _uniform_run(buf: bytes, start: int) -> Decoded | None:
     """The leading run of same-size v1 CAN_MESSAGE / CAN_MESSAGE2 objects, decoded via a strided view."""
     first = buf.find(b"LOBJ", start, start + 7)
     if first < 0 or first - start > 3 or len(buf) - first < 48:
         return None
     hsize, hver, size, otype = struct.unpack_from("<HHLL", buf, first + 4)
-    if hsize != 32 or hver != 1 or otype not in (K.CAN_MESSAGE, K.CAN_MESSAGE2) or size not in (48, 56):
+    if hsize != 32 or hver != 1 or (otype, size) not in ((K.CAN_MESSAGE, 48), (K.CAN_MESSAGE2, 48),
+                                                         (K.CAN_MESSAGE2, 56)):
         return None
     count = (len(buf) - first) // size
     view = np.ndarray((count,), _UNIFORM[size], buffer=buf, offset=first, strides=(size,))
     ten_us = view["oflags"] == 1
     ts = view["ts"]
-    ok = ((view["sig"] == _SIG) & (view["size"] == size) & (view["hsize"] == 32) & (view["hver"] == 1)
-          & ((view["type"] == K.CAN_MESSAGE) | (view["type"] == K.CAN_MESSAGE2))
-          & (ts <= np.where(ten_us, _MAX_10US, _I64_MAX)))
-    if size == 48:
-        ok &= view["type"] == K.CAN_MESSAGE  # CAN_MESSAGE2 is 56 bytes
+    # the 16-byte base header (signature, sizes, version, type) repeats exactly in a uniform run
+    h0, h1 = view["h0"], view["h1"]
+    ok = (h0 == h0[0]) & (h1 == h1[0])
+    if count and ts.max() > _MAX_10US:
+        ok &= ts <= np.where(ten_us, _MAX_10US, _I64_MAX)
     n = count if ok.all() else int(np.argmin(ok))
     if n == 0:
         return None
