@@ -20,6 +20,7 @@ each consumer's ceiling. Usage::
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import tempfile
@@ -228,6 +229,7 @@ def main() -> int:
     if args.generator:
         generator(args.rate, args.seconds, args.flood)
         return 0
+    load0 = os.getloadavg()[0]
     gen = subprocess.Popen([sys.executable, __file__, "--generator", "--rate", str(args.rate), "--seconds",
                             str(args.seconds), "--flood", str(args.flood)], stdin=subprocess.PIPE,
                            stdout=subprocess.PIPE, text=True, cwd=REPO)
@@ -245,7 +247,8 @@ def main() -> int:
     gen.stdin.close()
     gen.wait(10)
     print(f"live decoding benchmark: reference EV traffic (dbc/lashscope_ev.dbc + 20 % unknown IDs), "
-          f"paced {args.rate} frames/s for {args.seconds:g} s, then {args.flood} frames unpaced")
+          f"paced {args.rate} frames/s for {args.seconds:g} s, then {args.flood} frames unpaced; "
+          f"{os.cpu_count()} CPUs, load average before {load0:.2f}, after {os.getloadavg()[0]:.2f}")
     print(f"{'phase':6} {'consumer':30} {'frames':>8} {'frames/s':>9} {'lat p50 ms':>10} {'lat p99 ms':>10} "
           f"{'CPU us/frame':>12} {'dropped':>7}")
     for phase, name, r in rows:
