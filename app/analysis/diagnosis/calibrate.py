@@ -224,15 +224,16 @@ def fit(
         # the baseline's nuisance values may have soaked up the effect (a road load taking a drag, an
         # offset taking a delay): screen every start with them and with the nominal values
         u_nominal = prob.encode(Nuisance())[:prob.N_NUISANCE]
-        for eff_u in _starts(effects, rng, n_random_starts):
+        for k, eff_u in enumerate(_starts(effects, rng, n_random_starts)):
             candidates.append(np.concatenate([u_nui, eff_u]))
-            candidates.append(np.concatenate([u_nominal, eff_u]))
+            if k < 2:  # mid-prior and near-off starts also with nominal nuisance values
+                candidates.append(np.concatenate([u_nominal, eff_u]))
     scored = [(_chi2(prob.residuals(u)), i) for i, u in enumerate(candidates)]
     best_u = candidates[min(scored)[1]]
     n_par = best_u.size
     budget = max_nfev if max_nfev is not None else 6 * (n_par + 1)
     sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
-                        diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-4, gtol=1e-6)
+                        diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6)
     u = np.asarray(sol.x, dtype=np.float64)
     r = prob.residuals(u)
     nui, settings = prob.decode(u, prob.last_offset)
