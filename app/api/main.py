@@ -16,14 +16,14 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from app import __version__
 from app.api import errors
-from app.api.routes import analyses, health, live, logs, series, vehicles
+from app.api.routes import analyses, diagnoses, health, live, logs, series, vehicles
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
 from app.storage.results import ResultCache
 from app.storage.sqlite import SQLiteStore
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
-                            live.router]
+                            live.router, diagnoses.router]
 
 log = logging.getLogger("lashscope.api")
 
