@@ -43,8 +43,6 @@ def client(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[TestClie
 
     monkeypatch.setattr(diagnoses, "_decode", fake_decode)
     app = create_app(Settings(data_dir=tmp_path / "data"))
-    if diagnoses.router not in app.router.routes:
-        app.include_router(diagnoses.router)
     with TestClient(app) as c:
         store = app.state.store
         ids = {}
