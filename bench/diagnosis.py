@@ -22,6 +22,7 @@ candidate fit), shrink on the second drive, timings -- and the issue's targets a
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -157,9 +158,9 @@ def make_log(vehicle: Vehicle, truth: Vehicle, seed: int, tmp: Path, duration: f
 def run_case(case: Case, vehicle: Vehicle, tmp: Path, duration: float) -> Outcome:
     truth = apply_effects(vehicle, {case.truth: case.values}) if case.truth else vehicle
     signals, _, ratio = make_log(vehicle, truth, case.seed, tmp, duration)
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     res = diagnose_signals(signals, vehicle, DiagnosisOptions(candidates=case.candidates, seed=case.seed))
-    elapsed = time.perf_counter() - t0
+    elapsed = time.process_time() - t0  # CPU time: the machine is shared, wall time says little
     d = res.decision
     shrink = d.best.shrink.value if d.best is not None and d.top else float("nan")
     oracle = float("nan")
@@ -188,20 +189,22 @@ def timing_comparison(vehicle: Vehicle, tmp: Path) -> None:
     cal = make_split(events, 0).calibration_events(events)
     tq = signals["motor_torque_nm"]
     simulate(vehicle, tq.t[:50], tq.values[:50], interp="linear")  # compile/load kernels
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     for _ in range(3):
         for ev in cal:
             simulate_event(ev, vehicle, 1.0)
-    windows = (time.perf_counter() - t0) / 3
-    t0 = time.perf_counter()
-    simulate(vehicle, tq.t, tq.values, interp="linear", speed0_rpm=float(signals["motor_speed_rpm"].values[0]))
-    whole = time.perf_counter() - t0
-    print(f"one fit evaluation: {len(cal)} calibration windows {1e3 * windows:.0f} ms; whole 60 s log "
+    windows = (time.process_time() - t0) / 3
+    t0 = time.process_time()
+    for _ in range(3):
+        simulate(vehicle, tq.t, tq.values, interp="linear", speed0_rpm=float(signals["motor_speed_rpm"].values[0]))
+    whole = (time.process_time() - t0) / 3
+    print(f"one fit evaluation (CPU): {len(cal)} calibration windows {1e3 * windows:.0f} ms; whole 60 s log "
           f"{1e3 * whole:.0f} ms; ratio {whole / windows:.1f}x")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res = diagnose_signals(signals, vehicle, DiagnosisOptions())
     print(f"60 s log, {len(res.events)} events, {len(res.options.candidates)} candidates: diagnosed in "
-          f"{time.perf_counter() - t0:.1f} s (decision {res.decision.status})")
+          f"{time.process_time() - c0:.1f} s CPU ({time.perf_counter() - t0:.1f} s wall on a shared machine; "
+          f"load average {os.getloadavg()[0]:.1f}), decision {res.decision.status}")
 
 
 def cases(seeds: int, n_none: int, loo_seeds: int) -> list[Case]:
@@ -280,7 +283,7 @@ def report(outs: list[Outcome]) -> None:
     for o in loo_expl:
         print(f"  LOO false explained: truth {o.case.truth} -> {'+'.join(o.top)}")
     times = [o.elapsed for o in outs]
-    print(f"diagnosis time per log: median {np.median(times):.1f} s, max {np.max(times):.1f} s "
+    print(f"diagnosis CPU time per log: median {np.median(times):.1f} s, max {np.max(times):.1f} s "
           f"(events per log: median {np.median([o.n_events for o in outs]):.0f})")
 
     def check(name: str, ok: bool, value: str) -> None:
