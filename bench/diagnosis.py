@@ -305,6 +305,7 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="reduced size: 2 seeds per effect, 3 no-effect, 1 LOO")
     ap.add_argument("--duration", type=float, default=None, help="drive length in s (default 60, quick 40)")
     ap.add_argument("--no-timing", action="store_true", help="skip the 60 s timing comparison")
+    ap.add_argument("--timing-only", action="store_true", help="only the 60 s timing comparison")
     args = ap.parse_args()
     seeds, n_none, loo_seeds = (2, 3, 1) if args.quick else (5, 5, 2)
     duration = args.duration or (40.0 if args.quick else 60.0)
@@ -316,6 +317,8 @@ def main() -> int:
         tmp = Path(d)
         if not args.no_timing:
             timing_comparison(vehicle, tmp)
+        if args.timing_only:
+            return 0
         for i, case in enumerate(todo):
             o = run_case(case, vehicle, tmp, duration)
             outs.append(o)
