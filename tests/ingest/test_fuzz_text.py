@@ -18,6 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from app.errors import LogFormatError, TruncatedLogError
+from app.ingest.readers import asc as asc_module
 from tests.ingest.test_fuzz_blf import run_bounded
 from tests.ingest.test_readers_roundtrip import make_messages
 
@@ -51,7 +52,9 @@ ASC_DAMAGE = [  # (line, expected issue kind)
 ]
 
 
-def test_asc_damage_reported_with_line_numbers() -> None:
+@pytest.mark.parametrize("fast_path", [True, False], ids=["compiled", "line-parser"])
+def test_asc_damage_reported_with_line_numbers(fast_path: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(asc_module, "FAST_PATH_MIN_BYTES", 0 if fast_path else 10**12)
     lines = _asc_lines()
     good = run_bounded(b"".join(lines))
     assert good.chunk is not None and good.report is not None and good.report.ok

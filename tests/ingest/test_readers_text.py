@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import io
 from datetime import UTC, datetime
+from pathlib import Path
 
 import pytest
 
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers import LogReader, open_log
+from app.ingest.readers import asc as asc_module
 from app.ingest.readers.asc import parse_asc_date
+from tests.conftest import DATA
 
 
 def read_text(text: str, **kw: object) -> tuple[FrameChunk, LogReader]:
@@ -120,3 +123,21 @@ def test_gvret_header_with_dir_column_and_epoch_clock() -> None:
     assert list(chunk.t_ns) == [0, 250_000]
     assert list(chunk.flags) == [FrameFlag.TX, FrameFlag.EXTENDED] and list(chunk.channel) == [1, 0]
     assert bytes(chunk.data[0, :2]) == b"\xaa\xbb"
+
+
+ASC_FILES = [p for p in sorted(DATA.rglob("*.asc")) if p.stat().st_size < 400_000] if DATA.is_dir() else []
+
+
+@pytest.mark.parametrize("path", ASC_FILES, ids=lambda p: p.name[:40])
+def test_asc_compiled_fast_path_equals_line_parser(path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def read(min_bytes: int) -> tuple[FrameChunk, list[tuple[str, int | None]]]:
+        monkeypatch.setattr(asc_module, "FAST_PATH_MIN_BYTES", min_bytes)
+        with open_log(path) as log:
+            chunk = FrameChunk.concat(log.chunks())
+        return chunk, [(i.kind, i.line) for i in log.report.issues]
+
+    fast, fast_issues = read(0)
+    slow, slow_issues = read(10**12)
+    assert fast_issues == slow_issues
+    for col in ("t_ns", "channel", "arb_id", "flags", "dlc", "data"):
+        assert (getattr(fast, col) == getattr(slow, col)).all(), col

@@ -27,6 +27,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterator
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
@@ -44,6 +45,10 @@ EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFla
                                                     FrameFlag.REMOTE, FrameFlag.BRS, FrameFlag.ESI, FrameFlag.TX))
 
 Frame = tuple[int, int, int, int, int, bytes]  # t_ns, channel, arb_id, flags, dlc, payload
+
+# Loading the compiled fast path costs about a second (numba); text blocks smaller than this
+# (files below ~8000 lines) are parsed line by line in less time than that.
+FAST_PATH_MIN_BYTES = 512 * 1024
 
 
 def parse_asc_date(text: str) -> tuple[datetime, str] | None:
@@ -219,18 +224,20 @@ class ASCReader(BaseReader):
 
     # -- the loop -------------------------------------------------------------------------------
     def _iter_chunks(self) -> Iterator[FrameChunk]:
-        from app.ingest.readers import asc_kernel as K  # numba loads on first use only
-
         builder = ChunkBuilder(self.chunk_frames)
         lines = LineSource(self._stream, self._long_line, self.damage)
         self._mismatch = 0
         t_acc = 0
+        kernel: Any = None
         for block, first in lines.blocks():
+            if kernel is None and len(block) >= FAST_PATH_MIN_BYTES:
+                from app.ingest.readers import asc_kernel as kernel  # numba loads on first use only
+            K = kernel
             arr = np.frombuffer(block, np.uint8)
             end = len(block)
             pos, line_no = 0, first - 1
             while pos < end:
-                if self.base == 16:
+                if self.base == 16 and K is not None:
                     st, pos, line_no, n, t_acc, eol = K.scan_lines(
                         arr, pos, end, line_no, self.relative, t_acc, builder.t_ns, builder.channel,
                         builder.arb_id, builder.flags, builder.dlc, builder.data, builder.n, builder.cap)
