@@ -102,7 +102,8 @@ def extract_raw(payload: npt.NDArray[np.uint8], layout: SignalLayout,
     if layout.float_bits:
         ftype = {16: np.float16, 32: np.float32, 64: np.float64}[layout.float_bits]
         itype = {16: np.uint16, 32: np.uint32, 64: np.uint64}[layout.float_bits]
-        return value.astype(itype).view(ftype).astype(np.float64)
+        with np.errstate(invalid="ignore"):  # signalling NaN payloads convert quietly, as in Python
+            return value.astype(itype).view(ftype).astype(np.float64)
     if not layout.signed:
         return value
     if length == 64:

@@ -280,7 +280,8 @@ class VectorDecoder:
         present = {name: np.zeros(n, bool) for name in plan.maybe_absent}
         words: dict[tuple[int, bool], npt.NDArray[np.uint64]] = {}
         avail_bits = dlc * 8
-        self._walk(plan.root, np.flatnonzero(ok), payload, words, avail_bits, values, present, ok, errors)
+        with np.errstate(all="ignore"):  # inf/NaN float signals scale like Python floats, silently
+            self._walk(plan.root, np.flatnonzero(ok), payload, words, avail_bits, values, present, ok, errors)
         keep = np.flatnonzero(ok)
         sel = idx[keep]
         return DecodedMessage(
