@@ -119,3 +119,10 @@ def test_merge_by_time_is_ordered_stable_and_bounded() -> None:
     assert all(len(p) <= 2 for p in parts)
     assert list(merged.t_ns) == [0, 5, 5, 6, 7, 8, 10, 20, 30, 40]
     assert list(merged.channel[1:3]) == [0, 1]  # equal times keep stream order
+
+
+@pytest.mark.parametrize("raw", [BLF, CANDUMP, CSV, TRC], ids=["blf", "candump", "csv", "trc"])
+def test_any_format_gzipped(raw: bytes) -> None:
+    with open_log(io.BytesIO(gzip.compress(raw))) as log:
+        assert len(FrameChunk.concat(log.chunks())) == 1
+    assert log.report.ok
