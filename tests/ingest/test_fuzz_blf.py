@@ -231,3 +231,20 @@ def test_arbitrary_bytes_after_a_blf_header(payload: bytes) -> None:
        st.sampled_from([None, "blf", "asc", "candump", "trc", "gvret_csv", "mf4"]))
 def test_arbitrary_bytes_any_reader(payload: bytes, fmt: str | None) -> None:
     run_bounded(payload, fmt=fmt)
+
+
+@pytest.mark.parametrize(("field", "value"), [(4, 0), (4, 0xFFFFFFFF), (4, 100_000), (16, 2**63), (42, 13)],
+                         ids=["header-size-0", "header-size-max", "header-size-100k", "file-size-huge", "bad-date"])
+def test_damaged_file_header_fields(field: int, value: int) -> None:
+    data = bytearray(BASE)
+    fmt = "<Q" if field == 16 else "<H" if field == 42 else "<L"  # file size u64, SYSTEMTIME month u16
+    struct.pack_into(fmt, data, field, value)
+    out = run_bounded(bytes(data))
+    assert out.chunk is not None and len(out.chunk) == N_FRAMES, out.error
+    assert out.report is not None
+    if field == 4:
+        assert [i.kind for i in out.report.issues] == ["bad_header"]
+    elif field == 16:
+        assert [i.kind for i in out.report.issues] == ["truncated"]  # the header promises more than the file has
+    else:
+        assert out.report.ok
