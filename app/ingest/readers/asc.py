@@ -46,8 +46,8 @@ EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFla
 
 Frame = tuple[int, int, int, int, int, bytes]  # t_ns, channel, arb_id, flags, dlc, payload
 
-# Loading the compiled fast path costs about a second (numba); text blocks smaller than this
-# (files below ~8000 lines) are parsed line by line in less time than that.
+# Loading the compiled fast path (numba) has a fixed start-up cost; text blocks smaller than this
+# (files below ~8000 lines) are parsed line by line in less time than the load takes.
 FAST_PATH_MIN_BYTES = 512 * 1024
 
 
