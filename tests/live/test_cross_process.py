@@ -92,3 +92,37 @@ def test_replay_of_a_missing_or_corrupt_log_is_a_one_line_error(tmp_path: Path) 
                               capture_output=True, text=True, timeout=60)
         assert proc.returncode == 2, proc.stderr
         assert proc.stderr.startswith("lashscope: error [") and "Traceback" not in proc.stderr
+
+
+def test_live_command_records_and_reports_events(tmp_path: Path) -> None:
+    dbc = drive.write_dbc(tmp_path)
+    log = drive.write_blf(tmp_path / "drive.blf", drive.drive_messages(duration_s=4.0, period_s=1.6))
+    out = tmp_path / "cli.blf"
+    with LoopbackHub() as hub:
+        proc = subprocess.Popen(_lashscope("live", "-i", "tcp_loopback", "-c", hub.channel, "--dbc", str(dbc),
+                                           "--map", str(drive.map_of(dbc)), "--out", str(out), "--json",
+                                           "--status-every", "0"),
+                                cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 30
+            while hub.clients < 1 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            link_proc = subprocess.run(_lashscope("replay", str(log), "-i", "tcp_loopback", "-c", hub.channel,
+                                                  "--rate", "2"), cwd=REPO, capture_output=True, text=True,
+                                       timeout=60)
+            assert link_proc.returncode == 0, link_proc.stderr
+            time.sleep(0.5)
+            os.kill(proc.pid, signal.SIGINT)
+            stdout, err = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+    assert proc.returncode == 0, err
+    lines = [json.loads(line) for line in stdout.splitlines()]
+    events = [x["event"] for x in lines if "event" in x]
+    summary = lines[-1]
+    n = sum(len(c) for c in open_log(log).chunks())
+    assert summary["status"]["frames_processed"] == n and summary["status"]["state"] == "stopped"
+    assert [e["kind"] for e in events] == ["tip_in", "tip_out"]
+    assert sum(len(c) for c in open_log(out).chunks()) == n
