@@ -55,16 +55,17 @@ def get_effect(effect_id: str) -> Effect:
 def apply_effects(vehicle: Any, settings: Mapping[str, Mapping[str, float]]) -> Any:
     """``vehicle`` with each effect's parameter values applied (``{effect_id: {param: value}}``).
 
-    Effects that act on the input or output only cannot be stored in a vehicle and raise
-    :class:`~sim.errors.ParameterError`.
+    Every effect's changes are computed from the same base ``vehicle`` and applied in one rebuild,
+    so the result does not depend on the order of the effects. Effects that act on the input or
+    output only cannot be stored in a vehicle and raise :class:`~sim.errors.ParameterError`.
     """
-    v = vehicle
+    changes: dict[str, Any] = {}
     for eid, values in settings.items():
         eff = get_effect(eid)
         if eff.vehicle_change is None:
             raise ParameterError(f"effects.{eid}", dict(values), "acts outside the vehicle; cannot be stored in it")
-        v = eff.vehicle_change(v, eff.values(values))
-    return v
+        changes.update(eff.vehicle_change(vehicle, eff.values(values)))
+    return vehicle.with_changes(changes) if changes else vehicle
 
 
 __all__ = ["EFFECTS", "Effect", "ParamSpec", "apply_effects", "get_effect"]

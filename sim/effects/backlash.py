@@ -16,10 +16,10 @@ from sim.effects.base import Effect, ParamSpec, Values
 REDUCER_GAPS = ("spline", "mesh1", "mesh2", "differential")
 
 
-def _apply(vehicle: Any, v: Values) -> Any:
-    changes = {f"gaps.{g}": getattr(vehicle.gaps, g).nominal * v["reducer_scale"] for g in REDUCER_GAPS}
+def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
+    changes: dict[str, Any] = {f"gaps.{g}": getattr(vehicle.gaps, g).nominal * v["reducer_scale"] for g in REDUCER_GAPS}
     changes["gaps.halfshaft"] = vehicle.gaps.halfshaft.nominal * v["halfshaft_scale"]
-    return vehicle.with_changes(changes)
+    return changes
 
 
 EFFECT = Effect(
@@ -29,5 +29,5 @@ EFFECT = Effect(
         ParamSpec("reducer_scale", "-", 0.25, 2.0, 1.0, "reducer gaps (spline, meshes, differential) x nominal"),
         ParamSpec("halfshaft_scale", "-", 0.25, 2.0, 1.0, "half-shaft gap x nominal"),
     ),
-    vehicle_change=_apply,
+    vehicle_change=_changes,
 )

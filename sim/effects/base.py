@@ -4,7 +4,8 @@ An :class:`Effect` has at most three parameters (:class:`ParamSpec`, each with p
 an ``off`` value at which the effect vanishes) and acts in up to three places:
 
 ``vehicle``
-    parameter changes through the model's own fields (``Vehicle.with_changes``), e.g. lash sizes;
+    parameter changes through the model's own fields: a dict of dotted fields for
+    ``Vehicle.with_changes``, e.g. lash sizes (several effects merge into one call);
 ``input``
     a transform of the torque input before it reaches the model, e.g. an actuator lag;
 ``output``
@@ -28,7 +29,7 @@ from sim.errors import ParameterError
 
 FloatArray = npt.NDArray[np.float64]
 Values = Mapping[str, float]
-VehicleChange = Callable[[Any, Values], Any]
+VehicleChange = Callable[[Any, Values], dict[str, Any]]
 InputTransform = Callable[[FloatArray, FloatArray, Values], FloatArray]
 OutputTransform = Callable[[FloatArray, FloatArray, Values], FloatArray]
 
@@ -75,7 +76,7 @@ class Effect:
     id : stable identifier used in reports (``torque_lag``, ``speed_sensor``...).
     title : human-readable name.
     params : parameter specs (at most three).
-    vehicle_change : ``f(vehicle, values) -> vehicle`` or None.
+    vehicle_change : ``f(vehicle, values) -> {dotted field: value}`` or None.
     input_transform : ``f(t_fine, torque_fine, values) -> torque_fine`` or None.
     output_transform : ``f(t_fine, speed_fine, values) -> speed_fine`` or None.
     model : simulator model the effect needs (``"multibody"`` or ``"any"``).
@@ -114,6 +115,12 @@ class Effect:
         if len(seq) != len(self.params):
             raise ParameterError(self.id, seq, f"expects {len(self.params)} values {list(self.names)}")
         return {p.name: p.check(v) for p, v in zip(self.params, seq, strict=True)}
+
+    def apply(self, vehicle: Any, values: Values) -> Any:
+        """``vehicle`` with this effect's field changes (unchanged for input/output-only effects)."""
+        if self.vehicle_change is None:
+            return vehicle
+        return vehicle.with_changes(self.vehicle_change(vehicle, values))
 
     def describe(self) -> dict[str, Any]:
         return {

@@ -18,9 +18,9 @@ from typing import Any
 from sim.effects.base import Effect, ParamSpec, Values
 
 
-def _apply(vehicle: Any, v: Values) -> Any:
-    return vehicle.with_changes({"effects.drag.coulomb_nm": v["coulomb_nm"],
-                                 "effects.drag.viscous_nms": v["viscous_nms"]})
+def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
+    return {"effects.drag.coulomb_nm": v["coulomb_nm"],
+                                 "effects.drag.viscous_nms": v["viscous_nms"]}
 
 
 EFFECT = Effect(
@@ -30,5 +30,5 @@ EFFECT = Effect(
         ParamSpec("coulomb_nm", "N m", 0.0, 6.0, 0.0, "Coulomb friction torque at the rotor"),
         ParamSpec("viscous_nms", "N m s/rad", 0.0, 0.02, 0.0, "viscous drag coefficient at the rotor"),
     ),
-    vehicle_change=_apply,
+    vehicle_change=_changes,
 )

@@ -14,13 +14,13 @@ from typing import Any
 from sim.effects.base import Effect, ParamSpec, Values
 
 
-def _apply(vehicle: Any, v: Values) -> Any:
+def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
     h = vehicle.housing
-    return vehicle.with_changes({
+    return {
         "housing.enabled": True,
         "housing.mount_stiffness": h.mount_stiffness * 2.0 ** v["stiffness_log2"],
         "housing.mount_damping": h.mount_damping * 2.0 ** v["damping_log2"],
-    })
+    }
 
 
 EFFECT = Effect(
@@ -30,6 +30,6 @@ EFFECT = Effect(
         ParamSpec("stiffness_log2", "log2(x nominal)", -2.0, 2.0, 0.0, "mount roll stiffness scale, base-2 log"),
         ParamSpec("damping_log2", "log2(x nominal)", -2.0, 2.0, 0.0, "mount roll damping scale, base-2 log"),
     ),
-    vehicle_change=_apply,
+    vehicle_change=_changes,
     model="multibody",
 )

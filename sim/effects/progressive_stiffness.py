@@ -22,12 +22,12 @@ HALFSHAFT_REF_RAD = 0.1
 MOUNT_REF_RAD = 0.02
 
 
-def _apply(vehicle: Any, v: Values) -> Any:
-    return vehicle.with_changes({
+def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
+    return {
         "effects.progressive_stiffness.halfshaft": v["halfshaft_rel"] * vehicle.halfshaft.stiffness
         / HALFSHAFT_REF_RAD**2,
         "effects.progressive_stiffness.mount": v["mount_rel"] * vehicle.housing.mount_stiffness / MOUNT_REF_RAD**2,
-    })
+    }
 
 
 EFFECT = Effect(
@@ -37,6 +37,6 @@ EFFECT = Effect(
         ParamSpec("halfshaft_rel", "-", 0.0, 2.0, 0.0, "half-shaft k3 as relative hardening at 0.1 rad"),
         ParamSpec("mount_rel", "-", 0.0, 2.0, 0.0, "mount roll k3 as relative hardening at 0.02 rad"),
     ),
-    vehicle_change=_apply,
+    vehicle_change=_changes,
     model="multibody",
 )

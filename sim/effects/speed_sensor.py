@@ -19,9 +19,9 @@ from typing import Any
 from sim.effects.base import Effect, ParamSpec, Values
 
 
-def _apply(vehicle: Any, v: Values) -> Any:
-    return vehicle.with_changes({"effects.speed_sensor.tau_s": v["tau_s"],
-                                 "effects.speed_sensor.delay_s": v["delay_s"]})
+def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
+    return {"effects.speed_sensor.tau_s": v["tau_s"],
+                                 "effects.speed_sensor.delay_s": v["delay_s"]}
 
 
 EFFECT = Effect(
@@ -31,5 +31,5 @@ EFFECT = Effect(
         ParamSpec("tau_s", "s", 0.0, 0.030, 0.0, "first-order filter time constant"),
         ParamSpec("delay_s", "s", 0.0, 0.010, 0.0, "reporting delay"),
     ),
-    vehicle_change=_apply,
+    vehicle_change=_changes,
 )

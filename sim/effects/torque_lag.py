@@ -18,8 +18,8 @@ from typing import Any
 from sim.effects.base import Effect, ParamSpec, Values
 
 
-def _apply(vehicle: Any, v: Values) -> Any:
-    return vehicle.with_changes({"effects.torque_lag.tau_s": v["tau_s"], "effects.torque_lag.delay_s": v["delay_s"]})
+def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
+    return {"effects.torque_lag.tau_s": v["tau_s"], "effects.torque_lag.delay_s": v["delay_s"]}
 
 
 EFFECT = Effect(
@@ -29,5 +29,5 @@ EFFECT = Effect(
         ParamSpec("tau_s", "s", 0.0, 0.040, 0.0, "first-order lag of the air-gap torque behind the CAN value"),
         ParamSpec("delay_s", "s", 0.0, 0.020, 0.0, "transport delay of the air-gap torque"),
     ),
-    vehicle_change=_apply,
+    vehicle_change=_changes,
 )

@@ -21,14 +21,14 @@ from sim.effects.base import Effect, ParamSpec, Values
 MIN_COMPLIANCE = 0.05  # below this (C above 20 MN per unit slip) the tyre is rigid for the driveline
 
 
-def _apply(vehicle: Any, v: Values) -> Any:
+def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
     if v["compliance_per_mn"] < MIN_COMPLIANCE:
-        return vehicle.with_changes({"effects.tyre_slip.enabled": False})
-    return vehicle.with_changes({
+        return {"effects.tyre_slip.enabled": False}
+    return {
         "effects.tyre_slip.enabled": True,
         "effects.tyre_slip.slip_stiffness": 1e6 / v["compliance_per_mn"],
         "effects.tyre_slip.relaxation_length": v["relaxation_m"],
-    })
+    }
 
 
 EFFECT = Effect(
@@ -38,6 +38,6 @@ EFFECT = Effect(
         ParamSpec("compliance_per_mn", "1/MN", 0.0, 40.0, 0.0, "slip compliance 1e6 / C, C in N per unit slip"),
         ParamSpec("relaxation_m", "m", 0.05, 0.6, 0.15, "tyre relaxation length"),
     ),
-    vehicle_change=_apply,
+    vehicle_change=_changes,
     model="multibody",
 )

@@ -142,14 +142,14 @@ class Prediction:
 
 
 def vehicle_with(base: Vehicle, nuisance: Nuisance, effects: Sequence[EffectSetting]) -> Vehicle:
-    """The base vehicle with the road-load nuisance and every effect's vehicle changes applied."""
-    v = base
+    """The base vehicle with the road-load nuisance and every effect's field changes, in one rebuild."""
+    changes: dict[str, Any] = {}
     if nuisance.grade_pct != 0.0:
-        v = v.with_changes({"body.grade_percent": base.body.grade_percent + nuisance.grade_pct})
+        changes["body.grade_percent"] = base.body.grade_percent + nuisance.grade_pct
     for eff, vals in effects:
         if eff.vehicle_change is not None:
-            v = eff.vehicle_change(v, vals)
-    return v
+            changes.update(eff.vehicle_change(base, vals))
+    return base.with_changes(changes) if changes else base
 
 
 def torque_input(ev: DiagEvent, gain: float, effects: Sequence[EffectSetting], interp: str = "pchip") -> FloatArray:
