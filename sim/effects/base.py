@@ -11,9 +11,10 @@ an ``off`` value at which the effect vanishes) and acts in up to three places:
 ``output``
     a transform of the simulated motor speed before it is compared, e.g. sensor filtering.
 
-Input and output transforms work on a uniform fine grid (``dt`` seconds, 1 ms by default) so that
-sub-sample delays and lags are represented; the caller feeds the transformed input to the
-simulator with linear interpolation.
+Input and output transforms work on the diagnosis' uniform 1 ms grid, so that sub-sample delays
+and lags are represented; the caller feeds the transformed input to the simulator with linear
+interpolation. The current library needs none: the simulator carries torque lag, sensor filtering
+and drag as its own optional fields, which keeps a fitted effect storable in a vehicle file.
 """
 
 from __future__ import annotations
@@ -133,46 +134,3 @@ class Effect:
                        for p in self.params],
             "notes": self.notes,
         }
-
-
-def shift(t: FloatArray, y: FloatArray, delay_s: float) -> FloatArray:
-    """``y(t - delay)`` on the grid ``t``, holding the first value before the start."""
-    if delay_s == 0.0:
-        return y
-    return np.asarray(np.interp(t - delay_s, t, y), dtype=np.float64)
-
-
-def first_order(t: FloatArray, y: FloatArray, tau_s: float) -> FloatArray:
-    """First-order lag ``tau x' = y - x`` on a uniform grid, starting in steady state.
-
-    Uses the exact discretisation for a input held over each step; a time constant below a tenth of
-    the step is treated as no lag.
-    """
-    if y.size < 2:
-        return y
-    dt = float(t[1] - t[0])
-    if tau_s <= 0.1 * dt:
-        return y
-    from scipy.signal import lfilter  # local: keeps ``import sim`` light
-
-    a = float(np.exp(-dt / tau_s))
-    out, _ = lfilter([1.0 - a], [1.0, -a], y, zi=[a * y[0]])
-    return np.asarray(out, dtype=np.float64)
-
-
-def moving_average(t: FloatArray, y: FloatArray, window_s: float) -> FloatArray:
-    """Mean of ``y`` over the trailing window ``[t - window, t]`` (fractional windows allowed).
-
-    This is what an inverter reports when it computes speed as an angle difference over a window.
-    """
-    if y.size < 2:
-        return y
-    dt = float(t[1] - t[0])
-    if window_s <= 0.5 * dt:
-        return y
-    cum = np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))))
-    # before the start the signal is taken as steady at its first value
-    t0 = float(t[0])
-    back = t - window_s
-    cum_back = np.where(back >= t0, np.interp(back, t, cum), (back - t0) * y[0])
-    return np.asarray((cum - cum_back) / window_s, dtype=np.float64)
