@@ -15,7 +15,9 @@ import pytest
 
 from app.errors import LogFormatError
 from app.ingest.frames import FrameChunk, FrameFlag
+from app.ingest.readers import blf as blf_module
 from app.ingest.readers import open_log
+from tests.conftest import DATA
 
 START = (2024, 3, 2, 5, 14, 30, 15, 250)  # SYSTEMTIME: 2024-03-05 14:30:15.250 (a Tuesday)
 
@@ -133,3 +135,30 @@ def test_stray_signature_inside_a_payload_falls_back_correctly() -> None:
 def test_not_blf_signature() -> None:
     with pytest.raises(LogFormatError, match="not a BLF file"):
         open_log(io.BytesIO(b"LOGX" + bytes(200)), fmt="blf")
+
+
+def _fd_mix() -> bytes:
+    fd64 = struct.pack("<BBBBLLLLLLLHBBL", 2, 13, 32, 0, 0x80000042, 0, 0x1000 | 0x2000, 0, 0, 0, 0, 0, 1, 0, 0)
+    objs = [obj(1, can_msg(1, i, bytes([i] * (i % 9)), flags=0x80 if i % 7 == 0 else 0), i * 10, tflags=1 + i % 2)
+            for i in range(60)]
+    objs += [obj(101, fd64 + bytes(range(32)), 700), obj(2, struct.pack("<HH", 3, 0), 710),
+             obj(73, struct.pack("<HHLBBBxLLH2x8s", 2, 0, 0, 0, 0, 8, 0, 0x123, 0, b"abcdefgh"), 720),
+             obj(86, can_msg(2, 0x80000001, b"\x01\x02") + b"\0" * 8, 730, hver=2), obj(96, b"\0" * 44, 740)]
+    return blf_file(objs, container_bytes=333)
+
+
+PYCAN_BLF = sorted((DATA / "python-can-testdata" / "test" / "data").glob("*.blf")) if DATA.is_dir() else []
+
+
+@pytest.mark.parametrize("name", ["mix", *[p.name for p in PYCAN_BLF]])
+def test_vectorised_path_equals_compiled_walk(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    data = _fd_mix() if name == "mix" else (DATA / "python-can-testdata" / "test" / "data" / name).read_bytes()
+    fast, fast_log = read(data)
+    monkeypatch.setattr(blf_module, "decode_run", lambda buf, start: None)  # force the object-by-object walk
+    slow, slow_log = read(data)
+    assert fast_log.report.issues == slow_log.report.issues  # type: ignore[attr-defined]
+    assert fast_log.meta.extra == slow_log.meta.extra  # type: ignore[attr-defined]
+    assert len(fast) == len(slow) > 0
+    for col in ("t_ns", "channel", "arb_id", "flags", "dlc"):
+        assert (getattr(fast, col) == getattr(slow, col)).all(), col
+    assert (fast.data == slow.data[:, : fast.width]).all() and not slow.data[:, fast.width:].any()
