@@ -276,6 +276,14 @@ def report(outs: list[Outcome]) -> None:
           f"median {100 * float(np.median(oracles)) if oracles else float('nan'):.1f} %)")
     print(f"shrink on a second withheld drive: median {100 * float(np.median(second)) if second else float('nan'):.1f} "
           f"% over {len(second)} cases")
+    errs: dict[str, list[float]] = defaultdict(list)
+    for o in correct:
+        for p in EFFECTS[str(o.case.truth)].params:
+            if p.name in o.fitted:
+                errs[f"{o.case.truth}.{p.name}"].append(abs(o.fitted[p.name] - o.case.values[p.name]) / (p.hi - p.lo))
+    if errs:
+        print("parameter recovery (|fitted - true| / prior range, median over correct cases): "
+              + ", ".join(f"{k} {100 * float(np.median(v)):.1f} %" for k, v in errs.items()))
     fails = [o for o in clear if o not in correct]
     for o in fails:
         print(f"  miss: truth {o.case.truth} {o.case.values} (signal {o.signal_ratio:.1f}) -> {o.status} "
