@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from sim.errors import InstabilityError, ParameterError
 from sim.inputs import prepare_input
-from sim.integrate import STATUS_OK, run_chain_batch
+from sim.integrate import STATUS_OK, is_serial_chain, run_chain_batch
 from sim.metrics import peak_to_valley, unloaded_time
 from sim.model import build_chain, deflections, quasi_static_full
 from sim.params import GAP_NAMES, Vehicle
@@ -64,6 +64,8 @@ def simulate_batch(
         except ParameterError as exc:
             raise ParameterError(f"variants[{k}].{exc.field}", exc.value, exc.reason) from exc
     ref = chains[0]
+    if not is_serial_chain(ref.ca, ref.cb, ref.housing):
+        raise ValueError("the kernel needs the serial chain layout of sim.model.build_chain")
     for k, c in enumerate(chains):
         if c.body_names != ref.body_names:
             raise ParameterError(f"variants[{k}]", variants[k], "changes the model topology; batch needs one topology")

@@ -1,9 +1,10 @@
 """Fixed-step compiled integrator for the chain model (numba, cached on disk).
 
 Scheme: semi-implicit (symplectic) Euler, ``omega += dt * M^-1 F(theta, omega, t)`` then
-``theta += dt * omega``. It keeps the energy of the undamped linear part bounded (no drift),
-costs one force evaluation per step and is stable below ``dt = 2 / omega_max``; the caller
-chooses ``dt`` as a fraction of that from the linearised system (:func:`sim.model.max_rate`).
+``theta += dt * omega``, read as leapfrog (speeds at half steps, synchronised for output). It
+keeps the energy of the undamped linear part bounded (no drift), costs one force evaluation per
+step and is stable below ``dt = 2 / omega_max``; the caller chooses ``dt`` as a fraction of the
+limit of the linearised system (:func:`sim.linear.step_limit`).
 Sampled torque makes every sample a kink, which ruins the step control of adaptive solvers;
 a fixed step does not care.
 
@@ -77,10 +78,60 @@ def road_torque(road: np.ndarray, omega_w: float) -> float:
 
 @njit(cache=True, inline="always")
 def road_load_torque(road: np.ndarray, omega_v: float) -> float:
-    """Rolling, aero and grade load (N m at the wheel axle) on the vehicle body (tyre slip on)."""
+    """Rolling, aero and grade load (N m at the wheel axle) at speed ``omega_v * R``, no brake."""
     v = omega_v * road[0]
-    force = road[2] * road[1] * GRAVITY * math.tanh(v / 0.1) + road[3] * v * abs(v) + road[1] * GRAVITY * road[4]
+    x = v / 0.1
+    # rolling resistance sign, smoothed through standstill; tanh is exactly +-1 in double beyond 20
+    sgn = 1.0 if x > 20.0 else (-1.0 if x < -20.0 else math.tanh(x))
+    force = road[2] * road[1] * GRAVITY * sgn + road[3] * v * abs(v) + road[1] * GRAVITY * road[4]
     return road[0] * force
+
+
+def is_serial_chain(ca: np.ndarray, cb: np.ndarray, housing: int) -> bool:
+    """True when couplings join bodies ``j -> j + 1`` in order, followed only by the housing mount."""
+    nch = ca.size - (1 if housing >= 0 else 0)
+    serial = bool(np.array_equal(ca[:nch], np.arange(nch)) and np.array_equal(cb[:nch], np.arange(1, nch + 1)))
+    return serial and (housing < 0 or (int(ca[nch]) == housing and int(cb[nch]) == -1))
+
+
+@njit(cache=True)
+def _initial_forces(
+    theta: np.ndarray, omega: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
+    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, rotor: int, housing: int, wheel: int,
+    vehicle: int, road: np.ndarray, rotor_drag: np.ndarray, t_air: float, tyre_tau: float,
+    delta: np.ndarray, acc: np.ndarray,
+) -> None:
+    """Net torque on every body (``acc``) and coupling deflections (``delta``) of one state; same
+    forces as the step loop of :func:`run_chain` (kept apart so that loop stays one tight body)."""
+    for b in range(acc.size):
+        acc[b] = 0.0
+    th_h = theta[housing] if housing >= 0 else 0.0
+    om_h = omega[housing] if housing >= 0 else 0.0
+    for j in range(ca.size):
+        a = ca[j]
+        bb = cb[j]
+        d = theta[a] - ce[j] * th_h
+        dd = omega[a] - ce[j] * om_h
+        if bb >= 0:
+            d -= cr[j] * theta[bb]
+            dd -= cr[j] * omega[bb]
+        f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+        delta[j] = d
+        acc[a] -= f
+        if bb >= 0:
+            acc[bb] += cr[j] * f
+        if housing >= 0:
+            acc[housing] += ce[j] * f
+    w_r = omega[rotor]
+    acc[rotor] += t_air - rotor_drag[0] * w_r - rotor_drag[1] * math.tanh(w_r / 1.0)
+    if housing >= 0:
+        acc[housing] -= t_air
+    if vehicle >= 0:
+        acc[wheel] -= tyre_tau
+        acc[vehicle] += tyre_tau - road_load_torque(road, omega[vehicle])
+    else:
+        acc[wheel] -= road_load_torque(road, omega[wheel])
+    acc[wheel] -= road[5] * math.tanh(omega[wheel] / 0.05)
 
 
 @njit(cache=True)
@@ -96,108 +147,134 @@ def run_chain(
 ) -> tuple[int, float, int]:
     """Integrate one vehicle; fills the ``out_*`` arrays (row i at ``t0 + i*sub*dt``).
 
+    Leapfrog form of semi-implicit Euler: angles (and the tyre torque) live on the step times,
+    speeds half a step earlier; the start takes a half kick back from the given speeds, and each
+    output row adds the half kick of the force already computed for the next step, so the
+    reported speeds are synchronous with the angles (second order) at no extra force evaluation.
+
     ``out_omega``/``out_tau``/``out_open`` may have zero rows (batch mode: resolver speed only).
     ``lag = [delay_s, tau_s]`` of the air-gap torque. Tyre slip (``vehicle >= 0``): ``tyre =
     [k_t, R/sigma, tau_t at t0]``; its torque goes to column ``nc`` of ``out_tau`` if present.
-    Gap events (coupling index, time, 1=open 0=close) go to ``ev_*`` up to their length.
-    Returns ``(status, t_fail, n_events)``.
+    Gap events (coupling index, time interpolated within the step, 1=open 0=close) go to
+    ``ev_*`` up to their length. Returns ``(status, t_fail, n_events)``.
+
+    The step loop assumes the serial chain of :func:`sim.model.build_chain` (coupling ``j``
+    joins bodies ``j`` and ``j + 1``, then the mount of the housing to ground, if any): no index
+    arrays to chase and the housing torque summed in a register. :func:`is_serial_chain`
+    checks a model; ``ca``/``cb`` only serve the initial state.
     """
     nb = inertia.size
     nc = ca.size
+    nch = nc - 1 if housing >= 0 else nc  # chain couplings; the mount (if any) is last
     full = out_omega.shape[0] > 0
+    out_tyre = full and out_tau.shape[1] > nc
     theta = theta0.copy()
     omega = omega0.copy()
     acc = np.zeros(nb)
+    dtj = np.empty(nb)  # dt / J: one multiply per body and step
+    for b in range(nb):
+        dtj[b] = dt / inertia[b]
     tau = np.zeros(nc)
+    d_prev = np.zeros(nc)
     is_open = np.zeros(nc, dtype=np.bool_)
-    for j in range(nc):
-        d = theta[ca[j]] - (cr[j] * theta[cb[j]] if cb[j] >= 0 else 0.0)
-        dd = omega[ca[j]] - (cr[j] * omega[cb[j]] if cb[j] >= 0 else 0.0)
-        if housing >= 0:
-            d -= ce[j] * theta[housing]
-            dd -= ce[j] * omega[housing]
-        is_open[j] = chalf[j] > 0.0 and abs(d) < chalf[j]
-        tau[j] = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
-    k_in = 0
+    tyre_tau = tyre[2] if vehicle >= 0 else 0.0
     k_lag = 0
-    t_air, k_in = input_at(tin, tq, linear, t0 - lag[0], k_in)
+    t_air, k_lag = input_at(tin, tq, linear, t0 - lag[0], k_lag)
     a_lag = 1.0 - math.exp(-dt / lag[1]) if lag[1] > 0.0 else 1.0
     a_sen = 1.0 - math.exp(-dt / sensor_tau) if sensor_tau > 0.0 else 1.0
-    res = omega[rotor] - (omega[housing] if housing >= 0 else 0.0)
-    sensor = res
+    c_sen = min(1.0, 0.5 * dt / sensor_tau) if sensor_tau > 0.0 else 1.0
+    # start: speeds half a step back, so the first kick lands on the midpoint
+    _initial_forces(theta, omega, ca, cb, cr, ce, ck, ck3, cc, chalf, rotor, housing, wheel, vehicle, road,
+                    rotor_drag, t_air, tyre_tau, d_prev, acc)
+    for j in range(nc):
+        is_open[j] = chalf[j] > 0.0 and abs(d_prev[j]) < chalf[j]
+    for b in range(nb):
+        omega[b] -= 0.5 * dtj[b] * acc[b]
+    sensor = omega0[rotor] - (omega0[housing] if housing >= 0 else 0.0)
     n_ev = 0
     t = t0
-    tyre_tau = tyre[2] if vehicle >= 0 else 0.0
-    out_tyre = full and out_tau.shape[1] > nc
-    for i in range(n_out):
-        if i > 0:
-            for _ in range(sub):
-                t_cmd, k_lag = input_at(tin, tq, linear, t - lag[0], k_lag)
-                t_air += a_lag * (t_cmd - t_air)
-                for b in range(nb):
-                    acc[b] = 0.0
-                for j in range(nc):
-                    a = ca[j]
-                    bb = cb[j]
-                    d = theta[a]
-                    dd = omega[a]
-                    if bb >= 0:
-                        d -= cr[j] * theta[bb]
-                        dd -= cr[j] * omega[bb]
-                    if housing >= 0:
-                        d -= ce[j] * theta[housing]
-                        dd -= ce[j] * omega[housing]
-                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
-                    tau[j] = f
-                    acc[a] -= f
-                    if bb >= 0:
-                        acc[bb] += cr[j] * f
-                    if housing >= 0:
-                        acc[housing] += ce[j] * f
-                    if chalf[j] > 0.0:
-                        now_open = abs(d) < chalf[j]
-                        if now_open != is_open[j]:
-                            is_open[j] = now_open
-                            if n_ev < ev_gap.size:
-                                ev_gap[n_ev] = j
-                                ev_t[n_ev] = t
-                                ev_kind[n_ev] = 1 if now_open else 0
-                                n_ev += 1
-                w_r = omega[rotor]
-                acc[rotor] += t_air - rotor_drag[0] * w_r - rotor_drag[1] * math.tanh(w_r / 1.0)
+    k = 0
+    status = STATUS_OK
+    for row in range(n_out):
+        n_sub = sub if row < n_out - 1 else 1
+        for s in range(n_sub):
+            t = t0 + k * dt
+            th_h = theta[housing] if housing >= 0 else 0.0
+            om_h = omega[housing] if housing >= 0 else 0.0
+            t_cmd, k_lag = input_at(tin, tq, linear, t - lag[0], k_lag)
+            t_air += a_lag * (t_cmd - t_air)
+            for b in range(nb):
+                acc[b] = 0.0
+            acc_h = 0.0  # torque on the housing: mesh reactions, stator, mount
+            for j in range(nch):  # serial chain: coupling j joins body j to body j + 1
+                d = theta[j] - cr[j] * theta[j + 1] - ce[j] * th_h
+                dd = omega[j] - cr[j] * omega[j + 1] - ce[j] * om_h
+                f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+                tau[j] = f
+                acc[j] -= f
+                acc[j + 1] += cr[j] * f
+                acc_h += ce[j] * f
+                if chalf[j] > 0.0:
+                    now_open = abs(d) < chalf[j]
+                    if now_open != is_open[j]:
+                        is_open[j] = now_open
+                        if n_ev < ev_gap.size:  # crossing of |delta| = alpha within the last step
+                            a0 = abs(d_prev[j]) - chalf[j]
+                            a1 = abs(d) - chalf[j]
+                            frac = a0 / (a0 - a1) if a0 != a1 else 1.0
+                            ev_gap[n_ev] = j
+                            ev_t[n_ev] = t - dt + min(max(frac, 0.0), 1.0) * dt
+                            ev_kind[n_ev] = 1 if now_open else 0
+                            n_ev += 1
+                    d_prev[j] = d
+            if housing >= 0:
+                f = contact_torque(th_h, om_h, ck[nch], ck3[nch], cc[nch], 0.0)  # mount to ground
+                tau[nch] = f
+                acc[housing] = acc_h - f - t_air  # ... and the stator reaction
+            w_r = omega[rotor]
+            ext = t_air - rotor_drag[0] * w_r
+            if rotor_drag[1] != 0.0:  # tanh only when there is Coulomb drag
+                ext -= rotor_drag[1] * math.tanh(w_r / 1.0)
+            acc[rotor] += ext
+            if vehicle >= 0:
+                acc[wheel] -= tyre_tau
+                acc[vehicle] += tyre_tau - road_load_torque(road, omega[vehicle])
+            else:
+                acc[wheel] -= road_load_torque(road, omega[wheel])
+            if road[5] != 0.0:
+                acc[wheel] -= road[5] * math.tanh(omega[wheel] / 0.05)
+            if s == 0:  # output row: speeds synchronised with the angles by half of this step's kick
+                res = omega[rotor] + 0.5 * dtj[rotor] * acc[rotor]
                 if housing >= 0:
-                    acc[housing] -= t_air
-                if vehicle >= 0:
-                    acc[wheel] -= tyre_tau + road[5] * math.tanh(omega[wheel] / 0.05)
-                    acc[vehicle] += tyre_tau - road_load_torque(road, omega[vehicle])
-                else:
-                    acc[wheel] -= road_torque(road, omega[wheel])
-                for b in range(nb):
-                    omega[b] += dt * acc[b] / inertia[b]
-                    theta[b] += dt * omega[b]
-                if vehicle >= 0:  # relaxation-length tyre, driven by the updated speeds
-                    w_v = omega[vehicle]
-                    tyre_tau += dt * (tyre[0] * (omega[wheel] - w_v) - tyre[1] * abs(w_v) * tyre_tau)
-                res = omega[rotor] - (omega[housing] if housing >= 0 else 0.0)
-                sensor += a_sen * (res - sensor)
-                t += dt
-            for b in range(nb):
-                if not (math.isfinite(omega[b]) and math.isfinite(theta[b])):
-                    return STATUS_NONFINITE, t, n_ev
-                if abs(omega[b]) > speed_limit:
-                    return STATUS_DIVERGED, t, n_ev
-        out_res[i] = res
-        out_sensor[i] = sensor
-        out_torque[i] = t_air
-        if full:
-            for b in range(nb):
-                out_omega[i, b] = omega[b]
-            for j in range(nc):
-                out_tau[i, j] = tau[j]
-                out_open[i, j] = is_open[j]
-            if out_tyre:
-                out_tau[i, nc] = tyre_tau
-    return STATUS_OK, t, n_ev
+                    res -= omega[housing] + 0.5 * dtj[housing] * acc[housing]
+                out_res[row] = res
+                out_sensor[row] = sensor + c_sen * (res - sensor)
+                out_torque[row] = t_air
+                if full:
+                    for b in range(nb):
+                        out_omega[row, b] = omega[b] + 0.5 * dtj[b] * acc[b]
+                    for j in range(nc):
+                        out_tau[row, j] = tau[j]
+                        out_open[row, j] = is_open[j]
+                    if out_tyre:
+                        out_tau[row, nc] = tyre_tau
+                if row == n_out - 1:
+                    break
+            for b in range(nb):  # kick, drift
+                omega[b] += dtj[b] * acc[b]
+                theta[b] += dt * omega[b]
+            if vehicle >= 0:  # relaxation-length tyre, driven by the new (midpoint) speeds
+                w_v = omega[vehicle]
+                tyre_tau += dt * (tyre[0] * (omega[wheel] - w_v) - tyre[1] * abs(w_v) * tyre_tau)
+            res_half = omega[rotor] - (omega[housing] if housing >= 0 else 0.0)
+            sensor += a_sen * (res_half - sensor)
+            k += 1
+        for b in range(nb):
+            if not (math.isfinite(omega[b]) and math.isfinite(theta[b])):
+                return STATUS_NONFINITE, t, n_ev
+            if abs(omega[b]) > speed_limit:
+                return STATUS_DIVERGED, t, n_ev
+    return status, t, n_ev
 
 
 @njit(cache=True)

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
 
-from sim.errors import InstabilityError
+from sim.errors import InstabilityError, ParameterError
 from sim.model import ChainModel, quasi_static_state
 
 F64 = NDArray[np.float64]
@@ -45,7 +45,10 @@ def contact_torques(m: ChainModel, delta: F64, ddelta: F64) -> F64:
 
 
 def make_rhs(m: ChainModel, t_in: F64, q_in: F64, linear: bool) -> Callable[[float, F64], F64]:
-    """``f(t, y)`` with ``y = [theta (nb), omega (nb)]`` for solve_ivp."""
+    """``f(t, y)`` with ``y = [theta (nb), omega (nb)]`` for solve_ivp (no tyre slip)."""
+    if m.vehicle >= 0:
+        raise ParameterError("effects.tyre_slip.enabled", True, "the solve_ivp reference models the classic "
+                             "wheel-folded vehicle only")
     G = coupling_matrix(m)
     nb = m.n_bodies
     radius, mass, crr, half_rho_cda, sin_grade, brake = m.road

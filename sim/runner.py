@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.errors import InstabilityError
-from sim.integrate import STATUS_NONFINITE, STATUS_OK, run_chain
+from sim.integrate import STATUS_NONFINITE, STATUS_OK, is_serial_chain, run_chain
 from sim.model import ChainModel
 
 F64 = NDArray[np.float64]
@@ -51,6 +51,8 @@ def run_from_state(
     ------
     InstabilityError : a state became non-finite or a speed exceeded ``speed_limit`` (rad/s)
     """
+    if not is_serial_chain(chain.ca, chain.cb, chain.housing):
+        raise ValueError("the kernel needs the serial chain layout of sim.model.build_chain")
     nb, nc = chain.n_bodies, chain.n_couplings
     tyre_on = chain.vehicle >= 0
     out_res, out_sens, out_torque = np.zeros(n_out), np.zeros(n_out), np.zeros(n_out)

@@ -174,6 +174,19 @@ def test_hold_and_linear_differ_on_sparse_irregular_samples() -> None:
     assert not np.allclose(hold.motor_speed_rpm, lin.motor_speed_rpm)
 
 
+def test_step_limit_is_the_stability_boundary() -> None:
+    """The mode-by-mode limit of sim.linear.step_limit is where the scheme really turns unstable."""
+    from sim.linear import step_limit
+
+    lim = step_limit(build_chain(PAPER))
+    t, q = tip_in_torque(duration_s=1.0)
+    ok = simulate(PAPER, t, q, interp="linear", dt=0.95 * lim, output_dt=0.95 * lim)
+    assert np.isfinite(ok.motor_speed_rpm).all() and np.ptp(ok.motor_speed_rpm) < 2000.0
+    with pytest.raises(InstabilityError):
+        simulate(PAPER, t, q, interp="linear", dt=1.1 * lim, output_dt=1.1 * lim)
+    assert choose_step(build_chain(PAPER), 1e-3)[0] <= 0.4 * lim
+
+
 def test_errors() -> None:
     t, q = tip_in_torque(duration_s=0.3)
     with pytest.raises(InstabilityError, match="dt"):
