@@ -38,6 +38,7 @@ class Settings(BaseSettings):
     job_max_attempts: int = Field(default=2, ge=1)
     dbc_dir: Path = Field(default_factory=default_dbc_dir)
     series_cache_entries: int = Field(default=256, ge=0)
+    series_cache_mb: float = Field(default=64.0, ge=0)  # rendered series responses kept in memory
     host: str = "127.0.0.1"
     port: int = Field(default=8000, ge=0, le=65535)
 

@@ -114,14 +114,30 @@ def downsample_minmax(
     pad = buckets * size - n
     keep = [np.array([0, n - 1])]
     base = np.arange(buckets) * size
+    full = n // size  # whole buckets are reshaped views (no copy); the short last one is done apart
     for y in columns.values():
-        hi = np.where(np.isnan(y), -np.inf, y)
-        lo = np.where(np.isnan(y), np.inf, y)
-        if pad:
-            hi = np.concatenate([hi, np.full(pad, -np.inf)])
-            lo = np.concatenate([lo, np.full(pad, np.inf)])
-        keep.append(base + np.argmax(hi.reshape(buckets, size), axis=1))
-        keep.append(base + np.argmin(lo.reshape(buckets, size), axis=1))
+        keep.append(_bucket_extremes(y, base, full, size, pad))
     rows = np.unique(np.concatenate(keep))
     rows = rows[rows < n]
     return t[rows], {name: y[rows] for name, y in columns.items()}
+
+
+def _bucket_extremes(y: FloatArray, base: npt.NDArray[np.int64], full: int, size: int,
+                     pad: int) -> npt.NDArray[np.int64]:
+    """Rows of the max and of the min of ``y`` in every bucket of ``size`` rows, NaN ignored."""
+    hi = np.empty(base.size, np.int64)
+    lo = np.empty(base.size, np.int64)
+    if full:  # whole buckets as reshaped views: no copy
+        hi[:full] = base[:full] + np.argmax(y[:full * size].reshape(full, size), axis=1)
+        lo[:full] = base[:full] + np.argmin(y[:full * size].reshape(full, size), axis=1)
+    if pad:
+        hi[full] = full * size + int(np.argmax(y[full * size:]))
+        lo[full] = full * size + int(np.argmin(y[full * size:]))
+    # argmax/argmin stop at the first NaN: redo just those buckets ignoring NaN
+    for b in np.flatnonzero(np.isnan(y[hi]) | np.isnan(y[lo])):
+        seg = y[base[b]:base[b] + size]
+        ok = np.flatnonzero(~np.isnan(seg))
+        if ok.size:
+            hi[b] = base[b] + ok[np.argmax(seg[ok])]
+            lo[b] = base[b] + ok[np.argmin(seg[ok])]
+    return np.concatenate([hi, lo])

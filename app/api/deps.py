@@ -1,4 +1,7 @@
-"""Dependencies as ``Annotated`` aliases: routes declare ``store: StoreDep`` and so on."""
+"""Dependencies as ``Annotated`` aliases: routes declare ``store: StoreDep`` and so on.
+
+The app-state getters are ``async`` so resolving them never costs a thread-pool hop.
+"""
 
 from __future__ import annotations
 
@@ -12,17 +15,17 @@ from app.storage.base import Store
 from app.storage.results import ResultCache
 
 
-def get_store(request: Request) -> Store:
+async def get_store(request: Request) -> Store:
     store: Store = request.app.state.store
     return store
 
 
-def get_runner(request: Request) -> JobRunner:
+async def get_runner(request: Request) -> JobRunner:
     runner: JobRunner = request.app.state.runner
     return runner
 
 
-def get_results(request: Request) -> ResultCache:
+async def get_results(request: Request) -> ResultCache:
     cache: ResultCache = request.app.state.results
     return cache
 

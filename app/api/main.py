@@ -42,7 +42,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         store = SQLiteStore(cfg.data_dir)
         store.clean_temp()  # uploads cut off by a previous stop
         runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts)
-        app.state.store, app.state.runner = store, runner
+        app.state.store, app.state.runner, app.state.settings = store, runner, cfg
         app.state.results = ResultCache()
         resumed = runner.start()
         if resumed:
