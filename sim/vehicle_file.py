@@ -9,8 +9,10 @@ Layout (see ``sim/presets/paper.toml`` for a documented example)::
     [wheel]        inertia (per wheel, own), radius
     [body]         mass, speed_kmh, rolling_resistance, drag_area, air_density, grade_percent, brake_torque
     [housing]      enabled, inertia, mount_stiffness, mount_damping
-    [gaps.<name>]  nominal, min, max      (total clearance, rad, own shaft angle)
-    [effects.*]    optional effects, all off by default
+    [gaps.<name>]  nominal, min, max      (total clearance, rad, own shaft angle), radius_mm (contact
+                   radius); or nominal_mm, min_mm, max_mm (circumferential clearance) with radius_mm
+    [effects.*]    optional effects, all off by default: torque_lag, speed_sensor, drag,
+                   progressive_stiffness (cubic terms), tyre_slip (enabled, slip_stiffness, relaxation_length)
     [tolerances]   "section.field" = [min, max]
 """
 

@@ -153,3 +153,15 @@ def test_tyre_slip_outputs_and_quasi_static_start() -> None:
     slip = res.wheel_speed_rpm / (res.vehicle_speed_kmh / 3.6 / v.wheel.radius * RPM) - 1.0
     force = tyre[0] / v.wheel.radius / 2  # per tyre
     assert slip[5] == pytest.approx(force / v.effects.tyre_slip.slip_stiffness, rel=0.02)
+
+
+def test_batch_with_tyre_and_cubic_equals_single_runs() -> None:
+    v = PAPER.with_changes({"effects.tyre_slip.enabled": True, **PROGRESSIVE})
+    t, q = tip_in_torque(duration_s=0.3)
+    variants = [{}, {"effects.tyre_slip.relaxation_length": 0.3, "effects.progressive_stiffness.halfshaft": 0.0}]
+    batch = simulate_batch(v, variants, t, q, interp="linear")
+    for k, change in enumerate(variants):
+        single = simulate(v.with_changes(change), t, q, interp="linear")
+        assert np.allclose(batch.motor_speed_rpm[k], single.motor_speed_rpm, atol=1e-9)
+        assert batch.gap_events[k] == single.gap_events
+    assert not np.allclose(batch.motor_speed_rpm[0], batch.motor_speed_rpm[1])
