@@ -24,9 +24,10 @@ def free_port() -> int:
 
 
 class Server:
-    def __init__(self, data_dir: Path, max_upload_mb: float = 4.0) -> None:
+    def __init__(self, data_dir: Path, max_upload_mb: float = 4.0, extra_args: tuple[str, ...] = ()) -> None:
         self.data_dir = data_dir
         self.max_upload_mb = max_upload_mb
+        self.extra_args = extra_args
         self.proc: subprocess.Popen[bytes] | None = None
         self.url = ""
 
@@ -36,7 +37,8 @@ class Server:
         env = {**os.environ, "MPLBACKEND": "Agg", "PYTHONPATH": str(REPO)}
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port), "--data-dir",
-             str(self.data_dir), "--max-upload-mb", str(self.max_upload_mb), "--log-level", "warning"],
+             str(self.data_dir), "--max-upload-mb", str(self.max_upload_mb), "--log-level", "warning",
+             *self.extra_args],
             cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -73,7 +75,7 @@ class Server:
 
 @pytest.fixture
 def server(tmp_path: Path) -> Iterator[Server]:
-    srv = Server(tmp_path / "data").start()
+    srv = Server(tmp_path / "data", extra_args=("--cors-origin", "http://dashboard.test")).start()
     yield srv
     srv.stop()
 

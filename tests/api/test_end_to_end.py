@@ -77,6 +77,10 @@ def test_upload_analyse_and_read_everything(server: Server, demo_log: Path) -> N
         assert all(g["sensitivity"] < 100.0 for g in sens["gaps"][:3])
         assert sens["zero_gaps"]["impact_rpm"] == 0.0
 
+        cors = c.get("/health", headers={"Origin": "http://dashboard.test"})
+        assert cors.headers["access-control-allow-origin"] == "http://dashboard.test"
+        assert "access-control-allow-origin" not in c.get("/health", headers={"Origin": "http://evil.test"}).headers
+
         spec = c.get("/openapi.json").json()
         assert {"/logs", "/vehicles", "/analyses", "/analyses/{analysis_id}/speed", "/health"} <= set(spec["paths"])
 

@@ -1,0 +1,58 @@
+"""The command line on the same pipeline: ``lashscope analyze --json`` and ``lashscope demo``."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import pytest
+
+from app.cli import main
+from app.demo.build import build_demo_log
+from app.demo.scenario import Scenario
+from app.settings import default_dbc_dir
+
+DBC = default_dbc_dir()
+
+
+@pytest.fixture(scope="module")
+def short_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("cli") / "short.blf"
+    build_demo_log(path, DBC / "lashscope_ev.dbc", DBC / "lashscope_ev.map.toml", Scenario(duration_s=20.0))
+    return path
+
+
+def test_demo_log_is_deterministic(short_log: Path, tmp_path: Path) -> None:
+    again = tmp_path / "again.blf"
+    build_demo_log(again, DBC / "lashscope_ev.dbc", DBC / "lashscope_ev.map.toml", Scenario(duration_s=20.0))
+    assert hashlib.sha256(again.read_bytes()).digest() == hashlib.sha256(short_log.read_bytes()).digest()
+
+
+def test_analyze_json(short_log: Path, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    out = tmp_path / "result.json"
+    assert main(["analyze", str(short_log), "--vehicle", "paper", "--json", "--out", str(out)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc == json.loads(out.read_text())
+    assert doc["vehicle"] == "paper" and doc["summary"]["with_metrics"] >= 4
+    assert doc["ingest"]["format"] == "blf" and "motor_speed_rpm" in doc["ingest"]["channels"]
+    assert {"measured", "simulated", "difference", "rms_rpm", "nrmse"} <= set(doc["metrics"][0])
+
+
+def test_analyze_errors_are_one_line_with_code(short_log: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["analyze", str(short_log), "--vehicle", "no-such-preset"]) == 2
+    assert capsys.readouterr().err.startswith("lashscope: error [")
+
+
+def test_demo_builds_analyses_plots_and_stores(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--data-dir", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "analysed" in text and "fluctuation peak-valley" in text
+    png = tmp_path / "demo" / "overlay.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20000
+    from app.storage import SQLiteStore
+
+    store = SQLiteStore(tmp_path)
+    (analysis,) = store.list_analyses()
+    assert analysis.job.status.value == "done" and analysis.summary["with_metrics"] >= 20
+    store.close()
