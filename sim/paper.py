@@ -82,6 +82,11 @@ class Row:
     target: str
     ok: bool | None  # None: reported, no target
 
+    def __post_init__(self) -> None:  # plain Python types, so rows serialise to JSON as they are
+        object.__setattr__(self, "ours", float(self.ours))
+        if self.ok is not None:
+            object.__setattr__(self, "ok", bool(self.ok))
+
 
 def reproduce(vehicle: Vehicle) -> tuple[list[Row], dict[str, CaseResult]]:
     """All cases of Sections 2.3 and 4 and the comparison rows with pass/fail per target."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -77,6 +79,10 @@ def test_cli_reproduce_and_simulate(tmp_path, capsys) -> None:  # type: ignore[n
     assert main(["reproduce-paper"]) == 0
     printed = capsys.readouterr().out
     assert "targets met" in printed and "S/rad" in printed
+    assert main(["reproduce-paper", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert {r["quantity"] for r in rows} >= {"unloaded time, nominal gaps (ms)"} and all(
+        r["ok"] in (True, False, None) for r in rows)
     csv_in = tmp_path / "torque.csv"
     t, q = tip_in_torque(duration_s=0.4)
     csv_in.write_text("t_s,torque_nm\n" + "".join(f"{a},{b}\n" for a, b in zip(t, q, strict=True)))
