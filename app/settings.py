@@ -6,6 +6,7 @@
 ``LASHSCOPE_ANALYSIS_WORKERS``  background analyses run at the same time (default 1)
 ``LASHSCOPE_JOB_MAX_ATTEMPTS``  a job cut off by a crash is re-run until it has started this often
 ``LASHSCOPE_DBC_DIR``           the project's DBC files and signal maps (default: ``dbc/`` in the source tree)
+``LASHSCOPE_SHUTDOWN_GRACE_S``  on stop, open requests (e.g. live streams) get this long before they are cut
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ class Settings(BaseSettings):
     dbc_dir: Path = Field(default_factory=default_dbc_dir)
     series_cache_entries: int = Field(default=256, ge=0)
     series_cache_mb: float = Field(default=64.0, ge=0)  # rendered series responses kept in memory
+    shutdown_grace_s: int = Field(default=5, ge=0)  # a live event stream never ends by itself
     host: str = "127.0.0.1"
     port: int = Field(default=8000, ge=0, le=65535)
 

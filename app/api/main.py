@@ -3,10 +3,17 @@
 ``create_app(settings)`` wires the store (embedded SQLite + files by default), the job
 runner, CORS and the error handlers, and includes every router in :data:`ROUTERS` -- append
 a module's ``router`` there to add a resource.
+
+On stop (SIGTERM, Ctrl-C) the lifespan closes the job runner to new work (queued jobs stay
+queued in SQLite and run after the next start; uvicorn then ends the process with the signal,
+so a running analysis is cut off and re-run at the next start), stops running live sessions --
+each recording becomes a stored log and, when the session named a vehicle, its analysis is
+queued -- and closes the store.
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -34,6 +41,23 @@ then read events, ripple metrics and measured-vs-simulated speed. Every error is
 `{"detail": ..., "code": ...}`."""
 
 
+async def _stop_live_sessions(app: FastAPI) -> None:
+    """Stop running live sessions so their recordings become stored logs (and their analyses are queued).
+
+    The manager exists only once the live API has been used (``app.api.routes.live.get_manager``).
+    Stopping joins the session threads and hashes the recording, so it runs off the event loop.
+    """
+    manager = getattr(app.state, "live", None)
+    if manager is None:
+        return
+    try:
+        await asyncio.to_thread(manager.shutdown)
+    except Exception:  # the store and the job runner must still be closed
+        log.exception("stopping live sessions at shutdown failed")
+    else:
+        log.info("live sessions stopped and their recordings stored")
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     cfg = settings or get_settings()
 
@@ -50,7 +74,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         try:
             yield
         finally:
+            # The runner first: analyses queued from here on (those of the live recordings) stay queued in
+            # SQLite and run after the next start instead of holding up the exit.
             runner.shutdown(wait=False)
+            await _stop_live_sessions(app)
             store.close()
 
     app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan)

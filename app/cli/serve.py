@@ -33,5 +33,8 @@ def run(args: argparse.Namespace) -> int:
     settings = Settings(**overrides)
     print(f"lashscope: serving on http://{settings.host}:{settings.port} (data in {settings.data_dir.resolve()}; "
           f"API docs at /docs)", flush=True)
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level)
+    # Without a grace limit uvicorn waits for every open response before the lifespan shutdown, and a
+    # server-sent-event stream of a live session stays open until that very shutdown stops the session.
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level,
+                timeout_graceful_shutdown=settings.shutdown_grace_s)
     return 0
