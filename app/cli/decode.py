@@ -24,7 +24,7 @@ from app.ingest.decode import DecodedMessage, VectorDecoder
 from app.ingest.pipeline_signals import load_signals
 from app.ingest.readers import open_log
 from app.ingest.signalmap import load_signal_map
-from app.ingest.stats import DecodeReport, StatsAccumulator
+from app.ingest.stats import CounterGaps, DecodeReport, StatsAccumulator
 from app.ingest.suggest import suggest_candidates, suggest_signal_map
 from app.signals.signal import SignalSet
 
@@ -169,10 +169,7 @@ def format_report(r: DecodeReport) -> str:
         lines.append(f"  {name}: " + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items())))
     lines.append("counter gaps:" if r.counter_gaps else "counter gaps: no alive counters decoded")
     for g in r.counter_gaps:
-        state = "stuck (never changes)" if g.frames > 1 and g.repeats == g.frames - 1 else (
-            f"{g.gaps} gaps, {g.missed} frames missed, {g.repeats} repeats"
-            + (f", first gap at {g.first_gap_s:.3f} s" if g.first_gap_s is not None else ""))
-        lines.append(f"  bus {g.channel} {g.message}.{g.signal} (mod {g.modulus}, {g.frames} frames): {state}")
+        lines.append(f"  bus {g.channel} {g.message}.{g.signal} ({g.frames} frames): {format_counter(g)}")
     counts = ", ".join(f"{k} {v}" for k, v in sorted(r.anomaly_counts.items())) or "none"
     lines.append(f"timestamp anomalies (per bus): {counts}")
     for a in r.timestamp_anomalies:
@@ -184,6 +181,22 @@ def format_report(r: DecodeReport) -> str:
         times = f" (x{i.count})" if i.count > 1 else ""
         lines.append(f"  {where}: {i.kind}{times}: {i.message}{lost}")
     return "\n".join(lines)
+
+
+def format_counter(g: CounterGaps) -> str:
+    """One counter's pattern and deviations, e.g. ``step +1 mod 15 (fits 99.8%): 1 gaps, 3 frames missed, ...``."""
+    if g.kind == "constant":
+        text = f"{g.pattern} (not counting in this log)"
+    elif g.kind in ("irregular", "unknown"):
+        text = "no counting pattern fits: not checked" if g.kind == "irregular" else "too few frames to check"
+    else:
+        text = (f"{g.pattern} (fits {100 * (g.fit or 0.0):.1f}%): {g.gaps} gaps, {g.missed} frames missed, "
+                f"{g.repeats} repeats" + (f", first gap at {g.first_gap_s:.3f} s" if g.first_gap_s is not None else ""))
+    if g.pattern_changes:
+        text += f"; pattern changed {g.pattern_changes} times"
+    if g.unchecked and g.kind != "irregular":
+        text += f"; {g.unchecked} steps fit no pattern (not checked)"
+    return text
 
 
 def format_channels(signals: SignalSet) -> str:

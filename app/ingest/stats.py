@@ -6,9 +6,9 @@ Everything is accumulated chunk by chunk (memory independent of log length) and 
 * **Per-ID periods**: for each (bus channel, ID, extended flag) the mean and standard deviation
   (jitter) of the time between consecutive frames, with the smallest and largest gap.
 * **Counter gaps**: alive/rolling counters (unsigned, unscaled, 2..8 bits, named like
-  ``alive``, ``counter``, ``cnt``, ``rolling``, ``seq``) must advance by one modulo their range
-  (``maximum + 1`` when the DBC says the counter stops short of the top value, else
-  ``2**length``). A step of ``k > 1`` means ``k - 1`` frames were lost; a step of 0 is a repeat.
+  ``alive``, ``counter``, ``cnt``, ``rolling``, ``seq``). Each counter's pattern (step and
+  modulus, or the order of its values, or constant) is learned from the data
+  (:mod:`app.ingest.counters`); a gap is a step that deviates from it.
 * **Timestamp anomalies**, per bus channel in file order: time going backwards, and jumps
   (no frame on the channel for more than ``jump_s``).
 """
@@ -23,6 +23,7 @@ import numpy as np
 from cantools.database.can import Database as CanDatabase
 from cantools.database.can import Signal as CanSignal
 
+from app.ingest.counters import CounterGaps, CounterTrack, dbc_modulus
 from app.ingest.database import Repair
 from app.ingest.decode import EXTENDED_KEY, DecodedMessage
 from app.ingest.frames import FrameChunk, FrameFlag, ReadIssue
@@ -44,19 +45,6 @@ class IdStats:
     min_gap_ms: float | None
     max_gap_ms: float | None
     cycle_ms: float | None = None  # what the database says
-
-
-@dataclass(slots=True)
-class CounterGaps:
-    message: str
-    signal: str
-    channel: int
-    frames: int
-    modulus: int
-    gaps: int  # steps larger than one
-    missed: int  # frames lost according to the counter
-    repeats: int  # steps of zero
-    first_gap_s: float | None
 
 
 @dataclass(slots=True)
@@ -94,14 +82,11 @@ class DecodeReport:
 
 
 def counter_modulus(sig: CanSignal) -> int | None:
-    """The counting range of an alive counter signal, or None when ``sig`` is not one."""
+    """The DBC's counting range of an alive counter signal (a hint only), or None when ``sig`` is not one."""
     if (sig.is_float or sig.is_signed or not 2 <= sig.length <= 8 or sig.scale != 1 or sig.offset != 0
             or sig.is_multiplexer or not _COUNTER_NAME.search(sig.name)):
         return None
-    top = 2 ** sig.length
-    if isinstance(sig.maximum, (int, float)) and 0 < sig.maximum < top - 1 and float(sig.maximum).is_integer():
-        return int(sig.maximum) + 1
-    return top
+    return dbc_modulus(sig)
 
 
 class _Run:
@@ -128,14 +113,13 @@ class StatsAccumulator:
         self._anomalies: list[TimestampAnomaly] = []
         self._anomaly_counts: dict[str, int] = {}
         self._names: dict[int, tuple[str, float | None]] = {}
-        self._counters: dict[str, list[tuple[str, int]]] = {}
-        self._counter_state: dict[tuple[str, str, int], list[float]] = {}
-        self._gaps: dict[tuple[str, str, int], CounterGaps] = {}
+        self._counters: dict[str, list[tuple[str, int, int]]] = {}  # message -> (signal, bits, DBC modulus)
+        self._tracks: dict[tuple[str, str, int], CounterTrack] = {}
         if db is not None:
             for msg in db.messages:
                 key = msg.frame_id | (EXTENDED_KEY if msg.is_extended_frame else 0)
                 self._names[key] = (msg.name, float(msg.cycle_time) if msg.cycle_time else None)
-                found = [(s.name, m) for s in msg.signals if (m := counter_modulus(s)) is not None]
+                found = [(s.name, s.length, m) for s in msg.signals if (m := counter_modulus(s)) is not None]
                 if found:
                     self._counters[msg.name] = found
 
@@ -202,33 +186,20 @@ class StatsAccumulator:
             self._last_t[ch] = int(t[-1])
 
     def add_decoded(self, decoded: Mapping[str, DecodedMessage]) -> None:
-        """Check alive counters of the decoded messages for gaps and repeats."""
+        """Feed the alive counters of the decoded messages to their trackers (per bus)."""
         for dm in decoded.values():
             base_name = dm.name.split("@", 1)[0]
-            for sig, modulus in self._counters.get(base_name, []):
+            for sig, bits, hint in self._counters.get(base_name, []):
                 values = dm.signals.get(sig)
                 if values is None or not len(dm):
                     continue
                 for ch in np.unique(dm.channel).tolist():
                     m = (dm.channel == ch) & np.isfinite(values)
-                    v, t = values[m], dm.t_ns[m]
                     key = (dm.name, sig, int(ch))
-                    state = self._counter_state.get(key)
-                    seq = v if state is None else np.r_[state[0], v]
-                    gaps = self._gaps.setdefault(key, CounterGaps(dm.name, sig, int(ch), 0, modulus, 0, 0, 0, None))
-                    gaps.frames += int(v.size)
-                    if seq.size >= 2:
-                        step = np.mod(np.diff(seq), modulus)
-                        jump = step > 1
-                        gaps.gaps += int(jump.sum())
-                        gaps.missed += int((step[jump] - 1).sum())
-                        gaps.repeats += int((step == 0).sum())
-                        if gaps.first_gap_s is None and jump.any():
-                            # step i leads to seq[i + 1], which is v[i] when a previous value led seq
-                            first = int(np.flatnonzero(jump)[0]) + (1 if state is None else 0)
-                            gaps.first_gap_s = float(t[first]) / 1e9
-                    if v.size:
-                        self._counter_state[key] = [float(v[-1])]
+                    track = self._tracks.get(key)
+                    if track is None:
+                        track = self._tracks[key] = CounterTrack(dm.name, sig, int(ch), bits, hint)
+                    track.feed(values[m], dm.t_ns[m])
 
     def fill(self, report: DecodeReport, decode_errors: Mapping[str, Mapping[str, int]] | None = None) -> DecodeReport:
         """Write the totals into ``report`` (returned for chaining)."""
@@ -252,7 +223,9 @@ class StatsAccumulator:
                                None if not run.n else run.min / 1e6, None if not run.n else run.max / 1e6, cycle))
         report.ids = ids
         report.frames_unknown_id = unknown
-        report.counter_gaps = sorted(self._gaps.values(), key=lambda g: (-g.missed, g.message, g.signal))
+        gaps = [track.finish() for track in self._tracks.values()]
+        self._tracks = {}  # finished: the summary is final
+        report.counter_gaps = sorted(gaps, key=lambda g: (-g.missed, g.message, g.signal, g.channel))
         report.timestamp_anomalies = list(self._anomalies)
         report.anomaly_counts = dict(self._anomaly_counts)
         if decode_errors:
