@@ -334,15 +334,25 @@ def inspect_log(path: Path, progress: ProgressFn = _no_progress) -> dict[str, An
     }
 
 
+GAP_SENSITIVITY_FORMAT = 2  # 2: units stated, per-mm and per-rad values side by side
+
+
 def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> dict[str, Any]:
     """Gap what-ifs for a vehicle under the paper's scripted tip-in (see :mod:`sim.paper`).
 
     For each of the five gaps: the speed fluctuation and impact-induced fluctuation with the
-    gap removed and halved, and the sensitivity ``S_i`` (normalised to the half-shaft gap = 100),
-    next to the nominal and the zero-gap (no backlash at all) responses.
+    gap removed and halved, and the sensitivity ``S_i`` = (impact fluctuation of the nominal
+    minus that without gap i) / size of gap i, normalised to the half-shaft gap = 100, next to
+    the nominal and the zero-gap (no backlash at all) responses.
+
+    The size of a gap is its circumferential clearance in mm (the paper's definition) when the
+    vehicle gives every gap's contact radius, else its angle in rad in its own shaft; the
+    document says which (``sensitivity_unit``) and carries both where both exist:
+    ``sensitivity_per_mm`` (None without radii) and ``sensitivity_per_rad`` per gap.
+    ``sensitivity`` is the one in ``sensitivity_unit``.
     """
     from sim import GAP_NAMES, WhatIf
-    from sim.paper import run_case, sensitivities
+    from sim.paper import run_case, sensitivities, sensitivity_unit
 
     cases = {"nominal": run_case(vehicle, "nominal"), "zero_gaps": run_case(vehicle, "zero_gaps",
                                                                               WhatIf(gap_scale={"all": 0.0}))}
@@ -351,11 +361,25 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
         progress("gap_sensitivity", i / (len(GAP_NAMES) + 1))
         removed = cases[f"no_gap{i}"] = run_case(vehicle, f"no_gap{i}", WhatIf(gap_scale={g: 0.0}))
         halved = run_case(vehicle, f"half_gap{i}", WhatIf(gap_scale={g: 0.5}))
-        gaps.append({"gap": g, "nominal_rad": getattr(vehicle.gaps, g).nominal,
+        gap = getattr(vehicle.gaps, g)
+        gaps.append({"gap": g, "nominal_rad": gap.nominal, "radius_mm": gap.radius_mm or None,
+                     "clearance_mm": gap.arc_mm(name=g) if gap.radius_mm > 0 else None,
                      "removed": _case(removed), "halved": _case(halved)})
-    for row, s in zip(gaps, sensitivities(vehicle, cases), strict=True):
-        row["sensitivity"] = float(s)
-    return {"vehicle": vehicle.name, "scenario": "tip-in -50 -> +150 N m over 0.135 s (sim.paper)",
+    unit = sensitivity_unit(vehicle)
+    per_rad = sensitivities(vehicle, cases, per="rad")
+    per_mm = sensitivities(vehicle, cases, per="mm") if unit == "mm" else [None] * len(GAP_NAMES)
+    for row, s_mm, s_rad in zip(gaps, per_mm, per_rad, strict=True):
+        row["sensitivity_per_mm"] = None if s_mm is None else float(s_mm)
+        row["sensitivity_per_rad"] = float(s_rad)
+        row["sensitivity"] = row["sensitivity_per_mm"] if unit == "mm" else row["sensitivity_per_rad"]
+    size = ("circumferential clearance in mm (angle x contact radius)" if unit == "mm"
+            else "gap angle in rad in its own shaft (the vehicle gives no contact radii)")
+    return {"format": GAP_SENSITIVITY_FORMAT, "vehicle": vehicle.name,
+            "scenario": "tip-in -50 -> +150 N m over 0.135 s (sim.paper)",
+            "sensitivity_unit": unit,
+            "sensitivity_definition": ("S_i = (impact-induced fluctuation, nominal - with gap i removed) / size of "
+                                       f"gap i, normalised to halfshaft = 100; sensitivity is per {unit}: size = "
+                                       f"{size}"),
             "nominal": _case(cases["nominal"]), "zero_gaps": _case(cases["zero_gaps"]), "gaps": gaps}
 
 

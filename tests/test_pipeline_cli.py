@@ -31,12 +31,15 @@ def test_demo_log_is_deterministic(short_log: Path, tmp_path: Path) -> None:
 
 def test_analyze_json(short_log: Path, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     out = tmp_path / "result.json"
-    assert main(["analyze", str(short_log), "--vehicle", "paper", "--json", "--out", str(out)]) == 0
+    assert main(["analyze", str(short_log), "--vehicle", "paper", "--gap-sensitivity", "--json", "--out",
+                 str(out)]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc == json.loads(out.read_text())
     assert doc["vehicle"] == "paper" and doc["summary"]["with_metrics"] >= 4
     assert doc["ingest"]["format"] == "blf" and "motor_speed_rpm" in doc["ingest"]["channels"]
     assert {"measured", "simulated", "difference", "rms_rpm", "nrmse"} <= set(doc["metrics"][0])
+    sens = doc["gap_sensitivity"]
+    assert sens["sensitivity_unit"] == "mm" and sens["gaps"][-1]["sensitivity_per_rad"] == pytest.approx(100.0)
 
 
 def test_analyze_errors_are_one_line_with_code(short_log: Path, capsys: pytest.CaptureFixture[str]) -> None:

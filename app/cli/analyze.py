@@ -20,6 +20,8 @@ def register(sub: Any) -> None:
     p.add_argument("--signal-map", type=Path, default=None, help="signal map (default: dbc/lashscope_ev.map.toml)")
     p.add_argument("--model", choices=["multibody", "two_inertia"], default="multibody")
     p.add_argument("--no-whole-log", action="store_true", help="skip the open-loop whole-log simulation")
+    p.add_argument("--gap-sensitivity", action="store_true",
+                   help="add the vehicle's gap what-ifs and sensitivities S1..S5 (paper tip-in, ~2 s)")
     p.add_argument("--json", action="store_true", help="print the full result as JSON")
     p.add_argument("--out", type=Path, default=None, help="also write the JSON result to this file")
     p.set_defaults(func=run)
@@ -39,7 +41,34 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
     doc, _ = result_payload(run_analysis(args.log, inputs, opts))
     doc["log"] = str(args.log)
     doc["vehicle"] = inputs.vehicle.name
+    if getattr(args, "gap_sensitivity", False):
+        from app.pipeline import gap_sensitivity
+
+        doc["gap_sensitivity"] = gap_sensitivity(inputs.vehicle)
     return dict(json_safe(doc))
+
+
+def gap_sensitivity_table(sens: dict[str, Any]) -> str:
+    """The gap what-ifs as text; the sensitivity columns name their unit (per mm of clearance, per rad)."""
+    unit = sens["sensitivity_unit"]
+
+    def num(v: float | None, fmt: str) -> str:
+        return "-" if v is None else format(v, fmt)
+
+    lines = [f"gap sensitivity, {sens['scenario']}; S = impact-fluctuation change per {unit} of gap "
+             f"({'circumferential clearance' if unit == 'mm' else 'angle in its own shaft'}), halfshaft = 100",
+             f"{'gap':<13} {'angle (rad)':>11} {'arc (mm)':>8} {'S per mm':>8} {'S per rad':>9} "
+             f"{'impact, removed (rpm)':>21} {'halved (rpm)':>12}"]
+    for g in sens["gaps"]:
+        lines.append(f"{g['gap']:<13} {g['nominal_rad']:>11.4f} {num(g['clearance_mm'], '.3f'):>8} "
+                     f"{num(g['sensitivity_per_mm'], '.1f'):>8} {g['sensitivity_per_rad']:>9.1f} "
+                     f"{g['removed']['impact_rpm']:>21.1f} {g['halved']['impact_rpm']:>12.1f}")
+    nom, zero = sens["nominal"], sens["zero_gaps"]
+    lines.append(f"nominal: impact-induced fluctuation {nom['impact_rpm']:.1f} rpm, fluctuation "
+                 f"{nom['fluctuation_rpm']:.1f} rpm; no backlash at all: fluctuation {zero['fluctuation_rpm']:.1f} rpm")
+    if unit == "rad":
+        lines.append("(per mm needs every gap's contact radius, gaps.<gap>.radius_mm, in the driveline file)")
+    return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,4 +86,7 @@ def run(args: argparse.Namespace) -> int:
         print(events_table(doc))
         print()
         print(metrics_table(doc))
+        if "gap_sensitivity" in doc:
+            print()
+            print(gap_sensitivity_table(doc["gap_sensitivity"]))
     return 0

@@ -74,6 +74,8 @@ def test_upload_analyse_and_read_everything(server: Server, demo_log: Path) -> N
         sens = c.get("/vehicles/ev/gap-sensitivity").json()
         assert [g["gap"] for g in sens["gaps"]][-1] == "halfshaft"
         assert sens["gaps"][-1]["sensitivity"] == pytest.approx(100.0)
+        assert sens["sensitivity_unit"] == "mm"  # the paper preset gives every contact radius
+        assert all(g["sensitivity"] == g["sensitivity_per_mm"] and g["sensitivity_per_rad"] > 0 for g in sens["gaps"])
         assert all(g["sensitivity"] < 100.0 for g in sens["gaps"][:3])
         assert sens["zero_gaps"]["impact_rpm"] == 0.0
 

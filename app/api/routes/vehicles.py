@@ -13,7 +13,7 @@ from app.api.deps import SettingsDep, StoreDep
 from app.api.schemas import ERRORS, VehicleOut
 from app.api.upload import receive_upload
 from app.errors import InputError
-from app.pipeline import check_vehicle_files, gap_sensitivity
+from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity
 from app.storage.results import json_safe
 from sim import load_vehicle, preset_names
 
@@ -108,12 +108,17 @@ def vehicle_driveline(name: str, version: int, store: StoreDep) -> Response:
 async def vehicle_gap_sensitivity(name: str, store: StoreDep,
                                   version: Annotated[int | None, Query(ge=1)] = None) -> dict[str, Any]:
     """Each of the five gaps removed and halved under the paper's tip-in, with the nominal and
-    no-backlash responses; computed on first request and kept beside the vehicle version."""
+    no-backlash responses; computed on first request and kept beside the vehicle version.
+
+    ``sensitivity_unit`` says what ``sensitivity`` is per: ``mm`` of circumferential clearance
+    (the paper's definition; the vehicle gives every gap's contact radius) or ``rad`` of gap
+    angle; ``sensitivity_per_mm`` (null without radii) and ``sensitivity_per_rad`` are both given."""
     rec = store.get_vehicle(name, version)
     cached = rec.driveline_path.parent / "gap_sensitivity.json"
     if cached.exists():
         doc: dict[str, Any] = json.loads(cached.read_text(encoding="utf-8"))
-        return doc
+        if doc.get("format") == GAP_SENSITIVITY_FORMAT:  # older documents did not state the unit
+            return doc
     vehicle = await run_in_threadpool(load_vehicle, rec.driveline_path)
     doc = json_safe(await run_in_threadpool(gap_sensitivity, vehicle))
     doc.update(name=rec.name, version=rec.version)
