@@ -28,6 +28,7 @@ import numpy as np
 from app.analysis.align import OffsetEstimate, common_time_base, estimate_lag, overlap, shift
 from app.analysis.compare import EventComparison, SpeedError, compare_event, speed_error
 from app.analysis.events import SPEED, TORQUE, Event, EventParams, detect_events
+from app.analysis.lash import LashParams
 from app.analysis.metrics import MetricParams, ripple_metrics
 from app.analysis.series import FloatArray, finite_signal, median_period
 from app.errors import InputError, InsufficientDataError, MissingSignalError
@@ -64,6 +65,9 @@ class AnalysisOptions:
         ev_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("events", {}).items()}
         mp_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("metrics", {}).items()}
         try:
+            if isinstance(mp_kw.get("lash"), dict):
+                lash_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in mp_kw["lash"].items()}
+                mp_kw["lash"] = LashParams(**lash_kw)
             opts = cls(events=EventParams(**ev_kw), metrics=MetricParams(**mp_kw), **data)
         except (TypeError, ValueError) as exc:
             raise InputError(f"analysis options: {exc}") from exc
@@ -177,6 +181,20 @@ def signal_routes(database: Path, signal_map: Path) -> tuple[Any, dict[str, tupl
     return loaded, dict(routes)
 
 
+def free_rotor_inertia(vehicle: Vehicle) -> float:
+    """Motor-referred inertia (kg m^2) that moves with the rotor while the half-shaft gap is open.
+
+    The rotor and every reducer body up to the half-shaft gap, each times its squared speed
+    ratio to the rotor. With the reducer gaps open as well only the rotor moves freely; the
+    gap-open estimate fits a rescaling of this inertia (``MetricParams.lash.inertia_range``).
+    """
+    from sim.model import build_chain
+
+    chain = build_chain(vehicle)
+    last = int(chain.ca[chain.gap_coupling["halfshaft"]])
+    return float(sum(chain.inertia[b] * chain.speed_ratio[b] ** 2 for b in range(last + 1)))
+
+
 def _simulate(vehicle: Vehicle, torque: Signal, speed: Signal, t0: float, t1: float,
               opts: AnalysisOptions, output_dt: float) -> SimResult:
     m = (torque.t >= t0) & (torque.t <= t1)
@@ -206,6 +224,8 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
                     progress: ProgressFn = _no_progress, start: float = 0.0) -> AnalysisResult:
     """Events, simulation, alignment and metrics for decoded signals (see the module docstring)."""
     opts = options or AnalysisOptions()
+    if opts.metrics.free_rotor_inertia_kgm2 is None:
+        opts = replace(opts, metrics=replace(opts.metrics, free_rotor_inertia_kgm2=free_rotor_inertia(vehicle)))
     clock = time.perf_counter()
     timings: dict[str, float] = {}
 

@@ -9,9 +9,13 @@ so that the gap-open excursion is positive (``y = direction * (speed - trend)``)
       |  rise         /   \      /   \   .-.       first overshoot = y_peak - y_final
       |  (gap open)  /     \    /     \_/   \_____ y_final
       | ___________ /       \  /
-      |            t_open    \/ valley (adjacent)
+      |            t_rise    \/ valley (adjacent)
       +-----------|---------|------------------------> t
-                  |<------->| gap-open time (t_open to t_peak)
+                  |<------->| rising-edge time (t_rise to t_peak)
+
+The gap-open time itself comes from the free-rotor phase of the raw speed and torque
+(:mod:`app.analysis.lash`): the rising edge also holds the shafts unwinding before the gap
+opens and is an upper bound of it.
 
 The rigid-body trend is what the speed would do with a stiff, lash-free driveline:
 ``trend(t) = c0 + c1 (t - t_cross) + g * integral(torque dt)``. With the driveline's
@@ -21,18 +25,19 @@ reflected inertia known, ``g = 60 / (2 pi J_eq)`` rpm/(N m s) is fixed and only 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 from scipy.signal import find_peaks
 
+from app.analysis.lash import NO_GAP, LashParams, free_rotor_interval
 from app.analysis.series import FloatArray, median_period, noise_rms, parabolic_vertex
 from app.errors import InsufficientDataError
 from app.signals import Signal
 
 METRIC_NAMES: tuple[str, ...] = (
-    "fluctuation_rpm", "rise_height_rpm", "gap_open_time_s", "first_overshoot_rpm",
+    "fluctuation_rpm", "rise_height_rpm", "gap_open_time_s", "rising_edge_time_s", "first_overshoot_rpm",
     "shuffle_freq_hz", "damping_ratio", "settling_time_s",
 )
 NAN = float("nan")
@@ -49,6 +54,10 @@ class MetricParams:
     final_fraction: float = 0.25  # y_final = median over the last quarter of the window
     freq_band_hz: tuple[float, float] = (0.5, 40.0)
     rigid_gain_rpm_per_nms: float | None = None
+    # Motor-referred inertia moving with the rotor while the gaps are open (rotor + reducer gears), kg m^2;
+    # the gap-open time needs it (the pipeline takes it from the vehicle). None: gap_open_time_s is NaN.
+    free_rotor_inertia_kgm2: float | None = None
+    lash: LashParams = field(default_factory=LashParams)
 
 
 @dataclass(frozen=True)
@@ -57,16 +66,20 @@ class RippleMetrics:
 
     fluctuation_rpm: float
     rise_height_rpm: float
-    gap_open_time_s: float
+    gap_open_time_s: float  # free-rotor interval: loss of load to impact (app.analysis.lash)
+    rising_edge_time_s: float  # knee of the rise to the impact peak (an upper bound of the gap-open time)
     first_overshoot_rpm: float
     shuffle_freq_hz: float
     damping_ratio: float
     settling_time_s: float  # from the torque zero crossing
-    t_gap_open_s: float
+    t_gap_open_s: float  # loss of load (free-rotor fit)
+    t_gap_close_s: float  # the load comes back (free-rotor fit)
+    t_rise_start_s: float  # knee of the rising edge
     t_impact_s: float
     t_valley_s: float
     noise_rpm: float
     sample_period_s: float
+    gap_rotor_inertia_kgm2: float  # inertia the speed slope implies while the gap is open
 
     def values(self) -> dict[str, float]:
         return {k: getattr(self, k) for k in METRIC_NAMES}
@@ -214,9 +227,12 @@ def ripple_metrics(
     span = float(np.ptp(y[i0:])) if i0 < y.size else 0.0
     prom = max(p.min_prominence_rpm, 4.0 * noise, 0.1 * span)
     found = _impact_peak(y, i0, min(i1, y.size - 1), prom)
-    nan_result = RippleMetrics(NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, noise, dt)
+    lash = NO_GAP
+    if p.free_rotor_inertia_kgm2 is not None:
+        lash = free_rotor_interval(t, speed, torque, t_cross, direction, p.free_rotor_inertia_kgm2, noise, p.lash)
     if found is None:
-        return nan_result
+        return RippleMetrics(NAN, NAN, lash.duration_s, NAN, NAN, NAN, NAN, NAN, lash.t_open_s, lash.t_close_s,
+                             NAN, NAN, NAN, noise, dt, lash.rotor_inertia_kgm2)
     ip, iv = found
     off_p, y_peak = parabolic_vertex(y, ip)
     t_peak = float(t[ip] + off_p * dt)
@@ -264,14 +280,18 @@ def ripple_metrics(
     return RippleMetrics(
         fluctuation_rpm=y_peak - y_valley if np.isfinite(y_valley) else NAN,
         rise_height_rpm=y_peak - base if np.isfinite(base) else NAN,
-        gap_open_time_s=t_peak - t_open if np.isfinite(t_open) else NAN,
+        gap_open_time_s=lash.duration_s,
+        rising_edge_time_s=t_peak - t_open if np.isfinite(t_open) else NAN,
         first_overshoot_rpm=y_peak - final,
         shuffle_freq_hz=freq,
         damping_ratio=zeta,
         settling_time_s=settle,
-        t_gap_open_s=t_open,
+        t_gap_open_s=lash.t_open_s,
+        t_gap_close_s=lash.t_close_s,
+        t_rise_start_s=t_open,
         t_impact_s=t_peak,
         t_valley_s=t_valley,
         noise_rpm=noise,
         sample_period_s=dt,
+        gap_rotor_inertia_kgm2=lash.rotor_inertia_kgm2,
     )

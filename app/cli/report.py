@@ -8,7 +8,8 @@ from typing import Any
 METRIC_ROWS = (
     ("fluctuation_rpm", "fluctuation peak-valley", "rpm", 1.0),
     ("rise_height_rpm", "rise height (gap open)", "rpm", 1.0),
-    ("gap_open_time_s", "gap-open / rising edge", "ms", 1e3),
+    ("gap_open_time_s", "gap-open time (free rotor)", "ms", 1e3),
+    ("rising_edge_time_s", "rising edge (upper bound)", "ms", 1e3),
     ("first_overshoot_rpm", "first overshoot", "rpm", 1.0),
     ("shuffle_freq_hz", "shuffle frequency", "Hz", 1.0),
     ("damping_ratio", "damping ratio", "-", 1.0),
