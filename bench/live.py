@@ -196,6 +196,47 @@ class Naive:
         return {"p50": p50 or float("nan"), "p99": p99 or float("nan"), "dropped": 0.0}
 
 
+def decode_cost(sizes: tuple[int, ...] = (1, 5, 20, 64, 1000), frames: int = 8000) -> list[str]:
+    """Per-call cost of the live decode path against cantools per frame, by batch size (best of 5 passes).
+
+    lashscope: ``DecodingSource.feed`` (vector decode of the mapped signals, "not available"
+    masking, unknown-ID counting, signal map); cantools: ``decode_message(..., decode_choices=False)``
+    on every frame of a mapped message (no masking, no map: a lower bound of the per-frame way).
+    """
+    from app.live.convert import messages_to_chunk
+    from app.live.loopback import decode_records
+
+    msgs, _ = decode_records(bytearray(b"".join(traffic(frames))))
+    for i, m in enumerate(msgs):
+        m.timestamp = i * 5e-5
+    source, _units = source_for(DBC, MAP)
+    db = cantools.database.load_file(str(DBC))
+    mapped = {m.frame_id for m in source.decoder.db.messages}
+
+    def per_frame(batch: list[can.Message]) -> None:
+        for m in batch:
+            if m.arbitration_id in mapped:
+                db.decode_message(m.arbitration_id, m.data, decode_choices=False)
+
+    lines = [f"{'batch':>6} {'lashscope us/call':>18} {'cantools us/call':>17} {'lashscope us/frame':>19} {'ratio':>6}"]
+    for size in sizes:
+        groups = [msgs[i:i + size] for i in range(0, len(msgs) - size + 1, size)]
+        chunks = [messages_to_chunk(g, 0.0) for g in groups]
+        best = [np.inf, np.inf]
+        for _ in range(5):
+            t0 = time.perf_counter()
+            for c in chunks:
+                source.feed(c)
+            best[0] = min(best[0], (time.perf_counter() - t0) / len(chunks))
+            t0 = time.perf_counter()
+            for g in groups:
+                per_frame(g)
+            best[1] = min(best[1], (time.perf_counter() - t0) / len(groups))
+        lines.append(f"{size:6d} {best[0] * 1e6:18.1f} {best[1] * 1e6:17.1f} {best[0] * 1e6 / size:19.2f} "
+                     f"{best[1] / best[0]:5.2f}x")
+    return lines
+
+
 def run_phase(gen: subprocess.Popen[str], consumer: Lashscope | Naive, cmd: str, expected: int,
               timeout: float) -> dict[str, float]:
     assert gen.stdin is not None and gen.stdout is not None
@@ -224,11 +265,14 @@ def main() -> int:
     ap.add_argument("--rate", type=int, default=20000, help="paced traffic, frames/s (multiple of 1000)")
     ap.add_argument("--seconds", type=float, default=6.0)
     ap.add_argument("--flood", type=int, default=150000, help="frames sent unpaced in the ceiling phase")
+    ap.add_argument("--load", type=int, default=0,
+                    help="busy-loop processes competing for the CPUs during the phases (a loaded machine)")
     ap.add_argument("--generator", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.generator:
         generator(args.rate, args.seconds, args.flood)
         return 0
+    cost = decode_cost()
     load0 = os.getloadavg()[0]
     gen = subprocess.Popen([sys.executable, __file__, "--generator", "--rate", str(args.rate), "--seconds",
                             str(args.seconds), "--flood", str(args.flood)], stdin=subprocess.PIPE,
@@ -237,18 +281,25 @@ def main() -> int:
     channel = f"127.0.0.1:{int(gen.stdout.readline())}"
     paced_n = int(args.rate * args.seconds) // (args.rate // 1000) * (args.rate // 1000)
     rows = []
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.load)]
     with tempfile.TemporaryDirectory() as tmp:
         for phase, cmd, n in (("paced", "paced", paced_n), ("flood", "flood", args.flood)):
             for cls in (Lashscope, Naive):
                 consumer = cls(channel, Path(tmp) / f"{cls.__name__}-{phase}.blf", max(n, 1024))
                 rows.append((phase, cls.name, run_phase(gen, consumer, cmd, n, timeout=60.0)))
+    for hog in hogs:
+        hog.kill()
+        hog.wait()
     assert gen.stdin is not None
     gen.stdin.write("quit\n")
     gen.stdin.close()
     gen.wait(10)
     print(f"live decoding benchmark: reference EV traffic (dbc/lashscope_ev.dbc + 20 % unknown IDs), "
           f"paced {args.rate} frames/s for {args.seconds:g} s, then {args.flood} frames unpaced; "
-          f"{os.cpu_count()} CPUs, load average before {load0:.2f}, after {os.getloadavg()[0]:.2f}")
+          f"{os.cpu_count()} CPUs, load average before {load0:.2f}, after {os.getloadavg()[0]:.2f}"
+          + (f"; {args.load} busy-loop processes competing" if args.load else ""))
+    print("decode path per call (same traffic; ratio = cantools per frame / lashscope):")
+    print("\n".join(cost))
     print(f"{'phase':6} {'consumer':30} {'frames':>8} {'frames/s':>9} {'lat p50 ms':>10} {'lat p99 ms':>10} "
           f"{'CPU us/frame':>12} {'dropped':>7}")
     for phase, name, r in rows:

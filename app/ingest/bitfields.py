@@ -55,8 +55,10 @@ def _word(payload: npt.NDArray[np.uint8], byte: int, big_endian: bool, cache: di
     key = (byte, big_endian)
     got = cache.get(key)
     if got is None:
-        block = np.ascontiguousarray(payload[:, byte:byte + 8])
-        got = block.view(">u8" if big_endian else "<u8").reshape(-1).astype(np.uint64)
+        block = payload if payload.shape[1] == 8 and payload.flags.c_contiguous else \
+            np.ascontiguousarray(payload[:, byte:byte + 8])
+        word = block.view(">u8" if big_endian else "<u8").reshape(-1)
+        got = word if word.dtype == np.uint64 else word.astype(np.uint64)  # native order: no copy
         cache[key] = got
     return got
 

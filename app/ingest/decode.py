@@ -49,6 +49,11 @@ from app.ingest.frames import FrameChunk, FrameFlag
 F64 = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 EXTENDED_KEY = 0x8000_0000  # key bit for extended IDs, as cantools uses internally
+_IDENTITY, _PYTHON, _INTEGER, _FLOAT = range(4)  # scaling arithmetic, see _scale
+_SMALL = 64  # batches up to this many frames take the per-call-cheap paths
+# frame flags byte -> key bits: extended ID -> bit 31 (EXTENDED_KEY), error/remote -> bit 30 (never a message)
+_KEY_BITS = np.array([(EXTENDED_KEY if f & FrameFlag.EXTENDED else 0)
+                      | (1 << 30 if f & (FrameFlag.ERROR | FrameFlag.REMOTE) else 0) for f in range(256)], np.uint32)
 
 NA_LABELS: tuple[str, ...] = (
     "sna", "signal not available", "not available", "n/a", "na", "unavailable",
@@ -116,6 +121,52 @@ class DecodedMessage:
         )
 
 
+class NaMatch:
+    """Which raw values of one signal are labelled "not available", decided with one or two numpy operations.
+
+    Built once per signal (the decoder calls it for every batch, and a live batch is ~20
+    frames, so per-call setup would dominate): a single value is one comparison; integer
+    signals of up to ``TABLE_BITS`` bits use a lookup table over the raw bit pattern; the
+    rest a sorted array and ``searchsorted``. Values are compared exactly in the raw dtype
+    (float signals as float64), like ``np.isin``.
+    """
+
+    TABLE_BITS = 12
+
+    __slots__ = ("_mask", "_one", "_sorted", "_table", "empty")
+
+    def __init__(self, values: Sequence[int | float], layout: SignalLayout) -> None:
+        self._one: int | float | None = None
+        self._table: npt.NDArray[np.bool_] | None = None
+        self._sorted: npt.NDArray[np.generic] | None = None
+        self._mask = np.uint64((1 << layout.length) - 1) if layout.length < 64 else np.uint64(2**64 - 1)
+        if layout.float_bits:
+            vals: list[int | float] = sorted({float(v) for v in values})
+        else:  # an integer signal never equals a fractional value; out-of-range ones never match
+            lo, hi = (-(2 ** (layout.length - 1)), 2 ** (layout.length - 1)) if layout.signed else (0, 2**layout.length)
+            vals = sorted({int(v) for v in values if float(v).is_integer() and lo <= int(v) < hi})
+        self.empty = not vals
+        if len(vals) == 1:
+            self._one = vals[0]
+        elif vals and not layout.float_bits and layout.length <= self.TABLE_BITS:
+            self._table = np.zeros(1 << layout.length, bool)
+            self._table[[int(v) & int(self._mask) for v in vals]] = True
+        elif vals:
+            dtype = np.float64 if layout.float_bits else (np.int64 if layout.signed else np.uint64)
+            self._sorted = np.asarray(vals, dtype)
+
+    def __call__(self, raw: npt.NDArray[np.generic]) -> BoolArray:
+        """``(n,)`` True where ``raw`` (``(n,)``, as :func:`extract_raw` gives it) is not available."""
+        if self._one is not None:
+            return np.asarray(raw == self._one)
+        if self._table is not None:
+            bits = raw if raw.dtype.kind == "u" else raw.view(np.uint64)
+            return self._table[np.bitwise_and(bits, self._mask)]
+        assert self._sorted is not None
+        i = np.searchsorted(self._sorted, raw)
+        return np.asarray(self._sorted[np.minimum(i, self._sorted.size - 1)] == raw)
+
+
 @dataclass(slots=True)
 class _SignalPlan:
     name: str
@@ -123,6 +174,8 @@ class _SignalPlan:
     conversion: BaseConversion  # without choices: decides the arithmetic
     na_raw: tuple[int | float, ...]  # raw values labelled not-available (empty when none / disabled)
     exact_float: bool  # float64 arithmetic reproduces cantools' result exactly
+    na: NaMatch | None = None  # None when no raw value is "not available"
+    arithmetic: int = _FLOAT  # which branch of :func:`_scale` (decided once, not per batch)
 
 
 @dataclass(slots=True)
@@ -139,6 +192,7 @@ class _MessagePlan:
     padded_len: int  # message length rounded up to whole 64-bit words
     maybe_absent: set[str]
     out_name: str = ""  # the message name, made unique when a database reuses names
+    flat: bool = False  # no multiplexing and no truncation: every signal decodes from every frame
 
 
 class VectorDecoder:
@@ -193,7 +247,8 @@ class VectorDecoder:
         if self.allow_truncated:
             maybe_absent = set(plans)
         padded = max(8, -(-msg.length // 8) * 8)
-        return _MessagePlan(msg, root, plans, padded, maybe_absent)
+        flat = not root.muxes and not self.allow_truncated
+        return _MessagePlan(msg, root, plans, padded, maybe_absent, flat=flat)
 
     def _node(self, msg: Message, parent: str | None, mux_id: int | None, plans: dict[str, _SignalPlan]) -> _Node:
         # Mirrors cantools' Message._create_codec so branches (and errors) match it exactly.
@@ -228,7 +283,10 @@ class VectorDecoder:
             exact = max_raw * abs(conv.scale) + abs(conv.offset) < 2**63
         else:  # float scale: Python converts the raw int to float first, like numpy
             exact = isinstance(conv.scale, float) or max_raw * abs(conv.scale) < 2**53
-        return _SignalPlan(s.name, layout, conv, na, exact)
+        match = NaMatch(na, layout) if na else None
+        arithmetic = (_IDENTITY if isinstance(conv, IdentityConversion) else _PYTHON if not exact
+                      else _INTEGER if isinstance(conv, LinearIntegerConversion) else _FLOAT)
+        return _SignalPlan(s.name, layout, conv, na, exact, None if match is None or match.empty else match, arithmetic)
 
     # -- decoding -------------------------------------------------------------------------
     def decode(self, chunk: FrameChunk) -> dict[str, DecodedMessage]:
@@ -243,33 +301,40 @@ class VectorDecoder:
         """
         if len(chunk) == 0 or not self._plans:
             return {}
-        usable = (chunk.flags & np.uint8(FrameFlag.ERROR | FrameFlag.REMOTE)) == 0
-        key = chunk.arb_id.astype(np.uint64)
-        key |= np.where((chunk.flags & np.uint8(FrameFlag.EXTENDED)) != 0, EXTENDED_KEY, 0).astype(np.uint64)
-        rows = np.flatnonzero(usable)
-        order = rows[np.argsort(key[rows], kind="stable")]
-        sorted_keys = key[order]
-        bounds = np.flatnonzero(np.diff(sorted_keys)) + 1
+        # key = ID | extended << 31, with bit 30 set for error/remote frames so they match no message
+        key = chunk.arb_id | _KEY_BITS[chunk.flags]
+        groups: list[tuple[int, npt.NDArray[np.intp]]]
+        if key.size <= _SMALL:  # a live batch: grouping in Python costs less than the array calls
+            rows: dict[int, list[int]] = {}
+            for i, k in enumerate(key.tolist()):
+                rows.setdefault(k, []).append(i)
+            groups = [(k, np.array(r, np.intp)) for k, r in rows.items() if k in self._plans]
+        else:
+            order = np.argsort(key, kind="stable")  # stable: rows of one message stay in chunk order
+            sorted_keys = key[order]
+            cuts = (np.flatnonzero(sorted_keys[1:] != sorted_keys[:-1]) + 1).tolist()
+            starts, stops = [0, *cuts], [*cuts, key.size]
+            groups = [(k, order[a:b]) for a, b, k in zip(starts, stops, sorted_keys[starts].tolist(), strict=True)
+                      if k in self._plans]
         out: dict[str, DecodedMessage] = {}
-        for start, stop in zip(np.r_[0, bounds], np.r_[bounds, sorted_keys.size], strict=True):
-            if start == stop:
-                continue
-            plan = self._plans.get(int(sorted_keys[start]))
-            if plan is None:
-                continue
-            out[plan.out_name] = self._decode_rows(plan, chunk, np.sort(order[start:stop]))
+        with np.errstate(all="ignore"):  # inf/NaN float signals scale like Python floats, silently
+            for k, idx in groups:
+                plan = self._plans[k]
+                out[plan.out_name] = self._decode_rows(plan, chunk, idx)
         return out
 
     def _decode_rows(self, plan: _MessagePlan, chunk: FrameChunk, idx: npt.NDArray[np.intp]) -> DecodedMessage:
         msg = plan.message
         n = idx.size
-        dlc = chunk.dlc[idx].astype(np.int64)
         width = min(chunk.width, plan.padded_len)
         if chunk.width == plan.padded_len:
             payload = chunk.data[idx]
         else:
             payload = np.zeros((n, plan.padded_len), np.uint8)
             payload[:, :width] = chunk.data[idx, :width]
+        if plan.flat:
+            return self._decode_flat(plan, chunk, idx, payload)
+        dlc = chunk.dlc[idx].astype(np.int64)
         errors: dict[str, int] = {}
         ok = np.ones(n, bool)
         short = dlc < msg.length
@@ -280,14 +345,34 @@ class VectorDecoder:
         present = {name: np.zeros(n, bool) for name in plan.maybe_absent}
         words: dict[tuple[int, bool], npt.NDArray[np.uint64]] = {}
         avail_bits = dlc * 8
-        with np.errstate(all="ignore"):  # inf/NaN float signals scale like Python floats, silently
-            self._walk(plan.root, np.flatnonzero(ok), payload, words, avail_bits, values, present, ok, errors)
+        self._walk(plan.root, np.flatnonzero(ok), payload, words, avail_bits, values, present, ok, errors)
         keep = np.flatnonzero(ok)
         sel = idx[keep]
         return DecodedMessage(
             plan.out_name, msg.frame_id, bool(msg.is_extended_frame), chunk.t_ns[sel], chunk.channel[sel],
             {k: v[keep] for k, v in values.items()}, {k: v[keep] for k, v in present.items()}, errors,
         )
+
+    def _decode_flat(self, plan: _MessagePlan, chunk: FrameChunk, idx: npt.NDArray[np.intp],
+                     payload: npt.NDArray[np.uint8]) -> DecodedMessage:
+        """A message without multiplexing: every signal straight from every (long enough) frame."""
+        msg = plan.message
+        errors: dict[str, int] = {}
+        dlc = chunk.dlc[idx]
+        if min(dlc.tolist()) < msg.length if idx.size <= _SMALL else int(dlc.min()) < msg.length:
+            ok = dlc >= msg.length
+            errors["short_frame"] = int(idx.size - np.count_nonzero(ok))
+            idx, payload = idx[ok], payload[ok]
+        words: dict[tuple[int, bool], npt.NDArray[np.uint64]] = {}
+        values: dict[str, F64] = {}
+        for sp in plan.root.signals:
+            raw = extract_raw(payload, sp.layout, words)
+            scaled = _scale(sp, raw)
+            if sp.na is not None:
+                scaled[sp.na(raw)] = np.nan
+            values[sp.name] = scaled
+        return DecodedMessage(plan.out_name, msg.frame_id, bool(msg.is_extended_frame), chunk.t_ns[idx],
+                              chunk.channel[idx], values, {}, errors)
 
     def _walk(self, node: _Node, rows: npt.NDArray[np.intp], payload: npt.NDArray[np.uint8],
               words: dict[tuple[int, bool], npt.NDArray[np.uint64]], avail_bits: npt.NDArray[np.int64],
@@ -304,8 +389,8 @@ class VectorDecoder:
             raw = extract_raw(full, sp.layout, cache)
             scaled = _scale(sp, raw)
             mux_val = scaled.copy() if sp.name in node.muxes else scaled  # branch on the value before NaN-ing
-            if sp.na_raw:
-                scaled[_isin(raw, sp.na_raw)] = np.nan
+            if sp.na is not None:
+                scaled[sp.na(raw)] = np.nan
             if self.allow_truncated:
                 inside = sp.layout.end_bit <= avail_bits[rows]
                 scaled[~inside] = np.nan
@@ -335,24 +420,14 @@ class VectorDecoder:
 def _scale(sp: _SignalPlan, raw: npt.NDArray[np.generic]) -> F64:
     """Physical values with cantools' arithmetic (``raw * scale + offset``), as float64."""
     conv = sp.conversion
-    if isinstance(conv, IdentityConversion):
+    kind = sp.arithmetic
+    if kind == _IDENTITY:
         return raw.astype(np.float64)
-    if not sp.exact_float:
+    if kind == _PYTHON:
         # Python integers, as cantools computes them, then one rounding to float.
         return np.array([float(int(r) * conv.scale + conv.offset) for r in raw.tolist()], np.float64)
-    if isinstance(conv, LinearIntegerConversion):
+    if kind == _INTEGER:
         return (raw.astype(np.int64) * conv.scale + conv.offset).astype(np.float64)
     out = raw.astype(np.float64) * np.float64(conv.scale)
     out += np.float64(conv.offset)
     return out
-
-
-def _isin(raw: npt.NDArray[np.generic], values: tuple[int | float, ...]) -> BoolArray:
-    """``raw`` equal to any of ``values``, compared exactly in raw's own dtype."""
-    if raw.dtype.kind == "f":
-        return np.isin(raw, np.asarray(values, np.float64))
-    info = np.iinfo(np.int64 if raw.dtype.kind == "i" else np.uint64)
-    ints = [int(v) for v in values if float(v).is_integer() and info.min <= int(v) <= info.max]
-    if not ints:
-        return np.zeros(raw.shape, bool)
-    return np.isin(raw, np.asarray(ints, raw.dtype))

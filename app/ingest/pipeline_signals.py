@@ -44,13 +44,16 @@ def map_decoded(decoded: Mapping[str, DecodedMessage], resolved: Mapping[str, Re
         dm = by_message.get((r.message.frame_id, bool(r.message.is_extended_frame)))
         if dm is None or r.signal.name not in dm.signals:
             continue
-        keep = dm.is_present(r.signal.name)
+        values, t_ns = dm.signals[r.signal.name], dm.t_ns
+        keep = dm.present.get(r.signal.name)  # None: present in every row
         if r.spec.bus is not None:
-            keep = keep & (dm.channel == r.spec.bus)
-        values = dm.signals[r.signal.name][keep]
+            on_bus = dm.channel == r.spec.bus
+            keep = on_bus if keep is None else keep & on_bus
+        if keep is not None:
+            values, t_ns = values[keep], t_ns[keep]
         if r.gain != 1.0 or r.offset != 0.0:
             values = values * r.gain + r.offset
-        out[channel] = (dm.t_ns[keep], values)
+        out[channel] = (t_ns, values)
     return out
 
 

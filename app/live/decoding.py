@@ -23,7 +23,6 @@ from app.ingest.decode import EXTENDED_KEY, DecodedMessage, VectorDecoder
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.pipeline_signals import map_decoded
 from app.ingest.signalmap import ResolvedChannel, load_signal_map
-from app.live.framewise import FramewiseDecoder
 from app.live.session import Feed
 
 Mapper = Callable[[Mapping[str, DecodedMessage]], dict[str, tuple[np.ndarray, np.ndarray]]]
@@ -31,6 +30,10 @@ Mapper = Callable[[Mapping[str, DecodedMessage]], dict[str, tuple[np.ndarray, np
 
 class DecodingSource:
     """Decode batches and map them to canonical channels.
+
+    One decode path for every batch size: :class:`~app.ingest.decode.VectorDecoder` plans
+    each message once, so a 20-frame live batch costs a few dozen numpy operations and a
+    50,000-frame catch-up batch is decoded column-wise at full speed.
 
     Parameters
     ----------
@@ -40,53 +43,55 @@ class DecodingSource:
     known : cantools database, optional
         The vehicle's whole database, when ``decoder`` decodes a pruned copy: IDs it defines are
         not counted as unknown.
-    framewise : FramewiseDecoder, optional
-        Used instead of the vector decoder for batches of at most ``small_batch`` frames, where
-        its per-call overhead would dominate the latency (see :mod:`app.live.framewise`).
     """
 
-    def __init__(self, decoder: VectorDecoder, mapper: Mapper, known: CanDatabase | None = None,
-                 framewise: FramewiseDecoder | None = None, small_batch: int = 64) -> None:
+    SMALL = 256  # batches up to this size look IDs up in a set (cheaper than array calls)
+
+    def __init__(self, decoder: VectorDecoder, mapper: Mapper, known: CanDatabase | None = None) -> None:
         self.decoder = decoder
         self.mapper = mapper
-        self.framewise = framewise if framewise is not None and framewise.supported else None
-        self.small_batch = small_batch
         keys = [m.frame_id | (EXTENDED_KEY if m.is_extended_frame else 0) for m in (known or decoder.db).messages]
-        self._known = np.array(sorted(keys), np.uint64)
+        self._known = np.array(sorted(set(keys)), np.uint64)
         self._known_set = frozenset(keys)
 
     def feed(self, chunk: FrameChunk) -> Feed:
         if not len(chunk):
             return Feed({})
-        if self.framewise is not None and len(chunk) <= self.small_batch:
-            return self._feed_small(chunk)
-        keys = chunk.arb_id.astype(np.uint64)
-        keys |= np.where((chunk.flags & FrameFlag.EXTENDED) != 0, np.uint64(EXTENDED_KEY), np.uint64(0))
-        unknown = ~np.isin(keys, self._known)
-        ids = counts = np.empty(0, np.int64)
-        if unknown.any():
-            ids, counts = np.unique(chunk.arb_id[unknown], return_counts=True)
-        errors: dict[str, int]
+        ids, counts = self._unknown(chunk)
         decoded = self.decoder.decode(chunk)
-        errors = {}
+        errors: dict[str, int] = {}
         for dm in decoded.values():
             for k, v in dm.errors.items():
                 errors[k] = errors.get(k, 0) + int(v)
         return Feed(self.mapper(decoded), ids, counts, errors)
 
-    def _feed_small(self, chunk: FrameChunk) -> Feed:
-        assert self.framewise is not None
-        unknown: dict[int, int] = {}
+    def _unknown(self, chunk: FrameChunk) -> tuple[np.ndarray, np.ndarray]:
+        """Distinct IDs the database does not define, and their frame counts."""
         ext = int(FrameFlag.EXTENDED)
-        for arb, flags in zip(chunk.arb_id.tolist(), chunk.flags.tolist(), strict=True):
-            if (arb | (EXTENDED_KEY if flags & ext else 0)) not in self._known_set:
-                unknown[arb] = unknown.get(arb, 0) + 1
-        channels, errors = self.framewise.decode(chunk)
-        ids = np.fromiter(unknown.keys(), np.int64, len(unknown))
-        counts = np.fromiter(unknown.values(), np.int64, len(unknown))
-        return Feed(channels, ids, counts, errors)
+        if len(chunk) <= self.SMALL:
+            known = self._known_set
+            unknown: dict[int, int] = {}
+            for arb, flags in zip(chunk.arb_id.tolist(), chunk.flags.tolist(), strict=True):
+                if (arb | (EXTENDED_KEY if flags & ext else 0)) not in known:
+                    unknown[arb] = unknown.get(arb, 0) + 1
+            if not unknown:
+                return _NONE, _NONE
+            return (np.fromiter(unknown.keys(), np.int64, len(unknown)),
+                    np.fromiter(unknown.values(), np.int64, len(unknown)))
+        keys = chunk.arb_id.astype(np.uint64)
+        keys |= np.where((chunk.flags & ext) != 0, np.uint64(EXTENDED_KEY), np.uint64(0))
+        if self._known.size:
+            i = np.minimum(np.searchsorted(self._known, keys), self._known.size - 1)
+            unknown_rows = self._known[i] != keys
+        else:
+            unknown_rows = np.ones(keys.size, bool)
+        if not unknown_rows.any():
+            return _NONE, _NONE
+        ids, counts = np.unique(chunk.arb_id[unknown_rows], return_counts=True)
+        return ids.astype(np.int64), counts.astype(np.int64)
 
 
+_NONE = np.empty(0, np.int64)
 
 
 def all_signals_mapper(decoded: Mapping[str, DecodedMessage]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -120,7 +125,7 @@ def source_for(database: Path, signal_map: Path | None) -> tuple[DecodingSource,
         return {c: (t_ns / 1e9, v) for c, (t_ns, v) in map_decoded(decoded, resolved).items()}
 
     units = {c: (r.unit, r.interp) for c, r in resolved.items()}
-    return DecodingSource(decoder, mapper, known=db, framewise=FramewiseDecoder(resolved)), units
+    return DecodingSource(decoder, mapper, known=db), units
 
 
 def pruned(db: CanDatabase, resolved: Mapping[str, ResolvedChannel]) -> CanDatabase:
@@ -128,7 +133,7 @@ def pruned(db: CanDatabase, resolved: Mapping[str, ResolvedChannel]) -> CanDatab
 
     The vector decoder's cost per call grows with the number of signals, and a live session
     calls it for every small batch (~20 frames per ms at 20 k frames/s), so decoding the CRCs,
-    counters and temperatures nobody maps would dominate the latency. Each signal decodes from
+    counters and temperatures nobody maps would add to the latency for nothing. Each signal decodes from
     its own bits, so the kept signals' values are those of the full message; the message length
     is kept, so short frames are refused alike. Multiplexed messages are kept whole.
     """

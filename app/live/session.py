@@ -2,21 +2,26 @@
 
 Threads and queues (every queue bounded)::
 
-    bus ──recv──► [receiver] ──► pending frames (≤ max_pending) ──► [worker] ──► BLF recording
-                       │ full: frame dropped, counted                  ├──► decode ──► channel buffers
-                       ▼                                               │                 ├──► stream hub ──► SSE
-                  BusLink: reconnect with backoff                      │                 └──► live analyzer ──► events
-                                                                       └──► counters / status
+    bus ─recv─► [receiver: take what has arrived, decode + map] ─► queue (≤ max_pending frames) ─► [worker]
+                     │ queue full: batch dropped before decoding, counted                             │
+                     ▼                                                             BLF recording ◄─┤
+                BusLink: reconnect with backoff                      live analyzer ─► events  ◄─┤
+                                                                     stream hub ─► SSE        ◄─┤
+                                                                     counters / status        ◄─┘
 
-The receiver only stamps the receipt time and queues the message, so it keeps up with
-the bus even when the worker is briefly busy. The worker takes everything queued as one
-batch (columnar decode amortises per-call cost), writes it to the recording, decodes it
-and hands the channel samples to the analyzer and the stream. A frame dropped because the
-queue was full is neither recorded nor decoded, so the recording and the analysis always
-agree, and the status reports how many were dropped.
+The receiver blocks on the bus, so it wakes when a frame arrives; it then takes whatever
+else has already arrived (a burst becomes one batch; a backlog becomes a large batch, which
+the column-wise decoder handles at a lower cost per frame) and decodes it at once, in the
+same thread: no queue hop and no thread switch lie between a frame's receipt and its decoded
+samples, so the machine's load cannot add a scheduling delay there. What is not on that
+path -- the recording, the event analysis, the dashboard stream -- runs in the worker, which
+wakes every ``worker_every_s`` (or when the queue is a quarter full) and takes everything
+queued. A batch that does not fit in the queue is dropped before it is decoded, so it is
+neither recorded nor analysed: the recording and the analysis always agree, and the status
+reports how many frames were dropped.
 
-Latency (status ``latency_ms``) is measured per frame from its receipt by the receiver
-to the moment its decoded samples are in the channel buffers.
+Latency (status ``latency_ms``) is measured per frame from its receipt (``recv`` returned)
+to the moment its decoded, mapped samples exist.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import sys
 import threading
 import time
 import uuid
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -56,6 +62,14 @@ class Feed:
     decode_errors: dict[str, int] = field(default_factory=dict)
 
 
+@dataclass
+class _Batch:
+    """Frames the receiver took together, and what the source made of them."""
+
+    msgs: list[can.Message]
+    feed: Feed
+
+
 class ChannelSource(Protocol):
     """Turns frames into canonical channel samples (decode + signal map)."""
 
@@ -73,7 +87,9 @@ class EventSink(Protocol):
 @dataclass
 class SessionOptions:
     max_pending: int = 200_000  # frames queued between receiver and worker (~ 10 s at 20 k/s)
-    max_batch: int = 8192  # frames per worker batch
+    max_batch: int = 8192  # frames the receiver takes and decodes at once
+    max_batch_s: float = 0.0005  # ... and for at most this long after the first one (bounds the latency of a backlog)
+    worker_every_s: float = 0.01  # the worker's wake-up period (recording, analysis and stream are not latency-bound)
     flush_interval_s: float = 0.5  # recording flushed at least this often
     analysis_every_s: float = 0.25  # completed-event check period (wall time)
     status_every_s: float = 1.0  # status updates on the stream
@@ -114,9 +130,11 @@ class LiveSession:
         self.error: str | None = None
         self.started_at: datetime | None = None
         self.t0: float = 0.0  # bus time of t = 0 (the recording's start time)
-        self._pending: list[tuple[int, can.Message]] = []
+        self._pending: deque[_Batch] = deque()
+        self._queued = 0  # frames in ``_pending``
         self._cond = threading.Condition()
         self._stop = threading.Event()
+        self._rx_done = threading.Event()
         self._threads: list[threading.Thread] = []
         self._writer: FlushingBLFWriter | None = None
         self._stream_buf: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
@@ -151,9 +169,9 @@ class LiveSession:
             return
         self.state = "stopping"
         self._stop.set()
-        with self._cond:
-            self._cond.notify_all()
-        for th in self._threads:
+        for th in self._threads:  # the receiver first: the worker then drains what it queued
+            with self._cond:
+                self._cond.notify_all()
             th.join(timeout)
         self.link.close()
         if self._writer is not None:
@@ -170,47 +188,81 @@ class LiveSession:
             n = self.counters.frames_received
             if n != last[0]:
                 last = (n, time.monotonic())
-            elif time.monotonic() - last[1] >= quiet_s and not self._pending and \
+            elif time.monotonic() - last[1] >= quiet_s and not self._queued and \
                     self.counters.frames_processed + self.counters.frames_dropped >= n:
                 return True
             time.sleep(0.02)
         return False
 
+    @property
+    def queue_depth(self) -> int:
+        """Frames received and decoded, waiting for the worker (recording, analysis)."""
+        return self._queued
+
     # -- threads ---------------------------------------------------------------------------
     def _receive(self) -> None:
+        try:
+            self._receive_loop()
+        except Exception as exc:  # a decoder bug must not pass silently: the session fails visibly
+            self.error = f"{type(exc).__name__}: {exc}"
+            self.state = "failed"
+            self._stop.set()
+        finally:
+            self._rx_done.set()
+            with self._cond:
+                self._cond.notify_all()
+
+    def _receive_loop(self) -> None:
         c = self.counters
-        cap = self.opt.max_pending
+        link, clock = self.link, time.perf_counter_ns
+        cap, max_batch = self.opt.max_pending, self.opt.max_batch
+        max_wait = int(self.opt.max_batch_s * 1e9)
+        wake_at = max(1, cap // 4)
         while not self._stop.is_set():
-            msg = self.link.recv(0.1)
+            msg = link.recv(0.1)
             if msg is None:
                 continue
-            now = time.perf_counter_ns()
-            c.frames_received += 1
+            first = clock()
+            msgs, stamps = [msg], [first]
+            while len(msgs) < max_batch:  # whatever else has arrived already: one batch
+                more = link.recv(0.0)
+                if more is None:
+                    break
+                msgs.append(more)
+                stamps.append(now := clock())
+                if now - first > max_wait:
+                    break
+            n = len(msgs)
+            c.frames_received += n
+            if self._queued + n > cap:
+                c.frames_dropped += n  # before decoding: a machine that cannot keep up does no wasted work
+                continue
+            chunk = messages_to_chunk(msgs, self.t0)
+            good = (chunk.flags & (FrameFlag.ERROR | FrameFlag.REMOTE)) == 0
+            feed = self.source.feed(chunk if bool(good.all()) else chunk.select(good))
+            done = clock()
+            self.latency.add(done - np.array(stamps, np.int64))
             with self._cond:
-                if len(self._pending) >= cap:
-                    c.frames_dropped += 1
-                    continue
-                self._pending.append((now, msg))
-                if len(self._pending) == 1:
+                self._pending.append(_Batch(msgs, feed))
+                self._queued += n
+                if self._queued >= wake_at:
                     self._cond.notify()
 
-    def _take(self, timeout: float) -> list[tuple[int, can.Message]]:
+    def _take(self, timeout: float) -> list[_Batch]:
         with self._cond:
-            if not self._pending and not self._stop.is_set():
+            if self._queued < max(1, self.opt.max_pending // 4) and not self._rx_done.is_set():
                 self._cond.wait(timeout)
-            if len(self._pending) <= self.opt.max_batch:
-                batch, self._pending = self._pending, []
-            else:
-                batch = self._pending[: self.opt.max_batch]
-                del self._pending[: self.opt.max_batch]
-        return batch
+            batches = list(self._pending)
+            self._pending.clear()
+        return batches
 
     def _work(self) -> None:
         next_analysis = next_status = time.monotonic()
         try:
             while True:
-                batch = self._take(0.05)
-                if batch:
+                rx_done = self._rx_done.is_set()  # read before taking: nothing is queued after it is set
+                batches = self._take(self.opt.worker_every_s)
+                for batch in batches:
                     self._process(batch)
                 now = time.monotonic()
                 if self._writer is not None:
@@ -224,7 +276,7 @@ class LiveSession:
                     self.rate.update(self.counters.frames_received, now)
                     self.hub.publish("status", self.status())
                     next_status = now + self.opt.status_every_s
-                if self._stop.is_set() and not batch and not self._pending:
+                if rx_done and not self._queued:
                     break
             self._flush_stream()
             if self.analyzer is not None:
@@ -235,11 +287,11 @@ class LiveSession:
             self._stop.set()
 
     # -- per batch -------------------------------------------------------------------------
-    def _process(self, batch: list[tuple[int, can.Message]]) -> None:
+    def _process(self, batch: _Batch) -> None:
+        """Record a decoded batch and hand its samples to the analyzer and the stream (worker thread)."""
         c = self.counters
-        msgs = [m for _, m in batch]
         writer = self._writer
-        for m in msgs:
+        for m in batch.msgs:
             if m.is_error_frame:
                 c.bus_errors += 1
             elif m.is_remote_frame:
@@ -249,19 +301,17 @@ class LiveSession:
             if writer is not None:
                 m.channel = None  # one bus per recording: BLF channel 1
                 writer.on_message_received(m)
-        chunk = messages_to_chunk(msgs, self.t0)
-        good = (chunk.flags & (FrameFlag.ERROR | FrameFlag.REMOTE)) == 0
-        feed = self.source.feed(chunk if bool(good.all()) else chunk.select(good))
+        feed = batch.feed
         if self.analyzer is not None:
             self.analyzer.add(feed.channels)
-        done = time.perf_counter_ns()
-        self.latency.add(done - np.fromiter((r for r, _ in batch), np.int64, len(batch)))
-        c.frames_processed += len(batch)
         c.add_unknown(feed.unknown_ids, feed.unknown_counts)
         c.add_decode_errors(feed.decode_errors)
         for name, (t, v) in feed.channels.items():
             if t.size:
                 self._stream_buf.setdefault(name, []).append((t, v))
+        with self._cond:
+            self._queued -= len(batch.msgs)
+        c.frames_processed += len(batch.msgs)
 
     def _flush_stream(self) -> None:
         self._last_stream = time.monotonic()
@@ -303,7 +353,7 @@ class LiveSession:
             "frames_processed": c.frames_processed,
             "frames_dropped": c.frames_dropped,
             "frames_per_s": round(self.rate.rate(), 1),
-            "queue_depth": len(self._pending),
+            "queue_depth": self._queued,
             "queue_capacity": self.opt.max_pending,
             "bus_errors": c.bus_errors,
             "remote_frames": c.remote_frames,

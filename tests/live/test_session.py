@@ -99,7 +99,7 @@ def test_overload_drops_frames_with_bounded_queue_and_counts_them(tmp_path: Path
 
     def watch() -> None:
         while not stop.is_set():
-            peak[0] = max(peak[0], len(session._pending))
+            peak[0] = max(peak[0], session.queue_depth)
             time.sleep(0.001)
 
     watcher = threading.Thread(target=watch)
