@@ -155,7 +155,7 @@ def make_log(vehicle: Vehicle, truth: Vehicle, seed: int, tmp: Path, duration: f
     return read_blf(path, epoch), noise, float(np.sqrt(np.mean(d * d)) / noise)
 
 
-def run_case(case: Case, vehicle: Vehicle, tmp: Path, duration: float) -> Outcome:
+def run_case(case: Case, vehicle: Vehicle, tmp: Path, duration: float, dump: Path | None = None) -> Outcome:
     truth = apply_effects(vehicle, {case.truth: case.values}) if case.truth else vehicle
     signals, _, ratio = make_log(vehicle, truth, case.seed, tmp, duration)
     t0 = time.process_time()
@@ -172,8 +172,15 @@ def run_case(case: Case, vehicle: Vehicle, tmp: Path, duration: float) -> Outcom
         fitted = dict(res.candidates["+".join(d.top)].fit.values[case.truth])
         other, _, _ = make_log(vehicle, truth, case.seed + 1000, tmp, duration)
         second = validate_on(res, other, vehicle).shrink.value
-    return Outcome(case, d.status, d.top, d.confusable, ratio >= CLEAR_SIGNAL_RATIO, ratio, shrink, oracle, second,
-                   elapsed, len(res.events), fitted)
+    out = Outcome(case, d.status, d.top, d.confusable, ratio >= CLEAR_SIGNAL_RATIO, ratio, shrink, oracle, second,
+                  elapsed, len(res.events), fitted)
+    if dump is not None:
+        import pickle
+
+        dump.mkdir(parents=True, exist_ok=True)
+        with open(dump / f"{case.kind}_{case.truth or 'none'}_{case.seed}.pkl", "wb") as fh:
+            pickle.dump((out, res), fh)
+    return out
 
 
 def timing_comparison(vehicle: Vehicle, tmp: Path) -> None:
@@ -314,6 +321,7 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=None, help="drive length in s (default 60, quick 40)")
     ap.add_argument("--no-timing", action="store_true", help="skip the 60 s timing comparison")
     ap.add_argument("--timing-only", action="store_true", help="only the 60 s timing comparison")
+    ap.add_argument("--dump", type=Path, default=None, help="pickle (outcome, diagnosis result) per case here")
     args = ap.parse_args()
     seeds, n_none, loo_seeds = (2, 3, 1) if args.quick else (5, 5, 2)
     duration = args.duration or (40.0 if args.quick else 60.0)
@@ -328,7 +336,7 @@ def main() -> int:
         if args.timing_only:
             return 0
         for i, case in enumerate(todo):
-            o = run_case(case, vehicle, tmp, duration)
+            o = run_case(case, vehicle, tmp, duration, args.dump)
             outs.append(o)
             print(f"[{i + 1:3d}/{len(todo)}] {case.kind:10s} truth={case.truth or '-':14s} signal {o.signal_ratio:6.1f}"
                   f" -> {o.status:18s} {'+'.join(o.top):26s} shrink {100 * o.shrink:5.1f} % "

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from app.analysis.diagnosis.decide import CandidateScore, DecisionRules, bootstrap_draws, decide, score_candidate
+from app.analysis.diagnosis.structure import Remainder, remainder_test
 
 RULES = DecisionRules(n_boot=500)
 N = np.full(8, 100.0)  # 8 held-out events, 100 samples each: pure noise gives chi2 ~ 100 per event
@@ -77,6 +80,58 @@ def test_a_close_lookalike_leaving_a_clear_remainder_is_partial() -> None:
     """90 % of a large gap removed but the rest is still 14x the noise: not an explanation."""
     big = N * np.array([120.0, 150.0, 130.0, 160.0, 140.0, 125.0, 135.0, 145.0])
     assert run([cand("speed_sensor", big, 0.09, spread=0.01)], base=big)[:2] == ("partial", ("speed_sensor",))
-    # the same share with the remainder near the noise floor is explained
-    small = N * np.array([8.0, 12.0, 9.0, 15.0, 10.0, 7.0, 11.0, 13.0])
-    assert run([cand("speed_sensor", small, 0.09, spread=0.01)], base=small)[0] == "explained"
+
+
+def test_five_percent_of_a_huge_gap_is_still_many_noise_sigmas() -> None:
+    """A share cap would call 96 % of a 200x gap explained; what is left is 9x the noise: partial."""
+    huge = N * np.array([180.0, 220.0, 190.0, 230.0, 210.0, 175.0, 205.0, 215.0])
+    status, top, _ = run([cand("speed_sensor", huge, 0.04, spread=0.005)], base=huge)
+    assert (status, top) == ("partial", ("speed_sensor",))
+    # the same share of a small gap leaves about the noise floor: explained
+    assert run([cand("speed_sensor", BASE, 0.04, spread=0.005)])[0] == "explained"
+
+
+def with_remainder(c: CandidateScore, rem: Remainder) -> CandidateScore:
+    return replace(c, remainder=remainder_test(rem, bootstrap_draws(8, RULES, 1), RULES.level))
+
+
+def remainder_arrays(impact_ratio: float, shared: float, seed: int = 0) -> Remainder:
+    """A remainder whose total is near the noise floor, with an impact-phase ratio and a shared response."""
+    rng = np.random.default_rng(seed)
+    kinds = np.array([0, 1] * 4)
+    r = rng.normal(size=(8, 100)) + shared * np.sin(np.linspace(0, 12, 100))[None, :]
+    imp_n = np.full(8, 5.0)
+    return Remainder((r**2).sum(axis=1), N.copy(), impact_ratio * imp_n * rng.uniform(0.8, 1.2, 8), imp_n, r,
+                     np.ones((8, 100)), kinds)
+
+
+@pytest.mark.parametrize(("impact_ratio", "shared", "status"),
+                         [(1.0, 0.0, "explained"), (4.0, 0.0, "partial"), (1.0, 0.8, "partial")])
+def test_explained_needs_a_remainder_without_structure(impact_ratio: float, shared: float, status: str) -> None:
+    """Overall near the noise floor is not enough: nothing left at the impact, nothing repeating across events."""
+    c = with_remainder(cand("backlash", BASE, 0.01, spread=0.005), remainder_arrays(impact_ratio, shared))
+    d = decide(BASE, N, [c], [], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d.status == status, d.reason
+    assert d.top == ("backlash",)
+    if status == "partial":
+        assert d.details["remainder_above_noise"] == (["impact"] if impact_ratio > 1 else ["locked"])
+
+
+def test_two_candidates_that_both_reach_the_noise_floor_are_ambiguous() -> None:
+    """Input lag and output filter on a driveline without a resolved gap: both leave noise, neither is preferred."""
+    a = cand("torque_lag", BASE, 0.0, spread=0.01)
+    b = cand("speed_sensor", BASE, 0.0, spread=0.01, seed=1)
+    status, _, pair = run([a, b])
+    assert status == "ambiguous" and set(pair) == {"torque_lag", "speed_sensor"}
+
+
+def test_a_consistent_but_negligible_preference_is_no_separation() -> None:
+    """The runner-up is worse on every event, by 2 % of the noise floor: probability 1, but no evidence."""
+    a = cand("torque_lag", BASE, 0.0, spread=0.0)
+    worse = score_candidate("speed_sensor", ("speed_sensor",), BASE, a.chi2 + 2.0, N, bootstrap_draws(8, RULES, 1),
+                            RULES)
+    d = decide(BASE, N, [a, worse], [], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d.status == "ambiguous" and d.details["prefer_probability"] == 1.0
+    clearly = score_candidate("speed_sensor", ("speed_sensor",), BASE, a.chi2 + 30.0, N, bootstrap_draws(8, RULES, 1),
+                              RULES)
+    assert decide(BASE, N, [a, clearly], [], bootstrap_draws(8, RULES, 1), RULES, 8).status == "explained"

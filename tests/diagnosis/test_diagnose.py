@@ -103,3 +103,24 @@ def test_split_seed_changes_the_split_not_the_answer(signals_for: Signals) -> No
     assert res.split.seed == 7
     assert res.decision.top == ("torque_lag",)
     assert np.isfinite(res.decision.best.shrink.value)  # type: ignore[union-attr]
+
+
+def test_input_lag_and_output_filter_are_ambiguous_when_no_gap_separates_them() -> None:
+    """Without lash there is no gap phase: an input lag and an output filter are the same operator on
+    a linear driveline, so both reach the noise floor and the decision names the pair."""
+    from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
+    from sim.effects import apply_effects
+
+    no_lash = paper().with_changes({f"gaps.{g}": 0.0 for g in ("spline", "mesh1", "mesh2", "differential",
+                                                                "halfshaft")})
+    truth = apply_effects(no_lash, {"torque_lag": {"tau_s": 0.015, "delay_s": 0.0}})
+    rng = np.random.default_rng(31)
+    drive = make_drive(no_lash, rng, DriveSpec(duration_s=30.0))
+    signals = to_signals(measure(drive, run_truth(truth, drive), CanSampling(offset_s=0.006), rng))
+    res = diagnose_signals(signals, no_lash, DiagnosisOptions(candidates=("torque_lag", "speed_sensor"), seed=1,
+                                                              max_pairs=0))
+    assert all(res.phases[i].resolved_samples == 0 for i in res.split.heldout)
+    d = res.decision
+    assert d.status == "ambiguous", d.reason
+    assert set(d.confusable) == {"torque_lag", "speed_sensor"}
+    assert "do not separate" in d.reason

@@ -3,6 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from app.analysis.diagnosis.forward import DiagEvent, torque_quantisation_variance
 from app.analysis.diagnosis.noise import estimate_noise_floor, quantisation_step
 
 
@@ -31,3 +32,36 @@ def test_quantisation_step_ignores_unquantised_data() -> None:
     rng = np.random.default_rng(1)
     assert quantisation_step(rng.normal(0, 1, 500)) == 0.0
     assert quantisation_step(np.round(rng.normal(0, 10, 500)) * 0.5) == pytest.approx(0.5)
+
+
+def _event(tq_t: np.ndarray, tq_v: np.ndarray) -> DiagEvent:
+    speed_t = np.arange(0.0, 1.3, 0.01) + 0.004
+    return DiagEvent(0, "tip_in", 0.3, 0.0, 1.29, 2000.0, 150.0, tq_t, tq_v, speed_t, np.zeros(speed_t.size),
+                     np.ones(speed_t.size), speed_t < 0.22)
+
+
+def test_torque_quantisation_variance_matches_a_monte_carlo_of_held_torques() -> None:
+    """Hold, ramp through zero, hold: the rounding error of each hold acts for the whole hold, the
+    inertia integrates it, the pre-event anchor removes its mean. Compare with simulated rounding."""
+    rng = np.random.default_rng(5)
+    q, inertia = 0.5, 1.5
+    tq_t = np.arange(-0.1, 1.4, 0.01)
+    errors = []
+    shape = np.interp(tq_t, [0.25, 0.35], [-60.0, 120.0])
+    for _ in range(400):
+        true = shape + np.where(tq_t < 0.3, rng.uniform(-5, 5), rng.uniform(-5, 5))
+        true[(tq_t > 0.25) & (tq_t < 0.35)] += rng.uniform(0, q)  # ramp samples: independent errors
+        quant = np.round(true / q) * q
+        ev = _event(tq_t, quant)
+        edges = np.concatenate([[tq_t[0] - 0.005], 0.5 * (tq_t[1:] + tq_t[:-1]), [tq_t[-1] + 0.005]])
+        lo = np.maximum(edges[:-1], ev.t_fine[0])
+        acted = np.clip(np.minimum(edges[1:][None, :], ev.speed_t[:, None]) - lo[None, :], 0.0, None)
+        e = acted @ (quant - true) / inertia * 30 / np.pi
+        errors.append(e - e[ev.pre].mean())
+    empirical = np.var(np.array(errors), axis=0)
+    ev = _event(tq_t, np.round(shape / q) * q)
+    model = torque_quantisation_variance(ev, q, inertia)
+    late = ev.speed_t > 0.6
+    assert model[late] == pytest.approx(empirical[late], rel=0.25)
+    assert model[~late].max() < model[late].min()  # it grows with the time since the anchor
+    assert np.all(torque_quantisation_variance(ev, 0.0, inertia) == 0.0)  # unquantised torque: no term

@@ -1,7 +1,8 @@
 """The explicit decision: which effect explains the gap, and how confidently.
 
-Inputs are held-out scores only (per-event weighted residual energies, see :mod:`.score`). The
-rules, in order (thresholds in :class:`DecisionRules`):
+Inputs are held-out scores only (per-event weighted residual energies, see :mod:`.score`, and the
+remainder statistics of :mod:`.structure`). The rules, in order (thresholds in
+:class:`DecisionRules`):
 
 1. ``insufficient_data`` -- fewer than ``min_events_per_side`` calibration or held-out events;
 2. ``no_significant_gap`` -- the calibrated baseline's residual is not clearly above the
@@ -10,20 +11,27 @@ rules, in order (thresholds in :class:`DecisionRules`):
 3. ``none_of_candidates`` -- no candidate removes a significant share of the residual above the
    noise floor (share below ``min_explained`` or its interval touching zero, or fewer than half
    the held-out events improved);
-4. ``ambiguous`` -- the runner-up is significant too and the data do not prefer the best one
-   (paired bootstrap probability below ``prefer_probability`` while the shares differ by less than
-   ``ambiguous_margin``): the pair is named;
+4. ``ambiguous`` -- the runner-up is significant too and the held-out data do not separate the
+   two: the best is *preferred* only when a paired event bootstrap puts it ahead with probability
+   at least ``prefer_probability`` **and** its remainder-to-noise ratio is lower by at least
+   ``min_separation`` (a difference smaller than the scatter of the noise floor itself is no
+   evidence, however consistent: an input lag and an output filter on a driveline whose gap
+   phase the data do not resolve differ only by discretisation, on every event alike). The
+   pair is named;
 5. ``explained`` -- the best single effect (or greedy pair) removes at least ``explained_share`` of
    the residual above the noise floor, with the interval's lower end at least
-   ``explained_share_lo``, *and* what is left is small: a residual-to-noise ratio of at most
-   ``max_left_ratio`` or at most ``max_left_share`` of the original excess; otherwise ``partial``.
-   The second condition is what keeps a close look-alike (an output filter standing in for an
-   input lag, say) from being called an explanation when the true effect is not in the library: it
-   removes most of the gap but leaves a clear, structured remainder.
+   ``explained_share_lo``, *and* what it leaves is indistinguishable from noise: none of the
+   remainder statistics of :mod:`.structure` (overall, lash-traverse + impact, event-locked) is
+   above the noise floor by the same test that makes a baseline residual a gap (value above
+   ``min_gap_ratio`` with lower bound above ``min_gap_ratio_lo``). Otherwise ``partial``: the
+   effect is attributed, and the reason says which remainder is left and how large.
 
 A share of the residual *above the noise floor* is used instead of a plain shrink: with the true
 effect outside the library, a look-alike easily removes 30 % of the raw residual, but it leaves
-most of the excess over noise behind.
+most of the excess over noise behind. And a share alone is not enough either: 5 % of a gap that
+is 200x the noise is still 10x the noise -- a look-alike (an output filter standing in for an
+input lag) removes most of a large gap and leaves a clear, structured remainder, which rule 5
+reports as ``partial``.
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ import numpy as np
 import numpy.typing as npt
 
 from app.analysis.diagnosis.score import Interval, explained_interval, paired_better_probability, shrink_interval
+from app.analysis.diagnosis.structure import Remainder, RemainderTest, remainder_test, totals_only
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -52,10 +61,8 @@ class DecisionRules:
     explained_share: float = 0.7
     explained_share_lo: float = 0.5
     prefer_probability: float = 0.95
-    ambiguous_margin: float = 0.15
+    min_separation: float = 0.1
     pair_gain: float = 0.15
-    max_left_ratio: float = 2.0
-    max_left_share: float = 0.05
     n_boot: int = 2000
     level: float = 0.9
 
@@ -75,6 +82,7 @@ class CandidateScore:
     shrink, explained : intervals (see :mod:`.score`).
     improved_fraction : share of held-out events whose residual went down.
     significant : passes rule 3.
+    remainder : remainder-to-noise statistics of what the candidate leaves (None: not computed).
     """
 
     id: str
@@ -84,6 +92,11 @@ class CandidateScore:
     explained: Interval
     improved_fraction: float
     significant: bool
+    remainder: RemainderTest | None = None
+
+    def noise_ratio(self, n: FloatArray) -> float:
+        """Remaining residual-to-noise ratio ``sum(chi2) / sum(n)``."""
+        return float(self.chi2.sum() / max(float(n.sum()), 1.0))
 
 
 @dataclass(frozen=True)
@@ -126,14 +139,36 @@ def gap_ratio(base: FloatArray, n: FloatArray, draws: npt.NDArray[np.int64], lev
 
 
 def score_candidate(cid: str, effects: tuple[str, ...], base: FloatArray, cand: FloatArray, n: FloatArray,
-                    draws: npt.NDArray[np.int64], rules: DecisionRules) -> CandidateScore:
-    """Held-out statistics of one candidate against the calibrated baseline."""
+                    draws: npt.NDArray[np.int64], rules: DecisionRules,
+                    rem: Remainder | None = None) -> CandidateScore:
+    """Held-out statistics of one candidate against the calibrated baseline (``rem``: its remainder)."""
     shrink = shrink_interval(base, cand, draws, rules.level)
     expl = explained_interval(base, cand, n, draws, rules.level)
     improved = float(np.mean(cand < base)) if base.size else 0.0
     significant = (expl.value >= rules.min_explained and expl.lo > 0.0
                    and improved >= rules.min_improved_fraction)
-    return CandidateScore(cid, effects, cand, shrink, expl, improved, bool(significant))
+    test = remainder_test(rem if rem is not None else totals_only(cand, n), draws, rules.level)
+    return CandidateScore(cid, effects, cand, shrink, expl, improved, bool(significant), test)
+
+
+def separation(best: CandidateScore, other: CandidateScore, n: FloatArray, draws: npt.NDArray[np.int64],
+               rules: DecisionRules) -> tuple[bool, float, float]:
+    """Whether held-out events prefer ``best`` over ``other`` (rule 4): (preferred, probability, ratio gap)."""
+    p = paired_better_probability(best.chi2, other.chi2, draws)
+    gap = other.noise_ratio(n) - best.noise_ratio(n)
+    return bool(p >= rules.prefer_probability and gap >= rules.min_separation), p, gap
+
+
+def _left_over(chosen: CandidateScore, n: FloatArray, rules: DecisionRules) -> tuple[list[str], str]:
+    """Remainder statistics above noise, and a sentence describing them."""
+    t = chosen.remainder
+    if t is None:  # built by hand: judge the total only
+        t = remainder_test(totals_only(chosen.chi2, n), np.zeros((1, n.size), dtype=np.int64), rules.level)
+    above = t.above_noise(rules.min_gap_ratio, rules.min_gap_ratio_lo)
+    text = "what is left, as a ratio to the noise floor: " + "; ".join(t.describe())
+    if above:
+        text += f" -- above noise: {', '.join(above)}"
+    return above, text
 
 
 def decide(
@@ -177,13 +212,16 @@ def decide(
     best = sig[0]
     if len(sig) > 1:
         second = sig[1]
-        p = paired_better_probability(best.chi2, second.chi2, draws)
-        if p < rules.prefer_probability and best.explained.value - second.explained.value < rules.ambiguous_margin:
+        preferred, p, gap = separation(best, second, n, draws, rules)
+        if not preferred:
             return Decision("ambiguous", top=(best.id,), confusable=(best.id, second.id), gap_ratio=ratio, best=best,
                             reason=(f"{best.id} and {second.id} explain {100 * best.explained.value:.0f} % and "
-                                    f"{100 * second.explained.value:.0f} % of the gap; held-out events prefer "
-                                    f"{best.id} with probability {p:.2f} only"),
-                            details={"prefer_probability": round(p, 3)})
+                                    f"{100 * second.explained.value:.0f} % of the gap and leave "
+                                    f"{best.noise_ratio(n):.2f}x and {second.noise_ratio(n):.2f}x the noise floor; "
+                                    f"held-out events prefer "
+                                    f"{best.id} with probability {p:.2f} (needs {rules.prefer_probability:g} and a "
+                                    f"ratio gap of at least {rules.min_separation:g}): the data do not separate them"),
+                            details={"prefer_probability": round(p, 3), "separation": round(gap, 4)})
     chosen = best
     pair_note = ""
     for pair in sorted((q for q in pairs if q.effects[0] == best.id), key=lambda c: float(c.chi2.sum())):
@@ -193,14 +231,16 @@ def decide(
             pair_note = f"; adding {pair.effects[1]} explains {100 * pair.explained.value:.0f} % (p = {p:.2f})"
         break
     share = chosen.explained
-    left_ratio = float(chosen.chi2.sum() / max(n.sum(), 1.0))
-    small_left = left_ratio <= rules.max_left_ratio or 1.0 - share.value <= rules.max_left_share
-    if share.value >= rules.explained_share and share.lo >= rules.explained_share_lo and small_left:
+    above, left_text = _left_over(chosen, n, rules)
+    if share.value >= rules.explained_share and share.lo >= rules.explained_share_lo and not above:
         status = "explained"
     else:
         status = "partial"
     reason = (f"{' + '.join(chosen.effects)} removes {100 * share.value:.0f} % of the residual above the noise "
               f"floor on held-out events (90 % interval {100 * share.lo:.0f}-{100 * share.hi:.0f} %), "
-              f"{100 * chosen.improved_fraction:.0f} % of events improved{pair_note}; the residual left is "
-              f"{left_ratio:.2f}x the noise floor")
-    return Decision(status, top=chosen.effects, gap_ratio=ratio, best=chosen, reason=reason)
+              f"{100 * chosen.improved_fraction:.0f} % of events improved{pair_note}; {left_text}")
+    details: dict[str, Any] = {}
+    if chosen.remainder is not None:
+        details["remainder_to_noise"] = chosen.remainder.to_dict()
+        details["remainder_above_noise"] = above
+    return Decision(status, top=chosen.effects, gap_ratio=ratio, best=chosen, reason=reason, details=details)

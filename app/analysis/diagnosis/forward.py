@@ -28,6 +28,7 @@ from scipy.interpolate import PchipInterpolator
 
 from sim import Vehicle, simulate
 from sim.effects.base import Effect
+from sim.model import build_chain
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -269,3 +270,38 @@ def input_uncertainty(ev: DiagEvent, vehicle: Vehicle, nuisance: Nuisance, effec
         d = d - float(np.mean(d[ev.pre]))
     k = max(round(smooth_s / max(float(np.median(np.diff(ev.speed_t))), 1e-4)), 1)
     return np.asarray(np.convolve(d * d, np.ones(k) / k, mode="same"), dtype=np.float64)
+
+
+def rigid_inertia(vehicle: Vehicle) -> float:
+    """Inertia of the whole driveline and vehicle as one rigid body, referred to the rotor (kg m^2)."""
+    m = build_chain(vehicle)
+    return float(np.sum(m.inertia * m.speed_ratio**2))
+
+
+def torque_quantisation_variance(ev: DiagEvent, step_nm: float, inertia: float) -> FloatArray:
+    """(n,) speed variance (rpm^2) from the quantisation of the CAN torque.
+
+    While the torque is held, consecutive CAN values are equal and all carry the *same* rounding
+    error ``d`` (uniform, variance ``step^2 / 12``); the vehicle inertia integrates it into a speed
+    drift ``d (t - t_0) / J`` that grows through the window. Samples are grouped into runs of equal
+    values, each run with its own independent error acting over the run's time (half-way to the
+    neighbouring samples); the drift is taken relative to its mean on the anchor samples, which the
+    per-event speed anchor removes. A torque that moves (ramps, or dithered by noise) makes short
+    runs, and the term stays small. It uses the torque samples and the vehicle only.
+    """
+    n = ev.n
+    if step_nm <= 0 or ev.torque_t.size < 2 or inertia <= 0:
+        return np.zeros(n)
+    tt, vv = ev.torque_t, ev.torque_nm
+    edges = np.concatenate([[tt[0] - 0.5 * (tt[1] - tt[0])], 0.5 * (tt[1:] + tt[:-1]),
+                            [tt[-1] + 0.5 * (tt[-1] - tt[-2])]])
+    run = np.concatenate([[0], np.cumsum(np.diff(vv) != 0)])
+    lo = np.maximum(edges[:-1], ev.t_fine[0])
+    # time each torque sample has acted between the simulation start and each speed sample: (n, m)
+    acted = np.clip(np.minimum(edges[1:][None, :], ev.speed_t[:, None]) - lo[None, :], 0.0, None)
+    per_run = np.zeros((n, int(run[-1]) + 1))
+    np.add.at(per_run.T, run, acted.T)
+    if ev.pre.any():
+        per_run -= per_run[ev.pre].mean(axis=0)
+    rpm_per_nm_s = 30.0 / np.pi / inertia
+    return np.asarray(step_nm**2 / 12.0 * rpm_per_nm_s**2 * np.sum(per_run**2, axis=1), dtype=np.float64)

@@ -16,6 +16,10 @@ without any simulation, so the floor cannot be bent by a fit:
 A timestamp error ``e`` on a sample of a signal changing at ``v'`` rpm/s looks like a speed error
 ``v' e``; :meth:`NoiseFloor.variance` turns the jitter into a per-sample variance from the measured
 slope (again model-free).
+
+The *torque* channel's quantisation step is estimated the same way (``torque_step_nm``): while the
+torque is held, its CAN value is off by one fixed amount up to half a step, which the vehicle
+inertia integrates into a speed drift (see :func:`.forward.torque_quantisation_variance`).
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ class NoiseFloor:
     jitter_s : standard deviation of timestamp jitter (s).
     period_s : nominal sample period (s).
     n_samples : number of second differences the white-noise estimate used.
+    torque_step_nm : quantisation step of the torque channel (N m); 0 when not quantised or unknown.
     """
 
     sigma_rpm: float
@@ -50,6 +55,7 @@ class NoiseFloor:
     jitter_s: float
     period_s: float
     n_samples: int
+    torque_step_nm: float = 0.0
 
     def variance(self, slope_rpm_s: npt.ArrayLike) -> FloatArray:
         """Per-sample residual variance (rpm^2) no model can remove, for samples with slope ``slope_rpm_s``."""

@@ -9,12 +9,12 @@ torque crossing to ``post_s`` after it (inside the event's own window).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from app.analysis.diagnosis.forward import DiagEvent
-from app.analysis.diagnosis.noise import NoiseFloor, estimate_noise_floor, measured_slope
+from app.analysis.diagnosis.noise import NoiseFloor, estimate_noise_floor, measured_slope, quantisation_step
 from app.analysis.events import SPEED, TORQUE, Event
 from app.errors import InsufficientDataError, MissingSignalError
 from app.signals import SignalSet
@@ -59,7 +59,7 @@ def prepare(signals: SignalSet, events: Sequence[Event], params: WindowParams | 
     quiet = np.ones(sp_t.size, dtype=bool)
     for ev in events:
         quiet &= ~((sp_t >= ev.t_start_s) & (sp_t <= ev.t_end_s))
-    noise = estimate_noise_floor(sp_t, sp_v, quiet)
+    noise = replace(estimate_noise_floor(sp_t, sp_v, quiet), torque_step_nm=quantisation_step(tq_v))
     slope = measured_slope(sp_t, sp_v)
     out: list[DiagEvent] = []
     skipped: list[dict[str, object]] = []

@@ -7,17 +7,21 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
     vehicle, model    diagnosed vehicle name and simulator model
     options           {"candidates": [...], "seed": int, "rules": {...decision thresholds}}
     split             {"seed", "calibration": [event], "heldout": [event], "sha256", "strata"}
-    noise_floor       {"sigma_rpm", "quant_step_rpm", "jitter_s", "period_s", "n_samples"}
+    noise_floor       {"sigma_rpm", "quant_step_rpm", "jitter_s", "period_s", "n_samples", "torque_step_nm"}
     events_skipped    [{"index", "reason"}]
     decision          {"status": one of explained|partial|ambiguous|none_of_candidates|
                                  no_significant_gap|insufficient_data,
                        "top": [effect ids], "confusable": [id, id] | null, "reason": str,
                        "residual_to_noise_before": interval, "explained_share": interval,
-                       "heldout_shrink": interval, "residual_to_noise_after": float}
+                       "heldout_shrink": interval, "residual_to_noise_after": float,
+                       "remainder_to_noise": {"overall": interval, "impact": interval,
+                                              "locked": {"value", "p_value", "null_95"}},
+                       "remainder_above_noise": [names of the remainder statistics above noise],
+                       "prefer_probability", "separation" (ambiguous only)}
     baseline          fit: {"nuisance": {"offset_s", "gain", "road_load_grade_pct"}, "at_bound", ...}
     candidates        [{"id", "effects", "title", "fit": {"params": {effect: {name: value}},
                         "nuisance": {...}, "at_bound": [...]}, "heldout": {"shrink", "explained_share",
-                        "improved_fraction", "significant", "residual_to_noise"},
+                        "improved_fraction", "significant", "residual_to_noise", "remainder_to_noise"},
                         "phases": {phase: shrink interval}, "bands": {band: shrink interval}}]
     pairs             same shape, greedy pairs (first = best single effect)
     localisation      {"events": [{"index", "kind", "role", "t_event_s", "rms_rpm", "energy_share",
@@ -87,6 +91,7 @@ def _candidate(res: DiagnosisResult, sc: CandidateScore) -> dict[str, Any]:
             "improved_fraction": round(sc.improved_fraction, 4),
             "significant": sc.significant,
             "residual_to_noise": _f(sum(s.chi2 for s in cand) / max(n, 1)),
+            "remainder_to_noise": sc.remainder.to_dict() if sc.remainder is not None else None,
         },
         "phases": phases,
         "bands": bands,

@@ -34,6 +34,8 @@ from app.analysis.diagnosis.forward import (
     Prediction,
     input_uncertainty,
     predict,
+    rigid_inertia,
+    torque_quantisation_variance,
     vehicle_with,
     weighted_residual,
 )
@@ -41,6 +43,7 @@ from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2,
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.score import EventScore
 from app.analysis.diagnosis.split import Split, make_split
+from app.analysis.diagnosis.structure import remainder
 from app.errors import InputError
 from sim import Vehicle
 from sim.effects import EFFECTS, get_effect
@@ -122,11 +125,14 @@ def evaluate(base: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], mode
 
 
 def with_input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, fitted: FitResult,
-                           model: str) -> list[DiagEvent]:
-    """Events whose sample variances include the torque-reconstruction uncertainty (see
-    :func:`.forward.input_uncertainty`), evaluated with the fitted baseline."""
+                           model: str, torque_step_nm: float = 0.0) -> list[DiagEvent]:
+    """Events whose sample variances include what the torque channel cannot tell: the reconstruction
+    between samples (:func:`.forward.input_uncertainty`, evaluated with the fitted baseline) and the
+    quantisation of held values (:func:`.forward.torque_quantisation_variance`)."""
     veh = vehicle_with(vehicle, fitted.nuisance, ())
-    return [replace(ev, var=ev.var + input_uncertainty(ev, veh, fitted.nuisance, (), model)) for ev in events]
+    inertia = rigid_inertia(vehicle)
+    return [replace(ev, var=ev.var + input_uncertainty(ev, veh, fitted.nuisance, (), model)
+                    + torque_quantisation_variance(ev, torque_step_nm, inertia)) for ev in events]
 
 
 def _merge_start(base: FitResult, *parts: FitResult) -> FitResult:
@@ -191,7 +197,7 @@ def run_diagnosis(
     say(0.0, f"baseline calibration on {len(cal)} events (held out: {len(ho)})")
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
     # add the input-reconstruction uncertainty to every sample's variance, then recalibrate
-    events = with_input_uncertainty(events, vehicle, base_fit, opts.model)
+    events = with_input_uncertainty(events, vehicle, base_fit, opts.model, noise.torque_step_nm)
     cal = split.calibration_events(events)
     ho = split.heldout_events(events)
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, start=base_fit, seed=opts.seed)
@@ -212,7 +218,8 @@ def run_diagnosis(
                 seed=opts.seed)
         fit_order.append(f"{cid}: {[e.index for e in cal]}")
         evals[cid] = evaluate(vehicle, f, ho, opts.model, phases, period)
-        singles.append(score_candidate(cid, (cid,), b, evals[cid].chi2(ho_idx), n, draws, rules))
+        rem = remainder(ho, evals[cid].scores, evals[cid].predictions, period)
+        singles.append(score_candidate(cid, (cid,), b, evals[cid].chi2(ho_idx), n, draws, rules, rem))
         tick(f"{cid}: held-out shrink {100 * singles[-1].shrink.value:.0f} %")
 
     pairs: list[CandidateScore] = []
@@ -228,7 +235,8 @@ def run_diagnosis(
                     start=_merge_start(evals[first].fit, evals[first].fit, evals[second].fit), seed=opts.seed)
             fit_order.append(f"{pid}: {[e.index for e in cal]}")
             evals[pid] = evaluate(vehicle, f, ho, opts.model, phases, period)
-            pairs.append(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules))
+            rem = remainder(ho, evals[pid].scores, evals[pid].predictions, period)
+            pairs.append(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules, rem))
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
 
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))

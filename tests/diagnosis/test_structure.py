@@ -1,0 +1,70 @@
+"""Remainder statistics: noise passes, structure shared by events or concentrated at the impact does not."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.analysis.diagnosis.decide import DecisionRules, bootstrap_draws
+from app.analysis.diagnosis.structure import Remainder, remainder_test
+
+RULES = DecisionRules(n_boot=500)
+H, K = 8, 130  # held-out events, locked bins (one sample per bin)
+IMPACT = slice(30, 37)  # the bins of the lash traverse and impact
+
+
+def make(rng: np.random.Generator, shared: float = 0.0, impact: float = 0.0, scale: float = 1.0) -> Remainder:
+    """Residuals in noise units: white noise x ``scale`` plus a response shared by all events of a kind
+    (``shared`` sigmas, a damped oscillation) and a spike of ``impact`` sigmas in the impact bins."""
+    t = np.arange(K) * 0.01
+    response = shared * np.exp(-t) * np.sin(2 * np.pi * 6 * t)
+    kinds = np.array([0, 1] * (H // 2))
+    r = scale * rng.normal(size=(H, K)) + response * np.where(kinds == 0, 1.0, -1.0)[:, None]
+    r[:, IMPACT] += impact * rng.choice([-1.0, 1.0], size=(H, 1))
+    chi2 = (r**2).sum(axis=1)
+    imp = (r[:, IMPACT] ** 2).sum(axis=1)
+    return Remainder(chi2, np.full(H, float(K)), imp, np.full(H, float(IMPACT.stop - IMPACT.start)), r,
+                     np.ones((H, K)), kinds)
+
+
+def above(rem: Remainder) -> list[str]:
+    t = remainder_test(rem, bootstrap_draws(H, RULES, 1), RULES.level)
+    return t.above_noise(RULES.min_gap_ratio, RULES.min_gap_ratio_lo)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_white_noise_is_noise_like(seed: int) -> None:
+    rem = make(np.random.default_rng(seed))
+    t = remainder_test(rem, bootstrap_draws(H, RULES, 1))
+    assert t.overall.value == pytest.approx(1.0, abs=0.15)
+    assert t.locked == pytest.approx(1.0, abs=0.3)
+    assert above(rem) == []
+
+
+def test_a_small_response_shared_by_every_event_is_structure() -> None:
+    """A common response of about half a sigma RMS barely moves the overall ratio but adds up across events."""
+    rem = make(np.random.default_rng(1), shared=1.3)
+    t = remainder_test(rem, bootstrap_draws(H, RULES, 1))
+    assert t.overall.value < RULES.min_gap_ratio  # the total alone would call it noise
+    assert t.locked > 2.0 and t.locked_p < 0.05  # 4 events per kind: the smallest p is 1/64
+    assert above(rem) == ["locked"]
+
+
+def test_a_remainder_at_the_impact_is_structure() -> None:
+    rem = make(np.random.default_rng(2), impact=3.0)
+    assert "impact" in above(rem)
+
+
+def test_noise_larger_than_the_floor_says_so_overall_but_not_locked() -> None:
+    """Scaled noise is a wrong noise floor, not structure: the sign-flip null scales with it."""
+    rem = make(np.random.default_rng(3), scale=1.6)
+    t = remainder_test(rem, bootstrap_draws(H, RULES, 1))
+    assert "overall" in above(rem) and "locked" not in above(rem)
+    assert t.locked_p > 0.05
+
+
+def test_report_form_is_json_ready() -> None:
+    t = remainder_test(make(np.random.default_rng(4)), bootstrap_draws(H, RULES, 1))
+    d = t.to_dict()
+    assert set(d) == {"overall", "impact", "locked"}
+    assert set(d["locked"]) == {"value", "p_value", "null_95"}  # type: ignore[arg-type]
