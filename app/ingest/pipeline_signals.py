@@ -12,7 +12,6 @@ from __future__ import annotations
 import inspect
 import os
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
@@ -72,11 +71,12 @@ def _caller(progress: Callable[..., None] | None) -> Progress:
     return lambda fraction, message: progress(fraction)
 
 
-def _fraction(reader: LogReader, total: int | None) -> float | None:
-    offset = getattr(getattr(reader, "_stream", None), "offset", None)
-    if not total or not isinstance(offset, int):
+def _fraction(reader: LogReader) -> float | None:
+    """Share of the log read so far, from the reader's public position and size."""
+    size, pos = reader.size, reader.position()
+    if not size or pos is None:
         return None
-    return min(offset / total, 1.0)
+    return min(pos / size, 1.0)
 
 
 def load_signals(
@@ -133,8 +133,6 @@ def load_signals(
     own = not isinstance(log, LogReader)
     reader = log if isinstance(log, LogReader) else open_log(log, strict=strict, chunk_frames=chunk_frames)
     try:
-        path = getattr(reader, "path", None)
-        total = Path(path).stat().st_size if path is not None and Path(path).is_file() else None
         chunk: FrameChunk
         for chunk in reader.chunks():
             stats.add_chunk(chunk)
@@ -146,7 +144,7 @@ def load_signals(
                     errors.setdefault(name, {})[kind] = errors.setdefault(name, {}).get(kind, 0) + count
             for channel, samples in map_decoded(decoded, resolved).items():
                 parts[channel].append(samples)
-            frac = _fraction(reader, total)
+            frac = _fraction(reader)
             report_progress(frac if frac is not None else 0.0, f"{stats.frames} frames read")
         report = DecodeReport(source=str(getattr(reader, "name", "")), format=reader.meta.format,
                               database=db.name, database_repairs=list(db.repairs))

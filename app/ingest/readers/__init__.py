@@ -8,6 +8,7 @@ Usage::
         print(log.meta.start_time, log.meta.start_clock)
         for chunk in log.chunks():             # FrameChunk, at most chunk_frames rows each
             ...
+            print(log.position() / log.size)   # progress (size/position are None when unknown)
         for issue in log.report.issues:        # every skipped/corrupt region, with offset or line
             ...
 
@@ -47,6 +48,13 @@ class LogReader(Protocol):
     report: IngestReport
 
     def chunks(self) -> Iterator[FrameChunk]: ...
+
+    @property
+    def size(self) -> int | None:
+        """Bytes of the log as stored (compressed for gzip); None when unknown (a pipe)."""
+
+    def position(self) -> int | None:
+        """Bytes of the log consumed so far (``position() / size`` is the progress); None when unknown."""
 
     def close(self) -> None: ...
 

@@ -228,6 +228,16 @@ class BaseReader:
         self._last_t = int(t[-1])
         self._frame_index += len(t)
 
+    # -- progress -------------------------------------------------------------------------------
+    @property
+    def size(self) -> int | None:
+        """Bytes of the log source as stored (compressed for gzip), None when unknown (e.g. a pipe)."""
+        return self._stream.size
+
+    def position(self) -> int | None:
+        """Bytes of the source consumed so far (0..``size``), None when unknown."""
+        return self._stream.position()
+
     def close(self) -> None:
         self._stream.close()
 

@@ -11,6 +11,7 @@ import contextlib
 import gzip
 import io
 import os
+import stat
 import zlib
 from collections.abc import Callable
 from pathlib import Path
@@ -70,12 +71,19 @@ class ByteStream:
         Display name used in every message (the file name, or ``"<stream>"``).
     compressed : bool
         True when ``raw`` is a gzip decompressor; offsets then count decompressed bytes.
+    size : int, optional
+        Bytes of the source (the file as stored, compressed or not) from the log's first byte.
+    source_tell : callable, optional
+        Bytes of a compressed source consumed so far (the decompressor reads ahead in blocks).
     """
 
-    def __init__(self, raw: Readable, name: str, *, compressed: bool, closers: list[Readable]) -> None:
+    def __init__(self, raw: Readable, name: str, *, compressed: bool, closers: list[Readable],
+                 size: int | None = None, source_tell: Callable[[], int] | None = None) -> None:
         self._raw = raw
         self.name = name
         self.compressed = compressed
+        self.size = size
+        self._source_tell = source_tell
         self.offset = 0
         self._closers = closers
         self._pending: StreamDamage | None = None
@@ -120,6 +128,18 @@ class ByteStream:
             self._dead = True
             raise damage
         return chunks[0] if len(chunks) == 1 else b"".join(chunks)
+
+    def position(self) -> int | None:
+        """Bytes of the source consumed so far (compressed bytes for gzip), None when unknown."""
+        if not self.compressed:
+            return self.offset
+        if self._source_tell is None:
+            return None
+        try:
+            pos = self._source_tell()
+        except (OSError, ValueError):  # closed or not seekable after all
+            return None
+        return pos if self.size is None else min(pos, self.size)
 
     def close(self) -> None:
         for f in self._closers:
@@ -177,6 +197,7 @@ def open_source(source: str | os.PathLike[str] | BinaryIO) -> tuple[ByteStream, 
         closers.append(raw)
     else:
         raw = source
+    start, size = _extent(raw, path)
     try:
         head, raw = _peek(raw, HEAD_BYTES)
     except OSError as exc:
@@ -186,8 +207,8 @@ def open_source(source: str | os.PathLike[str] | BinaryIO) -> tuple[ByteStream, 
         ByteStream(raw, name, compressed=False, closers=closers).close()
         raise LogFormatError(f"{name}: empty log")
     if head[:2] != GZIP_MAGIC:
-        return ByteStream(raw, name, compressed=False, closers=closers), head, path
-    start = raw.tell() if raw.seekable() else 0
+        return ByteStream(raw, name, compressed=False, closers=closers, size=size), head, path
+    gz_start = raw.tell() if raw.seekable() else 0
     gz = gzip.GzipFile(fileobj=raw, mode="rb")
     inner = ByteStream(gz, name, compressed=True, closers=[gz, *closers])
     try:
@@ -204,6 +225,31 @@ def open_source(source: str | os.PathLike[str] | BinaryIO) -> tuple[ByteStream, 
         return ByteStream(replay, name, compressed=True, closers=[gz, *closers]), inner_head, path
     # Restart the decompressor so readers see decompressed byte 0 again.
     gz.close()  # does not close ``raw``: GzipFile only closes files it opened itself
-    raw.seek(start)
+    raw.seek(gz_start)
     gz = gzip.GzipFile(fileobj=raw, mode="rb")
-    return ByteStream(gz, name, compressed=True, closers=[gz, *closers]), inner_head, path
+    seekable_raw = raw
+    base = start if start is not None else gz_start
+    return ByteStream(gz, name, compressed=True, closers=[gz, *closers], size=size,
+                      source_tell=lambda: seekable_raw.tell() - base), inner_head, path
+
+
+def _extent(raw: BinaryIO, path: Path | None) -> tuple[int | None, int | None]:
+    """Where the log starts in ``raw`` and how many bytes it has from there, when the source can tell."""
+    try:
+        start: int | None = raw.tell() if raw.seekable() else None
+    except (OSError, ValueError):
+        start = None
+    total: int | None = None
+    try:
+        st = path.stat() if path is not None else os.fstat(raw.fileno())
+        total = st.st_size if stat.S_ISREG(st.st_mode) else None  # a pipe or socket has no size
+    except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
+        if start is not None:  # e.g. BytesIO: measure by seeking to the end and back
+            try:
+                total = raw.seek(0, io.SEEK_END)
+                raw.seek(start)
+            except (OSError, ValueError):
+                total = None
+    if total is None:
+        return start, None
+    return start, max(total - (start or 0), 0)

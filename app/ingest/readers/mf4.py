@@ -133,6 +133,15 @@ class MF4Reader(BaseReader):
                 continue
             yield chunk
 
+    def position(self) -> int | None:
+        """asammdf reads the file by random access: estimated from the records handed out so far."""
+        total = sum(c for _, _, c in self._groups)
+        if self.size is None:
+            return None
+        if not total:
+            return self.size if self._consumed else 0
+        return min(self.size, self.size * self.report.frames // total)
+
     def _iter_chunks(self) -> Iterator[FrameChunk]:
         streams = [self._blocks(*g) for g in self._groups]
         if len(streams) == 1:
