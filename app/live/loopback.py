@@ -203,8 +203,8 @@ class LoopbackBus(can.BusABC):
         self._inbuf += chunk
         msgs, used = decode_records(self._inbuf)
         del self._inbuf[:used]
-        for m in msgs:
-            m.channel = self.channel
+        # Messages keep channel None: a hub is one bus. The endpoint string "127.0.0.1:29536" would be
+        # read by python-can's log writers (can.util.channel2int) as CAN channel 29536.
         self._pending.extend(msgs)
         if self._pending:
             return self._pending.popleft(), False
