@@ -14,19 +14,15 @@ import argparse
 import re
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from app.errors import InputError, StorageError
-from app.ingest.database import LoadedDatabase, load_database
-from app.ingest.decode import DecodedMessage, VectorDecoder
-from app.ingest.pipeline_signals import load_signals
-from app.ingest.readers import open_log
-from app.ingest.signalmap import load_signal_map
-from app.ingest.stats import CounterGaps, DecodeReport, StatsAccumulator
-from app.ingest.suggest import suggest_candidates, suggest_signal_map
-from app.signals.signal import SignalSet
+
+if TYPE_CHECKING:  # the command imports numpy, cantools and pyarrow when it runs, not when --help is built
+    from app.ingest.database import LoadedDatabase
+    from app.ingest.decode import DecodedMessage
+    from app.ingest.stats import CounterGaps, DecodeReport
+    from app.signals.signal import SignalSet
 
 FORMATS = ("parquet", "csv")
 
@@ -45,6 +41,10 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.ingest.database import load_database
+    from app.ingest.pipeline_signals import load_signals
+    from app.ingest.signalmap import load_signal_map
+
     formats = [f.strip().lower() for f in str(args.format).split(",") if f.strip()]
     bad = [f for f in formats if f not in FORMATS]
     if bad or not formats:
@@ -72,6 +72,10 @@ def run(args: argparse.Namespace) -> int:
 def decode_all(log: Path, loaded: LoadedDatabase, *, strict: bool = False,
                ) -> tuple[dict[str, DecodedMessage], DecodeReport]:
     """Decode every message of the database; the messages (all chunks joined) and the report."""
+    from app.ingest.decode import DecodedMessage, VectorDecoder
+    from app.ingest.readers import open_log
+    from app.ingest.stats import DecodeReport, StatsAccumulator
+
     decoder = VectorDecoder(loaded.db)
     stats = StatsAccumulator(loaded.db)
     parts: dict[str, list[DecodedMessage]] = {}
@@ -116,6 +120,7 @@ def _write(table: Any, base: Path, formats: Iterable[str]) -> list[Path]:
 
 def write_signals(signals: SignalSet, out: Path, formats: Iterable[str]) -> list[Path]:
     """Canonical channels as one long table ``signals.<fmt>`` (channel, t_s, value, unit)."""
+    import numpy as np
     import pyarrow as pa
 
     names = list(signals)
@@ -200,6 +205,8 @@ def format_counter(g: CounterGaps) -> str:
 
 
 def format_channels(signals: SignalSet) -> str:
+    import numpy as np
+
     lines = ["", "canonical channels: samples, span s, NaN (not available)"]
     for name, s in signals.items():
         span = f"{s.t[0]:.3f}..{s.t[-1]:.3f}" if len(s) else "-"
@@ -208,6 +215,8 @@ def format_channels(signals: SignalSet) -> str:
 
 
 def format_suggestions(loaded: LoadedDatabase, periods: dict[int, float]) -> str:
+    from app.ingest.suggest import suggest_candidates, suggest_signal_map
+
     lines = ["", "no --map given; signal map candidates (score: reasons):"]
     for channel, cands in suggest_candidates(loaded.db, periods, limit=3).items():
         lines.append(f"  {channel}:" + ("" if cands else " no candidate"))

@@ -18,13 +18,13 @@ import sys
 import threading
 from pathlib import Path
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from app.cli.replay import add_bus_arguments, bus_config
 from app.errors import InputError
-from app.live.analyzer import LiveAnalyzer
-from app.live.decoding import source_for
-from app.live.session import LiveSession
+
+if TYPE_CHECKING:  # python-can, scipy and the analysis are imported when the command runs, not for --help
+    from app.live.session import LiveSession
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -60,6 +60,10 @@ def _event_line(ev: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.live.analyzer import LiveAnalyzer
+    from app.live.decoding import source_for
+    from app.live.session import LiveSession
+
     if (args.vehicle is None) == (args.dbc is None):
         raise InputError("give either --vehicle (from the store) or --dbc (with optional --map)")
     done = threading.Event()
@@ -104,6 +108,7 @@ def _watch(session: LiveSession, args: argparse.Namespace, done: threading.Event
 
 def _run_with_store(args: argparse.Namespace, done: threading.Event, emit: Any) -> int:
     from app.jobs import JobRunner
+    from app.live.decoding import source_for
     from app.live.manager import LiveManager, StartRequest
     from app.settings import get_settings
     from app.storage.sqlite import SQLiteStore

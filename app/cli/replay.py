@@ -13,11 +13,18 @@ import sys
 from collections.abc import Callable, Generator
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
 from app.errors import InputError
-from app.ingest.frames import FrameChunk
-from app.live.bus import BusConfig, BusLink, supported_interfaces
-from app.live.replay import Replayer, ReplayStats, parse_ids
+
+if TYPE_CHECKING:  # python-can and numpy are imported when the command runs, not when --help is built
+    from app.ingest.frames import FrameChunk
+    from app.live.bus import BusConfig
+    from app.live.replay import ReplayStats
+
+# For the help text only (listing python-can's interfaces would import python-can); an unknown
+# name is refused with the full list when the bus is opened.
+INTERFACE_EXAMPLES = "socketcan, pcan, vector, kvaser, virtual, tcp_loopback, ..."
 
 
 def parse_options(pairs: list[str] | None) -> dict[str, object]:
@@ -45,7 +52,7 @@ def parse_options(pairs: list[str] | None) -> dict[str, object]:
 
 def add_bus_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interface", "-i", required=True, metavar="NAME",
-                   help=f"python-can interface ({', '.join(supported_interfaces())})")
+                   help=f"python-can interface ({INTERFACE_EXAMPLES}; a wrong name lists the valid ones)")
     p.add_argument("--channel", "-c", default=None, help="bus channel, e.g. vcan0, PCAN_USBBUS1, 127.0.0.1:29536")
     p.add_argument("--bitrate", type=int, default=None, help="bit rate for interfaces that set it (bit/s)")
     p.add_argument("--option", "-o", action="append", metavar="KEY=VALUE",
@@ -53,6 +60,8 @@ def add_bus_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def bus_config(args: argparse.Namespace) -> BusConfig:
+    from app.live.bus import BusConfig
+
     return BusConfig(args.interface, args.channel, args.bitrate, parse_options(args.option))
 
 
@@ -95,6 +104,9 @@ def _progress_printer(tty: bool) -> Callable[[ReplayStats], None]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.live.bus import BusLink
+    from app.live.replay import Replayer, parse_ids
+
     if not args.log.is_file():
         raise InputError(f"log file not found: {args.log}")
     ids = parse_ids(args.ids)

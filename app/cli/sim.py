@@ -7,13 +7,12 @@ import csv
 import json
 import sys
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from app.errors import InputError
-from sim import load_vehicle, simulate
-from sim.metrics import peak_to_valley, unloaded_intervals
-from sim.paper import format_table, reproduce, sensitivity_table
+
+if TYPE_CHECKING:  # numpy and the simulator (numba) are imported when a command runs, not for --help
+    import numpy as np
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -34,6 +33,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 
 def _reproduce(args: argparse.Namespace) -> int:
+    from sim import load_vehicle
+    from sim.paper import format_table, reproduce, sensitivity_table
+
     vehicle = load_vehicle(args.vehicle)
     rows, cases = reproduce(vehicle)
     if args.json:
@@ -47,6 +49,8 @@ def _reproduce(args: argparse.Namespace) -> int:
 
 
 def _read_torque(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    import numpy as np
+
     if not path.is_file():
         raise InputError(f"torque file not found: {path}")
     with path.open(newline="", encoding="utf-8") as fh:
@@ -64,6 +68,9 @@ def _read_torque(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _simulate(args: argparse.Namespace) -> int:
+    from sim import load_vehicle, simulate
+    from sim.metrics import peak_to_valley, unloaded_intervals
+
     t, q = _read_torque(args.torque_csv)
     vehicle = load_vehicle(args.vehicle)
     res = simulate(vehicle, t, q, model=args.model, interp=args.interp, speed0_rpm=args.speed0_rpm,

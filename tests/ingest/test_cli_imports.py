@@ -1,0 +1,32 @@
+"""Building the command line stays cheap: decode/replay/live/sim/report import their heavy libraries lazily."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from tests.conftest import REPO
+
+HEAVY = ("cantools", "can", "pyarrow", "scipy", "asammdf", "pandas", "fastapi", "numba", "numpy")
+
+
+def test_registering_commands_imports_no_heavy_library() -> None:
+    code = (
+        "import argparse, sys\n"
+        "import app.cli\n"
+        "before = set(sys.modules)\n"  # what the dispatcher package itself imports is not these modules' doing
+        "from app.cli import decode, live, replay, report, sim\n"
+        "sub = argparse.ArgumentParser().add_subparsers()\n"
+        "for m in (decode, live, replay, sim):\n"
+        "    m.register(sub)\n"
+        f"print(','.join(m for m in {HEAVY!r} if m in sys.modules and m not in before))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == ""  # none of them was imported
+
+
+def test_help_still_lists_the_interfaces() -> None:
+    code = "from app.cli import main; main(['replay', '--help'])"
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and "tcp_loopback" in out.stdout
