@@ -11,7 +11,6 @@ corrupt region of the log with its byte offset or line number.
 from __future__ import annotations
 
 import argparse
-import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -20,11 +19,11 @@ from app.errors import InputError, StorageError
 
 if TYPE_CHECKING:  # the command imports numpy, cantools and pyarrow when it runs, not when --help is built
     from app.ingest.database import LoadedDatabase
-    from app.ingest.decode import DecodedMessage
     from app.ingest.stats import CounterGaps, DecodeReport
+    from app.ingest.tables import MessageTables
     from app.signals.signal import SignalSet
 
-FORMATS = ("parquet", "csv")
+FORMATS = ("parquet", "csv")  # the same as app.ingest.tables.FORMATS (not imported here: it needs numpy)
 
 
 def register(subparsers: Any) -> None:
@@ -44,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from app.ingest.database import load_database
     from app.ingest.pipeline_signals import load_signals
     from app.ingest.signalmap import load_signal_map
+    from app.ingest.tables import MessageTables
 
     formats = [f.strip().lower() for f in str(args.format).split(",") if f.strip()]
     bad = [f for f in formats if f not in FORMATS]
@@ -59,44 +59,51 @@ def run(args: argparse.Namespace) -> int:
             for path in write_signals(signals, args.out, formats):
                 print(f"wrote {path}")
         return 0
-    messages, report = decode_all(args.log, loaded, strict=args.strict)
+    tables = MessageTables(args.out / "messages", formats) if args.out is not None else None
+    report = decode_log(args.log, loaded, strict=args.strict, tables=tables)
     print(format_report(report))
     periods = {i.arb_id: i.period_ms / 1000.0 for i in report.ids if i.period_ms and i.message}
     print(format_suggestions(loaded, periods))
-    if args.out is not None:
-        for path in write_messages(messages, args.out, formats):
-            print(f"wrote {path}")
+    for path in tables.paths if tables is not None else []:
+        print(f"wrote {path}")
     return 0
 
 
-def decode_all(log: Path, loaded: LoadedDatabase, *, strict: bool = False,
-               ) -> tuple[dict[str, DecodedMessage], DecodeReport]:
-    """Decode every message of the database; the messages (all chunks joined) and the report."""
-    from app.ingest.decode import DecodedMessage, VectorDecoder
+def decode_log(log: Path, loaded: LoadedDatabase, *, strict: bool = False, tables: MessageTables | None = None,
+               chunk_frames: int = 65536) -> DecodeReport:
+    """Decode every message of the database chunk by chunk; the report (and the tables, streamed).
+
+    Nothing decoded is kept beyond the current chunk, except what ``tables`` buffers within its
+    memory budget; ``tables`` is closed (its files complete) when this returns or raises.
+    """
+    from app.ingest.decode import VectorDecoder
     from app.ingest.readers import open_log
     from app.ingest.stats import DecodeReport, StatsAccumulator
 
     decoder = VectorDecoder(loaded.db)
     stats = StatsAccumulator(loaded.db)
-    parts: dict[str, list[DecodedMessage]] = {}
-    with open_log(log, strict=strict) as reader:
-        for chunk in reader.chunks():
-            stats.add_chunk(chunk)
-            decoded = decoder.decode(chunk)
-            stats.add_decoded(decoded)
-            for name, dm in decoded.items():
-                parts.setdefault(name, []).append(dm)
-        report = DecodeReport(source=str(log), format=reader.meta.format, database=loaded.name,
-                              database_repairs=list(loaded.repairs), reader_issues=list(reader.report.issues))
-    messages = {name: DecodedMessage.concat(p) for name, p in parts.items()}
-    errors = {name: m.errors for name, m in messages.items() if m.errors}
+    errors: dict[str, dict[str, int]] = {}
+    decoded_frames = 0
+    try:
+        with open_log(log, strict=strict, chunk_frames=chunk_frames) as reader:
+            for chunk in reader.chunks():
+                stats.add_chunk(chunk)
+                decoded = decoder.decode(chunk)
+                stats.add_decoded(decoded)
+                for name, dm in decoded.items():
+                    decoded_frames += len(dm)
+                    for kind, count in dm.errors.items():
+                        errors.setdefault(name, {})[kind] = errors.get(name, {}).get(kind, 0) + count
+                if tables is not None:
+                    tables.add(decoded)
+            report = DecodeReport(source=str(log), format=reader.meta.format, database=loaded.name,
+                                  database_repairs=list(loaded.repairs), reader_issues=list(reader.report.issues))
+    finally:
+        if tables is not None:
+            tables.close()
     stats.fill(report, errors)
-    report.frames_decoded = sum(len(m) for m in messages.values())
-    return messages, report
-
-
-def _safe(name: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.@-]+", "_", name) or "message"
+    report.frames_decoded = decoded_frames
+    return report
 
 
 def _write(table: Any, base: Path, formats: Iterable[str]) -> list[Path]:
@@ -134,20 +141,6 @@ def write_signals(signals: SignalSet, out: Path, formats: Iterable[str]) -> list
                          if names else [], pa.string()).dictionary_encode(),
     })
     return _write(table, out / "signals", formats)
-
-
-def write_messages(messages: dict[str, DecodedMessage], out: Path, formats: Iterable[str]) -> list[Path]:
-    """One wide table per message under ``messages/``: t_s, bus, one column per signal."""
-    import pyarrow as pa
-
-    written = []
-    for name, dm in sorted(messages.items()):
-        if not len(dm):
-            continue
-        cols: dict[str, Any] = {"t_s": dm.t_ns / 1e9, "bus": dm.channel}
-        cols.update({s: v for s, v in dm.signals.items() if s not in cols})
-        written += _write(pa.table(cols), out / "messages" / _safe(name), formats)
-    return written
 
 
 def _ms(value: float | None) -> str:

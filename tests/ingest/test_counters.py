@@ -122,12 +122,12 @@ def test_chunking_does_not_change_the_result(splits: int, pattern: tuple[int, in
 
 
 def test_kona_capture_counters() -> None:
-    from app.cli.decode import decode_all
+    from app.cli.decode import decode_log
     from app.ingest.database import load_database
 
     log = shared_file("kona-ev", "230112-7-2019-pcan-ccan-power-off-on-ready-off.csv")
     dbc = shared_file("kona-ev", "dbc", "pcan.dbc")
-    _, report = decode_all(log, load_database(dbc))
+    report = decode_log(log, load_database(dbc))
     got = {(g.message, g.signal, g.channel): g for g in report.counter_gaps}
     sbw = got[("SBW_354", "Counter", 0)]  # steps by -15 mod 256 except where the low nibble wraps
     assert (sbw.kind, sbw.modulus, sbw.gaps, sbw.missed) == ("sequence", 16, 0, 0)
