@@ -8,7 +8,9 @@ Targets (issue 4): analysis of the 30-minute log <= 30 s; p95 of
 The obvious alternative -- sending every point and letting the dashboard downsample -- is
 timed in the same run and the ratio printed. Reads are measured twice: the same query
 repeated (served from the response cache, as for many viewers of one dashboard) and every
-request a different time window (each one downsampled from the memory-mapped arrays).
+request a different time window (each one downsampled from the memory-mapped arrays), and
+with ``method=lttb``. Last, the per-request work in-process (downsampling and JSON number
+formatting on the whole-log columns) next to the previous implementation, in the same run.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 from urllib.parse import urlencode, urlsplit
 
 import httpx
@@ -89,6 +92,79 @@ def hammer(url: str, clients: int, per_client: int, params_for: object) -> tuple
     for t in threads:
         t.join()
     return lat, time.perf_counter() - t0
+
+
+def _previous_downsample(t: Any, cols: dict[str, Any], max_points: int) -> tuple[Any, dict[str, Any]]:
+    """The previous implementation, kept here as the reference: argmax/argmin per bucket, then np.unique."""
+    import numpy as np
+
+    n = t.size
+    per_bucket = 2 * len(cols)
+    buckets = max(1, (max_points - 2) // per_bucket)
+    size = int(np.ceil(n / buckets))
+    full = n // size
+    keep = [np.array([0, n - 1])]
+    base = np.arange(full) * size
+    for y in cols.values():
+        whole = y[:full * size].reshape(full, size)
+        keep += [base + np.argmax(whole, axis=1), base + np.argmin(whole, axis=1)]
+        if n > full * size:
+            keep.append(np.array([full * size + int(np.argmax(y[full * size:])),
+                                  full * size + int(np.argmin(y[full * size:]))]))
+    rows = np.unique(np.concatenate(keep))
+    return t[rows], {k: y[rows] for k, y in cols.items()}
+
+
+def _previous_json(a: Any, decimals: int) -> str:
+    """The previous number formatting: one C-level % format over the array's Python floats."""
+    import numpy as np
+
+    finite = np.isfinite(a)
+    body = (f"%.{decimals}f," * a.size)[:-1] % tuple(np.where(finite, a, np.nan).tolist())
+    return f"[{body.replace('nan', 'null')}]"
+
+
+def inprocess_breakdown(data_dir: Path, analysis_id: str, reps: int = 200) -> list[str]:
+    """Per-request work on the whole-log columns, now and with the previous implementation, same run."""
+    from app.analysis.downsample import BlockExtremes, downsample
+    from app.api.numbers import json_numbers
+    from app.storage.results import ResultCache
+    from app.storage.sqlite import SQLiteStore
+
+    store = SQLiteStore(data_dir)
+    try:
+        files = ResultCache().get(store.get_analysis(analysis_id).result_dir)
+        t = files.array("whole_t")
+        cols = {c: files.array(f"whole_{c}") for c in ("measured_rpm", "simulated_rpm", "torque_nm")}
+
+        def per_call_ms(fn: Any) -> float:
+            fn()
+            t0 = time.perf_counter()
+            for _ in range(reps):
+                fn()
+            return (time.perf_counter() - t0) / reps * 1e3
+
+        arrays = list(cols.values())
+        t_build = time.perf_counter()
+        ext = BlockExtremes(arrays)
+        build_ms = (time.perf_counter() - t_build) * 1e3
+        new_ds = per_call_ms(lambda: ext.rows(arrays, 0, t.size - 1, 2000))
+        scan_ds = per_call_ms(lambda: downsample(t, cols, 2000))
+        old_ds = per_call_ms(lambda: _previous_downsample(t, cols, 2000))
+        rows = ext.rows(arrays, 0, t.size, 2000)
+        td, cd = t[rows], {k: v[rows] for k, v in cols.items()}
+        new_js = per_call_ms(lambda: [json_numbers(td, 6), *(json_numbers(v, 3) for v in cd.values())])
+        old_js = per_call_ms(lambda: [_previous_json(td, 6), *(_previous_json(v, 3) for v in cd.values())])
+        lttb = per_call_ms(lambda: downsample(t, cols, 2000, "lttb"))
+    finally:
+        store.close()
+    return [f"in-process, per request, whole log ({t.size} rows -> {td.size} rows, {reps} repetitions, same run):",
+            f"  downsample min/max      {new_ds:6.2f} ms   previous (argmax + np.unique) {old_ds:6.2f} ms   "
+            f"{old_ds / new_ds:4.1f}x  (block extremes, built once in {build_ms:.2f} ms; a full scan now: "
+            f"{scan_ds:.2f} ms)",
+            f"  JSON numbers (4 cols)   {new_js:6.2f} ms   previous (% format)          {old_js:6.2f} ms   "
+            f"{old_js / new_js:4.1f}x",
+            f"  downsample LTTB         {lttb:6.2f} ms   (method=lttb, 2000 rows)"]
 
 
 def line(name: str, lat: list[float], wall: float) -> str:
@@ -171,6 +247,12 @@ def main() -> int:
             print(line("max_points=2000, whole log, uncached", lat_var, w))
             lat_win, w = hammer(url, k, n, varied)
             print(line("max_points=2000, 2-min windows, uncached", lat_win, w))
+
+            def whole_lttb(cl: int, i: int) -> dict[str, object]:
+                return {**whole_varied(cl, i), "method": "lttb"}
+
+            lat_lttb, w = hammer(url, k, n, whole_lttb)
+            print(line("max_points=2000, whole log, uncached, lttb", lat_lttb, w))
             lat_full, w = hammer(url, k, max(2, n // 25), full)
             print(line("alternative: every point, uncached", lat_full, w))
             p95 = pct(lat_var, 95)
@@ -181,6 +263,8 @@ def main() -> int:
                   f"{len(httpx.get(url, params={'max_points': 0}, timeout=120).content)}")
             print(f"(median, same query: {statistics.median(lat_same):.1f} ms; load average now "
                   f"{os.getloadavg()[0]:.1f})")
+            print()
+            print("\n".join(inprocess_breakdown(tmpdir / "data", aid)))
         finally:
             srv.stop()
     return 0

@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.signal import correlate
 
+from app.analysis.downsample import downsample
 from app.analysis.series import FloatArray, parabolic_vertex
 from app.errors import InputError, InsufficientDataError
 from app.signals import Signal
@@ -101,43 +102,6 @@ def downsample_minmax(
     The rows are split into equal buckets; in each, the rows holding each column's min and
     max are kept (plus the first and last row), so peaks and valleys survive for plotting.
     NaN values are ignored when choosing the rows. Returns the kept times and columns.
+    (:func:`app.analysis.downsample.downsample` also offers LTTB.)
     """
-    n = t.size
-    per_bucket = 2 * max(1, len(columns))
-    if max_points < 2 + per_bucket:
-        raise InputError(f"max_points = {max_points}: must be at least {2 + per_bucket} for {len(columns)} series")
-    if n <= max_points:
-        return t, dict(columns)
-    buckets = max(1, (max_points - 2) // per_bucket)
-    size = int(np.ceil(n / buckets))
-    buckets = int(np.ceil(n / size))
-    pad = buckets * size - n
-    keep = [np.array([0, n - 1])]
-    base = np.arange(buckets) * size
-    full = n // size  # whole buckets are reshaped views (no copy); the short last one is done apart
-    for y in columns.values():
-        keep.append(_bucket_extremes(y, base, full, size, pad))
-    rows = np.unique(np.concatenate(keep))
-    rows = rows[rows < n]
-    return t[rows], {name: y[rows] for name, y in columns.items()}
-
-
-def _bucket_extremes(y: FloatArray, base: npt.NDArray[np.int64], full: int, size: int,
-                     pad: int) -> npt.NDArray[np.int64]:
-    """Rows of the max and of the min of ``y`` in every bucket of ``size`` rows, NaN ignored."""
-    hi = np.empty(base.size, np.int64)
-    lo = np.empty(base.size, np.int64)
-    if full:  # whole buckets as reshaped views: no copy
-        hi[:full] = base[:full] + np.argmax(y[:full * size].reshape(full, size), axis=1)
-        lo[:full] = base[:full] + np.argmin(y[:full * size].reshape(full, size), axis=1)
-    if pad:
-        hi[full] = full * size + int(np.argmax(y[full * size:]))
-        lo[full] = full * size + int(np.argmin(y[full * size:]))
-    # argmax/argmin stop at the first NaN: redo just those buckets ignoring NaN
-    for b in np.flatnonzero(np.isnan(y[hi]) | np.isnan(y[lo])):
-        seg = y[base[b]:base[b] + size]
-        ok = np.flatnonzero(~np.isnan(seg))
-        if ok.size:
-            hi[b] = base[b] + ok[np.argmax(seg[ok])]
-            lo[b] = base[b] + ok[np.argmin(seg[ok])]
-    return np.concatenate([hi, lo])
+    return downsample(t, columns, max_points, "minmax")

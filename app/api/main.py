@@ -58,6 +58,15 @@ async def _stop_live_sessions(app: FastAPI) -> None:
         log.info("live sessions stopped and their recordings stored")
 
 
+def _warm_up() -> None:
+    """Load the compiled series kernels before the first request (from numba's cache; compiled once)."""
+    from app.analysis import downsample
+    from app.api import numbers
+
+    downsample.warm_up()
+    numbers.warm_up()
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     cfg = settings or get_settings()
 
@@ -68,6 +77,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts)
         app.state.store, app.state.runner, app.state.settings = store, runner, cfg
         app.state.results = ResultCache()
+        await asyncio.to_thread(_warm_up)
         resumed = runner.start()
         if resumed:
             log.info("resumed %d queued job(s)", len(resumed))

@@ -14,9 +14,9 @@ import os
 import shutil
 import threading
 from collections import OrderedDict
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -24,6 +24,7 @@ import numpy.typing as npt
 from app.errors import NotFoundError, StorageError
 
 DOC = "result.json"
+T = TypeVar("T")
 
 
 def json_safe(obj: Any) -> Any:
@@ -64,7 +65,9 @@ class ResultFiles:
         except FileNotFoundError as exc:
             raise NotFoundError(f"no results in {directory.name}") from exc
         self._arrays: dict[str, npt.NDArray[np.float64]] = {}
+        self._derived: dict[object, object] = {}
         self._lock = threading.Lock()
+        self._build_lock = threading.Lock()
 
     def has(self, name: str) -> bool:
         return (self.directory / "arrays" / f"{name}.npy").exists()
@@ -79,6 +82,21 @@ class ResultFiles:
                 arr = np.load(path, mmap_mode="r")
                 self._arrays[name] = arr
             return arr
+
+
+    def derived(self, key: object, build: Callable[[], T]) -> T:
+        """``build()`` once per key and keep it with these files (results never change once written)."""
+        with self._lock:
+            if key in self._derived:
+                return self._derived[key]  # type: ignore[return-value]
+        with self._build_lock:  # concurrent first readers wait for one build
+            with self._lock:
+                if key in self._derived:
+                    return self._derived[key]  # type: ignore[return-value]
+            value = build()
+            with self._lock:
+                self._derived[key] = value
+            return value
 
 
 class ResultCache:

@@ -57,6 +57,11 @@ def test_upload_analyse_and_read_everything(server: Server, demo_log: Path) -> N
         for col in ("measured_rpm", "simulated_rpm"):
             assert max(v for v in small[col] if v is not None) == max(v for v in full[col] if v is not None)
             assert min(v for v in small[col] if v is not None) == min(v for v in full[col] if v is not None)
+        lttb = c.get(f"/analyses/{analysis_id}/speed", params={"max_points": 1000, "method": "lttb"}).json()
+        assert lttb["points"] == 1000 and lttb["t_s"][0] == full["t_s"][0] and lttb["t_s"][-1] == full["t_s"][-1]
+        assert set(lttb["t_s"]) <= set(full["t_s"])
+        bad = c.get(f"/analyses/{analysis_id}/speed", params={"method": "every-third"})
+        assert bad.status_code == 422 and bad.json()["code"] == "validation_error"
 
         k = analysed[0]["index"]
         ev = c.get(f"/analyses/{analysis_id}/events/{k}/speed", params={"format": "csv", "max_points": 500})
