@@ -59,3 +59,32 @@ def test_demo_builds_analyses_plots_and_stores(tmp_path: Path, capsys: pytest.Ca
     (analysis,) = store.list_analyses()
     assert analysis.job.status.value == "done" and analysis.summary["with_metrics"] >= 20
     store.close()
+
+
+HEAVY = ("fastapi", "uvicorn", "starlette", "numba", "sim", "matplotlib", "pandas", "scipy", "numpy", "can", "cantools")
+
+
+def test_registering_serve_analyze_demo_imports_nothing_heavy() -> None:
+    """Every invocation registers every command: the dispatcher and these commands' register() stay light."""
+    import subprocess
+    import sys
+
+    code = ("import argparse, sys\n"
+            "import app.cli\n"
+            "from app.cli import analyze, demo, serve\n"
+            "sub = argparse.ArgumentParser().add_subparsers()\n"
+            "for m in (serve, analyze, demo):\n"
+            "    m.register(sub)\n"
+            f"print(sorted(m for m in sys.modules if m.split('.')[0] in {HEAVY!r}))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=DBC.parent).stdout
+    assert out.strip() == "[]"
+
+
+def test_an_error_from_the_simulator_is_still_one_line(short_log: Path, capsys: pytest.CaptureFixture[str],
+                                                       tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "bad"\n[halfshaft]\nstiffness = -5.0\n', encoding="utf-8")
+    assert main(["analyze", str(short_log), "--vehicle", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("lashscope: error [invalid_parameter]") and "Traceback" not in err

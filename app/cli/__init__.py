@@ -4,7 +4,9 @@ Each subcommand lives in its own module under ``app.cli`` exposing
 ``register(subparsers)`` which adds a parser whose ``func`` attribute takes the parsed
 namespace and returns an exit code. The dispatcher maps :class:`app.errors.AppError`
 and :class:`sim.errors.SimError` to a one-line message and exit code 2, so no
-traceback reaches a user.
+traceback reaches a user. ``register()`` must stay cheap: command modules import their
+heavy dependencies (fastapi, uvicorn, the numba-backed simulator, matplotlib, pandas)
+inside the command function, since every invocation registers every command.
 """
 
 from __future__ import annotations
@@ -15,7 +17,6 @@ import sys
 from collections.abc import Sequence
 
 from app.errors import AppError
-from sim.errors import SimError
 
 # Subcommand modules, in the order they appear in --help.
 COMMANDS: tuple[str, ...] = ("decode", "sim", "serve", "analyze", "diagnose", "demo", "replay", "live")
@@ -34,12 +35,28 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _sim_error() -> type[Exception]:
+    """``sim.errors.SimError`` if the simulator was imported (it raised it then), else a type nothing raises.
+
+    Importing ``sim.errors`` imports the ``sim`` package and with it numba (~0.4 s): a command
+    that never simulates (``--help``, ``serve``, ``decode``) should not pay for it.
+    """
+    module = sys.modules.get("sim.errors")
+    return getattr(module, "SimError", _NeverRaised) if module is not None else _NeverRaised
+
+
+class _NeverRaised(Exception):
+    pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         code = args.func(args)
-    except (AppError, SimError) as exc:
+    except Exception as exc:
+        if not isinstance(exc, AppError | _sim_error()):
+            raise
         err_code = getattr(exc, "code", "error")
         print(f"lashscope: error [{err_code}]: {exc}", file=sys.stderr)
         return 2
