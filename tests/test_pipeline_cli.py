@@ -59,6 +59,29 @@ def test_demo_builds_analyses_plots_and_stores(tmp_path: Path, capsys: pytest.Ca
     (analysis,) = store.list_analyses()
     assert analysis.job.status.value == "done" and analysis.summary["with_metrics"] >= 20
     store.close()
+    _check_overlay_layout(analysis.result_dir)
+
+
+def _check_overlay_layout(result_dir: Path) -> None:
+    """No figure-level label or title overlaps a panel (axes with its tick labels and title)."""
+    import matplotlib.pyplot as plt
+
+    from app.demo.plot import overlay_figure
+    from app.storage.results import ResultFiles
+
+    fig = overlay_figure(ResultFiles(result_dir))
+    try:
+        renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+        fig.canvas.draw()
+        panels = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.get_visible() and ax.axison]
+        labels = [t.get_window_extent(renderer) for t in (fig._supylabel, fig._supxlabel, fig._suptitle)
+                  if t is not None]
+        assert len(panels) == 12 and len(labels) == 3
+        for lab in labels:
+            for box in panels:
+                assert not lab.overlaps(box), (lab, box)
+    finally:
+        plt.close(fig)
 
 
 HEAVY = ("fastapi", "uvicorn", "starlette", "numba", "sim", "matplotlib", "pandas", "scipy", "numpy", "can", "cantools")

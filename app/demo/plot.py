@@ -4,15 +4,29 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from app.storage.results import ResultFiles
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 
 def overlay_png(files: ResultFiles, path: Path, max_events: int = 12, title: str = "") -> Path:
     """One panel per analysed event (up to ``max_events``): speed vs time from the torque crossing."""
+    import matplotlib.pyplot as plt
+
+    fig = overlay_figure(files, max_events, title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def overlay_figure(files: ResultFiles, max_events: int = 12, title: str = "") -> Figure:
+    """The figure of :func:`overlay_png` (Agg backend); the caller closes it."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -24,7 +38,9 @@ def overlay_png(files: ResultFiles, path: Path, max_events: int = 12, title: str
     n = max(1, len(events))
     cols = min(4, n)
     rows = math.ceil(n / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False)
+    # constrained layout reserves room for the figure-level labels; tight_layout ignores supylabel, which
+    # then overlapped the tick labels of the first column
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False, layout="constrained")
     t_all, meas_all, sim_all = files.array("ev_t"), files.array("ev_measured_rpm"), files.array("ev_simulated_rpm")
     for ax, ev in zip(axes.flat, events, strict=False):
         a, b = doc["event_rows"][str(ev["index"])]
@@ -47,8 +63,4 @@ def overlay_png(files: ResultFiles, path: Path, max_events: int = 12, title: str
     fig.supylabel("motor speed (rpm)", fontsize=9)
     fig.suptitle(title or "measured vs simulated motor speed (fluctuation peak-valley measured vs simulated)",
                  fontsize=10)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
