@@ -74,8 +74,7 @@ def _check_overlay_layout(result_dir: Path) -> None:
         renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
         fig.canvas.draw()
         panels = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.get_visible() and ax.axison]
-        labels = [t.get_window_extent(renderer) for t in (fig._supylabel, fig._supxlabel, fig._suptitle)
-                  if t is not None]
+        labels = [t.get_window_extent(renderer) for t in fig.texts]  # suptitle, supxlabel, supylabel
         assert len(panels) == 12 and len(labels) == 3
         for lab in labels:
             for box in panels:
