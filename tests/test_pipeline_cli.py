@@ -73,7 +73,8 @@ def _check_overlay_layout(result_dir: Path) -> None:
     try:
         renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
         fig.canvas.draw()
-        panels = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.get_visible() and ax.axison]
+        boxes = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.get_visible() and ax.axison]
+        panels = [b for b in boxes if b is not None]
         labels = [t.get_window_extent(renderer) for t in fig.texts]  # suptitle, supxlabel, supylabel
         assert len(panels) == 12 and len(labels) == 3
         for lab in labels:
