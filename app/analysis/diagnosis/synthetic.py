@@ -9,10 +9,17 @@ the withheld effect); the "measurement" samples it like an inverter on CAN:
 - torque and speed values quantised to the DBC resolution, speed with Gaussian sensor noise;
 - a constant time offset between the torque and speed timestamps (the nuisance the diagnosis
   must fit, not attribute).
+
+Torque and speed come in separate frames (each with its own phase, jitter and drop-outs) or, with
+``shared_frame`` (1 kHz messages that carry both), in one frame whose torque value is the one valid
+``offset_s`` earlier. :func:`measure_frames` also returns each frame's position in the sender's
+sequence, so a log writer can fill alive counters that show the drop-outs
+(:mod:`.truthlog` writes real BLF logs through a DBC).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +56,7 @@ class CanSampling:
     jitter_s: float = 0.0002
     drop_fraction: float = 0.01
     offset_s: float = 0.0  # torque timestamps minus the time the value was valid
+    shared_frame: bool = False  # torque and speed in one frame (same timestamps)
 
 
 @dataclass(frozen=True)
@@ -102,29 +110,60 @@ def run_truth(vehicle: Vehicle, drive: Drive, model: str = "multibody") -> SimRe
                     interp="linear", output_dt=0.001)
 
 
-def _frame_times(duration: float, s: CanSampling, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
-    """Valid-at times and logged timestamps of a periodic frame (jittered, with drop-outs)."""
-    t_valid = float(rng.uniform(0, s.period_s)) + s.period_s * np.arange(int(duration / s.period_s) - 1)
+@dataclass(frozen=True)
+class Frames:
+    """CAN-like samples of one channel.
+
+    Attributes
+    ----------
+    t : (k,) logged timestamps (s), increasing.
+    values : (k,) physical values (before any DBC quantisation unless the sampling quantises).
+    seq : (k,) position of each frame in the sender's sequence (drop-outs leave gaps).
+    """
+
+    t: FloatArray
+    values: FloatArray
+    seq: npt.NDArray[np.int64]
+
+
+def _frame_times(duration: float, s: CanSampling, rng: np.random.Generator
+                 ) -> tuple[FloatArray, FloatArray, npt.NDArray[np.int64]]:
+    """Valid-at times, logged timestamps and sequence numbers of a periodic frame (jittered, with drop-outs)."""
+    seq = np.arange(int(duration / s.period_s) - 1, dtype=np.int64)
+    t_valid = float(rng.uniform(0, s.period_s)) + s.period_s * seq
     t_log = t_valid + np.abs(rng.normal(0.0, s.jitter_s, t_valid.size))
     keep = rng.random(t_valid.size) >= s.drop_fraction
-    t_valid, t_log = t_valid[keep], t_log[keep]
+    t_valid, t_log, seq = t_valid[keep], t_log[keep], seq[keep]
     order = np.argsort(t_log, kind="stable")
-    return np.asarray(t_valid[order], dtype=np.float64), np.asarray(t_log[order], dtype=np.float64)
+    return (np.asarray(t_valid[order], dtype=np.float64), np.asarray(t_log[order], dtype=np.float64),
+            np.asarray(seq[order], dtype=np.int64))
+
+
+def measure_frames(drive: Drive, truth: SimResult, s: CanSampling, rng: np.random.Generator) -> dict[str, Frames]:
+    """CAN-like frames ``{channel: Frames}`` of torque and speed (see the module docstring)."""
+    dur = float(drive.t[-1])
+    tv, tl, seq = _frame_times(dur, s, rng)
+    if s.shared_frame:
+        tv2, tl2, seq2 = tv, tl, seq
+        q = np.interp(tv - s.offset_s, drive.t, drive.torque_nm)
+        tq_log = tl
+    else:
+        q = np.interp(tv, drive.t, drive.torque_nm)
+        tq_log = tl + s.offset_s
+        tv2, tl2, seq2 = _frame_times(dur, s, rng)
+    if s.torque_res_nm > 0:
+        q = np.round(q / s.torque_res_nm) * s.torque_res_nm
+    sp = np.interp(tv2, truth.t, truth.motor_speed_rpm) + rng.normal(0.0, s.speed_noise_rpm, tv2.size)
+    if s.speed_res_rpm > 0:
+        sp = np.round(sp / s.speed_res_rpm) * s.speed_res_rpm
+    return {"motor_torque_nm": Frames(tq_log, np.asarray(q, dtype=np.float64), seq),
+            "motor_speed_rpm": Frames(tl2, np.asarray(sp, dtype=np.float64), seq2)}
 
 
 def measure(drive: Drive, truth: SimResult, s: CanSampling, rng: np.random.Generator) -> dict[str, tuple[FloatArray,
                                                                                                            FloatArray]]:
     """CAN-like samples ``{channel: (timestamps, values)}`` of torque and speed."""
-    dur = float(drive.t[-1])
-    tv, tl = _frame_times(dur, s, rng)
-    q = np.interp(tv, drive.t, drive.torque_nm)
-    if s.torque_res_nm > 0:
-        q = np.round(q / s.torque_res_nm) * s.torque_res_nm
-    tv2, tl2 = _frame_times(dur, s, rng)
-    sp = np.interp(tv2, truth.t, truth.motor_speed_rpm) + rng.normal(0.0, s.speed_noise_rpm, tv2.size)
-    if s.speed_res_rpm > 0:
-        sp = np.round(sp / s.speed_res_rpm) * s.speed_res_rpm
-    return {"motor_torque_nm": (tl + s.offset_s, q), "motor_speed_rpm": (tl2, sp)}
+    return {k: (f.t, f.values) for k, f in measure_frames(drive, truth, s, rng).items()}
 
 
 def to_signals(samples: dict[str, tuple[FloatArray, FloatArray]]) -> SignalSet:
@@ -134,3 +173,50 @@ def to_signals(samples: dict[str, tuple[FloatArray, FloatArray]]) -> SignalSet:
         keep = t >= 0
         out.add(Signal.from_samples(name, t[keep], v[keep], units.get(name, ""), Interp.LINEAR))
     return out
+
+
+def signal_ratio(drive: Drive, truth: SimResult, nominal: SimResult, noise_rpm: float, period_s: float = 0.01,
+                 pre_s: float = 0.3, post_s: float = 1.0) -> float:
+    """How visible an effect is: RMS of truth minus nominal speed near reversals, in noise sigmas.
+
+    Evaluated on a ``period_s`` grid inside ``[t_cross - pre_s, t_cross + post_s]`` of every torque
+    zero crossing, with the mean difference removed (a constant offset is no signal).
+    """
+    t = np.arange(0.0, float(drive.t[-1]), period_s)
+    diff = np.interp(t, truth.t, truth.motor_speed_rpm) - np.interp(t, nominal.t, nominal.motor_speed_rpm)
+    cross = drive.t[np.flatnonzero(np.diff(np.signbit(drive.torque_nm)))]
+    near = np.zeros(t.size, dtype=bool)
+    for tc in cross:
+        near |= (t > tc - pre_s) & (t < tc + post_s)
+    d = diff[near] - np.mean(diff[near]) if near.any() else diff - np.mean(diff)
+    return float(np.sqrt(np.mean(d * d)) / noise_rpm)
+
+
+def toward_off(values: dict[str, float], off: dict[str, float], alpha: float) -> dict[str, float]:
+    """Effect values moved toward the effect's ``off`` values: ``off + alpha * (value - off)``."""
+    return {k: off[k] + alpha * (v - off[k]) for k, v in values.items()}
+
+
+def scale_to_signal(make_truth: Callable[[dict[str, float]], SimResult], nominal: SimResult, drive: Drive,
+                    values: dict[str, float], off: dict[str, float], target: float, noise_rpm: float,
+                    period_s: float = 0.01, steps: int = 10) -> tuple[dict[str, float], float]:
+    """Effect values scaled toward ``off`` so that the :func:`signal_ratio` is about ``target``.
+
+    Bisection on ``alpha`` in (0, 1] (the ratio grows with ``alpha`` for every library effect); when
+    even the full draw is fainter than ``target`` it is returned as it is. Returns (values, ratio).
+    """
+    def ratio(a: float) -> float:
+        return signal_ratio(drive, make_truth(toward_off(values, off, a)), nominal, noise_rpm, period_s)
+
+    r_full = ratio(1.0)
+    if r_full <= target:
+        return dict(values), r_full
+    lo, hi, r_hi = 0.0, 1.0, r_full
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        r = ratio(mid)
+        if r > target:
+            hi, r_hi = mid, r
+        else:
+            lo = mid
+    return toward_off(values, off, hi), r_hi
