@@ -9,34 +9,37 @@
     POST /diagnoses/{diagnosis_id}/validate  {"log_id": ...}     -> 202; shrink on that drive in the report
 
 Work runs on a one-worker background pool (a diagnosis is CPU-bound). State lives in files under the
-analysis' directory (``diagnoses/<id>/status.json``, ``report.json``, PNGs), so a finished diagnosis
-survives a restart; one interrupted by a restart reads as failed.
+analysis' directory (``diagnoses/<id>/status.json``, ``report.json``, ``validation.json``, PNGs), so a
+finished diagnosis survives a restart, and one cut off by a restart is resumed when the server
+starts again -- or, after it has been cut off twice, marked failed with the reason "interrupted by
+server restart" (:mod:`app.diagnosis_state`; the router's lifespan runs the recovery after the
+app's own, so the store exists). The status carries ``attempts``.
 """
 
 from __future__ import annotations
 
 import json
 import secrets
-import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import AsyncIterator, Callable, Iterator
+from contextlib import asynccontextmanager
+from functools import partial
 from pathlib import Path
 from typing import Any
 
-from fastapi import APIRouter, Request, status
+from fastapi import APIRouter, FastAPI, Request, status
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, Field
 
 from app.api.deps import StoreDep
 from app.api.schemas import ERRORS
-from app.errors import AnalysisError, AppError, ConflictError, InputError, NotFoundError
+from app.diagnosis_state import ACTIVE, Worker, log, recover, state, update, write_json
+from app.errors import AnalysisError, ConflictError, InputError, NotFoundError
 from app.storage.base import Store
-from sim.errors import SimError
-
-router = APIRouter(tags=["diagnoses"], responses=ERRORS)
 
 _SEP = "--dg"
 PLOTS = {"events": "diagnosis_events.png", "residual": "diagnosis_residual.png"}
+STATUS, VALIDATION = "status.json", "validation.json"
 
 
 class DiagnosisCreate(BaseModel):
@@ -53,22 +56,53 @@ class ValidateBody(BaseModel):
     log_id: str
 
 
-class _Pool:
-    def __init__(self) -> None:
-        self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnosis")
+def _worker(app: FastAPI) -> Worker:
+    """The app's diagnosis worker (made by the lifespan; on first use when the app runs without one)."""
+    worker: Worker | None = getattr(app.state, "diagnosis_worker", None)
+    if worker is None:
+        worker = app.state.diagnosis_worker = Worker()
+    return worker
 
 
-_POOL_LOCK = threading.Lock()
+def _diagnosis_dirs(store: Store) -> Iterator[Path]:
+    offset, page_size = 0, 200
+    while True:
+        page = store.list_analyses(limit=page_size, offset=offset)
+        for rec in page:
+            root = store.analysis_dir(rec.id) / "diagnoses"
+            if root.is_dir():
+                yield from sorted(p for p in root.iterdir() if (p / STATUS).is_file())
+        if len(page) < page_size:
+            return
+        offset += page_size
 
 
-def _pool(request: Request) -> _Pool:
-    """The app's diagnosis worker, created on first use."""
-    state = request.app.state
-    with _POOL_LOCK:
-        if not hasattr(state, "diagnosis_pool"):
-            state.diagnosis_pool = _Pool()
-    pool: _Pool = state.diagnosis_pool
-    return pool
+def recover_interrupted(store: Store, worker: Worker) -> dict[str, list[str]]:
+    """Resume (or fail) every diagnosis and validation cut off by a stop or crash (see :mod:`app.diagnosis_state`)."""
+    todo: list[tuple[str, Path, Callable[[], Callable[[], None]]]] = []
+    for d in _diagnosis_dirs(store):
+        todo.append((d.name, d / STATUS, partial(_diagnosis_work, store, d, worker)))
+        todo.append((f"{d.name}/validation", d / VALIDATION, partial(_validation_work, store, d, worker)))
+    return recover(todo, worker)
+
+
+@asynccontextmanager
+async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+    """Resume interrupted work at startup; ask the running work to stop at shutdown (it goes back to the queue)."""
+    worker = app.state.diagnosis_worker = Worker()
+    store: Store | None = getattr(app.state, "store", None)
+    if store is not None:
+        done = recover_interrupted(store, worker)
+        if done["resumed"] or done["failed"]:
+            log.info("diagnoses after a restart: resumed %s, failed %s", done["resumed"], done["failed"])
+    try:
+        yield
+    finally:
+        worker.close()
+        app.state.diagnosis_worker = None
+
+
+router = APIRouter(tags=["diagnoses"], responses=ERRORS, lifespan=lifespan)
 
 
 def _dir(store: Store, diagnosis_id: str) -> Path:
@@ -76,31 +110,9 @@ def _dir(store: Store, diagnosis_id: str) -> Path:
         raise NotFoundError(f"diagnosis {diagnosis_id!r} not found", code="diagnosis_not_found")
     analysis_id = diagnosis_id.rsplit(_SEP, 1)[0]
     d = store.analysis_dir(analysis_id) / "diagnoses" / diagnosis_id
-    if not (d / "status.json").is_file():
+    if not (d / STATUS).is_file():
         raise NotFoundError(f"diagnosis {diagnosis_id!r} not found", code="diagnosis_not_found")
     return d
-
-
-def _write_json(path: Path, doc: dict[str, Any]) -> None:
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc, indent=1, allow_nan=False, default=str), encoding="utf-8")
-    tmp.replace(path)
-
-
-def _status(d: Path, **kw: Any) -> None:
-    path = d / "status.json"
-    doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
-    doc.update(kw, updated_at=time.time())
-    _write_json(path, doc)
-
-
-def _run_guarded(d: Path, work: Any) -> None:
-    try:
-        work()
-    except (AppError, SimError) as exc:
-        _status(d, status="failed", error={"code": getattr(exc, "code", "error"), "detail": str(exc)})
-    except Exception as exc:  # a bug must fail the diagnosis, not the server
-        _status(d, status="failed", error={"code": "internal_error", "detail": f"{type(exc).__name__}: {exc}"})
 
 
 def _decode(store: Store, log_id: str, vehicle_name: str, version: int) -> tuple[Any, Any]:
@@ -113,11 +125,43 @@ def _decode(store: Store, log_id: str, vehicle_name: str, version: int) -> tuple
     return signals, load_vehicle(veh.driveline_path)
 
 
+def _diagnosis_work(store: Store, d: Path, worker: Worker) -> Callable[[], None]:
+    """The diagnosis ``d/status.json`` describes (options, analysis, vehicle), as a job for the worker."""
+    from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict
+    from app.diagnosis_plots import event_overlay_png, residual_chart_png
+
+    path = d / STATUS
+    st = json.loads(path.read_text(encoding="utf-8"))
+    opts = st["options"]
+    options = DiagnosisOptions(candidates=tuple(opts["candidates"]), seed=int(opts["seed"]), model=opts["model"])
+
+    def work() -> None:
+        update(path, status="running", stage="decoding", progress=0.0)
+        rec = store.get_analysis(st["analysis_id"])
+        signals, vehicle = _decode(store, rec.log_id, st["vehicle"]["name"], st["vehicle"]["version"])
+        last = [0.0]
+
+        def progress(fraction: float, message: str) -> None:
+            worker.check()
+            if time.monotonic() - last[0] > 0.5 or fraction >= 1.0:
+                last[0] = time.monotonic()
+                update(path, progress=round(0.95 * fraction, 3), stage=message)
+
+        result = diagnose_signals(signals, vehicle, options, progress)
+        doc = report_dict(result)
+        if result.baseline is not None:
+            event_overlay_png(result, d / PLOTS["events"])
+            residual_chart_png(result, d / PLOTS["residual"])
+        write_json(d / "report.json", doc)
+        update(path, status="done", progress=1.0, stage="done", decision=doc["decision"]["status"], owner=None)
+
+    return work
+
+
 @router.post("/analyses/{analysis_id}/diagnoses", status_code=status.HTTP_202_ACCEPTED,
              summary="Start a diagnosis of an analysis' sim-to-real gap (runs in the background)")
 def create_diagnosis(analysis_id: str, body: DiagnosisCreate, store: StoreDep, request: Request) -> dict[str, Any]:
-    from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict
-    from app.diagnosis_plots import event_overlay_png, residual_chart_png
+    from app.analysis.diagnosis import DiagnosisOptions
     from sim.effects import EFFECTS
 
     rec = store.get_analysis(analysis_id)
@@ -126,42 +170,26 @@ def create_diagnosis(analysis_id: str, body: DiagnosisCreate, store: StoreDep, r
     diagnosis_id = f"{analysis_id}{_SEP}{secrets.token_hex(4)}"
     d = store.analysis_dir(analysis_id) / "diagnoses" / diagnosis_id
     d.mkdir(parents=True, exist_ok=True)
-    _status(d, id=diagnosis_id, analysis_id=analysis_id, status="queued", progress=0.0, stage="queued",
-            options={"candidates": list(options.candidates), "seed": options.seed, "model": options.model},
-            vehicle={"name": rec.vehicle_name, "version": rec.vehicle_version})
-
-    def work() -> None:
-        _status(d, status="running", stage="decoding")
-        signals, vehicle = _decode(store, rec.log_id, rec.vehicle_name, rec.vehicle_version)
-        last = [0.0]
-
-        def progress(fraction: float, message: str) -> None:
-            if time.monotonic() - last[0] > 0.5 or fraction >= 1.0:
-                last[0] = time.monotonic()
-                _status(d, progress=round(0.95 * fraction, 3), stage=message)
-
-        result = diagnose_signals(signals, vehicle, options, progress)
-        doc = report_dict(result)
-        if result.baseline is not None:
-            event_overlay_png(result, d / PLOTS["events"])
-            residual_chart_png(result, d / PLOTS["residual"])
-        _write_json(d / "report.json", doc)
-        _status(d, status="done", progress=1.0, stage="done", decision=doc["decision"]["status"])
-
-    _pool(request).pool.submit(_run_guarded, d, work)
+    update(d / STATUS, id=diagnosis_id, analysis_id=analysis_id, status="queued", progress=0.0, stage="queued",
+           attempts=1, options={"candidates": list(options.candidates), "seed": options.seed, "model": options.model},
+           vehicle={"name": rec.vehicle_name, "version": rec.vehicle_version})
+    worker = _worker(request.app)
+    worker.submit(d / STATUS, _diagnosis_work(store, d, worker))
     return _read(d)
 
 
 def _read(d: Path) -> dict[str, Any]:
-    doc: dict[str, Any] = json.loads((d / "status.json").read_text(encoding="utf-8"))
-    if doc.get("status") in ("queued", "running") and time.time() - doc.get("updated_at", 0) > 3600:
+    doc = state(d / STATUS) or {}
+    if doc.get("status") in ACTIVE and time.time() - doc.get("updated_at", 0) > 3600:
         doc["status"], doc["error"] = "failed", {"code": "interrupted", "detail": "no progress for an hour"}
+    doc.pop("owner", None)
     report = d / "report.json"
     if report.is_file():
         doc["report"] = json.loads(report.read_text(encoding="utf-8"))
-    validation = d / "validation.json"
-    if validation.is_file():
-        doc["validation"] = json.loads(validation.read_text(encoding="utf-8"))
+    validation = state(d / VALIDATION)
+    if validation is not None:
+        validation.pop("owner", None)
+        doc["validation"] = validation
     doc["plots"] = [k for k, f in PLOTS.items() if (d / f).is_file()]
     return doc
 
@@ -213,7 +241,7 @@ def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict
 
     d = _dir(store, diagnosis_id)
     report = _done_report(d, diagnosis_id)
-    st = json.loads((d / "status.json").read_text(encoding="utf-8"))
+    st = json.loads((d / STATUS).read_text(encoding="utf-8"))
     veh = store.get_vehicle(st["vehicle"]["name"], st["vehicle"]["version"])
     effects = _chosen(report)
     augmented = apply_effects(load_vehicle(veh.driveline_path), effects)
@@ -224,36 +252,42 @@ def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict
     summary["diagnosis"] = {"id": diagnosis_id, "effects": effects, "from": f"{veh.name}@{veh.version}"}
     rec, created = store.add_vehicle(name, driveline=path, database=veh.database_path,
                                      signal_map=veh.signal_map_path, summary=summary)
-    _status(d, applied={"vehicle": rec.name, "version": rec.version, "effects": effects})
+    update(d / STATUS, applied={"vehicle": rec.name, "version": rec.version, "effects": effects})
     return {"vehicle": rec.name, "version": rec.version, "created": created, "effects": effects,
             "from": f"{veh.name}@{veh.version}"}
 
 
-@router.post("/diagnoses/{diagnosis_id}/validate", status_code=status.HTTP_202_ACCEPTED,
-             summary="Validate the diagnosed effect on another log (runs in the background)")
-def validate_diagnosis(diagnosis_id: str, body: ValidateBody, store: StoreDep, request: Request) -> dict[str, Any]:
+def _validation_work(store: Store, d: Path, worker: Worker) -> Callable[[], None]:
+    """The validation ``d/validation.json`` describes (the other log) of the diagnosis in ``d``, as a job."""
     from app.analysis.diagnosis import DiagnosisOptions, validate_effects
 
-    d = _dir(store, diagnosis_id)
-    report = _done_report(d, diagnosis_id)
+    path = d / VALIDATION
+    report = json.loads((d / "report.json").read_text(encoding="utf-8"))
     effects = _chosen(report)
-    store.get_log(body.log_id)  # 404 now rather than in the background
-    st = json.loads((d / "status.json").read_text(encoding="utf-8"))
+    st = json.loads((d / STATUS).read_text(encoding="utf-8"))
+    log_id = json.loads(path.read_text(encoding="utf-8"))["log_id"]
     opts = report["options"]
     try:
         options = DiagnosisOptions(candidates=tuple(opts["candidates"]), seed=opts["seed"], model=report["model"])
     except (KeyError, TypeError) as exc:
         raise InputError(f"diagnosis report options unreadable: {exc}") from exc
-    _write_json(d / "validation.json", {"status": "running", "log_id": body.log_id})
 
     def work() -> None:
-        try:
-            signals, vehicle = _decode(store, body.log_id, st["vehicle"]["name"], st["vehicle"]["version"])
-            val = validate_effects(effects, signals, vehicle, options)
-            _write_json(d / "validation.json", {"status": "done", "log_id": body.log_id, **val.to_dict()})
-        except (AppError, SimError) as exc:
-            _write_json(d / "validation.json", {"status": "failed", "log_id": body.log_id,
-                                                "error": {"code": getattr(exc, "code", "error"), "detail": str(exc)}})
+        update(path, status="running")
+        signals, vehicle = _decode(store, log_id, st["vehicle"]["name"], st["vehicle"]["version"])
+        val = validate_effects(effects, signals, vehicle, options, lambda fraction, message: worker.check())
+        write_json(path, {"status": "done", "log_id": log_id, **val.to_dict()})
 
-    _pool(request).pool.submit(_run_guarded, d, work)
+    return work
+
+
+@router.post("/diagnoses/{diagnosis_id}/validate", status_code=status.HTTP_202_ACCEPTED,
+             summary="Validate the diagnosed effect on another log (runs in the background)")
+def validate_diagnosis(diagnosis_id: str, body: ValidateBody, store: StoreDep, request: Request) -> dict[str, Any]:
+    d = _dir(store, diagnosis_id)
+    _chosen(_done_report(d, diagnosis_id))  # 409 / 422 now rather than in the background
+    store.get_log(body.log_id)  # 404 now rather than in the background
+    write_json(d / VALIDATION, {"status": "queued", "log_id": body.log_id, "attempts": 1})
+    worker = _worker(request.app)
+    worker.submit(d / VALIDATION, _validation_work(store, d, worker))
     return _read(d)
