@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from app.analysis.metrics import MetricParams
 from app.errors import ConflictError, InputError, NotFoundError
 from app.live.analyzer import LiveAnalyzer
 from app.live.bus import BusConfig, supported_interfaces
@@ -111,7 +112,7 @@ class LiveManager:
         if req.vehicle is not None:
             veh = self.store.get_vehicle(req.vehicle, req.vehicle_version)
             source, units = self.make_source(veh.database_path, veh.signal_map_path)
-            return source, units, LiveAnalyzer(units)
+            return source, units, LiveAnalyzer(units, metric_params=_metric_params(veh.driveline_path))
         if req.database is not None:
             source, units = self.make_source(req.database, None)
             return source, units, None
@@ -185,3 +186,12 @@ class LiveManager:
         for s in self.sessions():
             if s.state == "running":
                 self.stop(s.id)
+
+
+def _metric_params(driveline_path: Path) -> MetricParams:
+    """The offline analysis' metric thresholds plus the vehicle's free-rotor inertia, so live
+    events get the same gap-open estimate as the stored analysis of the recording."""
+    from app.pipeline import free_rotor_inertia
+    from sim import load_vehicle
+
+    return MetricParams(free_rotor_inertia_kgm2=free_rotor_inertia(load_vehicle(driveline_path)))

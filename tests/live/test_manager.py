@@ -46,6 +46,10 @@ def test_session_with_a_vehicle_becomes_a_stored_log_with_an_analysis(tmp_path: 
     done = manager.stop(session.id)
     assert manager.stop(session.id) == done  # idempotent
     assert [e["kind"] for e in session.events] == ["tip_in", "tip_out"]
+    # the vehicle's rotor inertia reaches the live metrics, so the free-rotor gap-open time is estimated
+    assert session.analyzer is not None and session.analyzer.metric_params is not None
+    assert session.analyzer.metric_params.free_rotor_inertia_kgm2 is not None
+    assert session.analyzer.metric_params.free_rotor_inertia_kgm2 > 0.01
     rec = store.get_log(done.log_id)
     assert rec.frames == session.counters.frames_processed and rec.meta["source"] == "live"
     analysis = store.get_analysis(done.analysis_id)
