@@ -7,6 +7,7 @@ subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
     AppError
      +-- IngestError                      (422)
      |    +-- UnsupportedFormatError      (415)  no reader recognises the content
+     |    +-- LogNotFoundError (FileNotFoundError) (404)  no log file at the given path
      |    +-- LogFormatError (ValueError) (422)  corrupt or unreadable log content
      |    |    +-- TruncatedLogError             the log ends inside a record
      |    +-- DatabaseError (ValueError)  (422)  DBC/KCD/SYM/ARXML cannot be loaded
@@ -52,6 +53,11 @@ class IngestError(AppError):
 class UnsupportedFormatError(IngestError):
     code = "unsupported_format"
     status = 415
+
+
+class LogNotFoundError(IngestError, FileNotFoundError):
+    code = "file_not_found"
+    status = 404
 
 
 class LogFormatError(IngestError, ValueError):

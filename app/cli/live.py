@@ -2,7 +2,7 @@
 
 Receives the bus, records it to BLF (flushed as it arrives), decodes it with the vehicle's
 DBC and signal map, prints tip-in/tip-out events with their metrics as each completes and a
-status line every few seconds. Ctrl-C (or ``--duration``) stops it; the recording then
+status line every few seconds. Ctrl-C, SIGTERM or ``--duration`` stops it; the recording then
 becomes a stored log with its analysis, as if it had been uploaded.
 
 ``--dbc`` instead of ``--vehicle`` decodes without the store (no events unless ``--map``),
@@ -20,7 +20,7 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
-from app.cli.replay import add_bus_arguments, bus_config
+from app.cli.replay import add_bus_arguments, bus_config, check_connect_timeout
 from app.errors import InputError
 
 if TYPE_CHECKING:  # python-can, scipy and the analysis are imported when the command runs, not for --help
@@ -30,13 +30,15 @@ if TYPE_CHECKING:  # python-can, scipy and the analysis are imported when the co
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = subparsers.add_parser(
         "live", help="analyse a live CAN bus: events as they complete, stored log + analysis at the end",
-        description="Receive, record and analyse a live CAN bus until Ctrl-C or --duration.")
+        description="Receive, record and analyse a live CAN bus until Ctrl-C, SIGTERM or --duration.")
     add_bus_arguments(p)
     p.add_argument("--vehicle", default=None, help="registered vehicle (DBC + signal map + driveline)")
     p.add_argument("--vehicle-version", type=int, default=None, help="vehicle version (default: latest)")
     p.add_argument("--dbc", type=Path, default=None, help="decode with this DBC instead of a vehicle")
     p.add_argument("--map", type=Path, default=None, help="signal map for --dbc (enables events)")
     p.add_argument("--out", type=Path, default=None, help="recording path with --dbc (default live-<id>.blf)")
+    p.add_argument("--data-dir", type=Path, default=None,
+                   help="store (SQLite + files) for --vehicle (default $LASHSCOPE_DATA_DIR or ./lashscope-data)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--no-analysis", action="store_true", help="store the log but do not analyse it")
     p.add_argument("--status-every", type=float, default=2.0, help="seconds between status lines (0: none)")
@@ -62,10 +64,9 @@ def _event_line(ev: dict[str, Any]) -> str:
 def run(args: argparse.Namespace) -> int:
     from app.live.analyzer import LiveAnalyzer
     from app.live.decoding import source_for
-    from app.live.session import LiveSession
+    from app.live.session import LiveSession, SessionOptions
 
-    if (args.vehicle is None) == (args.dbc is None):
-        raise InputError("give either --vehicle (from the store) or --dbc (with optional --map)")
+    _check_args(args)
     done = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
@@ -74,13 +75,13 @@ def run(args: argparse.Namespace) -> int:
     def emit(ev: dict[str, Any]) -> None:
         print(json.dumps({"event": ev}, default=str) if args.json else _event_line(ev), flush=True)
 
-    previous = signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         if args.vehicle is not None:
             return _run_with_store(args, done, emit)
         source, units = source_for(args.dbc, args.map)
-        session = LiveSession(bus_config(args), source, analyzer=LiveAnalyzer(units) if args.map else None)
+        session = LiveSession(bus_config(args), source, analyzer=LiveAnalyzer(units) if args.map else None,
+                              options=SessionOptions(connect_timeout_s=args.connect_timeout))
         session.record_path = args.out or Path(f"live-{session.id}.blf")
         session.on_event = emit
         session.start()
@@ -90,7 +91,27 @@ def run(args: argparse.Namespace) -> int:
         _finish(args, summary)
         return 0
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """Refuse bad arguments before a bus, a store or a recording is opened."""
+    if (args.vehicle is None) == (args.dbc is None):
+        raise InputError("give either --vehicle (from the store) or --dbc (with optional --map)")
+    if args.dbc is not None and args.data_dir is not None:
+        raise InputError("--data-dir is the store for --vehicle; with --dbc the recording goes to --out")
+    if args.vehicle is not None and (args.map is not None or args.out is not None):
+        raise InputError("--map and --out go with --dbc; a --vehicle brings its own map and stores the recording")
+    if args.duration is not None and not 0 < args.duration < float("inf"):
+        raise InputError(f"--duration must be a positive number of seconds, got {args.duration:g}")
+    if not 0 <= args.status_every < float("inf"):
+        raise InputError(f"--status-every must be >= 0 seconds, got {args.status_every:g}")
+    check_connect_timeout(args)
+    if args.out is not None and not args.out.parent.is_dir():
+        raise InputError(f"--out: directory {args.out.parent} does not exist")
+    if args.data_dir is not None and args.data_dir.exists() and not args.data_dir.is_dir():
+        raise InputError(f"--data-dir: {args.data_dir} is not a directory")
 
 
 def _watch(session: LiveSession, args: argparse.Namespace, done: threading.Event) -> None:
@@ -110,17 +131,19 @@ def _run_with_store(args: argparse.Namespace, done: threading.Event, emit: Any) 
     from app.jobs import JobRunner
     from app.live.decoding import source_for
     from app.live.manager import LiveManager, StartRequest
-    from app.settings import get_settings
+    from app.live.session import SessionOptions
+    from app.settings import Settings, get_settings
     from app.storage.sqlite import SQLiteStore
 
-    settings = get_settings()
+    settings = Settings(data_dir=args.data_dir) if args.data_dir is not None else get_settings()
     store = SQLiteStore(settings.data_dir)
     runner = JobRunner(store)
     try:
         manager = LiveManager(store, settings.data_dir / "live", source_for, submit=runner.submit,
                               allowed_interfaces=frozenset({args.interface}))
         session = manager.start(StartRequest(bus_config(args), vehicle=args.vehicle,
-                                             vehicle_version=args.vehicle_version, analyse=not args.no_analysis))
+                                             vehicle_version=args.vehicle_version, analyse=not args.no_analysis,
+                                             options=SessionOptions(connect_timeout_s=args.connect_timeout)))
         session.on_event = emit
         _watch(session, args, done)
         fin = manager.stop(session.id)

@@ -149,10 +149,46 @@ class BusLink:
         self._closed = threading.Event()
         self.status = LinkState()
 
-    def open(self) -> None:
-        """Open now; raise :class:`LiveBusError` if the first attempt fails (bad config shows at once)."""
-        self._bus = self._opener(self.cfg)
-        self.status.state, self.status.connects = "connected", self.status.connects + 1
+    def open(self, connect_timeout_s: float = 0.0) -> None:
+        """Open now, retrying with the link's backoff for up to ``connect_timeout_s`` seconds.
+
+        A bus that is not there yet (adapter being plugged in, hub starting a moment later)
+        gets the same exponential backoff as one that disappears later. A configuration the
+        interface refuses (:class:`InputError`, e.g. an unknown interface name) fails at once.
+
+        Raises
+        ------
+        LiveBusError
+            The bus could not be opened within ``connect_timeout_s`` (the last attempt's reason,
+            with the number of attempts).
+        InputError
+            ``connect_timeout_s`` is negative or not finite, or the interface name is unknown.
+        """
+        if not 0.0 <= connect_timeout_s < float("inf"):
+            raise InputError(f"connect timeout must be a finite number of seconds >= 0, got {connect_timeout_s}")
+        deadline = time.monotonic() + connect_timeout_s
+        attempts = 0
+        while True:
+            attempts += 1
+            try:
+                self._bus = self._opener(self.cfg)
+                break
+            except LiveBusError as exc:
+                left = deadline - time.monotonic()
+                if left <= 0 or self._closed.is_set():
+                    if attempts > 1:
+                        raise LiveBusError(f"{exc} (gave up after {attempts} attempts in "
+                                           f"{connect_timeout_s:g} s)") from exc
+                    raise
+                delay = min(self._backoff.next(), left)
+                st = self.status
+                st.state, st.last_error, st.retry_in_s = "connecting", str(exc), delay
+                st.reconnect_attempts += 1
+                if self._closed.wait(delay):
+                    raise
+        self._backoff.reset()
+        st = self.status
+        st.state, st.connects, st.retry_in_s = "connected", st.connects + 1, None
 
     @property
     def connected(self) -> bool:

@@ -38,6 +38,9 @@ SPIN_NS = 300_000  # sleep until this close to the deadline, then spin
 BIN_NS = 10_000  # pacing histogram resolution
 N_BINS = 20_000  # 10 µs x 20 000 = 200 ms; later frames land in the last bin
 SWITCH_INTERVAL_S = 0.00025
+# Speed factors outside this range are no replay: below it a 10 ms gap waits hours and deadlines leave
+# the clock's range; above it every frame is late anyway (send as fast as the bus takes them).
+RATE_MIN, RATE_MAX = 1e-3, 1e3
 
 ChunkSource = Callable[[], Iterable[FrameChunk]]
 
@@ -98,6 +101,13 @@ class ReplayStats:
         }
 
 
+def check_rate(rate: float) -> float:
+    """``rate`` if it lies in [RATE_MIN, RATE_MAX]; else :class:`InputError` naming the bounds."""
+    if not RATE_MIN <= rate <= RATE_MAX:  # also refuses NaN
+        raise InputError(f"--rate must be between {RATE_MIN:g} and {RATE_MAX:g} (a speed factor), got {rate:g}")
+    return rate
+
+
 def parse_ids(text: str | None) -> frozenset[int] | None:
     """``"0x108,0x118 264"`` -> ``{0x108, 0x118, 264}`` (``0x`` for hex, plain digits decimal)."""
     if not text:
@@ -154,8 +164,7 @@ class Replayer:
                  ids: Collection[int] | None = None, channels: Collection[int] | None = None,
                  progress: Callable[[ReplayStats], None] | None = None, progress_every_s: float = 0.5,
                  lead_s: float = 0.05, realtime: bool = True) -> None:
-        if not rate > 0 or not np.isfinite(rate):
-            raise InputError(f"--rate must be a positive number, got {rate}")
+        check_rate(rate)
         self.link = link
         self.source = source
         self.rate = rate

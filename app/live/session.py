@@ -95,6 +95,7 @@ class SessionOptions:
     status_every_s: float = 1.0  # status updates on the stream
     stream_every_s: float = 0.05  # samples are sent to dashboards in ~20 Hz updates
     stream_max_points: int = 2000  # per channel and update; beyond this, evenly decimated
+    connect_timeout_s: float = 0.0  # keep retrying (with backoff) a bus that is absent at start this long
 
 
 class LiveSession:
@@ -145,7 +146,7 @@ class LiveSession:
     def start(self) -> LiveSession:
         if self.state != "created":
             raise ConflictError(f"live session {self.id} is {self.state}; it can be started once")
-        self.link.open()  # a wrong interface/channel fails here, at once
+        self.link.open(self.opt.connect_timeout_s)  # a wrong interface fails here, an absent bus after the timeout
         # The receiver holds the GIL while it parses a burst of frames; with the default 5 ms switch
         # interval the worker (and its latency) waits that long. Process-wide, so only ever lowered.
         sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))

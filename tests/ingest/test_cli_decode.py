@@ -78,6 +78,12 @@ def test_errors_are_one_line(log: Path, tmp_path: Path, capsys: pytest.CaptureFi
     assert code == 2 and f"[{message}]" in err and "Traceback" not in err and err.count("\n") == 1
 
 
+def test_missing_log_is_file_not_found(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["decode", str(tmp_path / "nope.blf"), "--dbc", str(DBC_DIR / "lashscope_ev.dbc")])
+    err = capsys.readouterr().err
+    assert code == 2 and "[file_not_found]" in err and "nope.blf" in err and err.count("\n") == 1
+
+
 def test_strict_refuses_broken_dbc(log: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["decode", str(log), "--dbc", str(shared_file("kona-ev", "dbc", "pcan.dbc")), "--strict"])
     err = capsys.readouterr().err

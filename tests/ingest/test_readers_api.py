@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.errors import InputError, LogFormatError, StorageError, UnsupportedFormatError
+from app.errors import InputError, LogFormatError, LogNotFoundError, StorageError, UnsupportedFormatError
 from app.ingest.frames import FrameChunk
 from app.ingest.readers import FORMATS, READERS, LogReader, open_log, sniff_format
 from app.ingest.readers.mf4 import merge_by_time
@@ -58,8 +58,10 @@ def test_empty_log() -> None:
 
 
 def test_missing_path_and_unknown_format(tmp_path: Path) -> None:
-    with pytest.raises(StorageError, match="not found"):
+    with pytest.raises(LogNotFoundError, match="not found") as missing:
         open_log(tmp_path / "nope.blf")
+    assert missing.value.code == "file_not_found" and missing.value.status == 404
+    assert isinstance(missing.value, FileNotFoundError)
     with pytest.raises(StorageError, match="directory"):
         open_log(tmp_path)
     with pytest.raises(UnsupportedFormatError, match="unknown format 'pcap'"):

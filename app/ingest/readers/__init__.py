@@ -95,8 +95,10 @@ def open_log(source: str | os.PathLike[str] | BinaryIO, *, fmt: str | None = Non
         Empty file, damaged header, or (strict) any damage found while opening.
     UnsupportedFormatError
         The content matches no supported format, or ``fmt`` is unknown.
+    LogNotFoundError
+        No file at the path (code ``file_not_found``).
     StorageError
-        The path cannot be opened.
+        The path cannot be opened otherwise.
     """
     stream, head, path = open_source(source)
     try:

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO, Protocol, cast
 
-from app.errors import InputError, LogFormatError, StorageError
+from app.errors import InputError, LogFormatError, LogNotFoundError, StorageError
 
 GZIP_MAGIC = b"\x1f\x8b"
 HEAD_BYTES = 65536  # enough for every format's header and a few hundred text lines
@@ -178,8 +178,10 @@ def open_source(source: str | os.PathLike[str] | BinaryIO) -> tuple[ByteStream, 
     ------
     LogFormatError
         Empty file, or a gzip member whose first bytes cannot be decompressed.
+    LogNotFoundError
+        No file at the path (code ``file_not_found``).
     StorageError
-        The path cannot be opened.
+        The path cannot be opened otherwise (a directory, no permission).
     """
     name = describe(source)
     closers: list[Readable] = []
@@ -189,7 +191,7 @@ def open_source(source: str | os.PathLike[str] | BinaryIO) -> tuple[ByteStream, 
         try:
             raw: BinaryIO = open(path, "rb")  # noqa: SIM115 -- closed by ByteStream.close
         except FileNotFoundError as exc:
-            raise StorageError(f"log file not found: {path}") from exc
+            raise LogNotFoundError(f"log file not found: {path}") from exc
         except IsADirectoryError as exc:
             raise StorageError(f"log path is a directory, not a file: {path}") from exc
         except OSError as exc:
