@@ -75,6 +75,21 @@ def test_asc_damage_reported_with_line_numbers(fast_path: bool, monkeypatch: pyt
     assert isinstance(strict.error, LogFormatError) and f"line {min(where)}" in str(strict.error)
 
 
+@pytest.mark.parametrize("fast_path", [True, False], ids=["compiled", "line-parser"])
+@pytest.mark.parametrize(("line", "kind", "message"), [
+    # a garbled byte on a short line names the byte, not the count
+    (b"0.001 1 123 Rx d 8 01 02 ZZ\n", "non_hex", "data byte 3 'ZZ' is not a hex number"),
+    (b"0.001 1 123 Rx d 8 01 02 03\n", "short_data", "3 data bytes present, 8 expected from the DLC"),
+])
+def test_asc_bad_byte_is_named_before_the_count(fast_path: bool, monkeypatch: pytest.MonkeyPatch, line: bytes,
+                                                kind: str, message: str) -> None:
+    monkeypatch.setattr(asc_module, "FAST_PATH_MIN_BYTES", 0 if fast_path else 10**12)
+    lines = _asc_lines()
+    out = run_bounded(b"".join([*lines[:20], line, *lines[20:]]))
+    assert out.report is not None
+    assert [(i.line, i.kind, i.message) for i in out.report.issues] == [(21, kind, f"line skipped: {message}")]
+
+
 def test_asc_gzip_truncated_salvages_and_reports() -> None:
     packed = gzip.compress(_asc_text())
     out = run_bounded(packed[: len(packed) * 2 // 3])

@@ -52,11 +52,13 @@ def decimal_to_ns(text: str, scale_exp: int = 9, *, what: str = "timestamp") -> 
 
 
 def hex_bytes(tokens: list[str], n: int, *, base: int = 16, what: str = "data byte") -> bytes:
-    """The first ``n`` tokens as bytes; short or non-hex input raises :class:`BadLine`."""
-    if len(tokens) < n:
-        raise BadLine("short_data", f"{len(tokens)} data bytes present, {n} expected from the DLC")
+    """The first ``n`` tokens as bytes; non-hex or short input raises :class:`BadLine`.
+
+    The tokens present are checked before their count, so a line with a garbled byte names
+    that byte (``non_hex``) rather than reporting it one byte short (``short_data``).
+    """
     out = bytearray(n)
-    for i in range(n):
+    for i in range(min(n, len(tokens))):
         tok = tokens[i]
         try:
             v = int(tok, base)
@@ -66,6 +68,8 @@ def hex_bytes(tokens: list[str], n: int, *, base: int = 16, what: str = "data by
         if not 0 <= v <= 255 or tok[0] in "+-":
             raise BadLine("non_hex", f"{what} {i + 1} {tok!r} is not a byte value")
         out[i] = v
+    if len(tokens) < n:
+        raise BadLine("short_data", f"{len(tokens)} data bytes present, {n} expected from the DLC")
     return bytes(out)
 
 
