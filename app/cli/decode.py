@@ -168,17 +168,48 @@ def format_report(r: DecodeReport) -> str:
     lines.append("counter gaps:" if r.counter_gaps else "counter gaps: no alive counters decoded")
     for g in r.counter_gaps:
         lines.append(f"  bus {g.channel} {g.message}.{g.signal} ({g.frames} frames): {format_counter(g)}")
-    counts = ", ".join(f"{k} {v}" for k, v in sorted(r.anomaly_counts.items())) or "none"
-    lines.append(f"timestamp anomalies (per bus): {counts}")
-    for a in r.timestamp_anomalies:
-        lines.append(f"  {a.kind}: bus {a.channel} frame {a.frame} at {a.t_s:.6f} s (step {a.dt_s:+.6f} s)")
-    lines.append("skipped or corrupt regions:" if r.reader_issues else "skipped or corrupt regions: none")
-    for i in r.reader_issues:
+    lines += _timestamp_lines(r)
+    # Backwards steps are a property of the timestamps (above), not a region the reader skipped.
+    regions = [i for i in r.reader_issues if i.kind != "time_backwards"]
+    lines.append("skipped or corrupt regions:" if regions else "skipped or corrupt regions: none")
+    for i in regions:
         where = f"byte {i.offset}" if i.offset is not None else (f"line {i.line}" if i.line is not None else "-")
         lost = f", {i.frames_lost} frames lost" if i.frames_lost else ""
         times = f" (x{i.count})" if i.count > 1 else ""
         lines.append(f"  {where}: {i.kind}{times}: {i.message}{lost}")
     return "\n".join(lines)
+
+
+def _timestamp_lines(r: DecodeReport) -> list[str]:
+    """Timestamp anomalies per bus, then backwards steps in file order explained against them.
+
+    The reader counts time going backwards in file order across all buses; the statistics count it
+    per bus. A multi-bus logger (GVRET/SavvyCAN) that interleaves buses steps back in file order
+    while each bus's own time runs forward, which is no damage.
+    """
+    counts = ", ".join(f"{k} {v}" for k, v in sorted(r.anomaly_counts.items())) or "none"
+    lines = ["timestamp anomalies:", f"  per bus: {counts}"]
+    for a in r.timestamp_anomalies:
+        lines.append(f"    {a.kind}: bus {a.channel} frame {a.frame} at {a.t_s:.6f} s (step {a.dt_s:+.6f} s)")
+    n_file = sum(i.count for i in r.reader_issues if i.kind == "time_backwards")
+    if not n_file:
+        lines.append("  in file order (all buses): none")
+        return lines
+    first = next(i for i in r.reader_issues if i.kind == "time_backwards")
+    where = first.message.partition("(")[2].partition(")")[0]  # "first before frame index N"
+    per_bus = r.anomaly_counts.get("backwards", 0)
+    multi_bus = len({s.channel for s in r.ids}) > 1
+    text = f"  in file order (all buses): {n_file} backward steps" + (f" ({where})" if where else "")
+    if per_bus == 0 and multi_bus:
+        text += ("; none within a bus: the buses are logged interleaved and each bus's own time runs forward "
+                 "(no frame skipped; frames kept in logged order)")
+    elif per_bus and multi_bus:
+        text += (f"; {per_bus} within a bus (above), the others where interleaved buses meet "
+                 "(no frame skipped; frames kept in logged order)")
+    else:
+        text += "; the per-bus steps above (no frame skipped; frames kept in logged order)"
+    lines.append(text)
+    return lines
 
 
 def format_counter(g: CounterGaps) -> str:

@@ -53,6 +53,31 @@ def test_decode_without_map_suggests(log: Path, tmp_path: Path, capsys: pytest.C
     assert not (tmp_path / "messages" / "MCU_Speed.parquet").exists()
 
 
+def test_kona_interleaved_buses_are_a_timestamp_note_not_a_skipped_region(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log = shared_file("kona-ev", "221217-1-2021-pcan-bcan-no-key.csv")
+    code = main(["decode", str(log), "--dbc", str(shared_file("kona-ev", "dbc", "pcan.dbc")),
+                 "--map", str(DBC_DIR / "kona_pcan.map.toml"), "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == 0
+    section = out[out.index("timestamp anomalies:"):]
+    assert section.startswith("timestamp anomalies:\n  per bus: none\n  in file order (all buses): 1029 backward steps")
+    assert "none within a bus: the buses are logged interleaved" in section
+    assert "skipped or corrupt regions: none" in section and "time_backwards" not in out
+
+
+def test_backwards_step_within_one_bus_is_listed_per_bus(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log = tmp_path / "back.log"
+    times = [1.0, 1.01, 1.02, 1.005, 1.03, 1.04]
+    log.write_text("".join(f"({t:.6f}) can0 100#0011223344556677\n" for t in times))
+    code = main(["decode", str(log), "--dbc", str(DBC_DIR / "lashscope_ev.dbc"), "--out", str(tmp_path / "o")])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "  per bus: backwards 1\n    backwards: bus 0 frame 3 at 1.005000 s (step -0.015000 s)" in out
+    assert "in file order (all buses): 1 backward steps (first before frame index 3); the per-bus steps above" in out
+    assert "skipped or corrupt regions: none" in out
+
+
 def test_report_lists_damaged_regions(log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     broken = tmp_path / "cut.blf"
     broken.write_bytes(log.read_bytes()[: log.stat().st_size * 2 // 3])
