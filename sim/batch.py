@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sim.budget import MAX_BATCH_STEPS, MAX_STEPS, check_output, check_steps
 from sim.errors import InstabilityError, ParameterError
 from sim.inputs import prepare_input
 from sim.integrate import STATUS_OK, is_serial_chain, run_chain_batch
@@ -70,13 +71,20 @@ def simulate_batch(
         if c.body_names != ref.body_names:
             raise ParameterError(f"variants[{k}]", variants[k], "changes the model topology; batch needs one topology")
     t0, n_out = _grid(inp, output_dt)
+    span = float(inp.t[-1]) - t0
     nv = len(chains)
+    check_output(span, output_dt, n_out, 16 * nv)  # kernel buffer and the rpm copy
     w0 = initial_speed(vehicle, speed0_rpm)
     states = [quasi_static_full(c, float(inp.torque[0]), w0) for c in chains]
     q_max = float(np.max(np.abs(inp.torque)))
     steps = [choose_step(c, output_dt, torque_max=q_max,
                          omega_vehicle=float(s[1][c.vehicle]) if c.vehicle >= 0 else 0.0)
              for c, s in zip(chains, states, strict=True)]
+    for k, (step, sub) in enumerate(steps):
+        check_steps(span, step, (n_out - 1) * sub, auto=True, what=f"variant {k}")
+    total = sum((n_out - 1) * sub for _, sub in steps)
+    check_steps(span, min(s[0] for s in steps), total, auto=True, limit=MAX_BATCH_STEPS,
+                what=f"all {nv} variants together")
 
     def stack(name: str) -> F64:
         return np.ascontiguousarray(np.stack([getattr(c, name) for c in chains]))
@@ -138,19 +146,34 @@ class ToleranceResult:
         return float(100.0 * np.mean(self.fluct_rpm <= measured_rpm))
 
 
+ProgressFn = Callable[[int, int], None]
+TOLERANCE_CHUNK = 100  # variants per compiled batch: progress granularity and bounded buffers
+
+
 def tolerance_analysis(
     vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLike, *, n: int = 1000, seed: int = 0,
     window: tuple[float, float] | None = None, distribution: Literal["uniform", "normal"] = "uniform",
     speed0_rpm: float | None = None, interp: Literal["hold", "linear"] = "hold", output_dt: float = 0.001,
+    progress: ProgressFn | None = None,
 ) -> ToleranceResult:
     """Monte Carlo over every gap's [min, max] band and every ``vehicle.tolerances`` band.
 
     ``uniform`` samples each band uniformly (a production spread with no better knowledge);
     ``normal`` takes the band as +-3 sigma about its midpoint, clipped to the band. The
-    window (s) bounds the fluctuation metric; default: the whole input.
+    window (s) bounds the fluctuation metric; default: the whole input. Variants run in
+    compiled batches of ``TOLERANCE_CHUNK``; ``progress(done, n)`` is called after each (and
+    once with ``done = 0`` before the first). The same ``seed`` gives the same result.
+
+    Raises
+    ------
+    ParameterError : invalid ``n``/``distribution``, or the whole analysis would take more than
+        ``sim.budget.MAX_BATCH_STEPS`` integrator steps (field ``dt``, with the numbers)
+    InputSignalError, InstabilityError : as :func:`simulate_batch`
     """
-    if n < 1:
-        raise ParameterError("n", n, "must be >= 1")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ParameterError("n", n, "must be an integer >= 1")
+    if distribution not in ("uniform", "normal"):
+        raise ParameterError("distribution", distribution, "must be 'uniform' or 'normal'")
     rng = np.random.default_rng(seed)
     bands: dict[str, tuple[float, float]] = {f"gaps.{g}": (getattr(vehicle.gaps, g).min, getattr(vehicle.gaps, g).max)
                                              for g in GAP_NAMES}
@@ -160,18 +183,42 @@ def tolerance_analysis(
     hi = np.array([bands[f][1] for f in fields])
     if distribution == "uniform":
         x = rng.uniform(lo, hi, size=(n, len(fields)))
-    elif distribution == "normal":
-        x = np.clip(rng.normal((lo + hi) / 2, (hi - lo) / 6, size=(n, len(fields))), lo, hi)
     else:
-        raise ParameterError("distribution", distribution, "must be 'uniform' or 'normal'")
+        x = np.clip(rng.normal((lo + hi) / 2, (hi - lo) / 6, size=(n, len(fields))), lo, hi)
     variants = [dict(zip(fields, (float(v) for v in row), strict=True)) for row in x]
-    res = simulate_batch(vehicle, [{}, *variants], t_s, torque_nm, speed0_rpm=speed0_rpm, interp=interp,
-                         output_dt=output_dt)
-    w0, w1 = window if window is not None else (float(res.t[0]), float(res.t[-1]))
-    fl = np.array([peak_to_valley(res.t, s, w0, w1) for s in res.motor_speed_rpm])
-    ul = np.array([unloaded_time(ev, w0, w1) for ev in res.gap_events]) * 1e3
+    _check_analysis_budget(vehicle, t_s, torque_nm, n + 1, speed0_rpm, interp, output_dt)
+    report = progress if progress is not None else (lambda done, total: None)
+    report(0, n)
+    runs: list[BatchResult] = []
+    for start in range(0, n, TOLERANCE_CHUNK):
+        chunk = variants[start:start + TOLERANCE_CHUNK]
+        runs.append(simulate_batch(vehicle, [{}, *chunk] if start == 0 else chunk, t_s, torque_nm,
+                                   speed0_rpm=speed0_rpm, interp=interp, output_dt=output_dt))
+        report(start + len(chunk), n)
+    t = runs[0].t
+    speeds = np.concatenate([r.motor_speed_rpm for r in runs])
+    events = [ev for r in runs for ev in r.gap_events]
+    w0, w1 = window if window is not None else (float(t[0]), float(t[-1]))
+    fl = np.array([peak_to_valley(t, s, w0, w1) for s in speeds])
+    ul = np.array([unloaded_time(ev, w0, w1) for ev in events]) * 1e3
     return ToleranceResult(fluct_rpm=fl[1:], unloaded_ms=ul[1:], samples=x, fields=fields,
                            nominal_fluct_rpm=float(fl[0]))
+
+
+def _check_analysis_budget(vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLike, runs: int,
+                           speed0_rpm: float | None, interp: str, output_dt: float) -> None:
+    """Refuse up front an analysis whose ``runs`` runs at the nominal step exceed ``MAX_BATCH_STEPS``."""
+    inp = prepare_input(t_s, torque_nm, interp)
+    t0, n_out = _grid(inp, output_dt)
+    check_output(float(inp.t[-1]) - t0, output_dt, n_out, 16 * runs)  # every variant's speed, kept for metrics
+    chain = build_chain(vehicle)
+    _, omega0, _ = quasi_static_full(chain, float(inp.torque[0]), initial_speed(vehicle, speed0_rpm))
+    step, sub = choose_step(chain, output_dt, torque_max=float(np.max(np.abs(inp.torque))),
+                            omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
+    span = float(inp.t[-1]) - t0
+    check_steps(span, step, (n_out - 1) * sub, auto=True, limit=MAX_STEPS, what="one variant")
+    check_steps(span, step, runs * (n_out - 1) * sub, auto=True, limit=MAX_BATCH_STEPS,
+                what=f"{runs} variants at the nominal step")
 
 
 __all__ = ["BatchResult", "ToleranceResult", "simulate_batch", "tolerance_analysis"]

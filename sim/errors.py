@@ -8,6 +8,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 
 class SimError(Exception):
     """Base of all simulator errors."""
@@ -15,10 +17,31 @@ class SimError(Exception):
     code = "sim_error"
 
 
+def plain(value: Any) -> Any:
+    """``value`` with numpy scalars (also inside lists, tuples and dicts) turned into Python numbers.
+
+    Error messages show ``0.5``, not ``np.float64(0.5)``; sim imports numpy lazily here so the
+    error module stays dependency-free.
+    """
+    if hasattr(value, "item") and getattr(value, "ndim", None) == 0:  # numpy scalar or 0-d array
+        return value.item()
+    if isinstance(value, list | tuple):
+        return type(value)(plain(v) for v in value)
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    return value
+
+
+def fmt(value: Any) -> str:
+    """Plain text of a value for an error message: ``0.5``, ``1e+30``, ``'abc'``, ``[0.1, 0.2]``."""
+    return repr(plain(value))
+
+
 class ParameterError(SimError, ValueError):
     code = "invalid_parameter"
 
     def __init__(self, field: str, value: object, reason: str) -> None:
+        value = plain(value)
         super().__init__(f"{field} = {value!r}: {reason}")
         self.field = field
         self.value = value

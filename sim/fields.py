@@ -29,9 +29,19 @@ NestedType = Callable[[type, str], "type | None"]
 Preprocess = Callable[[type, Mapping[str, Any], str], Mapping[str, Any]]
 
 
-def num(unit: str, rule: str = POS, default: Any = dataclasses.MISSING) -> Any:
-    """A dataclass field with its unit and validation rule in the metadata."""
-    return field(default=default, metadata={"unit": unit, "rule": rule})
+Limits = tuple[float, float]
+
+
+def num(unit: str, rule: str = POS, default: Any = dataclasses.MISSING, limits: Limits | None = None) -> Any:
+    """A dataclass field with its unit, validation rule and physical ``limits`` (inclusive) in the metadata.
+
+    ``limits`` bound what a real driveline can have; they keep a typo such as ``1e30`` from
+    reaching the integrator, whose step follows the stiffest mode (docs/simulation.md lists them).
+    """
+    meta: dict[str, Any] = {"unit": unit, "rule": rule}
+    if limits is not None:
+        meta["limits"] = limits
+    return field(default=default, metadata=meta)
 
 
 def flag(default: bool = False) -> Any:
@@ -39,15 +49,15 @@ def flag(default: bool = False) -> Any:
     return field(default=default, metadata={"unit": "-", "rule": BOOL})
 
 
-def check(path: str, value: Any, rule: str) -> None:
-    """Raise :class:`ParameterError` naming ``path`` if ``value`` breaks ``rule``."""
+def check(path: str, value: Any, rule: str, limits: Limits | None = None, unit: str = "") -> None:
+    """Raise :class:`ParameterError` naming ``path`` if ``value`` breaks ``rule`` or lies outside ``limits``."""
     if rule == BOOL:
         if not isinstance(value, bool):
             raise ParameterError(path, value, "must be true or false")
         return
     if isinstance(value, tuple):
         for i, v in enumerate(value):
-            check(f"{path}[{i}]", v, rule)
+            check(f"{path}[{i}]", v, rule, limits, unit)
         return
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ParameterError(path, value, "must be a number")
@@ -59,6 +69,8 @@ def check(path: str, value: Any, rule: str) -> None:
         raise ParameterError(path, value, "must be >= 0")
     if rule == INT_POS and (not isinstance(value, int) or value < 1):
         raise ParameterError(path, value, "must be an integer >= 1")
+    if limits is not None and not limits[0] <= value <= limits[1]:
+        raise ParameterError(path, value, f"outside the physical range [{limits[0]:g}, {limits[1]:g}] {unit}".rstrip())
 
 
 def validate(obj: Any, prefix: str, extra: Callable[[Any, str], None] | None = None) -> None:
@@ -67,7 +79,7 @@ def validate(obj: Any, prefix: str, extra: Callable[[Any, str], None] | None = N
         value = getattr(obj, f.name)
         path = f"{prefix}{f.name}"
         if "rule" in f.metadata:
-            check(path, value, f.metadata["rule"])
+            check(path, value, f.metadata["rule"], f.metadata.get("limits"), f.metadata.get("unit", ""))
         elif dataclasses.is_dataclass(value):
             validate(value, path + ".", extra)
     if extra is not None:
@@ -104,6 +116,20 @@ def band(path: str, value: Any) -> tuple[float, float]:
         return float(value[0]), float(value[1])
     except (TypeError, ValueError) as exc:
         raise ParameterError(path, value, "must be two numbers") from exc
+
+
+def field_meta(cls: type, path: str, nested: NestedType) -> Mapping[str, Any] | None:
+    """Metadata (unit, rule, limits) of the numeric field at dotted ``path`` below ``cls``, or None."""
+    parts = path.split(".")
+    for part in parts[:-1]:
+        sub = nested(cls, part)
+        if sub is None:
+            return None
+        cls = sub
+    for f in dataclasses.fields(cls):
+        if f.name == parts[-1]:
+            return f.metadata if "rule" in f.metadata else None
+    return None
 
 
 def build(cls: type[T], data: Mapping[str, Any], prefix: str, nested: NestedType, pre: Preprocess) -> T:

@@ -51,15 +51,17 @@ def prepare_input(
         raise InputSignalError("need at least two torque samples to span a time interval")
     bad_t = np.flatnonzero(~np.isfinite(t))
     if bad_t.size:
-        raise InputSignalError(f"t_s[{bad_t[0]}] = {t[bad_t[0]]!r}: sample times must be finite")
+        raise InputSignalError(f"t_s[{bad_t[0]}] = {float(t[bad_t[0]])!r}: sample times must be finite")
     bad_q = np.flatnonzero(~np.isfinite(q))
     if bad_q.size:
-        raise InputSignalError(f"torque_nm[{bad_q[0]}] = {q[bad_q[0]]!r} at t = {t[bad_q[0]]:.6f} s: must be finite")
+        raise InputSignalError(f"torque_nm[{bad_q[0]}] = {float(q[bad_q[0]])!r} at t = {t[bad_q[0]]:.6f} s: "
+                               "must be finite")
     step = np.diff(t)
     bad = np.flatnonzero(step <= 0)
     if bad.size:
         k = int(bad[0])
-        raise InputSignalError(f"t_s[{k + 1}] = {t[k + 1]!r} <= t_s[{k}] = {t[k]!r}: times must strictly increase")
+        raise InputSignalError(f"t_s[{k + 1}] = {float(t[k + 1])!r} <= t_s[{k}] = {float(t[k])!r}: "
+                               "times must strictly increase")
     med = float(np.median(step))
     big = np.flatnonzero(step > gap_factor * med)
     gaps = tuple((float(t[k]), float(t[k + 1])) for k in big)

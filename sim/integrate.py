@@ -94,7 +94,7 @@ def is_serial_chain(ca: np.ndarray, cb: np.ndarray, housing: int) -> bool:
     return serial and (housing < 0 or (int(ca[nch]) == housing and int(cb[nch]) == -1))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _initial_forces(
     theta: np.ndarray, omega: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
     ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, rotor: int, housing: int, wheel: int,
@@ -134,7 +134,7 @@ def _initial_forces(
     acc[wheel] -= road[5] * math.tanh(omega[wheel] / 0.05)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def run_chain(
     inertia: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
     ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray,
@@ -277,7 +277,7 @@ def run_chain(
     return status, t, n_ev
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def run_chain_batch(
     inertia: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
     ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray,

@@ -12,31 +12,34 @@ from dataclasses import dataclass, field
 from sim.fields import NONNEG, POS, flag
 from sim.fields import num as _f
 
+SECONDS = (0.0, 10.0)  # delays, time constants and sample periods of a drive's signals
+CUBIC_STIFFNESS = (0.0, 1e14)  # N m/rad^3: doubles a 1e9 N m/rad mesh at 3 mrad
+
 
 @dataclass(frozen=True, kw_only=True)
 class TorqueLag:
     """Air-gap torque = first-order lag (tau) of the CAN torque delayed by ``delay_s``. Off at zeros."""
 
-    delay_s: float = _f("s", NONNEG, 0.0)
-    tau_s: float = _f("s", NONNEG, 0.0)
+    delay_s: float = _f("s", NONNEG, 0.0, SECONDS)
+    tau_s: float = _f("s", NONNEG, 0.0, SECONDS)
 
 
 @dataclass(frozen=True, kw_only=True)
 class SpeedSensor:
     """Inverter speed signal: first-order filter, transport delay, sample-and-hold, quantisation. Off at zeros."""
 
-    tau_s: float = _f("s", NONNEG, 0.0)
-    delay_s: float = _f("s", NONNEG, 0.0)
-    sample_s: float = _f("s", NONNEG, 0.0)
-    resolution_rpm: float = _f("rpm", NONNEG, 0.0)
+    tau_s: float = _f("s", NONNEG, 0.0, SECONDS)
+    delay_s: float = _f("s", NONNEG, 0.0, SECONDS)
+    sample_s: float = _f("s", NONNEG, 0.0, SECONDS)
+    resolution_rpm: float = _f("rpm", NONNEG, 0.0, (0.0, 1e4))
 
 
 @dataclass(frozen=True, kw_only=True)
 class Drag:
     """Extra rotor drag: Coulomb (bearing/seal/churning) plus viscous. Off at zeros."""
 
-    coulomb_nm: float = _f("N m", NONNEG, 0.0)
-    viscous_nms: float = _f("N m s/rad", NONNEG, 0.0)
+    coulomb_nm: float = _f("N m", NONNEG, 0.0, (0.0, 1e4))
+    viscous_nms: float = _f("N m s/rad", NONNEG, 0.0, (0.0, 1e6))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -49,12 +52,12 @@ class ProgressiveStiffness:
     the spring would lose stiffness and turn over at large deflection.
     """
 
-    spline: float = _f("N m/rad^3 (motor angle)", NONNEG, 0.0)
-    mesh1: float = _f("N m/rad^3 (intermediate angle)", NONNEG, 0.0)
-    mesh2: float = _f("N m/rad^3 (differential angle)", NONNEG, 0.0)
-    differential: float = _f("N m/rad^3 (side-gear angle)", NONNEG, 0.0)
-    halfshaft: float = _f("N m/rad^3 (per shaft)", NONNEG, 0.0)
-    mount: float = _f("N m/rad^3 (housing roll)", NONNEG, 0.0)
+    spline: float = _f("N m/rad^3 (motor angle)", NONNEG, 0.0, CUBIC_STIFFNESS)
+    mesh1: float = _f("N m/rad^3 (intermediate angle)", NONNEG, 0.0, CUBIC_STIFFNESS)
+    mesh2: float = _f("N m/rad^3 (differential angle)", NONNEG, 0.0, CUBIC_STIFFNESS)
+    differential: float = _f("N m/rad^3 (side-gear angle)", NONNEG, 0.0, CUBIC_STIFFNESS)
+    halfshaft: float = _f("N m/rad^3 (per shaft)", NONNEG, 0.0, CUBIC_STIFFNESS)
+    mount: float = _f("N m/rad^3 (housing roll)", NONNEG, 0.0, CUBIC_STIFFNESS)
 
     @property
     def any(self) -> bool:
@@ -74,8 +77,8 @@ class TyreSlip:
     """
 
     enabled: bool = flag(False)
-    slip_stiffness: float = _f("N per unit slip, per driven tyre", POS, 8.0e4)
-    relaxation_length: float = _f("m", POS, 0.15)
+    slip_stiffness: float = _f("N per unit slip, per driven tyre", POS, 8.0e4, (1e3, 1e10))
+    relaxation_length: float = _f("m", POS, 0.15, (0.01, 5.0))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -22,36 +22,50 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sim.errors import ParameterError
-from sim.fields import ANY, INT_POS, NONNEG, POS, build, check, flag, to_plain, validate
+from sim.fields import ANY, INT_POS, NONNEG, POS, build, check, field_meta, flag, to_plain, validate
 from sim.fields import num as _f
 from sim.optional import Drag, Effects, ProgressiveStiffness, SpeedSensor, TorqueLag, TyreSlip
+
+# Physical limits (inclusive) of the description's fields; docs/simulation.md explains each.
+INERTIA = (1e-6, 1e4)  # kg m^2: a small pinion .. a heavy-truck wheel set
+STIFFNESS = (1.0, 1e9)  # N m/rad: a soft mount .. a steel gear mesh referred to a large gear
+DAMPING = (0.0, 1e6)  # N m s/rad
+MASS = (1.0, 1e5)  # kg
+WHEEL_RADIUS = (0.05, 2.0)  # m
+TEETH = (5, 500)
+MODULE_MM = (0.1, 50.0)
+RATIO = (0.5, 50.0)  # total reducer ratio
+MAX_SEGMENTS = 20  # half-shaft segments: 20 carry its first modes; more only shrinks the step
+SEGMENTS = (1, MAX_SEGMENTS)
+LASH_RAD = (0.0, 0.2)  # total clearance in its own shaft's angle: 0.2 rad = 11.5 deg, far above any real joint
+CONTACT_RADIUS_MM = (0.0, 1000.0)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Motor:
-    rotor_inertia: float = _f("kg m^2")
-    viscous_damping: float = _f("N m s/rad", NONNEG, 0.0)
-    max_power_kw: float = _f("kW", POS, 160.0)
+    rotor_inertia: float = _f("kg m^2", limits=INERTIA)
+    viscous_damping: float = _f("N m s/rad", NONNEG, 0.0, DAMPING)
+    max_power_kw: float = _f("kW", POS, 160.0, (0.1, 5000.0))
 
 
 @dataclass(frozen=True, kw_only=True)
 class Reducer:
     """Two-stage reducer: pinion 1 / gear 1 (input -> intermediate), pinion 2 / gear 2 (-> differential)."""
 
-    teeth: tuple[int, int, int, int] = _f("-", INT_POS)
-    normal_module_mm: tuple[float, float, float, float] = _f("mm", POS, (1.0, 1.0, 1.0, 1.0))
-    input_shaft_inertia: float = _f("kg m^2")
-    intermediate_inertia: float = _f("kg m^2")
-    differential_inertia: float = _f("kg m^2")
-    side_gears_inertia: float = _f("kg m^2")
-    spline_stiffness: float = _f("N m/rad (motor angle)")
-    spline_damping: float = _f("N m s/rad", NONNEG)
-    mesh1_stiffness: float = _f("N m/rad (intermediate angle)")
-    mesh1_damping: float = _f("N m s/rad", NONNEG)
-    mesh2_stiffness: float = _f("N m/rad (differential angle)")
-    mesh2_damping: float = _f("N m s/rad", NONNEG)
-    diff_stiffness: float = _f("N m/rad (side-gear angle)")
-    diff_damping: float = _f("N m s/rad", NONNEG)
+    teeth: tuple[int, int, int, int] = _f("-", INT_POS, limits=TEETH)
+    normal_module_mm: tuple[float, float, float, float] = _f("mm", POS, (1.0, 1.0, 1.0, 1.0), MODULE_MM)
+    input_shaft_inertia: float = _f("kg m^2", limits=INERTIA)
+    intermediate_inertia: float = _f("kg m^2", limits=INERTIA)
+    differential_inertia: float = _f("kg m^2", limits=INERTIA)
+    side_gears_inertia: float = _f("kg m^2", limits=INERTIA)
+    spline_stiffness: float = _f("N m/rad (motor angle)", limits=STIFFNESS)
+    spline_damping: float = _f("N m s/rad", NONNEG, limits=DAMPING)
+    mesh1_stiffness: float = _f("N m/rad (intermediate angle)", limits=STIFFNESS)
+    mesh1_damping: float = _f("N m s/rad", NONNEG, limits=DAMPING)
+    mesh2_stiffness: float = _f("N m/rad (differential angle)", limits=STIFFNESS)
+    mesh2_damping: float = _f("N m s/rad", NONNEG, limits=DAMPING)
+    diff_stiffness: float = _f("N m/rad (side-gear angle)", limits=STIFFNESS)
+    diff_damping: float = _f("N m s/rad", NONNEG, limits=DAMPING)
 
     @property
     def ratio1(self) -> float:
@@ -71,30 +85,30 @@ class Reducer:
 class Halfshaft:
     """Per half-shaft values; ``count`` shafts (and driven wheels) act in parallel."""
 
-    stiffness: float = _f("N m/rad")
-    damping: float = _f("N m s/rad", NONNEG)
-    inertia: float = _f("kg m^2", NONNEG, 0.0)
-    segments: int = _f("-", INT_POS, 1)
-    count: int = _f("-", INT_POS, 2)
+    stiffness: float = _f("N m/rad", limits=STIFFNESS)
+    damping: float = _f("N m s/rad", NONNEG, limits=DAMPING)
+    inertia: float = _f("kg m^2", NONNEG, 0.0, (0.0, INERTIA[1]))
+    segments: int = _f("-", INT_POS, 1, SEGMENTS)
+    count: int = _f("-", INT_POS, 2, (1, 2))
 
 
 @dataclass(frozen=True, kw_only=True)
 class Wheel:
-    inertia: float = _f("kg m^2")  # own rotational inertia of one driven wheel
-    radius: float = _f("m")
+    inertia: float = _f("kg m^2", limits=INERTIA)  # own rotational inertia of one driven wheel
+    radius: float = _f("m", limits=WHEEL_RADIUS)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Body:
     """Vehicle body and road load."""
 
-    mass: float = _f("kg")
-    speed_kmh: float = _f("km/h", NONNEG, 0.0)
-    rolling_resistance: float = _f("-", NONNEG, 0.0)
-    drag_area: float = _f("m^2", NONNEG, 0.0)
-    air_density: float = _f("kg/m^3", NONNEG, 1.2)
-    grade_percent: float = _f("%", ANY, 0.0)
-    brake_torque: float = _f("N m (at the wheels)", NONNEG, 0.0)
+    mass: float = _f("kg", limits=MASS)
+    speed_kmh: float = _f("km/h", NONNEG, 0.0, (0.0, 500.0))
+    rolling_resistance: float = _f("-", NONNEG, 0.0, (0.0, 0.5))
+    drag_area: float = _f("m^2", NONNEG, 0.0, (0.0, 50.0))
+    air_density: float = _f("kg/m^3", NONNEG, 1.2, (0.0, 5.0))
+    grade_percent: float = _f("%", ANY, 0.0, (-100.0, 100.0))
+    brake_torque: float = _f("N m (at the wheels)", NONNEG, 0.0, (0.0, 1e6))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -102,9 +116,9 @@ class Housing:
     """Drive-unit housing rolling on its mounts about an axis parallel to the shafts."""
 
     enabled: bool = flag(True)
-    inertia: float = _f("kg m^2", POS, 2.5)
-    mount_stiffness: float = _f("N m/rad", POS, 8.0e4)
-    mount_damping: float = _f("N m s/rad", NONNEG, 150.0)
+    inertia: float = _f("kg m^2", POS, 2.5, INERTIA)
+    mount_stiffness: float = _f("N m/rad", POS, 8.0e4, STIFFNESS)
+    mount_damping: float = _f("N m s/rad", NONNEG, 150.0, DAMPING)
 
 
 MM_FIELDS = ("nominal_mm", "min_mm", "max_mm")
@@ -121,10 +135,10 @@ class Gap:
     back in mm (:meth:`arc_mm`). 0 means not given.
     """
 
-    nominal: float = _f("rad", NONNEG)
-    min: float = _f("rad", NONNEG, -1.0)  # omitted (-1) -> same as nominal
-    max: float = _f("rad", NONNEG, -1.0)
-    radius_mm: float = _f("mm", NONNEG, 0.0)
+    nominal: float = _f("rad", NONNEG, limits=LASH_RAD)
+    min: float = _f("rad", NONNEG, -1.0, LASH_RAD)  # omitted (-1) -> same as nominal
+    max: float = _f("rad", NONNEG, -1.0, LASH_RAD)
+    radius_mm: float = _f("mm", NONNEG, 0.0, CONTACT_RADIUS_MM)
 
     def __post_init__(self) -> None:
         for side in ("min", "max"):
@@ -203,6 +217,10 @@ class Vehicle:
                 raise ParameterError(f"tolerances.{path}", band, "only numeric fields can have a band")
             if len(band) != 2 or not all(math.isfinite(b) for b in band) or band[0] > band[1]:
                 raise ParameterError(f"tolerances.{path}", band, "must be [min, max] with min <= max")
+            meta = field_meta(Vehicle, path, _nested_type)
+            if meta is not None:  # every sampled variant must be a valid vehicle
+                for end, b in zip(("min", "max"), band, strict=True):
+                    check(f"tolerances.{path}[{end}]", b, meta["rule"], meta.get("limits"), meta.get("unit", ""))
 
     # ---- dict round trip -------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -240,10 +258,16 @@ class Vehicle:
         all_changes = dict(changes or {})
         all_changes.update({k.replace("__", "."): v for k, v in kw.items()})
         data = self.to_dict()
+        moved: set[str] = set()  # gaps whose nominal changed
+        banded: set[str] = set()  # gaps whose min or max was given
         for path, value in all_changes.items():
             parts = path.split(".")
             if parts[0] == "gaps" and len(parts) == 2:
                 parts.append("nominal")
+            if parts[0] == "gaps" and len(parts) == 3 and parts[2] in ("nominal", "nominal_mm"):
+                moved.add(parts[1])
+            if parts[0] == "gaps" and len(parts) == 3 and parts[2] in ("min", "max", "min_mm", "max_mm"):
+                banded.add(parts[1])
             if parts[0] == "gaps" and len(parts) == 3 and parts[2] in MM_FIELDS:
                 self.get(".".join(parts[:2]))  # validates the gap name
                 gap = data["gaps"][parts[1]]
@@ -257,6 +281,8 @@ class Vehicle:
             if parts[-1] not in node:
                 raise ParameterError(path, value, "no such vehicle field")
             node[parts[-1]] = list(value) if isinstance(value, tuple) else value
+        for name in moved - banded:
+            _move_band(data["gaps"][name], getattr(self.gaps, name))
         return Vehicle.from_dict(data)
 
     @property
@@ -296,9 +322,38 @@ class Vehicle:
 
 def _cross_checks(obj: Any, prefix: str) -> None:
     if isinstance(obj, Gap) and obj.min > obj.max:
-        raise ParameterError(f"{prefix}min", obj.min, f"must be <= {prefix}max = {obj.max}")
+        raise ParameterError(f"{prefix}min", obj.min, f"must be <= {prefix}max = {obj.max!r}")
+    if isinstance(obj, Gap) and not obj.min <= obj.nominal <= obj.max:
+        raise ParameterError(f"{prefix}nominal", obj.nominal,
+                             f"must lie within its tolerance band [min, max] = [{obj.min!r}, {obj.max!r}] rad")
+    if isinstance(obj, Reducer) and not RATIO[0] <= obj.ratio <= RATIO[1]:
+        raise ParameterError(f"{prefix}teeth", list(obj.teeth),
+                             f"total ratio {obj.ratio:.4g} outside the physical range [{RATIO[0]:g}, {RATIO[1]:g}]")
     if isinstance(obj, Halfshaft) and obj.count > 2:
         raise ParameterError(f"{prefix}count", obj.count, "must be 1 or 2 driven half-shafts")
+
+
+def _move_band(gap: dict[str, Any], old: Gap) -> None:
+    """Carry a gap's tolerance band along when a what-if changes its nominal size (``gap`` is its dict).
+
+    The band is kept (as before bands were checked) and only widened to take in the new
+    nominal, so a removed or enlarged gap is still a valid description whose band contains
+    its size. Values that are not numbers are left for validation to name.
+    """
+    if "nominal_mm" in gap:
+        mm, radius = gap["nominal_mm"], gap.get("radius_mm", 0.0)
+        if not (_is_num(mm) and _is_num(radius) and radius > 0):
+            return
+        new = mm / radius
+    else:
+        new = gap.get("nominal")
+        if not _is_num(new):
+            return
+    gap["min"], gap["max"] = min(old.min, new), max(old.max, new)
+
+
+def _is_num(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
 
 _TABLES: dict[str, type] = {c.__name__: c for c in (

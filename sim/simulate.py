@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sim.budget import check_output, check_steps
 from sim.errors import InputSignalError, ParameterError
 from sim.inputs import TorqueInput, prepare_input
 from sim.linear import step_limit, tangent_stiffness
@@ -74,7 +75,11 @@ def choose_step(chain: ChainModel, output_dt: float, dt: float | None = None, *,
         chain, omega_vehicle, tangent_stiffness(chain, torque_max))
     if dt_max <= 0 or not math.isfinite(dt_max):
         raise ParameterError("dt", dt_max, "must be a positive number of seconds")
-    sub = max(1, math.ceil(output_dt / dt_max - 1e-9))
+    ratio = output_dt / dt_max
+    if not math.isfinite(ratio) or ratio > 1e15:  # such a step cannot be taken; check_steps would refuse it anyway
+        raise ParameterError("dt", dt_max, f"step too small for output_dt = {output_dt:.6g} s; check stiffness "
+                             "and inertia values")
+    sub = max(1, math.ceil(ratio - 1e-9))
     return output_dt / sub, sub
 
 
@@ -88,11 +93,25 @@ def initial_speed(vehicle: Vehicle, speed0_rpm: float | None) -> float:
 
 
 def _grid(inp: TorqueInput, output_dt: float) -> tuple[float, int]:
+    """Start (s) and number of rows of the output grid; nothing is allocated here."""
+    if not isinstance(output_dt, int | float) or not output_dt > 0 or not math.isfinite(output_dt):
+        raise ParameterError("output_dt", output_dt, "must be a positive number of seconds")
     t0 = float(inp.t[0])
-    n_out = math.floor((float(inp.t[-1]) - t0) / output_dt + 1e-9) + 1
+    span = float(inp.t[-1]) - t0
+    n_out = math.floor(span / output_dt + 1e-9) + 1
     if n_out < 2:
-        raise InputSignalError(f"input spans {inp.t[-1] - t0:.6g} s, shorter than output_dt = {output_dt} s")
+        raise InputSignalError(f"input spans {span:.6g} s, shorter than output_dt = {output_dt:.6g} s")
     return t0, n_out
+
+
+def multibody_row_bytes(n_bodies: int, n_couplings: int) -> int:
+    """Bytes per output row of a multibody run: kernel buffers plus the result's own arrays."""
+    kernel = 8 * (3 + n_bodies + n_couplings + 1) + n_couplings
+    result = 8 * (4 + n_bodies + n_couplings + 1) + n_couplings
+    return kernel + result
+
+
+TWO_INERTIA_ROW_BYTES = 8 * 5 + 8 * 7 + 1
 
 
 def simulate(
@@ -119,20 +138,26 @@ def simulate(
     InputSignalError, ParameterError, InstabilityError
     """
     inp = prepare_input(t_s, torque_nm, interp)
+    if model not in ("multibody", "two_inertia"):
+        raise ParameterError("model", model, "must be 'multibody' or 'two_inertia'")
+    t0, n_out = _grid(inp, output_dt)
+    span = float(inp.t[-1]) - t0
     if what_if is not None:
         vehicle = what_if.apply_vehicle(vehicle)
+    chain = build_chain(vehicle) if model == "multibody" else None
+    # refuse before any array of the run's length exists (what-if resampling included)
+    check_output(span, output_dt, n_out, TWO_INERTIA_ROW_BYTES if chain is None
+                 else multibody_row_bytes(chain.n_bodies, chain.n_couplings))
+    if what_if is not None:
         t_new, q_new, resampled = what_if.apply_torque(inp.t, inp.torque)
         inp = TorqueInput(t_new, q_new, inp.linear or resampled, inp.gaps)
     w0 = initial_speed(vehicle, speed0_rpm)
-    if model == "two_inertia":
+    if chain is None:
         return _simulate_two_inertia(vehicle, inp, w0, dt, output_dt)
-    if model != "multibody":
-        raise ParameterError("model", model, "must be 'multibody' or 'two_inertia'")
-    chain = build_chain(vehicle)
     theta0, omega0, tyre0 = quasi_static_full(chain, float(inp.torque[0]), w0)
     step, sub = choose_step(chain, output_dt, dt, torque_max=float(np.max(np.abs(inp.torque))),
                             omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
-    t0, n_out = _grid(inp, output_dt)
+    check_steps(span, step, (n_out - 1) * sub, auto=dt is None)
     eff = vehicle.effects
     raw = run_from_state(chain, inp.t, inp.torque, inp.linear, t0, step, sub, n_out, theta0, omega0, tyre0,
                          lag=(eff.torque_lag.delay_s, eff.torque_lag.tau_s), sensor_tau=eff.speed_sensor.tau_s,
@@ -181,9 +206,12 @@ def _simulate_two_inertia(vehicle: Vehicle, inp: TorqueInput, w0: float, dt: flo
     p = project(vehicle)
     arr, road = pack(p)
     dt_max = dt if dt is not None else TWO_INERTIA_SAFETY * 2.0 / p.max_rate()
+    if not dt_max > 0 or not math.isfinite(dt_max):
+        raise ParameterError("dt", dt_max, "must be a positive number of seconds")
     sub = max(1, math.ceil(output_dt / dt_max - 1e-9))
     step = output_dt / sub
     t0, n_out = _grid(inp, output_dt)
+    check_steps(float(inp.t[-1]) - t0, step, (n_out - 1) * sub, auto=dt is None)
     state0 = quasi_static(p, float(inp.torque[0]), w0)
     out = np.zeros((n_out, 5))
     ev_t = np.zeros(MAX_EVENTS)

@@ -89,7 +89,7 @@ def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaPara
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def run_two_inertia(
     p: np.ndarray, road: np.ndarray, tin: np.ndarray, tq: np.ndarray, linear: bool,
     t0: float, dt: float, n_out: int, sub: int, state0: np.ndarray, speed_limit: float,

@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.errors import ParameterError
+from sim.budget import MAX_OUTPUT_BYTES
+from sim.errors import InputSignalError, ParameterError
 from sim.params import GAP_NAMES, Vehicle
 
 F64 = NDArray[np.float64]
@@ -45,8 +46,10 @@ class WhatIf:
                 raise ParameterError(f"what_if.gap_scale.{name}", s, "must be a finite factor >= 0")
         if not np.isfinite(self.torque_scale):
             raise ParameterError("what_if.torque_scale", self.torque_scale, "must be finite")
-        if self.antijerk_rate < 0 or self.antijerk_band < 0:
-            raise ParameterError("what_if.antijerk_rate", self.antijerk_rate, "rate and band must be >= 0")
+        if not np.isfinite(self.antijerk_rate) or self.antijerk_rate < 0:
+            raise ParameterError("what_if.antijerk_rate", self.antijerk_rate, "must be a finite rate >= 0 N m/s")
+        if not np.isfinite(self.antijerk_band) or self.antijerk_band < 0:
+            raise ParameterError("what_if.antijerk_band", self.antijerk_band, "must be a finite band >= 0 N m")
 
     def apply_vehicle(self, v: Vehicle) -> Vehicle:
         changes: dict[str, object] = dict(self.changes)
@@ -66,6 +69,11 @@ class WhatIf:
         if self.antijerk_rate <= 0:
             return t, q, False
         step = 1e-3
+        n = int((t[-1] - t[0]) / step) + 1
+        if n * 24 > MAX_OUTPUT_BYTES:  # grid, interpolated and shaped torque
+            raise InputSignalError(f"anti-jerk shaping resamples the torque at {step:g} s: {float(t[-1] - t[0]):.6g} s "
+                                   f"of input would need {n:.4g} samples, over the output budget of "
+                                   f"{MAX_OUTPUT_BYTES / 2**20:.0f} MiB")
         grid = np.arange(t[0], t[-1] + 0.5 * step, step)
         x = np.interp(grid, t, q)
         return grid, antijerk(grid, x, self.antijerk_rate, self.antijerk_band), True
