@@ -1,37 +1,61 @@
-"""Background execution of analyses: a small thread pool fed from the store's jobs table.
+"""Background jobs (analyses, tolerance bands): each run in its own worker process with a wall-time limit.
 
 The store is the source of truth: a job is queued in SQLite before it is submitted here,
-marked running (with this process id) when a worker picks it up, and finished or failed
-with a typed ``{code, detail}`` when it ends. At startup :meth:`JobRunner.start` asks the
-store to re-queue (or fail, after ``max_attempts``) jobs cut off by a crash and runs every
-queued job, so nothing is lost across restarts.
+marked running (with the server's process id) when a runner thread picks it up, and finished
+or failed with a typed ``{code, detail}`` when it ends. At startup :meth:`JobRunner.start`
+asks the store to re-queue (or fail, after ``max_attempts``) jobs cut off by a crash and runs
+every queued job, so nothing is lost across restarts.
+
+Why a process per job: the simulator holds the GIL in long compiled loops, so a runaway job in
+a thread of the server would stall every request, ``/health`` included. A spawned worker
+process is isolated: the runner thread only waits on it, kills it after ``timeout_s`` (the job
+fails with ``timed out after N s``) and fails the job if the process dies without a verdict
+(e.g. out of memory). The worker reports progress and its result through the store, which is
+safe across processes. ``in_process=True`` runs jobs in the runner thread instead (for the
+command line, where nothing else has to stay responsive).
 """
 
 from __future__ import annotations
 
+import json
 import logging
+import multiprocessing
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
+from multiprocessing.process import BaseProcess
+from pathlib import Path
+from typing import Any
 
 from app.errors import AppError
-from app.payload import result_payload
-from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
 from app.storage.base import Store
-from app.storage.records import JobRecord
-from app.storage.results import write_result
-from sim import SimError, load_vehicle
+from app.storage.records import JobRecord, JobStatus
 
 log = logging.getLogger("lashscope.jobs")
 PROGRESS_EVERY_S = 0.25
+KINDS = ("analysis", "tolerance")
+_SPAWN = multiprocessing.get_context("spawn")  # no fork of a threaded server; the child imports afresh
+
+
+def tolerance_subject(analysis_id: str, n: int, seed: int) -> str:
+    """The job subject (and result file stem) of a tolerance band: ``<analysis>/n=<n>/seed=<seed>``."""
+    return f"{analysis_id}/n={n}/seed={seed}"
+
+
+def tolerance_path(result_dir: Path, n: int, seed: int) -> Path:
+    return result_dir / f"tolerance_n{n}_seed{seed}.json"
 
 
 class JobRunner:
-    def __init__(self, store: Store, workers: int = 1, max_attempts: int = 2) -> None:
+    def __init__(self, store: Store, workers: int = 1, max_attempts: int = 2, timeout_s: float | None = 600.0,
+                 in_process: bool = False) -> None:
         self.store = store
         self.max_attempts = max_attempts
+        self.timeout_s = timeout_s
+        self.in_process = in_process
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lashscope-job")
         self._futures: dict[str, Future[None]] = {}
+        self._procs: dict[str, BaseProcess] = {}
         self._lock = threading.Lock()
         self._closed = False
 
@@ -55,44 +79,140 @@ class JobRunner:
             fut.result(timeout)
 
     def shutdown(self, wait: bool = False) -> None:
+        """Take no new work; kill running workers (their jobs stay 'running' and are resumed at the next start)."""
         with self._lock:
             self._closed = True
+            procs = list(self._procs.values())
+        if not wait:
+            for p in procs:
+                p.kill()
         self._pool.shutdown(wait=wait, cancel_futures=True)
 
     # -- one job ---------------------------------------------------------------------------
     def _run(self, job_id: str) -> None:
         try:
             job = self.store.start_job(job_id)
-            if job.kind != "analysis":
-                raise AppError(f"unknown job kind {job.kind!r}", code="unknown_job")
-            self._analysis(job)
-            self.store.finish_job(job_id)
-        except (AppError, SimError) as exc:
-            self.store.fail_job(job_id, getattr(exc, "code", "error"), str(exc))
-        except MemoryError:
-            self.store.fail_job(job_id, "out_of_memory", "the analysis ran out of memory")
+            if job.kind not in KINDS:
+                self.store.fail_job(job_id, "unknown_job", f"unknown job kind {job.kind!r}")
+            elif self.in_process:
+                execute(self.store, job)
+            else:
+                self._in_worker(job)
         except Exception as exc:  # a bug must fail the job, not the server
             log.exception("job %s failed", job_id)
             self.store.fail_job(job_id, "internal_error", f"{type(exc).__name__}: {exc}")
         finally:
             with self._lock:
                 self._futures.pop(job_id, None)
+                self._procs.pop(job_id, None)
 
-    def _analysis(self, job: JobRecord) -> None:
-        rec = self.store.get_analysis(job.subject)
-        logrec = self.store.get_log(rec.log_id)
-        veh = self.store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
-        last_time, last_stage = [0.0], [""]
+    def _in_worker(self, job: JobRecord) -> None:
+        proc = _SPAWN.Process(target=worker_main, args=(str(self.store.root), job.id), daemon=True,
+                              name=f"lashscope-{job.kind}-{job.id}")
+        with self._lock:
+            if self._closed:
+                return  # stays 'running' with this pid: re-queued at the next start
+            proc.start()
+            self._procs[job.id] = proc
+        proc.join(self.timeout_s)
+        if proc.is_alive():
+            proc.kill()
+            proc.join()
+            self.store.fail_job(job.id, "timeout", f"timed out after {self.timeout_s:g} s "
+                                "(LASHSCOPE_JOB_TIMEOUT_S); the worker was stopped")
+            log.warning("job %s timed out after %g s", job.id, self.timeout_s)
+            return
+        with self._lock:
+            closed = self._closed
+        if self.store.get_job(job.id).status is JobStatus.RUNNING and not closed:
+            code = proc.exitcode
+            reason = f"killed by signal {-code}" if code is not None and code < 0 else f"exit code {code}"
+            self.store.fail_job(job.id, "worker_died", f"the worker process ended without a result ({reason})")
 
-        def progress(stage: str, fraction: float) -> None:
-            now = time.monotonic()
-            if stage != last_stage[0] or now - last_time[0] >= PROGRESS_EVERY_S:
-                last_time[0], last_stage[0] = now, stage
-                self.store.update_job(job.id, 0.98 * fraction, stage)
 
-        inputs = VehicleInputs(load_vehicle(veh.driveline_path), veh.database_path, veh.signal_map_path)
-        result = run_analysis(logrec.path, inputs, AnalysisOptions.from_dict(rec.options), progress)
-        self.store.update_job(job.id, 0.99, "saving")
-        doc, arrays = result_payload(result)
-        write_result(rec.result_dir, doc, arrays)
-        self.store.set_analysis_summary(rec.id, doc["summary"])
+def worker_main(root: str, job_id: str) -> None:
+    """Entry point of a worker process: run one job against the store at ``root``."""
+    from app.storage.sqlite import SQLiteStore
+
+    store = SQLiteStore(Path(root))
+    try:
+        execute(store, store.get_job(job_id))
+    finally:
+        store.close()
+
+
+def execute(store: Store, job: JobRecord) -> None:
+    """Run a started job and record its outcome (done, or failed with a typed reason)."""
+    from sim import SimError
+
+    try:
+        if job.kind == "analysis":
+            _analysis(store, job)
+        else:
+            _tolerance(store, job)
+        store.finish_job(job.id)
+    except (AppError, SimError) as exc:
+        store.fail_job(job.id, getattr(exc, "code", "error"), _user_names(store, job, str(exc)))
+    except MemoryError:
+        store.fail_job(job.id, "out_of_memory", "the job ran out of memory")
+    except Exception as exc:  # a bug must fail the job, not the worker silently
+        log.exception("job %s failed", job.id)
+        store.fail_job(job.id, "internal_error", f"{type(exc).__name__}: {exc}")
+
+
+def _user_names(store: Store, job: JobRecord, message: str) -> str:
+    """``message`` with the stored log's internal file name replaced by the name it was uploaded as."""
+    try:
+        rec = store.get_analysis(job.subject.split("/", 1)[0])
+        logrec = store.get_log(rec.log_id)
+    except AppError:
+        return message
+    return message.replace(str(logrec.path), logrec.filename).replace(logrec.path.name, logrec.filename)
+
+
+def _progress(store: Store, job_id: str, scale: float = 0.98) -> Any:
+    last_time, last_stage = [0.0], [""]
+
+    def progress(stage: str, fraction: float) -> None:
+        now = time.monotonic()
+        if stage != last_stage[0] or now - last_time[0] >= PROGRESS_EVERY_S:
+            last_time[0], last_stage[0] = now, stage
+            store.update_job(job_id, scale * fraction, stage)
+
+    return progress
+
+
+def _analysis(store: Store, job: JobRecord) -> None:
+    from app.payload import result_payload
+    from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
+    from app.storage.results import write_result
+    from sim import load_vehicle
+
+    rec = store.get_analysis(job.subject)
+    logrec = store.get_log(rec.log_id)
+    veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
+    inputs = VehicleInputs(load_vehicle(veh.driveline_path), veh.database_path, veh.signal_map_path)
+    result = run_analysis(logrec.path, inputs, AnalysisOptions.from_dict(rec.options), _progress(store, job.id))
+    store.update_job(job.id, 0.99, "saving")
+    doc, arrays = result_payload(result)
+    write_result(rec.result_dir, doc, arrays)
+    store.set_analysis_summary(rec.id, doc["summary"])
+
+
+def _tolerance(store: Store, job: JobRecord) -> None:
+    from app.pipeline import tolerance_for_result
+    from app.storage.results import ResultFiles, json_safe
+    from sim import load_vehicle
+
+    analysis_id, n_part, seed_part = job.subject.split("/")
+    n, seed = int(n_part.removeprefix("n=")), int(seed_part.removeprefix("seed="))
+    rec = store.get_analysis(analysis_id)
+    veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
+    progress = _progress(store, job.id)
+    doc = tolerance_for_result(ResultFiles(rec.result_dir), load_vehicle(veh.driveline_path), n, seed,
+                               lambda f: progress("tolerance", f))
+    doc.update(analysis_id=analysis_id, vehicle=rec.vehicle_name, vehicle_version=rec.vehicle_version)
+    out = tolerance_path(rec.result_dir, n, seed)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(json.dumps(json_safe(doc)), encoding="utf-8")
+    tmp.replace(out)

@@ -155,18 +155,21 @@ def _plain(obj: Any) -> Any:
 def check_vehicle_files(driveline: Path, database: Path, signal_map: Path) -> dict[str, Any]:
     """Load all three vehicle files and check that the signal map fits the database.
 
+    The driveline must also pass a cheap simulation trial (:func:`app.vehicle_check.trial_vehicle`).
     Raises ParameterError (driveline), DatabaseError, SignalMapError; returns a summary.
     """
+    from app.vehicle_check import trial_vehicle
     from sim import load_vehicle
 
     vehicle = load_vehicle(driveline)
+    steps = trial_vehicle(vehicle, driveline.name)
     loaded, routes = signal_routes(database, signal_map)
     missing = [c for c in REQUIRED if c not in routes]
     if missing:
         from app.errors import SignalMapError
         raise SignalMapError(f"signal map {signal_map.name} does not map {missing}, which every analysis needs")
     return {"vehicle": vehicle.name, "description": vehicle.description, "ratio": vehicle.ratio,
-            "database": database.name, "database_repairs": len(loaded.repairs),
+            "steps_per_simulated_s": steps, "database": database.name, "database_repairs": len(loaded.repairs),
             "channels": {c: f"{m}.{s}" for c, (m, s) in sorted(routes.items())}}
 
 
@@ -406,3 +409,33 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
 def _case(c: Any) -> dict[str, float]:
     return {"unloaded_ms": c.unloaded_ms, "fluctuation_rpm": c.fluct_rpm, "impact_rpm": c.impact_rpm,
             "rise_rpm": c.rise_rpm}
+
+
+def tolerance_for_result(files: Any, vehicle: Vehicle, n: int, seed: int,
+                         progress: Callable[[float], None] = lambda f: None, lead_s: float = 0.05) -> dict[str, Any]:
+    """The tolerance band of every analysed event of a stored result (:mod:`app.analysis.tolerance`).
+
+    ``files`` is a :class:`app.storage.results.ResultFiles` (or anything with ``doc`` and
+    ``array``); the decoded torque and speed stored with the result drive the Monte Carlo,
+    each event simulated from ``lead_s`` before its window (the analysis' offset search span).
+    """
+    from app.analysis.tolerance import EventWindow, check_request, tolerance_doc
+
+    check_request(n, seed)
+    doc = files.doc
+    sigs: dict[str, Signal] = {}
+    for name in REQUIRED:
+        meta = doc["signals"].get(name)
+        if meta is None:
+            raise MissingSignalError(f"the stored result has no {name!r} channel")
+        k = meta["key"]
+        sigs[name] = finite_signal(Signal(name, np.asarray(files.array(f"sig_{k}_t")),
+                                          np.asarray(files.array(f"sig_{k}_v")), meta["unit"]))
+    windows = [EventWindow(e["index"], e["kind"], e["t_start_s"] - lead_s, e["t_start_s"], e["t_end_s"])
+               for e in doc["events"] if e["has_metrics"]]
+    out = tolerance_doc(vehicle, sigs[TORQUE], sigs[SPEED], windows, n, seed, progress)
+    by_index = {m["event_index"]: m for m in doc["metrics"]}
+    for row in out["events"]:
+        meas = by_index.get(row["index"], {}).get("measured") or {}
+        row["analysis_fluctuation_rpm"] = meas.get("fluctuation_rpm")  # the detrended metric, for reference
+    return out

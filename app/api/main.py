@@ -5,8 +5,8 @@ runner, CORS and the error handlers, and includes every router in :data:`ROUTERS
 a module's ``router`` there to add a resource.
 
 On stop (SIGTERM, Ctrl-C) the lifespan closes the job runner to new work (queued jobs stay
-queued in SQLite and run after the next start; uvicorn then ends the process with the signal,
-so a running analysis is cut off and re-run at the next start), stops running live sessions --
+queued in SQLite and run after the next start; a running job's worker process is killed, so the
+job is cut off and re-run at the next start), stops running live sessions --
 each recording becomes a stored log and, when the session named a vehicle, its analysis is
 queued -- and closes the store.
 """
@@ -74,7 +74,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         store = SQLiteStore(cfg.data_dir)
         store.clean_temp()  # uploads cut off by a previous stop
-        runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts)
+        runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts, cfg.job_timeout_s)
         app.state.store, app.state.runner, app.state.settings = store, runner, cfg
         app.state.results = ResultCache()
         await asyncio.to_thread(_warm_up)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -20,7 +21,7 @@ from urllib.parse import parse_qsl
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
-from app.errors import InputError, UploadTooLargeError
+from app.errors import AppError, InputError, UploadTooLargeError
 
 MAX_FIELD_BYTES = 64 * 1024
 
@@ -132,6 +133,26 @@ class _Multipart:
             self.result.files.append(self._sink.close())
         elif self._field is not None:
             self.result.fields[self._field[0]] = self._field[1].decode("utf-8", "replace")
+
+
+def rename_paths(message: str, names: Mapping[Path, str]) -> str:
+    """``message`` with every stored file path (full or bare name) replaced by the name the user uploaded."""
+    for path, shown in names.items():
+        message = message.replace(str(path), shown).replace(path.name, shown)
+    return message
+
+
+@contextlib.contextmanager
+def user_file_names(names: Mapping[Path, str]) -> Iterator[None]:
+    """Errors raised inside name the user's uploaded files, never the store's internal temp names."""
+    try:
+        yield
+    except Exception as exc:
+        if isinstance(exc, AppError):
+            exc.detail = rename_paths(exc.detail, names)
+        elif exc.args and isinstance(exc.args[0], str):
+            exc.args = (rename_paths(exc.args[0], names), *exc.args[1:])
+        raise
 
 
 async def _drain(request: Request, limit: int) -> None:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
@@ -21,17 +23,30 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     srv.stop()
 
 
+INTERNAL_NAME = re.compile(r"[0-9a-f]{32}|/tmp/|lashscope-data")
+
+
 def _assert_error(r: httpx.Response, status: int, code: str) -> None:
     assert r.status_code == status, r.text
     body = r.json()
     assert set(body) == {"detail", "code"} and body["code"] == code and body["detail"]
+    assert not INTERNAL_NAME.search(body["detail"]), f"error names an internal file: {body['detail']}"
+
+
+def test_missing_file_field(server: Server) -> None:
+    with httpx.Client(base_url=server.url, timeout=60.0) as c:
+        for r in (c.post("/logs"), c.post("/logs", files={"note": (None, "no file here")})):
+            _assert_error(r, 400, "missing_file")
+            assert "missing multipart field 'file'" in r.json()["detail"]
 
 
 def test_bad_uploads(server: Server, tmp_path: Path, demo_log: Path) -> None:
     with httpx.Client(base_url=server.url, timeout=60.0) as c:
         junk = tmp_path / "junk.blf"
         junk.write_bytes(os.urandom(20000))
-        _assert_error(upload(c, junk), 415, "unsupported_format")
+        r = upload(c, junk)
+        _assert_error(r, 415, "unsupported_format")
+        assert "junk.blf" in r.json()["detail"]
 
         broken = tmp_path / "broken.blf"
         raw = demo_log.read_bytes()
@@ -67,6 +82,11 @@ def test_wrong_dbc_bad_map_and_missing_signals(server: Server, tmp_path: Path) -
         bad.write_text("BO_ this is not a database\n")
         r = c.post("/vehicles", data={"name": "x", "preset": "paper"}, files={"dbc": ("bad.dbc", bad.read_bytes())})
         _assert_error(r, 422, "database_error")
+        r = c.post("/vehicles", data={"name": "x", "preset": "paper"},
+                   files={"dbc": ("notes.md", b"# meeting notes\nnot a database\n")})
+        assert r.status_code in (415, 422), r.text
+        _assert_error(r, r.status_code, r.json()["code"])
+        assert "notes.md" in r.json()["detail"]
 
         other = shared_file("cantools-testfiles", "dbc", "abs.dbc")  # loads fine, but not this vehicle's DBC
         r = c.post("/vehicles", data={"name": "x", "preset": "paper"},
@@ -86,7 +106,10 @@ def test_wrong_dbc_bad_map_and_missing_signals(server: Server, tmp_path: Path) -
         assert r.status_code == 201, r.text
         analysis = c.post("/analyses", json={"log_id": r.json()["id"], "vehicle": "ev"}).json()
         body = wait_for(c, analysis["id"])
-        assert body["status"] == "failed" and body["job"]["error"]["code"] == "missing_signal"
+        job: Any = body["job"]
+        assert body["status"] == "failed" and job["error"]["code"] == "missing_signal"
+        detail = job["error"]["detail"]
+        assert "issue_1905.blf" in detail and not INTERNAL_NAME.search(detail), detail
         _assert_error(c.get(f"/analyses/{analysis['id']}/metrics"), 422, "missing_signal")
         _assert_error(c.post("/analyses", json={"log_id": r.json()["id"], "vehicle": "ev",
                                                 "options": {"model": "quantum"}}), 400, "invalid_input")

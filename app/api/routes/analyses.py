@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import json
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response, status
+from fastapi.responses import JSONResponse
 
+from app.analysis.tolerance import MAX_SAMPLES
 from app.api.deps import ResultsDep, RunnerDep, StoreDep
 from app.api.schemas import ERRORS, AnalysisCreate, AnalysisOut
 from app.errors import AppError, ConflictError
+from app.jobs import tolerance_path, tolerance_subject
 from app.pipeline import AnalysisOptions
 from app.storage.base import Store
 from app.storage.records import AnalysisRecord, JobStatus
@@ -81,3 +85,37 @@ def get_metrics(analysis_id: str, store: StoreDep, cache: ResultsDep) -> dict[st
     d = files.doc
     return {"analysis_id": analysis_id, "summary": d["summary"], "offset": d["offset"], "whole": d["whole"],
             "events": d["metrics"], "notes": d["notes"]}
+
+
+@router.get("/{analysis_id}/tolerance", summary="Predicted ripple band over the vehicle's tolerances (background job)",
+            responses={202: {"description": "computing: the job's status and progress"}})
+def get_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, runner: RunnerDep,
+                  n: Annotated[int, Query(ge=1, le=MAX_SAMPLES, description="Monte Carlo variants per event")] = 200,
+                  seed: Annotated[int, Query(ge=0, description="random seed of the sampling")] = 0) -> Response:
+    """Per analysed event: the 5/50/95 % band of the predicted peak-to-valley fluctuation with every
+    gap and ``vehicle.tolerances`` band sampled uniformly, the nominal vehicle's value, the measured
+    value and its percentile in the predicted distribution.
+
+    The first request starts a background job and answers 202 with its status; ask again until 200.
+    A failed job answers with its error; a timed-out one is started again.
+    """
+    rec, _ = finished(store, cache, analysis_id)
+    out = tolerance_path(rec.result_dir, n, seed)
+    if out.exists():
+        return JSONResponse(json.loads(out.read_text(encoding="utf-8")))
+    subject = tolerance_subject(analysis_id, n, seed)
+    job = store.find_job("tolerance", subject)
+    if job is None or (job.status is JobStatus.FAILED and job.error_code == "timeout"):
+        job = store.create_job("tolerance", subject)
+        runner.submit(job.id)
+    elif job.status is JobStatus.FAILED:
+        err = AppError(f"tolerance band of {analysis_id} failed: {job.error_detail}",
+                       code=job.error_code or "tolerance_failed")
+        err.status = 500 if job.error_code in ("internal_error", "storage_error", "worker_died") else 422
+        raise err
+    elif job.status is JobStatus.DONE and not out.exists():  # result deleted behind our back: compute again
+        job = store.create_job("tolerance", subject)
+        runner.submit(job.id)
+    return JSONResponse(status_code=status.HTTP_202_ACCEPTED, content={
+        "analysis_id": analysis_id, "n": n, "seed": seed, "job_id": job.id, "status": job.status.value,
+        "stage": job.stage, "progress": job.progress})

@@ -9,7 +9,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from app.api.deps import SettingsDep, StoreDep
 from app.api.schemas import ERRORS, LogOut
-from app.api.upload import receive_upload
+from app.api.upload import receive_upload, user_file_names
 from app.errors import InputError
 from app.pipeline import inspect_log
 
@@ -38,11 +38,19 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
     """
     up = await receive_upload(request, store.temp_path, settings.max_upload_bytes,
                               int(settings.upload_drain_mb * 2**20), filename)
+    multipart = request.headers.get("content-type", "").startswith("multipart/form-data")
     if len(up.files) != 1:
         for f in up.files:
             f.path.unlink(missing_ok=True)
+        if not up.files:
+            raise InputError("missing multipart field 'file' (send the log as -F file=@drive.blf)",
+                             code="missing_file")
         raise InputError(f"expected one file in the upload, got {len(up.files)}")
     f = up.files[0]
+    if f.size == 0 and not multipart and filename is None:  # a bare POST: no file at all
+        f.path.unlink(missing_ok=True)
+        raise InputError("missing multipart field 'file' (send the log as -F file=@drive.blf, or the raw bytes "
+                         "as the body with ?filename=drive.blf)", code="missing_file")
     existing = store.find_log_by_hash(f.sha256)
     if existing is not None:
         f.path.unlink(missing_ok=True)
@@ -51,7 +59,8 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
     try:
         if f.size == 0:
             raise InputError(f"upload {f.filename!r} is empty")
-        info = await run_in_threadpool(inspect_log, f.path)
+        with user_file_names({f.path: f.filename}):
+            info = await run_in_threadpool(inspect_log, f.path)
     except BaseException:
         f.path.unlink(missing_ok=True)
         raise

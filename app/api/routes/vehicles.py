@@ -11,7 +11,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from app.api.deps import SettingsDep, StoreDep
 from app.api.schemas import ERRORS, VehicleOut
-from app.api.upload import receive_upload
+from app.api.upload import receive_upload, user_file_names
 from app.errors import InputError
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity
 from app.storage.results import json_safe
@@ -38,11 +38,13 @@ FORM_DOC = {
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=VehicleOut, openapi_extra=FORM_DOC,
              summary="Create a vehicle or a new version of it")
 async def create_vehicle(request: Request, response: Response, store: StoreDep, settings: SettingsDep) -> VehicleOut:
-    """Every file is checked before anything is stored: the driveline must load in the simulator,
-    the database must load, and the signal map must fit the database. Identical content to the
-    latest version returns that version (200, ``unchanged: true``)."""
+    """Every file is checked before anything is stored: the driveline must load in the simulator and
+    pass a cheap trial (one simulated second must need at most 1e6 integrator steps; otherwise 422
+    naming the suspect field), the database must load, and the signal map must fit the database.
+    Identical content to the latest version returns that version (200, ``unchanged: true``)."""
     up = await receive_upload(request, store.temp_path, 64 * 2**20, 0, urlencoded_form=True)
     files = {f.field_name: f.path for f in up.files}
+    names = {f.path: f.filename for f in up.files}
     try:
         name = up.fields.get("name", "").strip()
         if not name:
@@ -57,10 +59,12 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
                 raise InputError(f"give a driveline TOML file or a preset; presets: {preset_names()}")
             driveline = store.temp_path(".toml")
             driveline.write_text(_preset_toml(preset), encoding="utf-8")
+            names[driveline] = f"preset {preset}"
             files["driveline"] = driveline
         dbc = files.get("dbc") or settings.dbc_dir / "lashscope_ev.dbc"
         smap = files.get("signal_map") or settings.dbc_dir / "lashscope_ev.map.toml"
-        summary = await run_in_threadpool(check_vehicle_files, driveline, dbc, smap)
+        with user_file_names(names):
+            summary = await run_in_threadpool(check_vehicle_files, driveline, dbc, smap)
         rec, created = await run_in_threadpool(store.add_vehicle, name, driveline=driveline, database=dbc,
                                                signal_map=smap, summary=summary)
     finally:

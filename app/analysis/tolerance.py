@@ -1,0 +1,97 @@
+"""Predicted ripple band over the vehicle's tolerance bands, and where each measured ripple falls in it.
+
+For every analysed event the measured motor torque over the event window drives a Monte Carlo
+of the driveline (:func:`sim.batch.tolerance_analysis`: every gap sampled in its [min, max]
+band and every ``vehicle.tolerances`` band, uniformly), from the measured speed at the window
+start. The ripple compared is the same on both sides: the paper's peak-to-adjacent-valley
+fluctuation of the motor speed (:func:`sim.metrics.peak_to_valley`) over the event window, for
+each variant and for the measured speed. The measured percentile is the share of variants whose
+fluctuation is at most the measured one (0-100).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from app.errors import InputError
+from app.signals import Signal
+from sim import SimError, Vehicle
+from sim.batch import ToleranceResult, tolerance_analysis
+from sim.metrics import peak_to_valley
+
+MAX_SAMPLES = 2000  # variants per event: the cost is linear in this
+BAND_PERCENTILES = (5.0, 50.0, 95.0)
+
+
+@dataclass(frozen=True)
+class EventWindow:
+    """One event to predict: its index and kind, the simulated span and the metric window (s)."""
+
+    index: int
+    kind: str
+    t_sim_start_s: float
+    t_start_s: float
+    t_end_s: float
+
+
+def check_request(n: int, seed: int) -> None:
+    """Raise InputError unless ``n`` variants (1..MAX_SAMPLES) and ``seed`` (>= 0) are usable."""
+    if not 1 <= n <= MAX_SAMPLES:
+        raise InputError(f"tolerance: n = {n} variants; use 1..{MAX_SAMPLES}")
+    if seed < 0:
+        raise InputError(f"tolerance: seed = {seed}; use a non-negative integer")
+
+
+def band_of(res: ToleranceResult) -> dict[str, float]:
+    """The predicted fluctuation (rpm) at :data:`BAND_PERCENTILES`, keyed ``p5``, ``p50``, ``p95``."""
+    vals = np.percentile(res.fluct_rpm, BAND_PERCENTILES)
+    return {f"p{p:g}": float(v) for p, v in zip(BAND_PERCENTILES, vals, strict=True)}
+
+
+def event_tolerance(vehicle: Vehicle, torque: Signal, speed: Signal, window: EventWindow, n: int, seed: int,
+                    interp: Literal["hold", "linear"] = "linear") -> tuple[dict[str, Any], ToleranceResult | None]:
+    """Band and measured percentile for one event; the dict says ``error`` when the event cannot be run.
+
+    Returns the JSON-ready row and the raw :class:`ToleranceResult` (None on error).
+    """
+    row: dict[str, Any] = {"index": window.index, "kind": window.kind, "t_start_s": window.t_start_s,
+                           "t_end_s": window.t_end_s}
+    m = (torque.t >= window.t_sim_start_s) & (torque.t <= window.t_end_s)
+    tq_t, tq_v = torque.t[m], torque.values[m]
+    if tq_t.size < 2:
+        return {**row, "error": f"torque has {tq_t.size} samples in the event window"}, None
+    w = speed.window(window.t_start_s, window.t_end_s)
+    if len(w) < 2:
+        return {**row, "error": f"measured speed has {len(w)} samples in the event window"}, None
+    speed0 = float(speed.at([tq_t[0]])[0])
+    try:
+        res = tolerance_analysis(vehicle, tq_t, tq_v, n=n, seed=seed, window=(window.t_start_s, window.t_end_s),
+                                 speed0_rpm=speed0 if np.isfinite(speed0) else None, interp=interp)
+    except SimError as exc:
+        return {**row, "error": f"simulation failed: {exc}"}, None
+    measured = peak_to_valley(w.t, w.values, window.t_start_s, window.t_end_s)
+    row.update(nominal_fluctuation_rpm=res.nominal_fluct_rpm, band_rpm=band_of(res),
+               measured_fluctuation_rpm=measured, measured_percentile=res.percentile_of(measured),
+               unloaded_ms_median=float(np.median(res.unloaded_ms)), error=None)
+    return row, res
+
+
+def tolerance_doc(vehicle: Vehicle, torque: Signal, speed: Signal, windows: Sequence[EventWindow], n: int, seed: int,
+                  progress: Callable[[float], None] = lambda f: None) -> dict[str, Any]:
+    """:func:`event_tolerance` for every window, with the sampled fields; progress 0..1 per event done."""
+    check_request(n, seed)
+    rows: list[dict[str, Any]] = []
+    fields: tuple[str, ...] = ()
+    for k, win in enumerate(windows):
+        row, res = event_tolerance(vehicle, torque, speed, win, n, seed)
+        if res is not None:
+            fields = res.fields
+        rows.append(row)
+        progress((k + 1) / max(1, len(windows)))
+    return {"n": n, "seed": seed, "distribution": "uniform", "percentiles": list(BAND_PERCENTILES),
+            "metric": "peak-to-adjacent-valley fluctuation of motor speed over the event window (rpm)",
+            "sampled_fields": list(fields), "events": rows}
