@@ -6,7 +6,7 @@ torque input before the run, so a what-if result is an ordinary :class:`~sim.Sim
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -97,3 +97,58 @@ def antijerk(t: F64, torque: F64, rate: float, band: float, catchup: float = 5.0
         dmax = rate * step * (1.0 if crossing else catchup)
         y[k] = prev + min(max(want, -dmax), dmax)
     return y
+
+
+WHAT_IF_KEYS = ("gap", "torque", "anti_jerk", "anti_jerk_band", "set")
+
+
+def parse_what_if(specs: Sequence[str]) -> WhatIf:
+    """A :class:`WhatIf` from text items ``key=value`` (comma-separated, several strings allowed).
+
+    Keys: ``gap=NAME:FACTOR`` (NAME a gap or ``all``; factor 0 removes it; repeatable),
+    ``torque=FACTOR``, ``anti_jerk=RATE`` (N m/s near zero torque), ``anti_jerk_band=N_M``,
+    ``set=dotted.field:VALUE`` (any vehicle field, a number or true/false; repeatable).
+    Example: ``"gap=halfshaft:0.5,torque=0.8,anti_jerk=2000"``.
+
+    Raises
+    ------
+    ParameterError : naming ``what_if.<key>`` and the offending text
+    """
+    gap_scale: dict[str, float] = {}
+    changes: dict[str, object] = {}
+    kw: dict[str, float] = {}
+    for spec in specs:
+        for item in (s.strip() for s in spec.split(",")):
+            if not item:
+                continue
+            key, sep, value = item.partition("=")
+            key = key.strip()
+            if not sep or key not in WHAT_IF_KEYS:
+                raise ParameterError("what_if", item, f"expected key=value with key one of {WHAT_IF_KEYS}")
+            if key in ("gap", "set"):
+                name, sep2, amount = value.partition(":")
+                if not sep2:
+                    raise ParameterError(f"what_if.{key}", value, f"expected {key}=NAME:VALUE")
+                if key == "gap":
+                    gap_scale[name.strip()] = _number(f"what_if.gap.{name.strip()}", amount)
+                else:
+                    changes[name.strip()] = _setting(f"what_if.set.{name.strip()}", amount)
+            else:
+                kw[key] = _number(f"what_if.{key}", value)
+    return WhatIf(gap_scale=gap_scale, torque_scale=kw.get("torque", 1.0), antijerk_rate=kw.get("anti_jerk", 0.0),
+                  antijerk_band=kw.get("anti_jerk_band", 20.0), changes=changes)
+
+
+def _number(field_name: str, text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ParameterError(field_name, text, "must be a number") from None
+
+
+def _setting(field_name: str, text: str) -> object:
+    low = text.strip().lower()
+    if low in ("true", "false"):
+        return low == "true"
+    value = _number(field_name, text)
+    return int(value) if value.is_integer() and "." not in text and "e" not in low else value

@@ -1,4 +1,4 @@
-"""``lashscope reproduce-paper`` and ``lashscope simulate``: the driveline simulator from the shell."""
+"""``lashscope reproduce-paper``, ``simulate`` (with what-ifs) and ``tolerance``: the simulator from the shell."""
 
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ from app.errors import InputError
 
 if TYPE_CHECKING:  # numpy and the simulator (numba) are imported when a command runs, not for --help
     import numpy as np
+
+    from sim.simulate import SimResult
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -29,7 +31,30 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     s.add_argument("--speed0-rpm", type=float, default=None, help="initial motor speed (default: from the vehicle)")
     s.add_argument("--output-dt", type=float, default=0.001, help="output grid spacing, s")
     s.add_argument("--out", type=Path, default=None, help="write t, speeds and gap states to this CSV")
+    s.add_argument("--what-if", action="append", default=[], metavar="SPEC",
+                   help="also run a what-if and compare with the baseline: comma-separated gap=NAME:FACTOR "
+                        "(NAME a gap or 'all', 0 removes it), torque=FACTOR, anti_jerk=N_M_PER_S, "
+                        "anti_jerk_band=N_M, set=dotted.field:VALUE; e.g. gap=halfshaft:0.5,torque=0.8,"
+                        "anti_jerk=2000 (--out then holds the what-if run)")
     s.set_defaults(func=_simulate)
+
+    tol = subparsers.add_parser(
+        "tolerance", help="Monte Carlo over the vehicle's tolerance bands: predicted ripple band for a torque CSV")
+    tol.add_argument("torque_csv", type=Path, help="CSV with header t_s,torque_nm (irregular times allowed)")
+    tol.add_argument("--vehicle", default="paper", help="preset name or TOML file with [min, max] bands")
+    tol.add_argument("--n", type=int, default=1000, help="number of sampled variants (default 1000)")
+    tol.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same band")
+    tol.add_argument("--distribution", choices=("uniform", "normal"), default="uniform",
+                     help="uniform over each band, or normal with the band as +-3 sigma")
+    tol.add_argument("--window", type=float, nargs=2, default=None, metavar=("T0", "T1"),
+                     help="time window (s) of the ripple metric (default: the whole input)")
+    tol.add_argument("--measured-ripple", type=float, default=None, metavar="RPM",
+                     help="a measured peak-to-valley ripple to place inside the predicted band")
+    tol.add_argument("--interp", choices=("hold", "linear"), default="hold")
+    tol.add_argument("--speed0-rpm", type=float, default=None, help="initial motor speed (default: from the vehicle)")
+    tol.add_argument("--output-dt", type=float, default=0.001, help="output grid spacing, s")
+    tol.add_argument("--json", action="store_true", help="print the result as JSON")
+    tol.set_defaults(func=_tolerance)
 
 
 def _reproduce(args: argparse.Namespace) -> int:
@@ -69,18 +94,23 @@ def _read_torque(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def _simulate(args: argparse.Namespace) -> int:
     from sim import load_vehicle, simulate
-    from sim.metrics import peak_to_valley, unloaded_intervals
+    from sim.whatif import parse_what_if
 
+    what_if = parse_what_if(args.what_if) if args.what_if else None  # bad specs fail before any work
     t, q = _read_torque(args.torque_csv)
     vehicle = load_vehicle(args.vehicle)
     res = simulate(vehicle, t, q, model=args.model, interp=args.interp, speed0_rpm=args.speed0_rpm,
                    output_dt=args.output_dt)
-    spans = unloaded_intervals(res.gap_events, float(res.t[-1]))
     print(f"vehicle {vehicle.name}, model {res.model}, {res.t[-1] - res.t[0]:.3f} s simulated, step {res.dt:.3g} s")
-    print(f"motor speed {res.motor_speed_rpm.min():.1f}..{res.motor_speed_rpm.max():.1f} rpm, "
-          f"largest peak-to-valley {peak_to_valley(res.t, res.motor_speed_rpm):.1f} rpm")
-    print(f"{len(spans)} unloaded intervals (any gap open); longest "
-          f"{max((b - a for a, b in spans), default=0.0) * 1e3:.1f} ms")
+    base = _summary("baseline" if what_if else "", res)
+    if what_if is not None:
+        alt = simulate(vehicle, t, q, model=args.model, interp=args.interp, speed0_rpm=args.speed0_rpm,
+                       output_dt=args.output_dt, what_if=what_if)
+        new = _summary(f"what-if {','.join(args.what_if)}", alt)
+        if base[0] > 0:
+            print(f"what-if ripple {new[0]:.1f} rpm = {100.0 * new[0] / base[0]:.0f} % of the baseline's "
+                  f"{base[0]:.1f} rpm; longest unloaded interval {new[1]:.1f} ms vs {base[1]:.1f} ms")
+        res = alt
     if res.input_gaps:
         print(f"{len(res.input_gaps)} holes in the torque samples, first at {res.input_gaps[0][0]:.3f} s")
     if args.out is not None:
@@ -93,4 +123,60 @@ def _simulate(args: argparse.Namespace) -> int:
             w.writerow(cols)
             w.writerows(zip(*cols.values(), strict=True))
         print(f"wrote {args.out}", file=sys.stderr)
+    return 0
+
+
+def _summary(label: str, res: SimResult) -> tuple[float, float]:
+    """Print one run's speed range, ripple and unloaded intervals; return (ripple rpm, longest unloaded ms)."""
+    from sim.metrics import peak_to_valley, unloaded_intervals
+
+    spans = unloaded_intervals(res.gap_events, float(res.t[-1]))
+    ripple = peak_to_valley(res.t, res.motor_speed_rpm)
+    longest = max((b - a for a, b in spans), default=0.0) * 1e3
+    prefix = f"{label}: " if label else ""
+    print(f"{prefix}motor speed {res.motor_speed_rpm.min():.1f}..{res.motor_speed_rpm.max():.1f} rpm, "
+          f"largest peak-to-valley {ripple:.1f} rpm")
+    print(f"{prefix}{len(spans)} unloaded intervals (any gap open); longest {longest:.1f} ms")
+    return ripple, longest
+
+
+def _tolerance(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from sim import load_vehicle
+    from sim.batch import tolerance_analysis
+
+    t, q = _read_torque(args.torque_csv)
+    vehicle = load_vehicle(args.vehicle)
+
+    def progress(done: int, total: int) -> None:
+        print(f"tolerance: {done}/{total} variants", file=sys.stderr, flush=True)
+
+    res = tolerance_analysis(vehicle, t, q, n=args.n, seed=args.seed, distribution=args.distribution,
+                             window=tuple(args.window) if args.window else None, interp=args.interp,
+                             speed0_rpm=args.speed0_rpm, output_dt=args.output_dt, progress=progress)
+    p5, p50, p95 = (float(v) for v in np.percentile(res.fluct_rpm, [5.0, 50.0, 95.0]))
+    u5, u50, u95 = (float(v) for v in np.percentile(res.unloaded_ms, [5.0, 50.0, 95.0]))
+    out: dict[str, object] = {
+        "vehicle": vehicle.name, "n": args.n, "seed": args.seed, "distribution": args.distribution,
+        "fields": list(res.fields), "nominal_ripple_rpm": res.nominal_fluct_rpm,
+        "ripple_rpm": {"p5": p5, "p50": p50, "p95": p95},
+        "unloaded_ms": {"p5": u5, "p50": u50, "p95": u95},
+    }
+    pct = res.percentile_of(args.measured_ripple) if args.measured_ripple is not None else None
+    if pct is not None:
+        out["measured_ripple_rpm"] = args.measured_ripple
+        out["measured_percentile"] = pct
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"vehicle {vehicle.name}: {args.n} variants ({args.distribution}, seed {args.seed}) over "
+          f"{', '.join(res.fields)}")
+    print(f"ripple (largest peak-to-valley of motor speed): nominal {res.nominal_fluct_rpm:.1f} rpm; "
+          f"predicted 5 % {p5:.1f}, 50 % {p50:.1f}, 95 % {p95:.1f} rpm")
+    print(f"first unloaded interval: 5 % {u5:.1f}, 50 % {u50:.1f}, 95 % {u95:.1f} ms")
+    if pct is not None:
+        where = "below the band" if args.measured_ripple < p5 else "above the band" if args.measured_ripple > p95 \
+            else "inside the 5-95 % band"
+        print(f"measured ripple {args.measured_ripple:.1f} rpm: percentile {pct:.1f} of the prediction ({where})")
     return 0
