@@ -42,6 +42,25 @@ def test_analyze_json(short_log: Path, capsys: pytest.CaptureFixture[str], tmp_p
     assert sens["sensitivity_unit"] == "mm" and sens["gaps"][-1]["sensitivity_per_rad"] == pytest.approx(100.0)
 
 
+def test_analyze_tolerance(short_log: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["analyze", str(short_log), "--vehicle", "paper", "--no-whole-log", "--tolerance", "24",
+                 "--seed", "2", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    tol = doc["tolerance"]
+    assert tol["n"] == 24 and tol["seed"] == 2 and len(tol["events"]) == doc["summary"]["with_metrics"] >= 4
+    for e in tol["events"]:
+        b = e["band_rpm"]
+        assert e["error"] is None and b["p5"] <= b["p50"] <= b["p95"]
+        assert 0.0 <= e["measured_percentile"] <= 100.0 and e["measured_fluctuation_rpm"] >= 0.0
+        # the percentile agrees with the band: below p5 -> under ~5 %, above p95 -> over ~95 %
+        if e["measured_fluctuation_rpm"] < b["p5"]:
+            assert e["measured_percentile"] <= 5.0 + 100.0 / 24
+        if e["measured_fluctuation_rpm"] > b["p95"]:
+            assert e["measured_percentile"] >= 95.0 - 100.0 / 24
+    assert main(["analyze", str(short_log), "--vehicle", "paper", "--no-whole-log", "--tolerance", "8"]) == 0
+    assert "tolerance band, 8 variants per event" in capsys.readouterr().out
+
+
 def test_analyze_errors_are_one_line_with_code(short_log: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["analyze", str(short_log), "--vehicle", "no-such-preset"]) == 2
     assert capsys.readouterr().err.startswith("lashscope: error [")

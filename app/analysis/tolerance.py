@@ -53,10 +53,13 @@ def band_of(res: ToleranceResult) -> dict[str, float]:
 
 
 def event_tolerance(vehicle: Vehicle, torque: Signal, speed: Signal, window: EventWindow, n: int, seed: int,
-                    interp: Literal["hold", "linear"] = "linear") -> tuple[dict[str, Any], ToleranceResult | None]:
+                    interp: Literal["hold", "linear"] = "linear",
+                    progress: Callable[[int, int], None] | None = None
+                    ) -> tuple[dict[str, Any], ToleranceResult | None]:
     """Band and measured percentile for one event; the dict says ``error`` when the event cannot be run.
 
-    Returns the JSON-ready row and the raw :class:`ToleranceResult` (None on error).
+    Returns the JSON-ready row and the raw :class:`ToleranceResult` (None on error);
+    ``progress(done, n)`` follows the variants.
     """
     row: dict[str, Any] = {"index": window.index, "kind": window.kind, "t_start_s": window.t_start_s,
                            "t_end_s": window.t_end_s}
@@ -70,7 +73,8 @@ def event_tolerance(vehicle: Vehicle, torque: Signal, speed: Signal, window: Eve
     speed0 = float(speed.at([tq_t[0]])[0])
     try:
         res = tolerance_analysis(vehicle, tq_t, tq_v, n=n, seed=seed, window=(window.t_start_s, window.t_end_s),
-                                 speed0_rpm=speed0 if np.isfinite(speed0) else None, interp=interp)
+                                 speed0_rpm=speed0 if np.isfinite(speed0) else None, interp=interp,
+                                 progress=progress)
     except SimError as exc:
         return {**row, "error": f"simulation failed: {exc}"}, None
     measured = peak_to_valley(w.t, w.values, window.t_start_s, window.t_end_s)
@@ -87,7 +91,10 @@ def tolerance_doc(vehicle: Vehicle, torque: Signal, speed: Signal, windows: Sequ
     rows: list[dict[str, Any]] = []
     fields: tuple[str, ...] = ()
     for k, win in enumerate(windows):
-        row, res = event_tolerance(vehicle, torque, speed, win, n, seed)
+        def step(done: int, total: int, k: int = k) -> None:
+            progress((k + done / max(1, total)) / max(1, len(windows)))
+
+        row, res = event_tolerance(vehicle, torque, speed, win, n, seed, progress=step)
         if res is not None:
             fields = res.fields
         rows.append(row)

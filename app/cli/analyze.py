@@ -22,6 +22,10 @@ def register(sub: Any) -> None:
     p.add_argument("--no-whole-log", action="store_true", help="skip the open-loop whole-log simulation")
     p.add_argument("--gap-sensitivity", action="store_true",
                    help="add the vehicle's gap what-ifs and sensitivities S1..S5 (paper tip-in, ~2 s)")
+    p.add_argument("--tolerance", type=int, default=0, metavar="N",
+                   help="add the predicted ripple band (5/50/95 %%) over the vehicle's tolerance bands, N Monte "
+                   "Carlo variants per event, and each measured ripple's percentile in it")
+    p.add_argument("--seed", type=int, default=0, help="random seed of --tolerance (default 0)")
     p.add_argument("--json", action="store_true", help="print the full result as JSON")
     p.add_argument("--out", type=Path, default=None, help="also write the JSON result to this file")
     p.set_defaults(func=run)
@@ -38,7 +42,14 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
     inputs = VehicleInputs(load_vehicle(args.vehicle), args.dbc or dbc_dir / "lashscope_ev.dbc",
                            args.signal_map or dbc_dir / "lashscope_ev.map.toml")
     opts = AnalysisOptions(model=args.model, whole_log=not args.no_whole_log)
-    doc, _ = result_payload(run_analysis(args.log, inputs, opts))
+    doc, arrays = result_payload(run_analysis(args.log, inputs, opts))
+    if getattr(args, "tolerance", 0):
+        from types import SimpleNamespace
+
+        from app.pipeline import tolerance_for_result
+
+        stored = SimpleNamespace(doc=doc, array=arrays.__getitem__)  # the result as the job reads it from disk
+        doc["tolerance"] = tolerance_for_result(stored, inputs.vehicle, args.tolerance, getattr(args, "seed", 0))
     doc["log"] = str(args.log)
     doc["vehicle"] = inputs.vehicle.name
     if getattr(args, "gap_sensitivity", False):
@@ -71,6 +82,25 @@ def gap_sensitivity_table(sens: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def tolerance_table(tol: dict[str, Any]) -> str:
+    """The tolerance band per event as text."""
+
+    def num(v: float | None, fmt: str = ".1f") -> str:
+        return "-" if v is None else format(v, fmt)
+
+    lines = [f"tolerance band, {tol['n']} variants per event (seed {tol['seed']}); {tol['metric']}",
+             f"{'#':>3} {'kind':<8} {'p5':>8} {'p50':>8} {'p95':>8} {'nominal':>8} {'measured':>9} {'pct':>6}"]
+    for e in tol["events"]:
+        if e.get("error"):
+            lines.append(f"{e['index']:>3} {e['kind']:<8} {e['error']}")
+            continue
+        b = e["band_rpm"]
+        lines.append(f"{e['index']:>3} {e['kind']:<8} {num(b['p5']):>8} {num(b['p50']):>8} {num(b['p95']):>8} "
+                     f"{num(e['nominal_fluctuation_rpm']):>8} {num(e['measured_fluctuation_rpm']):>9} "
+                     f"{num(e['measured_percentile'], '.0f'):>5}%")
+    return "\n".join(lines)
+
+
 def run(args: argparse.Namespace) -> int:
     from app.cli.report import events_table, metrics_table, summary_line
 
@@ -89,4 +119,7 @@ def run(args: argparse.Namespace) -> int:
         if "gap_sensitivity" in doc:
             print()
             print(gap_sensitivity_table(doc["gap_sensitivity"]))
+        if "tolerance" in doc:
+            print()
+            print(tolerance_table(doc["tolerance"]))
     return 0
