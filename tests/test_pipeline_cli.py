@@ -29,6 +29,17 @@ def test_demo_log_is_deterministic(short_log: Path, tmp_path: Path) -> None:
     assert hashlib.sha256(again.read_bytes()).digest() == hashlib.sha256(short_log.read_bytes()).digest()
 
 
+def test_demo_alive_counters_count_and_show_the_dropped_frames(short_log: Path) -> None:
+    from app.pipeline import decode_log
+
+    _, ingest = decode_log(short_log, DBC / "lashscope_ev.dbc", DBC / "lashscope_ev.map.toml")
+    gaps = {g["message"]: g for g in ingest["decode"]["counter_gaps"]}
+    assert set(gaps) == {"MCU_Torque", "MCU_Speed", "VCU_Pedal", "ESP_Vehicle"}
+    for g in gaps.values():
+        assert g["kind"] == "step" and g["pattern"] == "step +1 mod 15"
+        assert g["gaps"] == g["missed"] == Scenario().dropped_frames  # each dropped frame is one missed count
+
+
 def test_analyze_json(short_log: Path, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     out = tmp_path / "result.json"
     assert main(["analyze", str(short_log), "--vehicle", "paper", "--gap-sensitivity", "--json", "--out",
@@ -70,6 +81,7 @@ def test_demo_builds_analyses_plots_and_stores(tmp_path: Path, capsys: pytest.Ca
     assert main(["demo", "--data-dir", str(tmp_path)]) == 0
     text = capsys.readouterr().out
     assert "analysed" in text and "fluctuation peak-valley" in text
+    assert "alive counter" in text and "MCU_Torque.MCU_TorqueAlive" in text and "step +1 mod 15" in text
     png = tmp_path / "demo" / "overlay.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20000
     from app.storage import SQLiteStore

@@ -38,6 +38,7 @@ class Scenario:
     jitter_s: float = 0.0003
     truth_changes: dict[str, float] = field(default_factory=lambda: {"gaps.halfshaft": 0.8})  # factors on nominal
     brake_cycle: int = 5  # this release cycle happens with the brake pressed (-1: never)
+    dropped_frames: int = 3  # frames of each message lost on the bus (their alive counters show the gaps)
 
 
 def _smooth_step(t: FloatArray, t0: float, a: float, b: float, rate: float) -> FloatArray:
