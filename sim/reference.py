@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
 
 from sim.errors import InstabilityError, ParameterError
+from sim.linear import coupling_rows
 from sim.model import ChainModel, quasi_static_state
 
 F64 = NDArray[np.float64]
@@ -21,15 +22,8 @@ GRAVITY = 9.81
 
 
 def coupling_matrix(m: ChainModel) -> F64:
-    """``G`` (nc x nb) with ``delta = G @ theta``."""
-    G = np.zeros((m.n_couplings, m.n_bodies))
-    for j in range(m.n_couplings):
-        G[j, m.ca[j]] += 1.0
-        if m.cb[j] >= 0:
-            G[j, m.cb[j]] -= m.cr[j]
-        if m.housing >= 0:
-            G[j, m.housing] -= m.ce[j]
-    return G
+    """``G`` (nc x nb) with ``delta = G @ theta`` (the linearisation's own matrix)."""
+    return coupling_rows(m)
 
 
 def contact_torques(m: ChainModel, delta: F64, ddelta: F64) -> F64:

@@ -49,6 +49,7 @@ import can
 
 from app.errors import InputError
 from app.ingest.frames import FrameFlag
+from app.live.convert import message_flags
 
 GREETING = b"LSB1"
 RECORD = struct.Struct("<HdIBB")  # len, timestamp s, arb_id, flags, dlc
@@ -87,19 +88,7 @@ def parse_endpoint(channel: str | None, default_port: int = DEFAULT_PORT) -> tup
 
 
 def encode_message(msg: can.Message, timestamp: float | None = None) -> bytes:
-    flags = 0
-    if msg.is_extended_id:
-        flags |= FrameFlag.EXTENDED
-    if msg.is_fd:
-        flags |= FrameFlag.FD
-    if msg.is_error_frame:
-        flags |= FrameFlag.ERROR
-    if msg.is_remote_frame:
-        flags |= FrameFlag.REMOTE
-    if msg.bitrate_switch:
-        flags |= FrameFlag.BRS
-    if msg.error_state_indicator:
-        flags |= FrameFlag.ESI
+    flags = message_flags(msg) & ~FrameFlag.TX  # direction is the receiver's business on the hub
     data = bytes(msg.data or b"")
     ts = msg.timestamp if timestamp is None else timestamp
     return RECORD.pack(_BODY_FIXED + len(data), ts, msg.arbitration_id, flags, msg.dlc) + data

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Iterator
+from datetime import UTC, datetime, timedelta
 
+from app.ingest.frames import LogMeta
 from app.ingest.readers._source import ByteStream, StreamDamage
 
 # CAN FD DLC code -> payload length (codes above 15 read as 64, like python-can's ``dlc2len``)
@@ -153,3 +155,20 @@ class LineSource:
                 parts.pop()
             for i, raw in enumerate(parts):
                 yield first + i, raw.rstrip(b"\r").decode("latin-1")
+
+
+EPOCH_2000_NS = 946_684_800 * 10**9
+
+
+def epoch_origin(meta: LogMeta, t_ns: int) -> int:
+    """Time origin for a text log whose stamps may be epoch times.
+
+    A first stamp after the year 2000 is taken as epoch time: it becomes the origin and sets
+    ``meta.start_time`` (UTC, microseconds) with ``start_clock = "epoch_utc"``. Anything smaller
+    is a device or relative clock: the origin stays 0 and no absolute start is claimed.
+    """
+    if t_ns < EPOCH_2000_NS:
+        return 0
+    meta.start_time = datetime.fromtimestamp(t_ns // 10**9, tz=UTC) + timedelta(microseconds=(t_ns % 10**9) // 1000)
+    meta.start_clock = "epoch_utc"
+    return t_ns

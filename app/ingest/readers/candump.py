@@ -21,15 +21,13 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator
-from datetime import UTC, datetime, timedelta
 
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader, ChunkBuilder
-from app.ingest.readers._text import LEN_TO_DLC, BadLine, LineSource, decimal_to_ns, printable
+from app.ingest.readers._text import LEN_TO_DLC, BadLine, LineSource, decimal_to_ns, epoch_origin, printable
 
 _LINE = re.compile(r"^\(([^)]*)\)\s+(\S+)\s+(\S+)(?:\s+([RrTt]))?$")
 _HEX = re.compile(r"^[0-9A-Fa-f]*$")
-_EPOCH_2000_NS = 946_684_800 * 10**9
 CAN_ERR_FLAG = 0x20000000
 
 EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFlag.FD, FrameFlag.ERROR,
@@ -101,13 +99,7 @@ class CandumpReader(BaseReader):
                 break
 
     def _set_origin(self, t: int) -> None:
-        if t >= _EPOCH_2000_NS:
-            self._t0 = t
-            self.meta.start_time = (datetime.fromtimestamp(t // 10**9, tz=UTC)
-                                    + timedelta(microseconds=(t % 10**9) // 1000))
-            self.meta.start_clock = "epoch_utc"
-        else:
-            self._t0 = 0
+        self._t0 = epoch_origin(self.meta, t)
 
     def _channel(self, iface: str) -> int:
         ch = self._ifaces.get(iface)

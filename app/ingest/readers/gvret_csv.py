@@ -17,15 +17,22 @@ counted in the report (``time_backwards``). Buses are 0-based already.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from datetime import UTC, datetime, timedelta
 
 from app.errors import LogFormatError
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader, ChunkBuilder
-from app.ingest.readers._text import LEN_TO_DLC, BadLine, LineSource, decimal_to_ns, hex_bytes, parse_int, printable
+from app.ingest.readers._text import (
+    LEN_TO_DLC,
+    BadLine,
+    LineSource,
+    decimal_to_ns,
+    epoch_origin,
+    hex_bytes,
+    parse_int,
+    printable,
+)
 
 EXT, FD, TX = int(FrameFlag.EXTENDED), int(FrameFlag.FD), int(FrameFlag.TX)
-_EPOCH_2000_NS = 946_684_800 * 10**9
 _BOOL = {"true": True, "false": False, "1": True, "0": False}
 
 Frame = tuple[int, int, int, int, int, bytes]
@@ -63,14 +70,9 @@ class GvretCsvReader(BaseReader):
                 break
 
     def _set_origin(self, t: int) -> None:
-        if t >= _EPOCH_2000_NS:
-            self._t0 = t
-            self.meta.start_time = (datetime.fromtimestamp(t // 10**9, tz=UTC)
-                                    + timedelta(microseconds=(t % 10**9) // 1000))
-            self.meta.start_clock = "epoch_utc"
+        self._t0 = epoch_origin(self.meta, t)
+        if self._t0:
             self.meta.extra["time_base"] = "epoch microseconds (system clock)"
-        else:
-            self._t0 = 0
 
     def parse_line(self, line: str) -> Frame | None:
         """One CSV row as ``(device t_ns, bus, id, flags, len, payload)``; damage raises :class:`BadLine`."""
