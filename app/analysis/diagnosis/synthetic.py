@@ -176,19 +176,25 @@ def to_signals(samples: dict[str, tuple[FloatArray, FloatArray]]) -> SignalSet:
 
 
 def signal_ratio(drive: Drive, truth: SimResult, nominal: SimResult, noise_rpm: float, period_s: float = 0.01,
-                 pre_s: float = 0.3, post_s: float = 1.0) -> float:
+                 pre_s: float = 0.3, post_s: float = 1.0, anchor_end_s: float = 0.08) -> float:
     """How visible an effect is: RMS of truth minus nominal speed near reversals, in noise sigmas.
 
     Evaluated on a ``period_s`` grid inside ``[t_cross - pre_s, t_cross + post_s]`` of every torque
-    zero crossing, with the mean difference removed (a constant offset is no signal).
+    zero crossing, each window's difference taken relative to its mean before ``t_cross -
+    anchor_end_s`` -- as the diagnosis anchors each event on its pre-event samples. (Relative to one
+    mean over the whole drive, the slow drift of two whole-drive simulations apart -- a drag
+    decelerating the truth -- would count as signal, which no event window can see.)
     """
     t = np.arange(0.0, float(drive.t[-1]), period_s)
     diff = np.interp(t, truth.t, truth.motor_speed_rpm) - np.interp(t, nominal.t, nominal.motor_speed_rpm)
     cross = drive.t[np.flatnonzero(np.diff(np.signbit(drive.torque_nm)))]
-    near = np.zeros(t.size, dtype=bool)
+    parts = []
     for tc in cross:
-        near |= (t > tc - pre_s) & (t < tc + post_s)
-    d = diff[near] - np.mean(diff[near]) if near.any() else diff - np.mean(diff)
+        window = (t > tc - pre_s) & (t < tc + post_s)
+        anchor = window & (t < tc - anchor_end_s)
+        if anchor.any():
+            parts.append(diff[window] - np.mean(diff[anchor]))
+    d = np.concatenate(parts) if parts else diff - np.mean(diff)
     return float(np.sqrt(np.mean(d * d)) / noise_rpm)
 
 
