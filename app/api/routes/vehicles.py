@@ -63,6 +63,8 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
             files["driveline"] = driveline
         dbc = files.get("dbc") or settings.dbc_dir / "lashscope_ev.dbc"
         smap = files.get("signal_map") or settings.dbc_dir / "lashscope_ev.map.toml"
+        for default in {dbc, smap} - set(files.values()):  # the project's own files: named, not located
+            names[default] = f"default {default.name}"
         with user_file_names(names):
             summary = await run_in_threadpool(check_vehicle_files, driveline, dbc, smap)
         rec, created = await run_in_threadpool(store.add_vehicle, name, driveline=driveline, database=dbc,
