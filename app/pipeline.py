@@ -184,6 +184,15 @@ def signal_routes(database: Path, signal_map: Path) -> tuple[Any, dict[str, tupl
     return loaded, dict(routes)
 
 
+WHOLE_LOG_MAX_ROWS = 1_000_000  # ~330 MB of simulator output; per-event runs keep their fine grid
+
+
+def whole_log_output_dt(span_s: float, speed_period_s: float) -> float:
+    """Output step (s) of the whole-log run: the speed signal's own period (1-20 ms), coarser for
+    very long logs so the open-loop comparison stays within ``WHOLE_LOG_MAX_ROWS`` samples."""
+    return float(max(np.clip(speed_period_s, 1e-3, 0.02), span_s / WHOLE_LOG_MAX_ROWS))
+
+
 def free_rotor_inertia(vehicle: Vehicle) -> float:
     """Motor-referred inertia (kg m^2) that moves with the rotor while the half-shaft gap is open.
 
@@ -302,7 +311,7 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     whole_err: SpeedError | None = None
     if opts.whole_log:
         t0, t1 = overlap([torque, speed])
-        dt_whole = float(np.clip(median_period(speed.t), 1e-3, 0.02))
+        dt_whole = whole_log_output_dt(t1 - t0, median_period(speed.t))
         try:
             res = _simulate(vehicle, torque, speed, t0, t1, opts, dt_whole)
             grid = common_time_base(t0, t1, dt_whole)

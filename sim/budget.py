@@ -12,7 +12,7 @@ from sim.errors import InputSignalError, ParameterError
 
 MAX_STEPS = 200_000_000  # integrator steps of one run (about 10-20 s of compiled work for the paper chain)
 MAX_BATCH_STEPS = 10 * MAX_STEPS  # all variants of a batch together
-MAX_OUTPUT_BYTES = 512 * 2**20  # output arrays of one call (kernel buffers and result arrays)
+MAX_OUTPUT_BYTES = 2 * 2**30  # output arrays of one call (kernel buffers and result arrays); ~110 min at 1 ms
 
 
 def check_output(span_s: float, output_dt: float, n_out: int, bytes_per_row: int) -> None:

@@ -80,3 +80,17 @@ def test_missing_channels_and_bad_options_are_typed_errors(paper: object) -> Non
     opts = AnalysisOptions.from_dict({"events": {"min_step_nm": 10.0, "step_before_s": [0.2, 0.05]}})
     assert opts.events.min_step_nm == 10.0 and opts.events.step_before_s == (0.2, 0.05)
     assert AnalysisOptions.from_dict(opts.to_dict()) == opts
+
+
+@pytest.mark.parametrize(("span_s", "period_s", "expected"), [
+    (600.0, 0.01, 0.01),  # 10 min at 100 Hz: the speed signal's own period
+    (600.0, 0.0005, 1e-3),  # faster than 1 kHz: clipped to 1 ms
+    (1800.0, 0.001, 1.8e-3),  # 30 min at 1 kHz: coarsened to stay within WHOLE_LOG_MAX_ROWS
+    (36_000.0, 0.01, 0.036),  # 10 h at 100 Hz: coarsened
+])
+def test_whole_log_output_step_stays_within_the_row_budget(span_s: float, period_s: float, expected: float) -> None:
+    from app.pipeline import WHOLE_LOG_MAX_ROWS, whole_log_output_dt
+
+    dt = whole_log_output_dt(span_s, period_s)
+    assert dt == pytest.approx(expected)
+    assert span_s / dt <= WHOLE_LOG_MAX_ROWS * (1 + 1e-9)

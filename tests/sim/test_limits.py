@@ -11,7 +11,7 @@ import pytest
 from app.cli import main
 from sim import InputSignalError, ParameterError, WhatIf, load_vehicle, load_vehicle_text, simulate
 from sim.batch import simulate_batch, tolerance_analysis
-from sim.budget import MAX_STEPS
+from sim.budget import MAX_OUTPUT_BYTES, MAX_STEPS
 from sim.inputs import prepare_input
 from sim.integrate import _initial_forces, run_chain, run_chain_batch
 from sim.two_inertia import run_two_inertia
@@ -95,7 +95,8 @@ def test_step_budget_refuses_a_stiff_valid_vehicle_before_integrating() -> None:
     ([0.0, 1e9], 0.001, "multibody"), ([0.0, 1e9], 1.0, "two_inertia"), ([0.0, 1.0], 1e-12, "multibody"),
 ])
 def test_output_budget_refuses_before_allocating(t: list[float], output_dt: float, model: str) -> None:
-    with pytest.raises(InputSignalError, match=r"output samples, .* MiB of output, over the budget of 512 MiB"):
+    budget = f"{MAX_OUTPUT_BYTES / 2**20:.0f} MiB"
+    with pytest.raises(InputSignalError, match=rf"output samples, .* MiB of output, over the budget of {budget}"):
         simulate(PAPER, t, [10.0, 10.0], output_dt=output_dt, model=model)
     with pytest.raises(InputSignalError, match=r"over the budget"):
         simulate_batch(PAPER, [{}], t, [10.0, 10.0], output_dt=output_dt)
@@ -185,7 +186,7 @@ def test_cli_what_if_and_tolerance(torque_csv: Path, capsys: pytest.CaptureFixtu
 
 @pytest.mark.parametrize(("args", "message"), [
     (["--vehicle", "{bad}"], "halfshaft.segments = 100000: outside the physical range [1, 20]"),
-    (["--output-dt", "1e-12"], "over the budget of 512 MiB"),
+    (["--output-dt", "1e-12"], f"over the budget of {MAX_OUTPUT_BYTES / 2**20:.0f} MiB"),
     (["--what-if", "gap=hub:2"], "what_if.gap_scale.hub = 2.0"),
 ])
 def test_cli_errors_are_one_line(args: list[str], message: str, torque_csv: Path, tmp_path: Path,
