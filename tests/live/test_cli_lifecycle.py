@@ -4,11 +4,9 @@ SIGTERM, and the store directory."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import socket
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -20,12 +18,7 @@ from app.errors import LiveBusError
 from app.live.bus import Backoff, BusConfig, BusLink
 from app.live.loopback import LoopbackHub
 from tests.live import drive
-
-REPO = Path(__file__).resolve().parents[2]
-
-
-def _lashscope(*args: str) -> list[str]:
-    return [sys.executable, "-m", "app", *args]
+from tests.live.procs import REPO, lashscope, signal_when_ready
 
 
 def _free_port() -> int:
@@ -50,7 +43,7 @@ def log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 ])
 def test_replay_refuses_bad_arguments_before_opening_the_bus(log: Path, extra: list[str], message: str) -> None:
     with LoopbackHub() as hub:
-        proc = subprocess.run(_lashscope("replay", str(log), "-i", "tcp_loopback", "-c", hub.channel, *extra),
+        proc = subprocess.run(lashscope("replay", str(log), "-i", "tcp_loopback", "-c", hub.channel, *extra),
                               cwd=REPO, capture_output=True, text=True, timeout=60)
         clients_seen = hub.clients
     assert proc.returncode == 2, proc.stderr
@@ -61,7 +54,7 @@ def test_replay_refuses_bad_arguments_before_opening_the_bus(log: Path, extra: l
 
 def test_replay_waits_for_a_bus_that_appears_after_start(log: Path) -> None:
     port = _free_port()
-    proc = subprocess.Popen(_lashscope("replay", str(log), "-i", "tcp_loopback", "-c", f"127.0.0.1:{port}",
+    proc = subprocess.Popen(lashscope("replay", str(log), "-i", "tcp_loopback", "-c", f"127.0.0.1:{port}",
                                        "--connect-timeout", "20", "--json"),
                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -81,7 +74,7 @@ def test_replay_waits_for_a_bus_that_appears_after_start(log: Path) -> None:
 def test_replay_gives_up_on_an_absent_bus_after_the_connect_timeout(log: Path) -> None:
     port = _free_port()
     t = time.monotonic()
-    proc = subprocess.run(_lashscope("replay", str(log), "-i", "tcp_loopback", "-c", f"127.0.0.1:{port}",
+    proc = subprocess.run(lashscope("replay", str(log), "-i", "tcp_loopback", "-c", f"127.0.0.1:{port}",
                                      "--connect-timeout", "1"), cwd=REPO, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert proc.stderr.startswith("lashscope: error [live_bus_error]") and "attempts" in proc.stderr, proc.stderr
@@ -116,19 +109,9 @@ def test_link_open_without_timeout_fails_at_once() -> None:
 
 def test_replay_sigterm_stops_cleanly_with_a_summary(log: Path) -> None:
     with LoopbackHub() as hub:
-        proc = subprocess.Popen(_lashscope("replay", str(log), "-i", "tcp_loopback", "-c", hub.channel, "--loop"),
-                                cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            deadline = time.monotonic() + 20
-            while hub.frames_forwarded < 100 and time.monotonic() < deadline:
-                time.sleep(0.05)
-            os.kill(proc.pid, signal.SIGTERM)
-            out, err = proc.communicate(timeout=10)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-    assert proc.returncode == 143, err
+        code, out, err = signal_when_ready(["replay", str(log), "-i", "tcp_loopback", "-c", hub.channel, "--loop"],
+                                           lambda: hub.frames_forwarded >= 100, signal.SIGTERM)
+    assert code == 143, err
     assert "replay stopped by SIGTERM" in out and "pacing error p50" in out
     assert "Traceback" not in err
 
@@ -137,20 +120,11 @@ def test_live_sigterm_stops_cleanly_with_a_summary(tmp_path: Path) -> None:
     dbc = drive.write_dbc(tmp_path)
     out = tmp_path / "rec.blf"
     with LoopbackHub() as hub:
-        proc = subprocess.Popen(_lashscope("live", "-i", "tcp_loopback", "-c", hub.channel, "--dbc", str(dbc),
-                                           "--out", str(out), "--json", "--status-every", "0"),
-                                cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            deadline = time.monotonic() + 30
-            while hub.clients < 1 and time.monotonic() < deadline:
-                time.sleep(0.05)
-            os.kill(proc.pid, signal.SIGTERM)
-            stdout, err = proc.communicate(timeout=30)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-    assert proc.returncode == 0, err
+        code, stdout, err = signal_when_ready(
+            ["live", "-i", "tcp_loopback", "-c", hub.channel, "--dbc", str(dbc), "--out", str(out), "--json",
+             "--status-every", "0"],
+            lambda: hub.clients >= 1, signal.SIGTERM, ready_within_s=30, exit_within_s=30)
+    assert code == 0, err
     summary = json.loads(stdout.splitlines()[-1])
     assert summary["status"]["state"] == "stopped" and out.is_file()
 

@@ -6,7 +6,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -19,13 +18,8 @@ from app.live.decoding import source_for
 from app.live.loopback import LoopbackHub
 from app.live.session import LiveSession
 from tests.live import drive
+from tests.live.procs import REPO, lashscope, signal_when_ready
 from tests.live.test_live_events import _same, offline_events
-
-REPO = Path(__file__).resolve().parents[2]
-
-
-def _lashscope(*args: str) -> list[str]:
-    return [sys.executable, "-m", "app", *args]
 
 
 def test_cli_replay_into_live_session_in_another_process(tmp_path: Path) -> None:
@@ -37,7 +31,7 @@ def test_cli_replay_into_live_session_in_another_process(tmp_path: Path) -> None
         session = LiveSession(BusConfig("tcp_loopback", hub.channel), source, record_path=tmp_path / "rec.blf",
                               analyzer=LiveAnalyzer()).start()
         try:
-            proc = subprocess.run(_lashscope("replay", str(log), "--interface", "tcp_loopback", "--channel",
+            proc = subprocess.run(lashscope("replay", str(log), "--interface", "tcp_loopback", "--channel",
                                              hub.channel, "--json"),
                                   cwd=REPO, capture_output=True, text=True, timeout=60)
             assert proc.returncode == 0, proc.stderr
@@ -67,19 +61,9 @@ def test_cli_replay_into_live_session_in_another_process(tmp_path: Path) -> None
 def test_replay_ctrl_c_stops_cleanly_with_a_summary(tmp_path: Path) -> None:
     log = drive.write_blf(tmp_path / "drive.blf", drive.drive_messages(duration_s=3.0))
     with LoopbackHub() as hub:
-        proc = subprocess.Popen(_lashscope("replay", str(log), "-i", "tcp_loopback", "-c", hub.channel, "--loop"),
-                                cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            deadline = time.monotonic() + 20
-            while hub.frames_forwarded < 300 and time.monotonic() < deadline:
-                time.sleep(0.05)
-            os.kill(proc.pid, signal.SIGINT)
-            out, err = proc.communicate(timeout=10)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-    assert proc.returncode == 130, err
+        code, out, err = signal_when_ready(["replay", str(log), "-i", "tcp_loopback", "-c", hub.channel, "--loop"],
+                                           lambda: hub.frames_forwarded >= 300, signal.SIGINT)
+    assert code == 130, err
     assert "replay stopped by Ctrl-C" in out and "pacing error p50" in out
     assert "Traceback" not in err
 
@@ -88,7 +72,7 @@ def test_replay_of_a_missing_or_corrupt_log_is_a_one_line_error(tmp_path: Path) 
     bad = tmp_path / "bad.blf"
     bad.write_bytes(b"LOGG" + os.urandom(200))
     for path in (tmp_path / "missing.blf", bad):
-        proc = subprocess.run(_lashscope("replay", str(path), "-i", "virtual", "-c", "x"), cwd=REPO,
+        proc = subprocess.run(lashscope("replay", str(path), "-i", "virtual", "-c", "x"), cwd=REPO,
                               capture_output=True, text=True, timeout=60)
         assert proc.returncode == 2, proc.stderr
         assert proc.stderr.startswith("lashscope: error [") and "Traceback" not in proc.stderr
@@ -99,26 +83,18 @@ def test_live_command_records_and_reports_events(tmp_path: Path) -> None:
     log = drive.write_blf(tmp_path / "drive.blf", drive.drive_messages(duration_s=4.0, period_s=1.6))
     out = tmp_path / "cli.blf"
     with LoopbackHub() as hub:
-        proc = subprocess.Popen(_lashscope("live", "-i", "tcp_loopback", "-c", hub.channel, "--dbc", str(dbc),
-                                           "--map", str(drive.map_of(dbc)), "--out", str(out), "--json",
-                                           "--status-every", "0"),
-                                cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            deadline = time.monotonic() + 30
-            while hub.clients < 1 and time.monotonic() < deadline:
-                time.sleep(0.05)
-            link_proc = subprocess.run(_lashscope("replay", str(log), "-i", "tcp_loopback", "-c", hub.channel,
-                                                  "--rate", "2"), cwd=REPO, capture_output=True, text=True,
-                                       timeout=60)
+        def replay_the_drive() -> None:
+            link_proc = subprocess.run(lashscope("replay", str(log), "-i", "tcp_loopback", "-c", hub.channel,
+                                                 "--rate", "2"), cwd=REPO, capture_output=True, text=True, timeout=60)
             assert link_proc.returncode == 0, link_proc.stderr
             time.sleep(0.5)
-            os.kill(proc.pid, signal.SIGINT)
-            stdout, err = proc.communicate(timeout=30)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-    assert proc.returncode == 0, err
+
+        code, stdout, err = signal_when_ready(
+            ["live", "-i", "tcp_loopback", "-c", hub.channel, "--dbc", str(dbc), "--map", str(drive.map_of(dbc)),
+             "--out", str(out), "--json", "--status-every", "0"],
+            lambda: hub.clients >= 1, signal.SIGINT, ready_within_s=30, exit_within_s=30,
+            before_signal=replay_the_drive)
+    assert code == 0, err
     lines = [json.loads(line) for line in stdout.splitlines()]
     events = [x["event"] for x in lines if "event" in x]
     summary = lines[-1]
