@@ -1,7 +1,12 @@
 """Background diagnoses that survive a restart: state files, owners, one worker, resume or fail.
 
-A diagnosis (and a validation of one) runs on its own one-worker pool, and its state lives in a
-JSON file next to its results (``status.json`` / ``validation.json``). Queued and running work
+A diagnosis (and a validation of one) runs one at a time, each in its own spawned worker process
+with a wall-time limit (:class:`Worker`), and its state lives in a JSON file next to its results
+(``status.json`` / ``validation.json``) that the worker writes its progress to. Why a process: the
+fitting holds the GIL for long stretches, so in a thread of the server it would slow every request,
+and a runaway fit could never be stopped; a process is killed after ``timeout_s`` and the work
+fails with code ``timeout``. The worker dies with the server (``PR_SET_PDEATHSIG`` on Linux, and a
+parent check at every progress report), so a killed server leaves no orphan fitting on. Queued and running work
 records its *owner*: process id, the process' start time (Linux ``/proc``) and a token drawn when
 this module is imported -- so a restarted server with the same pid (pid 1 in a container) is still
 a different owner. With that, work cut off by a stop or a crash is recognisable:
@@ -13,8 +18,9 @@ a different owner. With that, work cut off by a stop or a crash is recognisable:
   work still queued, or stopped cleanly, does not. A claim file per dead owner (created
   exclusively) makes sure only one process resumes a piece when several start on one data
   directory;
-- :meth:`Worker.close` (at shutdown) asks the running work to stop at its next progress report
-  (:class:`Stopping`), which puts it back to ``queued``; queued work stays queued;
+- :meth:`Worker.close` (at shutdown) stops the running work -- it kills the worker process, or, with
+  ``in_process=True``, asks the work to stop at its next progress report (:class:`Stopping`) -- and
+  puts it back to ``queued``; queued work stays queued;
 - :func:`state` marks work failed with the same reason when it is read while its owner is dead
   (another process on the same data directory crashed).
 """
@@ -23,12 +29,15 @@ from __future__ import annotations
 
 import json
 import logging
+import multiprocessing
 import os
 import secrets
+import signal
 import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import Any
 
@@ -42,8 +51,13 @@ INTERRUPTED = "interrupted by server restart"
 ACTIVE = ("queued", "running")
 _TOKEN = secrets.token_hex(8)
 _FILE_LOCK = threading.Lock()
+_SPAWN = multiprocessing.get_context("spawn")  # no fork of a threaded server; the child imports afresh
+_PR_SET_PDEATHSIG = 1
 
-Work = Callable[[], None]
+Check = Callable[[], None]
+#: A piece of work: called with a ``check`` to call at every progress report. For a worker process it must
+#: pickle (a module-level function or a :func:`functools.partial` of one), as it is sent to a spawned child.
+Work = Callable[[Check], None]
 
 
 class Stopping(Exception):
@@ -113,43 +127,124 @@ def state(path: Path) -> dict[str, Any] | None:
     return doc
 
 
-def run_guarded(path: Path, work: Work, stopping: threading.Event) -> None:
+def run_guarded(path: Path, work: Work, check: Check) -> None:
     """Run ``work``; its failures and a stop end up in the state file, never in the server."""
-    if stopping.is_set():
-        return  # picked up after the stop: it is still queued in its file
     try:
-        work()
+        work(check)
     except Stopping:
         # the owner stays: once this process has exited, the next start sees it gone and resumes the work
-        update(path, status="queued", stage="stopped with the server; resumes at the next start")
+        _requeue(path)
     except (AppError, SimError) as exc:
         update(path, status="failed", owner=None, error={"code": getattr(exc, "code", "error"), "detail": str(exc)})
+    except MemoryError:
+        update(path, status="failed", owner=None,
+               error={"code": "out_of_memory", "detail": "the work ran out of memory"})
     except Exception as exc:  # a bug must fail the diagnosis, not the server
         log.exception("diagnosis work %s failed", path)
         update(path, status="failed", owner=None,
                error={"code": "internal_error", "detail": f"{type(exc).__name__}: {exc}"})
 
 
-class Worker:
-    """One background thread for CPU-bound diagnoses, with a stop flag the work polls."""
+def _requeue(path: Path) -> None:
+    update(path, status="queued", stage="stopped with the server; resumes at the next start")
 
-    def __init__(self) -> None:
+
+def _die_with_parent(parent: int) -> None:
+    """Have the kernel kill this process when the server dies (Linux), so no orphan keeps fitting."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):  # not Linux: the parent check at each progress report remains
+        pass
+    if os.getppid() != parent:  # the server died before the line above took effect
+        os._exit(1)
+
+
+def _child(path: str, work: Work, parent: int) -> None:
+    """Entry point of a worker process: run one piece of work, writing its state to ``path``."""
+    _die_with_parent(parent)
+
+    def check() -> None:
+        if os.getppid() != parent:
+            os._exit(1)  # the server is gone: the file stays "running" for a dead owner, the next start decides
+
+    run_guarded(Path(path), work, check)
+
+
+class Worker:
+    """Runs diagnoses one at a time, each in a spawned process killed after ``timeout_s`` (seconds; None: no limit).
+
+    ``in_process=True`` runs the work in the worker thread instead (no isolation, no time limit); the work
+    then stops at its next ``check()`` once :meth:`close` is called.
+    """
+
+    def __init__(self, timeout_s: float | None = None, in_process: bool = False,
+                 timeout_setting: str = "LASHSCOPE_DIAGNOSIS_TIMEOUT_S") -> None:
         self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnosis")
         self.stopping = threading.Event()
+        self.timeout_s = timeout_s
+        self.in_process = in_process
+        self.timeout_setting = timeout_setting
+        self._procs: dict[Path, BaseProcess] = {}
+        self._lock = threading.Lock()
 
     def submit(self, path: Path, work: Work) -> None:
         """Queue ``work`` whose state lives in ``path`` (this process becomes its owner)."""
         update(path, owner=owner())
-        self.pool.submit(run_guarded, path, work, self.stopping)
+        self.pool.submit(self._run, path, work)
 
     def check(self) -> None:
-        """Called from progress reports: raises :class:`Stopping` once the server stops."""
+        """Progress check of in-process work: raises :class:`Stopping` once the server stops."""
         if self.stopping.is_set():
             raise Stopping
 
+    def _run(self, path: Path, work: Work) -> None:
+        if self.stopping.is_set():
+            return  # picked up after the stop: it is still queued in its file
+        if self.in_process:
+            run_guarded(path, work, self.check)
+            return
+        proc = _SPAWN.Process(target=_child, args=(str(path), work, os.getpid()), daemon=True,
+                              name=f"lashscope-diagnosis-{path.parent.name}")
+        with self._lock:
+            if self.stopping.is_set():
+                return
+            proc.start()
+            self._procs[path] = proc
+        try:
+            proc.join(self.timeout_s)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+                if not self.stopping.is_set():
+                    update(path, status="failed", owner=None,
+                           error={"code": "timeout", "detail": f"timed out after {self.timeout_s:g} s "
+                                  f"({self.timeout_setting}); the worker was stopped"})
+                    log.warning("diagnosis work %s timed out after %g s", path, self.timeout_s)
+                return
+        finally:
+            with self._lock:
+                self._procs.pop(path, None)
+        doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+        if doc.get("status") in ACTIVE and not self.stopping.is_set():
+            code = proc.exitcode
+            reason = f"killed by signal {-code}" if code is not None and code < 0 else f"exit code {code}"
+            update(path, status="failed", owner=None,
+                   error={"code": "worker_died", "detail": f"the worker process ended without a result ({reason})"})
+
     def close(self) -> None:
-        self.stopping.set()
-        self.pool.shutdown(wait=False, cancel_futures=True)  # queued work stays queued in its files
+        """Stop: running work is stopped and goes back to ``queued``; queued work stays queued in its files."""
+        with self._lock:
+            self.stopping.set()
+            procs = dict(self._procs)
+        for path, proc in procs.items():
+            proc.kill()  # deterministic work restarts from the beginning, so nothing is lost by not waiting
+            proc.join()
+            doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+            if doc.get("status") in ACTIVE:
+                _requeue(path)
+        self.pool.shutdown(wait=False, cancel_futures=True)
 
 
 def _claim(path: Path, previous: Any) -> bool:

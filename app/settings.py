@@ -6,6 +6,8 @@
 ``LASHSCOPE_ANALYSIS_WORKERS``  background analyses run at the same time (default 1)
 ``LASHSCOPE_JOB_MAX_ATTEMPTS``  a job cut off by a crash is re-run until it has started this often
 ``LASHSCOPE_JOB_TIMEOUT_S``     a job's worker process is killed after this wall time and the job fails (default 600)
+``LASHSCOPE_DIAGNOSIS_TIMEOUT_S``  a diagnosis' (or validation's) worker process is killed after this wall time
+                                 and it fails (default 1800)
 ``LASHSCOPE_DBC_DIR``           the project's DBC files and signal maps (default: ``dbc/`` in the source tree)
 ``LASHSCOPE_SHUTDOWN_GRACE_S``  on stop, open requests (e.g. live streams) get this long before they are cut
 """
@@ -39,6 +41,7 @@ class Settings(BaseSettings):
     analysis_workers: int = Field(default=1, ge=1, le=16)
     job_max_attempts: int = Field(default=2, ge=1)
     job_timeout_s: float = Field(default=600.0, gt=0)
+    diagnosis_timeout_s: float = Field(default=1800.0, gt=0)  # a whole-library fit on a long log takes minutes
     dbc_dir: Path = Field(default_factory=default_dbc_dir)
     series_cache_entries: int = Field(default=256, ge=0)
     series_cache_mb: float = Field(default=64.0, ge=0)  # rendered series responses kept in memory

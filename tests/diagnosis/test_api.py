@@ -1,13 +1,11 @@
-"""The diagnoses routes in-process: start, poll, read the report, plots, apply as a vehicle version, validate.
+"""The diagnoses routes: start, poll, read the report, plots, apply as a vehicle version, validate.
 
-The log decode edge (``_decode``: stored log + DBC + signal map -> signals) belongs to the ingest
-path and is tested there; here it returns synthetic drives with a known truth so the routes'
-own behaviour is what is checked.
+The app runs in the test process; each diagnosis runs in the worker process it spawns, on two
+uploaded BLF logs of drives with a known truth (a 15 ms torque lag) written through the reference DBC.
 """
 
 from __future__ import annotations
 
-import hashlib
 import time
 import warnings
 from collections.abc import Iterator
@@ -22,45 +20,32 @@ with warnings.catch_warnings():
     from fastapi.testclient import TestClient
 
 from app.api.main import create_app
-from app.api.routes import diagnoses
 from app.settings import Settings
-from sim import dump_toml
+from tests.api.conftest import create_vehicle, upload
 from tests.conftest import REPO
-from tests.diagnosis.conftest import drive_signals, paper
+from tests.diagnosis.test_restart import write_lag_log
 
-LAG = (("tau_s", 0.015), ("delay_s", 0.0))
+
+@pytest.fixture(scope="module")
+def lag_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    if not (REPO / "dbc" / "lashscope_ev.dbc").is_file():
+        pytest.skip("the reference DBC and signal map are not in dbc/")
+    root = tmp_path_factory.mktemp("logs")
+    return {name: write_lag_log(root / f"{name}.blf", seed) for name, seed in (("log_a", 21), ("log_b", 22))}
 
 
 @pytest.fixture()
-def client(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[TestClient]:
-    logs = {"log_a": 21, "log_b": 22}
-
-    def fake_decode(store: Any, log_id: str, name: str, version: int) -> tuple[Any, Any]:
-        from sim import load_vehicle
-
-        veh = store.get_vehicle(name, version)
-        return drive_signals("torque_lag", LAG, logs[store.get_log(log_id).filename]), load_vehicle(veh.driveline_path)
-
-    monkeypatch.setattr(diagnoses, "_decode", fake_decode)
+def client(tmp_path: Path, lag_logs: dict[str, Path]) -> Iterator[TestClient]:
     app = create_app(Settings(data_dir=tmp_path / "data"))
     with TestClient(app) as c:
         store = app.state.store
+        create_vehicle(c, "paper")
         ids = {}
-        for name in logs:
-            tmp = store.temp_path(".blf")
-            tmp.write_bytes(name.encode())
-            rec, _ = store.add_log(tmp, sha256=hashlib.sha256(name.encode()).hexdigest(), filename=name, fmt="blf",
-                                   frames=1, duration_s=30.0, start_time=None, issues=[], meta={})
-            ids[name] = rec.id
-        files = tmp_path / "files"
-        files.mkdir()
-        (files / "paper.toml").write_text(dump_toml(paper()), encoding="utf-8")
-        dbc, smap = REPO / "dbc" / "lashscope_ev.dbc", REPO / "dbc" / "lashscope_ev.map.toml"
-        if not (dbc.is_file() and smap.is_file()):
-            pytest.skip("the reference DBC and signal map are not in dbc/")
-        veh, _ = store.add_vehicle("paper", driveline=files / "paper.toml", database=dbc, signal_map=smap,
-                                   summary={})
-        analysis = store.create_analysis(ids["log_a"], veh, {})
+        for name, path in lag_logs.items():
+            r = upload(c, path)
+            assert r.status_code in (200, 201), r.text
+            ids[name] = r.json()["id"]
+        analysis = store.create_analysis(ids["log_a"], store.get_vehicle("paper"), {})
         c.app_state = {"analysis": analysis.id, "log_b": ids["log_b"]}  # type: ignore[attr-defined]
         yield c
 
@@ -76,7 +61,7 @@ def wait(c: TestClient, url: str, key: str = "status", timeout: float = 120.0) -
     raise AssertionError(f"{url} not finished in {timeout} s")
 
 
-def test_diagnosis_lifecycle(client: TestClient, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_diagnosis_lifecycle(client: TestClient) -> None:
     st = client.app_state  # type: ignore[attr-defined]
     r = client.post(f"/analyses/{st['analysis']}/diagnoses",
                     json={"candidates": ["torque_lag", "drag", "speed_sensor"], "seed": 3})

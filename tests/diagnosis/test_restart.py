@@ -34,17 +34,20 @@ from tests.diagnosis.conftest import paper
 CANDIDATES = ["torque_lag", "speed_sensor", "drag"]
 
 
-@pytest.fixture(scope="module")
-def lag_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def write_lag_log(path: Path, seed: int = 41) -> Path:
     """30 s of tip-ins and tip-outs with a 15 ms torque lag, written as BLF through the reference DBC."""
-    rng = np.random.default_rng(41)
+    rng = np.random.default_rng(seed)
     drive = make_drive(paper(), rng, DriveSpec(duration_s=30.0))
     truth = run_truth(apply_effects(paper(), {"torque_lag": {"tau_s": 0.015, "delay_s": 0.0}}), drive)
     frames = measure_frames(drive, truth, CanSampling(offset_s=0.004, speed_res_rpm=0.0, torque_res_nm=0.0), rng)
-    path = tmp_path_factory.mktemp("restart") / "lag.blf"
     write_blf(path, frames, load_database(REPO / "dbc" / "lashscope_ev.dbc"),
               load_signal_map(REPO / "dbc" / "lashscope_ev.map.toml"))
     return path
+
+
+@pytest.fixture(scope="module")
+def lag_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_lag_log(tmp_path_factory.mktemp("restart") / "lag.blf")
 
 
 def _poll(c: httpx.Client, did: str, until: Any, timeout: float = 120.0) -> dict[str, Any]:
@@ -100,9 +103,9 @@ def test_work_cut_off_too_often_is_failed_with_the_reason(tmp_path: Path) -> Non
     path = tmp_path / "status.json"
     update(path, status="running", attempts=MAX_ATTEMPTS, owner=_dead_owner())
     ran: list[int] = []
-    worker = Worker()
+    worker = Worker(in_process=True)
     try:
-        done = recover([("d1", path, lambda: lambda: ran.append(1))], worker)
+        done = recover([("d1", path, lambda: lambda check: ran.append(1))], worker)
     finally:
         worker.close()
     assert done == {"resumed": [], "failed": ["d1"]}
@@ -115,33 +118,33 @@ def test_queued_work_and_a_clean_stop_resume_without_counting_an_attempt(tmp_pat
     update(path, status="queued", attempts=1, owner=_dead_owner())
     finished = threading.Event()
 
-    def finish() -> None:
+    def finish(check: Any) -> None:
         update(path, status="done")
         finished.set()
 
-    worker = Worker()
+    worker = Worker(in_process=True)
     try:
         done = recover([("d1", path, lambda: finish)], worker)
         assert done["resumed"] == ["d1"] and finished.wait(10)
         assert json.loads(path.read_text(encoding="utf-8"))["attempts"] == 1
         # resumed once per dead owner: a second recovery (another process on the same directory) leaves it
         update(path, status="queued", owner=_dead_owner())
-        assert recover([("d1", path, lambda: lambda: None)], worker)["resumed"] == ["d1"]
-        assert recover([("d1", path, lambda: lambda: None)], worker)["resumed"] == []
+        assert recover([("d1", path, lambda: lambda check: None)], worker)["resumed"] == ["d1"]
+        assert recover([("d1", path, lambda: lambda check: None)], worker)["resumed"] == []
     finally:
         worker.close()
 
     # a stop while running puts the work back in the queue, with its attempts unchanged
     stopped = tmp_path / "stopped.json"
     update(stopped, status="queued", attempts=1)
-    worker = Worker()
+    worker = Worker(in_process=True)
     started = threading.Event()
 
-    def work() -> None:
+    def work(check: Any) -> None:
         update(stopped, status="running")
         started.set()
         while True:
-            worker.check()
+            check()
             time.sleep(0.01)
 
     worker.submit(stopped, work)

@@ -8,7 +8,9 @@
     POST /diagnoses/{diagnosis_id}/apply     {"name": optional}  -> 201 new vehicle version with the effect
     POST /diagnoses/{diagnosis_id}/validate  {"log_id": ...}     -> 202; shrink on that drive in the report
 
-Work runs on a one-worker background pool (a diagnosis is CPU-bound). State lives in files under the
+Work runs one piece at a time, each in its own spawned worker process killed after
+``LASHSCOPE_DIAGNOSIS_TIMEOUT_S`` (the diagnosis then fails with code ``timeout``), so a CPU-bound fit
+never slows request handling and a runaway one is stopped. State lives in files under the
 analysis' directory (``diagnoses/<id>/status.json``, ``report.json``, ``validation.json``, PNGs), so a
 finished diagnosis survives a restart, and one cut off by a restart is resumed when the server
 starts again -- or, after it has been cut off twice, marked failed with the reason "interrupted by
@@ -33,7 +35,7 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import StoreDep
 from app.api.schemas import ERRORS
-from app.diagnosis_state import ACTIVE, Worker, log, recover, state, update, write_json
+from app.diagnosis_state import ACTIVE, Check, Work, Worker, log, recover, state, update, write_json
 from app.errors import AnalysisError, ConflictError, InputError, NotFoundError
 from app.storage.base import Store
 
@@ -56,11 +58,16 @@ class ValidateBody(BaseModel):
     log_id: str
 
 
+def _new_worker(app: FastAPI) -> Worker:
+    settings = getattr(app.state, "settings", None)
+    return Worker(timeout_s=settings.diagnosis_timeout_s if settings is not None else None)
+
+
 def _worker(app: FastAPI) -> Worker:
     """The app's diagnosis worker (made by the lifespan; on first use when the app runs without one)."""
     worker: Worker | None = getattr(app.state, "diagnosis_worker", None)
     if worker is None:
-        worker = app.state.diagnosis_worker = Worker()
+        worker = app.state.diagnosis_worker = _new_worker(app)
     return worker
 
 
@@ -79,17 +86,17 @@ def _diagnosis_dirs(store: Store) -> Iterator[Path]:
 
 def recover_interrupted(store: Store, worker: Worker) -> dict[str, list[str]]:
     """Resume (or fail) every diagnosis and validation cut off by a stop or crash (see :mod:`app.diagnosis_state`)."""
-    todo: list[tuple[str, Path, Callable[[], Callable[[], None]]]] = []
+    todo: list[tuple[str, Path, Callable[[], Work]]] = []
     for d in _diagnosis_dirs(store):
-        todo.append((d.name, d / STATUS, partial(_diagnosis_work, store, d, worker)))
-        todo.append((f"{d.name}/validation", d / VALIDATION, partial(_validation_work, store, d, worker)))
+        todo.append((d.name, d / STATUS, partial(_diagnosis_work, store, d)))
+        todo.append((f"{d.name}/validation", d / VALIDATION, partial(_validation_work, store, d)))
     return recover(todo, worker)
 
 
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Resume interrupted work at startup; ask the running work to stop at shutdown (it goes back to the queue)."""
-    worker = app.state.diagnosis_worker = Worker()
+    worker = app.state.diagnosis_worker = _new_worker(app)
     store: Store | None = getattr(app.state, "store", None)
     if store is not None:
         done = recover_interrupted(store, worker)
@@ -125,24 +132,51 @@ def _decode(store: Store, log_id: str, vehicle_name: str, version: int) -> tuple
     return signals, load_vehicle(veh.driveline_path)
 
 
-def _diagnosis_work(store: Store, d: Path, worker: Worker) -> Callable[[], None]:
-    """The diagnosis ``d/status.json`` describes (options, analysis, vehicle), as a job for the worker."""
-    from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict
+def _options(opts: dict[str, Any], model: str) -> Any:
+    from app.analysis.diagnosis import DiagnosisOptions
+
+    try:
+        return DiagnosisOptions(candidates=tuple(opts["candidates"]), seed=int(opts["seed"]), model=model)
+    except (KeyError, TypeError) as exc:
+        raise InputError(f"diagnosis options unreadable: {exc}") from exc
+
+
+def _diagnosis_work(store: Store, d: Path) -> Work:
+    """The diagnosis ``d/status.json`` describes (options, analysis, vehicle), as work for the worker process."""
+    st = json.loads((d / STATUS).read_text(encoding="utf-8"))
+    _options(st["options"], st["options"]["model"])  # unreadable options fail now, not in the worker
+    return partial(_run_diagnosis, str(store.root), str(d))
+
+
+def _in_store(root: str, run: Callable[[Store], None]) -> None:
+    """Run ``run`` against the store at ``root`` (the worker process opens its own connection)."""
+    from app.storage.sqlite import SQLiteStore
+
+    store = SQLiteStore(Path(root))
+    try:
+        run(store)
+    finally:
+        store.close()
+
+
+def _run_diagnosis(root: str, dir_: str, check: Check) -> None:
+    """Worker-process side of a diagnosis: decode, fit with progress in ``status.json``, write report and plots."""
+    from app.analysis.diagnosis import diagnose_signals, report_dict
     from app.diagnosis_plots import event_overlay_png, residual_chart_png
 
+    d = Path(dir_)
     path = d / STATUS
     st = json.loads(path.read_text(encoding="utf-8"))
-    opts = st["options"]
-    options = DiagnosisOptions(candidates=tuple(opts["candidates"]), seed=int(opts["seed"]), model=opts["model"])
+    options = _options(st["options"], st["options"]["model"])
 
-    def work() -> None:
+    def run(store: Store) -> None:
         update(path, status="running", stage="decoding", progress=0.0)
         rec = store.get_analysis(st["analysis_id"])
         signals, vehicle = _decode(store, rec.log_id, st["vehicle"]["name"], st["vehicle"]["version"])
         last = [0.0]
 
         def progress(fraction: float, message: str) -> None:
-            worker.check()
+            check()
             if time.monotonic() - last[0] > 0.5 or fraction >= 1.0:
                 last[0] = time.monotonic()
                 update(path, progress=round(0.95 * fraction, 3), stage=message)
@@ -155,7 +189,7 @@ def _diagnosis_work(store: Store, d: Path, worker: Worker) -> Callable[[], None]
         write_json(d / "report.json", doc)
         update(path, status="done", progress=1.0, stage="done", decision=doc["decision"]["status"], owner=None)
 
-    return work
+    _in_store(root, run)
 
 
 @router.post("/analyses/{analysis_id}/diagnoses", status_code=status.HTTP_202_ACCEPTED,
@@ -173,8 +207,7 @@ def create_diagnosis(analysis_id: str, body: DiagnosisCreate, store: StoreDep, r
     update(d / STATUS, id=diagnosis_id, analysis_id=analysis_id, status="queued", progress=0.0, stage="queued",
            attempts=1, options={"candidates": list(options.candidates), "seed": options.seed, "model": options.model},
            vehicle={"name": rec.vehicle_name, "version": rec.vehicle_version})
-    worker = _worker(request.app)
-    worker.submit(d / STATUS, _diagnosis_work(store, d, worker))
+    _worker(request.app).submit(d / STATUS, _diagnosis_work(store, d))
     return _read(d)
 
 
@@ -257,28 +290,35 @@ def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict
             "from": f"{veh.name}@{veh.version}"}
 
 
-def _validation_work(store: Store, d: Path, worker: Worker) -> Callable[[], None]:
-    """The validation ``d/validation.json`` describes (the other log) of the diagnosis in ``d``, as a job."""
-    from app.analysis.diagnosis import DiagnosisOptions, validate_effects
+def _validation_work(store: Store, d: Path) -> Work:
+    """The validation ``d/validation.json`` describes (the other log) of the diagnosis in ``d``, as work."""
+    report = json.loads((d / "report.json").read_text(encoding="utf-8"))
+    _chosen(report)
+    _options(report["options"], report["model"])  # unreadable now, not in the worker
+    if "log_id" not in json.loads((d / VALIDATION).read_text(encoding="utf-8")):
+        raise KeyError(f"{d / VALIDATION} names no log_id")
+    return partial(_run_validation, str(store.root), str(d))
 
+
+def _run_validation(root: str, dir_: str, check: Check) -> None:
+    """Worker-process side of a validation: decode the other log, measure the shrink, write ``validation.json``."""
+    from app.analysis.diagnosis import validate_effects
+
+    d = Path(dir_)
     path = d / VALIDATION
     report = json.loads((d / "report.json").read_text(encoding="utf-8"))
     effects = _chosen(report)
+    options = _options(report["options"], report["model"])
     st = json.loads((d / STATUS).read_text(encoding="utf-8"))
     log_id = json.loads(path.read_text(encoding="utf-8"))["log_id"]
-    opts = report["options"]
-    try:
-        options = DiagnosisOptions(candidates=tuple(opts["candidates"]), seed=opts["seed"], model=report["model"])
-    except (KeyError, TypeError) as exc:
-        raise InputError(f"diagnosis report options unreadable: {exc}") from exc
 
-    def work() -> None:
+    def run(store: Store) -> None:
         update(path, status="running")
         signals, vehicle = _decode(store, log_id, st["vehicle"]["name"], st["vehicle"]["version"])
-        val = validate_effects(effects, signals, vehicle, options, lambda fraction, message: worker.check())
+        val = validate_effects(effects, signals, vehicle, options, lambda fraction, message: check())
         write_json(path, {"status": "done", "log_id": log_id, **val.to_dict()})
 
-    return work
+    _in_store(root, run)
 
 
 @router.post("/diagnoses/{diagnosis_id}/validate", status_code=status.HTTP_202_ACCEPTED,
@@ -288,6 +328,5 @@ def validate_diagnosis(diagnosis_id: str, body: ValidateBody, store: StoreDep, r
     _chosen(_done_report(d, diagnosis_id))  # 409 / 422 now rather than in the background
     store.get_log(body.log_id)  # 404 now rather than in the background
     write_json(d / VALIDATION, {"status": "queued", "log_id": body.log_id, "attempts": 1})
-    worker = _worker(request.app)
-    worker.submit(d / VALIDATION, _validation_work(store, d, worker))
+    _worker(request.app).submit(d / VALIDATION, _validation_work(store, d))
     return _read(d)
