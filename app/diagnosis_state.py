@@ -169,6 +169,7 @@ def _child(path: str, work: Work, parent: int) -> None:
         if os.getppid() != parent:
             os._exit(1)  # the server is gone: the file stays "running" for a dead owner, the next start decides
 
+    update(Path(path), worker_pid=os.getpid())  # for operators (and tests): which process to look at
     run_guarded(Path(path), work, check)
 
 

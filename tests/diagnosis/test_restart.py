@@ -34,10 +34,10 @@ from tests.diagnosis.conftest import paper
 CANDIDATES = ["torque_lag", "speed_sensor", "drag"]
 
 
-def write_lag_log(path: Path, seed: int = 41) -> Path:
-    """30 s of tip-ins and tip-outs with a 15 ms torque lag, written as BLF through the reference DBC."""
+def write_lag_log(path: Path, seed: int = 41, duration_s: float = 30.0) -> Path:
+    """``duration_s`` of tip-ins and tip-outs with a 15 ms torque lag, written as BLF through the reference DBC."""
     rng = np.random.default_rng(seed)
-    drive = make_drive(paper(), rng, DriveSpec(duration_s=30.0))
+    drive = make_drive(paper(), rng, DriveSpec(duration_s=duration_s))
     truth = run_truth(apply_effects(paper(), {"torque_lag": {"tau_s": 0.015, "delay_s": 0.0}}), drive)
     frames = measure_frames(drive, truth, CanSampling(offset_s=0.004, speed_res_rpm=0.0, torque_res_nm=0.0), rng)
     write_blf(path, frames, load_database(REPO / "dbc" / "lashscope_ev.dbc"),
@@ -48,6 +48,20 @@ def write_lag_log(path: Path, seed: int = 41) -> Path:
 @pytest.fixture(scope="module")
 def lag_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_lag_log(tmp_path_factory.mktemp("restart") / "lag.blf")
+
+
+def process_gone(pid: int, timeout: float = 10.0) -> bool:
+    """Whether process ``pid`` has ended (or is a zombie nobody reaped yet) within ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text(encoding="ascii")
+        except OSError:
+            return True
+        if stat.rsplit(")", 1)[-1].split()[0] == "Z":
+            return True
+        time.sleep(0.05)
+    return False
 
 
 def _poll(c: httpx.Client, did: str, until: Any, timeout: float = 120.0) -> dict[str, Any]:
@@ -80,6 +94,9 @@ def test_a_diagnosis_killed_with_the_server_resumes_at_the_next_start(tmp_path: 
     st_path = data / "analyses" / analysis_id / "diagnoses" / did / "status.json"
     left = json.loads(st_path.read_text(encoding="utf-8"))
     assert left["status"] == "running" and left["owner"]["pid"] == pid
+    # the fit ran in a worker process, and that died with the server rather than fitting on as an orphan
+    assert left["worker_pid"] != pid
+    assert process_gone(left["worker_pid"])
 
     srv = Server(data).start()
     try:

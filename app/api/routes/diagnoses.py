@@ -216,12 +216,14 @@ def _read(d: Path) -> dict[str, Any]:
     if doc.get("status") in ACTIVE and time.time() - doc.get("updated_at", 0) > 3600:
         doc["status"], doc["error"] = "failed", {"code": "interrupted", "detail": "no progress for an hour"}
     doc.pop("owner", None)
+    doc.pop("worker_pid", None)
     report = d / "report.json"
     if report.is_file():
         doc["report"] = json.loads(report.read_text(encoding="utf-8"))
     validation = state(d / VALIDATION)
     if validation is not None:
         validation.pop("owner", None)
+        validation.pop("worker_pid", None)
         doc["validation"] = validation
     doc["plots"] = [k for k, f in PLOTS.items() if (d / f).is_file()]
     return doc

@@ -1,0 +1,99 @@
+"""A diagnosis runs in its own worker process: over LASHSCOPE_DIAGNOSIS_TIMEOUT_S it is killed and fails with
+code ``timeout`` while ``/health`` keeps answering; a SIGTERM of the server stops the worker and puts the
+diagnosis back in the queue. Both against the real server (``lashscope serve`` on 127.0.0.1)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from tests.api.conftest import Server, create_vehicle, upload, wait_for
+from tests.diagnosis.test_restart import CANDIDATES, process_gone, write_lag_log
+
+
+@pytest.fixture(scope="module")
+def lag_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    # twice the usual drive, so the whole-library fit runs well past the time limit below
+    return write_lag_log(tmp_path_factory.mktemp("isolation") / "lag.blf", seed=43, duration_s=60.0)
+
+
+def _start_diagnosis(c: httpx.Client, log: Path, body: dict[str, Any]) -> tuple[str, str]:
+    """Upload ``log``, analyse it and start a diagnosis of the analysis with request ``body``."""
+    create_vehicle(c)
+    log_id = upload(c, log).json()["id"]
+    analysis_id = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
+    assert wait_for(c, analysis_id)["status"] == "done"  # so the diagnosis has both cores to itself
+    r = c.post(f"/analyses/{analysis_id}/diagnoses", json=body)
+    assert r.status_code == 202, r.text
+    return analysis_id, r.json()["id"]
+
+
+def _state(data: Path, analysis_id: str, did: str) -> dict[str, Any]:
+    doc: dict[str, Any] = json.loads((data / "analyses" / analysis_id / "diagnoses" / did / "status.json")
+                                     .read_text(encoding="utf-8"))
+    return doc
+
+
+def test_a_diagnosis_over_its_time_limit_fails_while_health_answers(tmp_path: Path, lag_log: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    # long enough for the worker to start and decode, too short to fit the whole library
+    monkeypatch.setenv("LASHSCOPE_DIAGNOSIS_TIMEOUT_S", "6")
+    data = tmp_path / "data"
+    srv = Server(data).start()
+    try:
+        with httpx.Client(base_url=srv.url, timeout=60.0) as c:
+            analysis_id, did = _start_diagnosis(c, lag_log, {"seed": 1})  # the whole effect library
+            deadline = time.monotonic() + 90.0
+            health_checks, seen = 0, set()
+            while True:
+                # a server whose GIL a fit held would raise a timeout here
+                assert c.get("/health", timeout=5.0).status_code == 200
+                health_checks += 1
+                doc = c.get(f"/diagnoses/{did}").json()
+                seen.add(doc["status"])
+                if doc["status"] in ("done", "failed") or time.monotonic() > deadline:
+                    break
+                time.sleep(0.05)
+            assert doc["status"] == "failed", {k: doc[k] for k in ("status", "stage", "progress")}
+            assert doc["error"]["code"] == "timeout"
+            assert "timed out after 6 s" in doc["error"]["detail"]
+            assert "running" in seen  # the worker's progress reached the state file the server reads
+            assert "LASHSCOPE_DIAGNOSIS_TIMEOUT_S" in doc["error"]["detail"]
+            assert health_checks >= 5
+            assert "report" not in doc
+            assert c.get("/health", timeout=5.0).json()["status"] == "ok"
+            left = _state(data, analysis_id, did)
+            assert srv.proc is not None and left["worker_pid"] != srv.proc.pid
+            assert process_gone(left["worker_pid"], timeout=1.0)
+    finally:
+        srv.stop()
+
+
+def test_sigterm_stops_the_worker_and_requeues_the_diagnosis(tmp_path: Path, lag_log: Path) -> None:
+    data = tmp_path / "data"
+    srv = Server(data).start()
+    proc = srv.proc
+    try:
+        with httpx.Client(base_url=srv.url, timeout=60.0) as c:
+            analysis_id, did = _start_diagnosis(c, lag_log, {"candidates": CANDIDATES, "seed": 1})
+            deadline = time.monotonic() + 90.0
+            while time.monotonic() < deadline:
+                doc = c.get(f"/diagnoses/{did}").json()
+                if doc["status"] != "queued":
+                    break
+                time.sleep(0.05)
+            assert doc["status"] == "running", doc
+            worker_pid = _state(data, analysis_id, did)["worker_pid"]
+    finally:
+        srv.stop(signal.SIGTERM)
+    assert proc is not None and proc.returncode is not None  # uvicorn re-raises SIGTERM after its clean shutdown
+    left = _state(data, analysis_id, did)
+    assert left["status"] == "queued" and left["attempts"] == 1, left
+    assert "stopped with the server" in left["stage"]
+    assert process_gone(worker_pid, timeout=1.0)
