@@ -3,8 +3,8 @@
 Phases come from the calibrated baseline simulation's gap states (the data alone cannot see a
 ~20 ms gap-open phase at 100 Hz)::
 
-    pre_event     before the last gap opens (or before the torque crossing when no gap opens)
-    gap_traverse  from the last opening to the closing that ends the reversal
+    pre_event     before the lash opens at the reversal (or before the torque crossing when no gap opens)
+    gap_traverse  from that loss of load to the impact that first closes every gap again
     impact        the first 50 ms after that closing
     oscillation   the next 550 ms (about four shuffle periods)
     steady        the rest of the window
@@ -29,10 +29,15 @@ from app.analysis.diagnosis.score import BANDS, PHASES
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
 
 IMPACT_S = 0.05
 OSCILLATION_S = 0.55
 _SEARCH_S = (0.15, 0.4)  # the reversal's gap opens/closes within t_event - 0.15 s .. t_event + 0.4 s
+# Shortest open stretch taken for a lash traverse. The free run across the lash lasts 5-40 ms over the
+# backlash prior (about 20 ms nominal); what else opens near a reversal is shorter: rebounds after the
+# impact (1-2 ms of separation after 0.1-2 ms of contact) and the chatter of a lash touched by the shuffle.
+MIN_TRAVERSE_S = 0.003
 
 
 @dataclass(frozen=True)
@@ -53,20 +58,36 @@ class PhaseTimes:
         return lab
 
 
+def open_runs(g: BoolArray) -> IntArray:
+    """(k, 2) ``[first, stop)`` sample indices of the contiguous ``True`` stretches of ``g``, in time order."""
+    d = np.diff(np.concatenate(([0], g.astype(np.int8), [0])))
+    return np.column_stack((np.flatnonzero(d == 1), np.flatnonzero(d == -1))).astype(np.int64)
+
+
 def phase_times(ev: DiagEvent, pred: Prediction) -> PhaseTimes:
-    """Phase boundaries from the predicted gap states around the event's torque crossing."""
+    """Phase boundaries from the predicted gap states around the event's torque crossing.
+
+    The lash traverse is the first open stretch near the crossing that lasts at least
+    :data:`MIN_TRAVERSE_S`: it starts with the loss of load and ends at the impact. Open stretches
+    after it -- rebounds of the impact, a lash reopened by the shuffle -- belong to the impact and
+    oscillation phases. Contacts are not bridged: a rebound follows a contact of 0.1-2 ms, as short as
+    any contact inside the traverse, so bridging would move the impact onto the last rebound. (Contacts
+    shorter than the simulator's output step do not show in the mask and are bridged by it.) When no
+    stretch is that long, the longest one (the first of equals) is taken.
+    """
     t, g = pred.t_fine, pred.gap_open
     if g is None or not g.any():
         return PhaseTimes(ev.t_event, ev.t_event, 0)
     near = (t >= ev.t_event - _SEARCH_S[0]) & (t <= ev.t_event + _SEARCH_S[1])
-    idx = np.flatnonzero(g & near)
-    if idx.size == 0:
+    runs = open_runs(g & near)
+    if runs.shape[0] == 0:
         return PhaseTimes(ev.t_event, ev.t_event, 0)
-    # the last contiguous open stretch is the traverse that ends with the impact
-    last = idx[-1]
-    breaks = np.flatnonzero(np.diff(idx) > 1)
-    first = idx[breaks[-1] + 1] if breaks.size else idx[0]
-    t_open, t_close = float(t[first]), float(t[min(last + 1, t.size - 1)])
+    # a stretch's duration counts from its first open sample to the first closed one
+    stop = np.minimum(runs[:, 1], t.size - 1)
+    length = t[stop] - t[runs[:, 0]]
+    long_enough = np.flatnonzero(length >= MIN_TRAVERSE_S - 1e-9)
+    k = int(long_enough[0]) if long_enough.size else int(np.argmax(length))
+    t_open, t_close = float(t[runs[k, 0]]), float(t[stop[k]])
     n_res = int(np.sum((ev.speed_t >= t_open) & (ev.speed_t < t_close)))
     return PhaseTimes(t_open, t_close, n_res)
 
