@@ -82,18 +82,12 @@ def decode_log(log: Path, loaded: LoadedDatabase, *, strict: bool = False, table
 
     decoder = VectorDecoder(loaded.db)
     stats = StatsAccumulator(loaded.db)
-    errors: dict[str, dict[str, int]] = {}
-    decoded_frames = 0
     try:
         with open_log(log, strict=strict, chunk_frames=chunk_frames) as reader:
             for chunk in reader.chunks():
                 stats.add_chunk(chunk)
                 decoded = decoder.decode(chunk)
                 stats.add_decoded(decoded)
-                for name, dm in decoded.items():
-                    decoded_frames += len(dm)
-                    for kind, count in dm.errors.items():
-                        errors.setdefault(name, {})[kind] = errors.get(name, {}).get(kind, 0) + count
                 if tables is not None:
                     tables.add(decoded)
             report = DecodeReport(source=str(log), format=reader.meta.format, database=loaded.name,
@@ -101,9 +95,7 @@ def decode_log(log: Path, loaded: LoadedDatabase, *, strict: bool = False, table
     finally:
         if tables is not None:
             tables.close()
-    stats.fill(report, errors)
-    report.frames_decoded = decoded_frames
-    return report
+    return stats.fill(report)
 
 
 def _write(table: Any, base: Path, formats: Iterable[str]) -> list[Path]:

@@ -128,8 +128,6 @@ def load_signals(
                             messages={r.message.name for r in resolved.values()})
     stats = StatsAccumulator(db.db)
     parts: dict[str, list[ChannelSamples]] = {c: [] for c in resolved}
-    errors: dict[str, dict[str, int]] = {}
-    decoded_frames = 0
     own = not isinstance(log, LogReader)
     reader = log if isinstance(log, LogReader) else open_log(log, strict=strict, chunk_frames=chunk_frames)
     try:
@@ -138,18 +136,13 @@ def load_signals(
             stats.add_chunk(chunk)
             decoded = decoder.decode(chunk)
             stats.add_decoded(decoded)
-            for name, dm in decoded.items():
-                decoded_frames += len(dm)
-                for kind, count in dm.errors.items():
-                    errors.setdefault(name, {})[kind] = errors.setdefault(name, {}).get(kind, 0) + count
             for channel, samples in map_decoded(decoded, resolved).items():
                 parts[channel].append(samples)
             frac = _fraction(reader)
             report_progress(frac if frac is not None else 0.0, f"{stats.frames} frames read")
         report = DecodeReport(source=str(getattr(reader, "name", "")), format=reader.meta.format,
                               database=db.name, database_repairs=list(db.repairs))
-        stats.fill(report, errors)
-        report.frames_decoded = decoded_frames
+        stats.fill(report)
         report.reader_issues = list(reader.report.issues)
     finally:
         if own:

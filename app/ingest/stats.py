@@ -115,6 +115,8 @@ class StatsAccumulator:
         self._names: dict[int, tuple[str, float | None]] = {}
         self._counters: dict[str, list[tuple[str, int, int]]] = {}  # message -> (signal, bits, DBC modulus)
         self._tracks: dict[tuple[str, str, int], CounterTrack] = {}
+        self._decoded = 0
+        self._decode_errors: dict[str, dict[str, int]] = {}  # message -> error kind -> frames
         if db is not None:
             for msg in db.messages:
                 key = msg.frame_id | (EXTENDED_KEY if msg.is_extended_frame else 0)
@@ -186,7 +188,12 @@ class StatsAccumulator:
             self._last_t[ch] = int(t[-1])
 
     def add_decoded(self, decoded: Mapping[str, DecodedMessage]) -> None:
-        """Feed the alive counters of the decoded messages to their trackers (per bus)."""
+        """Count the decoded frames and their decode errors; feed the alive counters to their trackers (per bus)."""
+        for name, dm in decoded.items():
+            self._decoded += len(dm)
+            for kind, count in dm.errors.items():
+                per_kind = self._decode_errors.setdefault(name, {})
+                per_kind[kind] = per_kind.get(kind, 0) + count
         for dm in decoded.values():
             base_name = dm.name.split("@", 1)[0]
             for sig, bits, hint in self._counters.get(base_name, []):
@@ -201,9 +208,10 @@ class StatsAccumulator:
                         track = self._tracks[key] = CounterTrack(dm.name, sig, int(ch), bits, hint)
                     track.feed(values[m], dm.t_ns[m])
 
-    def fill(self, report: DecodeReport, decode_errors: Mapping[str, Mapping[str, int]] | None = None) -> DecodeReport:
+    def fill(self, report: DecodeReport) -> DecodeReport:
         """Write the totals into ``report`` (returned for chaining)."""
         report.frames_read = self._frames
+        report.frames_decoded = self._decoded
         report.error_frames, report.remote_frames = self._error, self._remote
         if self._t_first is not None and self._t_last is not None:
             report.duration_s = (self._t_last - self._t_first) / 1e9
@@ -228,6 +236,6 @@ class StatsAccumulator:
         report.counter_gaps = sorted(gaps, key=lambda g: (-g.missed, g.message, g.signal, g.channel))
         report.timestamp_anomalies = list(self._anomalies)
         report.anomaly_counts = dict(self._anomaly_counts)
-        if decode_errors:
-            report.decode_errors = {k: dict(v) for k, v in decode_errors.items() if v}
+        if self._decode_errors:
+            report.decode_errors = {k: dict(v) for k, v in self._decode_errors.items() if v}
         return report
