@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from datetime import UTC, datetime, timedelta
+from typing import Any
 
 from app.ingest.frames import LogMeta
 from app.ingest.readers._source import ByteStream, StreamDamage
@@ -172,3 +173,18 @@ def epoch_origin(meta: LogMeta, t_ns: int) -> int:
     meta.start_time = datetime.fromtimestamp(t_ns // 10**9, tz=UTC) + timedelta(microseconds=(t_ns % 10**9) // 1000)
     meta.start_clock = "epoch_utc"
     return t_ns
+
+
+def first_stamp(lines: Iterable[str], parse: Callable[[str], tuple[Any, ...] | None]) -> int | None:
+    """Time stamp (ns, the first field of a parsed frame) of the first line that parses as a frame.
+
+    Lines that are not frames (``None``) or are damaged (:class:`BadLine`) are passed over.
+    """
+    for line in lines:
+        try:
+            frame = parse(line)
+        except BadLine:
+            continue
+        if frame is not None:
+            return int(frame[0])
+    return None

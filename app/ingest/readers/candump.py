@@ -24,7 +24,15 @@ from collections.abc import Iterator
 
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader, ChunkBuilder
-from app.ingest.readers._text import LEN_TO_DLC, BadLine, LineSource, decimal_to_ns, epoch_origin, printable
+from app.ingest.readers._text import (
+    LEN_TO_DLC,
+    BadLine,
+    LineSource,
+    decimal_to_ns,
+    epoch_origin,
+    first_stamp,
+    printable,
+)
 
 _LINE = re.compile(r"^\(([^)]*)\)\s+(\S+)\s+(\S+)(?:\s+([RrTt]))?$")
 _HEX = re.compile(r"^[0-9A-Fa-f]*$")
@@ -89,14 +97,9 @@ class CandumpReader(BaseReader):
     def _open(self) -> None:
         self._t0: int | None = None
         self._ifaces: dict[str, int] = {}
-        for line in self._head.decode("latin-1").splitlines()[:1000]:
-            try:
-                frame = parse_candump_line(line)
-            except BadLine:
-                continue
-            if frame is not None:
-                self._set_origin(frame[0])
-                break
+        t = first_stamp(self._head.decode("latin-1").splitlines()[:1000], parse_candump_line)
+        if t is not None:
+            self._set_origin(t)
 
     def _set_origin(self, t: int) -> None:
         self._t0 = epoch_origin(self.meta, t)

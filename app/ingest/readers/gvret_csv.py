@@ -27,6 +27,7 @@ from app.ingest.readers._text import (
     LineSource,
     decimal_to_ns,
     epoch_origin,
+    first_stamp,
     hex_bytes,
     parse_int,
     printable,
@@ -60,14 +61,9 @@ class GvretCsvReader(BaseReader):
         elif len(fields := first.split(",")) > 4 and fields[3].strip() in ("Rx", "Tx"):
             self._layout = (0, 1, 2, 3, 4, 5)
         self.meta.extra["time_base"] = "GVRET device clock (microseconds)"
-        for line in self._head.decode("latin-1").splitlines()[1:50]:
-            try:
-                frame = self.parse_line(line)
-            except BadLine:
-                continue
-            if frame is not None:
-                self._set_origin(frame[0])
-                break
+        t = first_stamp(self._head.decode("latin-1").splitlines()[1:50], self.parse_line)
+        if t is not None:
+            self._set_origin(t)
 
     def _set_origin(self, t: int) -> None:
         self._t0 = epoch_origin(self.meta, t)
