@@ -8,16 +8,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from app.cli.vehicle_args import add_log_and_vehicle, vehicle_inputs
+
 
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "analyze", help="analyse a log: events, simulation, metrics",
         description="Decode LOG with the DBC and signal map, find tip-in/tip-out events, simulate the vehicle "
         "with the measured torque and compare ripple metrics.")
-    p.add_argument("log", type=Path, help="CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4; gzip accepted)")
-    p.add_argument("--vehicle", required=True, help="driveline preset name (e.g. paper) or TOML file")
-    p.add_argument("--dbc", type=Path, default=None, help="database (default: dbc/lashscope_ev.dbc)")
-    p.add_argument("--signal-map", type=Path, default=None, help="signal map (default: dbc/lashscope_ev.map.toml)")
+    add_log_and_vehicle(p)
     p.add_argument("--model", choices=["multibody", "two_inertia"], default="multibody")
     p.add_argument("--no-whole-log", action="store_true", help="skip the open-loop whole-log simulation")
     p.add_argument("--gap-sensitivity", action="store_true",
@@ -33,14 +32,10 @@ def register(sub: Any) -> None:
 
 def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
     from app.payload import result_payload
-    from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
-    from app.settings import get_settings
+    from app.pipeline import AnalysisOptions, run_analysis
     from app.storage.results import json_safe
-    from sim import load_vehicle
 
-    dbc_dir = get_settings().dbc_dir
-    inputs = VehicleInputs(load_vehicle(args.vehicle), args.dbc or dbc_dir / "lashscope_ev.dbc",
-                           args.signal_map or dbc_dir / "lashscope_ev.map.toml")
+    inputs = vehicle_inputs(args)
     opts = AnalysisOptions(model=args.model, whole_log=not args.no_whole_log)
     doc, arrays = result_payload(run_analysis(args.log, inputs, opts))
     if getattr(args, "tolerance", 0):

@@ -14,6 +14,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from app.cli.vehicle_args import add_log_and_vehicle, vehicle_inputs
+
 
 def register(sub: Any) -> None:
     from sim.effects import EFFECTS
@@ -22,10 +24,7 @@ def register(sub: Any) -> None:
         "diagnose", help="diagnose the sim-to-real gap: where it lies, which effect explains it",
         description="Fit candidate unmodelled effects on calibration events of LOG, score them on held-out events "
         "and decide which one explains the gap between simulated and measured motor speed.")
-    p.add_argument("log", type=Path, help="CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4)")
-    p.add_argument("--vehicle", required=True, help="driveline preset name (e.g. paper) or TOML file")
-    p.add_argument("--dbc", type=Path, default=None, help="database (default: dbc/lashscope_ev.dbc)")
-    p.add_argument("--signal-map", type=Path, default=None, help="signal map (default: dbc/lashscope_ev.map.toml)")
+    add_log_and_vehicle(p)
     p.add_argument("--validate", type=Path, default=None, metavar="OTHER_LOG",
                    help="another drive: report the shrink of the diagnosed effect there")
     p.add_argument("--candidates", default=",".join(EFFECTS),
@@ -101,16 +100,12 @@ def run(args: argparse.Namespace) -> int:
     from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict, validate_on
     from app.errors import InputError
     from app.pipeline import decode_log
-    from app.settings import get_settings
-    from sim import load_vehicle
 
-    dbc_dir = get_settings().dbc_dir
-    dbc = args.dbc or dbc_dir / "lashscope_ev.dbc"
-    smap = args.signal_map or dbc_dir / "lashscope_ev.map.toml"
     candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
     if not candidates:
         raise InputError("--candidates is empty")
-    vehicle = load_vehicle(args.vehicle)
+    inputs = vehicle_inputs(args)
+    vehicle, dbc, smap = inputs.vehicle, inputs.database, inputs.signal_map
     options = DiagnosisOptions(candidates=candidates, seed=args.seed, model=args.model)
     say = _progress(args.quiet)
     say(0.0, f"decoding {args.log}")
