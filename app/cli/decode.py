@@ -62,8 +62,7 @@ def run(args: argparse.Namespace) -> int:
     tables = MessageTables(args.out / "messages", formats) if args.out is not None else None
     report = decode_log(args.log, loaded, strict=args.strict, tables=tables)
     print(format_report(report))
-    periods = {i.arb_id: i.period_ms / 1000.0 for i in report.ids if i.period_ms and i.message}
-    print(format_suggestions(loaded, periods))
+    print(format_suggestions(loaded, report))
     for path in tables.paths if tables is not None else []:
         print(f"wrote {path}")
     return 0
@@ -230,15 +229,18 @@ def format_channels(signals: SignalSet) -> str:
     return "\n".join(lines)
 
 
-def format_suggestions(loaded: LoadedDatabase, periods: dict[int, float]) -> str:
-    from app.ingest.suggest import suggest_candidates, suggest_signal_map
+def format_suggestions(loaded: LoadedDatabase, report: DecodeReport) -> str:
+    """Candidates per channel and a draft map, from the messages the log carries."""
+    from app.ingest.suggest import MIN_FRAMES, observed, suggest_candidates, suggest_signal_map
 
-    lines = ["", "no --map given; signal map candidates (score: reasons):"]
-    for channel, cands in suggest_candidates(loaded.db, periods, limit=3).items():
+    periods, counts = observed(report.ids)
+    lines = ["", f"no --map given; signal map candidates from messages with >= {MIN_FRAMES} frames in the log "
+             "(score: reasons):"]
+    for channel, cands in suggest_candidates(loaded.db, periods, limit=3, counts=counts).items():
         lines.append(f"  {channel}:" + ("" if cands else " no candidate"))
         for c in cands:
             lines.append(f"    {c.message}.{c.signal} [{c.unit}] {c.score:g}: {'; '.join(c.reasons)}")
-    draft = suggest_signal_map(loaded.db, periods).to_toml()
+    draft = suggest_signal_map(loaded.db, periods, counts=counts).to_toml()
     lines += ["", "draft map (check signs, units and scale before use):", draft]
     return "\n".join(lines)
 
