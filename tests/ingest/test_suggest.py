@@ -90,7 +90,7 @@ def test_suggested_map_from_the_log(car: tuple[LoadedDatabase, Path]) -> None:
     assert [(c.signal, c.score) for c in cands["wheel_speed_fr_rpm"]] == [("SpeedWheelRightFront", 4.0)]
     assert [c.signal for c in cands["wheel_speed_fl_rpm"]] == ["SpeedWheelLeftFront"]
     torque = cands["motor_torque_nm"][0]
-    assert torque.score == 7.0 and "unit 'torque:N.m'" in torque.reasons and "period 20 ms" in torque.reasons
+    assert torque.score == 9.0 and "unit 'torque:N.m'" in torque.reasons and "period 20 ms" in torque.reasons
     text = format_suggestions(loaded, report)
     assert "MC_Fast_Info" not in text and "with >= 20 frames in the log" in text
 
