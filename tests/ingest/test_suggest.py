@@ -129,3 +129,39 @@ def test_demo_log_suggestions_skip_messages_it_does_not_carry(tmp_path: Path) ->
     assert {routes[f"wheel_speed_{c}_rpm"][1] for c in ("fl", "fr", "rl", "rr")} == {
         "WheelSpeedFL", "WheelSpeedFR", "WheelSpeedRL", "WheelSpeedRR"}
     assert all(routes[f"wheel_speed_{c}_rpm"][1] == f"WheelSpeed{c.upper()}" for c in ("fl", "fr", "rl", "rr"))
+
+
+def test_decode_report_sampling_per_channel(car: tuple[LoadedDatabase, Path], tmp_path: Path) -> None:
+    """A bursty inverter stream (1, 1, 61 ms gaps) and a periodic pedal: the report says which is which."""
+    from dataclasses import asdict
+
+    from app.cli.decode import format_channels, format_report
+    from app.ingest.pipeline_signals import load_signals
+    from app.ingest.signalmap import ChannelSpec, SignalMap
+
+    loaded, _ = car
+    rows = []
+    for k in range(100):
+        for j in range(3):
+            rows.append((63 * k + j, 0x0CFFAC01))
+    rows += [(50 * k, 0x08100302) for k in range(126)]
+    log = tmp_path / "LOGS2.TXT"
+    log.write_text("".join(f"{t:08X}x{i:08X}0000000000000000\n" for t, i in sorted(rows)))
+    smap = SignalMap("car", {"motor_torque_nm": ChannelSpec("motor_torque_nm", "MC_Torque_And_Timer_Info",
+                                                             "INV_Torque_Feedback"),
+                             "pedal_pct": ChannelSpec("pedal_pct", "VCU_Data", "ThrottlePercent")})
+    signals, report = load_signals(log, loaded, smap)
+    torque, pedal = report.sampling["motor_torque_nm"], report.sampling["pedal_pct"]
+    assert torque.samples == 300 and torque.bursty
+    assert (torque.median_ms, torque.max_ms) == (pytest.approx(1.0), pytest.approx(61.0))
+    assert torque.mean_ms == pytest.approx((63 * 99 + 2) / 299)
+    assert (pedal.samples, pedal.bursty) == (126, False)
+    assert (pedal.mean_ms, pedal.median_ms) == (pytest.approx(50.0), pytest.approx(50.0))
+    ids = {s.message: s for s in report.ids}
+    assert ids["MC_Torque_And_Timer_Info"].bursty and not ids["VCU_Data"].bursty
+    assert ids["MC_Torque_And_Timer_Info"].median_gap_ms == 1.0 and ids["VCU_Data"].p95_gap_ms == 50.0
+    plain = asdict(report)  # what the API stores and returns for a log
+    assert plain["sampling"]["motor_torque_nm"]["bursty"] is True
+    assert plain["ids"][0]["median_gap_ms"] is not None
+    assert "motor_torque_nm: median spacing 1 ms" in format_channels(signals)
+    assert "MC_Torque_And_Timer_Info: median spacing 1 ms" in format_report(report)
