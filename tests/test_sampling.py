@@ -1,4 +1,4 @@
-"""Spacing statistics of time stamps and the burst rule, with values; the decode report's per-ID and per-channel figures."""
+"""Spacing statistics of time stamps and the burst rule, with values; the decode report's per-ID figures."""
 
 from __future__ import annotations
 
