@@ -17,11 +17,9 @@ reported and skipped, like every damaged line.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
 
-from app.ingest.frames import FrameChunk, FrameFlag
-from app.ingest.readers._base import BaseReader, ChunkBuilder
-from app.ingest.readers._text import BadLine, LineSource, epoch_origin, first_stamp, printable
+from app.ingest.frames import FrameFlag
+from app.ingest.readers._text import BadLine, LineFrame, LineFrameReader, first_stamp, printable
 
 EXT = int(FrameFlag.EXTENDED)
 LINE_SHAPE = r"^[0-9A-Fa-f]{8}x[0-9A-Fa-f]{8}(?:[0-9A-Fa-f]{2}){0,8}\s*$"  # for the format sniffer
@@ -57,37 +55,20 @@ def parse_tcu_line(line: str) -> Frame | None:
     return t_ms * 1_000_000, ident, EXT, bytes.fromhex(data)
 
 
-class TcuReader(BaseReader):
+class TcuReader(LineFrameReader):
     """TCU hex-stamped text reader (see the module docstring)."""
 
     fmt = "tcu"
 
     def _open(self) -> None:
-        self._t0: int | None = None
         self.meta.extra["time_base"] = "logger clock (milliseconds since power-up)"
         t = first_stamp(self._head.decode("latin-1").splitlines()[:1000], parse_tcu_line)
         if t is not None:
-            self._t0 = epoch_origin(self.meta, t)
+            self._set_origin(t)
 
-    def _iter_chunks(self) -> Iterator[FrameChunk]:
-        builder = ChunkBuilder(self.chunk_frames)
-        lines = LineSource(self._stream, self._long_line, self.damage)
-        for line_no, line in lines.lines():
-            try:
-                frame = parse_tcu_line(line)
-            except BadLine as bad:
-                self.problem(bad.kind, f"line skipped: {bad.message}", line=line_no)
-                continue
-            if frame is None:
-                continue
-            t, ident, fl, payload = frame
-            if self._t0 is None:
-                self._t0 = epoch_origin(self.meta, t)
-            builder.add(t - self._t0, 0, ident, fl, len(payload), payload)
-            if builder.full:
-                yield builder.take()
-        if builder.n:
-            yield builder.take()
-
-    def _long_line(self, line_no: int) -> None:
-        self.problem("bad_line", "line skipped: longer than 64 kB (binary data?)", line=line_no)
+    def _frame(self, line: str) -> LineFrame | None:
+        frame = parse_tcu_line(line)
+        if frame is None:
+            return None
+        t, ident, fl, payload = frame
+        return t, 0, ident, fl, len(payload), payload
