@@ -10,6 +10,7 @@ subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
      |    +-- LogNotFoundError (FileNotFoundError) (404)  no log file at the given path
      |    +-- LogFormatError (ValueError) (422)  corrupt or unreadable log content
      |    |    +-- TruncatedLogError             the log ends inside a record
+     |    +-- InflatedTooLargeError       (413)  a compressed log inflates past the cap
      |    +-- DatabaseError (ValueError)  (422)  DBC/KCD/SYM/ARXML cannot be loaded
      |    +-- DecodeError (ValueError)    (422)  frames cannot be decoded
      |    +-- SignalMapError (ValueError) (422)  signal map invalid or does not fit the DBC
@@ -66,6 +67,13 @@ class LogFormatError(IngestError, ValueError):
 
 class TruncatedLogError(LogFormatError):
     code = "log_truncated"
+
+
+class InflatedTooLargeError(IngestError):
+    """A gzip-compressed log that must be inflated to disk (MF4) decompresses past the configured cap."""
+
+    code = "inflated_too_large"
+    status = 413
 
 
 class DatabaseError(IngestError, ValueError):

@@ -29,7 +29,8 @@ FORMATS = ("parquet", "csv")  # the same as app.ingest.tables.FORMATS (not impor
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser("decode", help="decode a CAN log with a DBC (and signal map); print the bus report",
                               description=__doc__.split("\n\n", 1)[1] if __doc__ else None)
-    p.add_argument("log", type=Path, help="BLF, ASC, candump -L, TRC, SavvyCAN CSV or MF4 log (format from content)")
+    p.add_argument("log", type=Path,
+                   help="BLF, ASC, candump -L, TRC, SavvyCAN CSV, MF4 or TCU text log (format from content)")
     p.add_argument("--dbc", type=Path, required=True, help="DBC, KCD, SYM or ARXML database")
     p.add_argument("--map", type=Path, default=None, help="signal map TOML (canonical channels)")
     p.add_argument("--out", type=Path, default=None, help="write decoded tables to this folder")
@@ -62,8 +63,7 @@ def run(args: argparse.Namespace) -> int:
     tables = MessageTables(args.out / "messages", formats) if args.out is not None else None
     report = decode_log(args.log, loaded, strict=args.strict, tables=tables)
     print(format_report(report))
-    periods = {i.arb_id: i.period_ms / 1000.0 for i in report.ids if i.period_ms and i.message}
-    print(format_suggestions(loaded, periods))
+    print(format_suggestions(loaded, report))
     for path in tables.paths if tables is not None else []:
         print(f"wrote {path}")
     return 0
@@ -146,12 +146,18 @@ def format_report(r: DecodeReport) -> str:
              f"error frames {r.error_frames}, remote frames {r.remote_frames}, duration {r.duration_s:.3f} s"]
     for rep in r.database_repairs:
         lines.append(f"  database repair line {rep.line if rep.line is not None else '?'}: {rep.kind}: {rep.message}")
-    lines += ["", "per ID (bus, ID, message): count, period ms (mean), jitter ms (std), min/max gap ms, DBC cycle ms"]
+    lines += ["", "per ID (bus, ID, message): count, period ms (mean), jitter ms (std), min/max gap ms, "
+              "median/p95 gap ms, DBC cycle ms; * = bursty"]
     for s in r.ids:
         ident = f"0x{s.arb_id:08X}x" if s.extended else f"0x{s.arb_id:03X}"
         lines.append(f"  {s.channel:>3} {ident:<12} {s.message or '?':<28} {s.count:>9} {_ms(s.period_ms):>10} "
                      f"{_ms(s.jitter_ms):>9} {_ms(s.min_gap_ms):>9}/{_ms(s.max_gap_ms):<9} "
-                     f"{'-' if s.cycle_ms is None else f'{s.cycle_ms:g}'}")
+                     f"{_ms(s.median_gap_ms):>9}/{_ms(s.p95_gap_ms):<9} "
+                     f"{'-' if s.cycle_ms is None else f'{s.cycle_ms:g}'}{' *' if s.bursty else ''}")
+    bursty = [s for s in r.ids if s.bursty and s.message]
+    if bursty:
+        lines.append("bursty or gapped messages (take their period from the mean, not the median):")
+        lines += [f"  {s.message}: {s.bursty_reason}" for s in bursty]
     for name, n in sorted(r.id_type_mismatch.items()):
         lines.append(f"  {n} frames carry the ID of {name} with the other ID type (11/29 bit): not decoded")
     lines += ["", "decode errors:" if r.decode_errors else "decode errors: none"]
@@ -223,22 +229,33 @@ def format_counter(g: CounterGaps) -> str:
 def format_channels(signals: SignalSet) -> str:
     import numpy as np
 
-    lines = ["", "canonical channels: samples, span s, NaN (not available)"]
+    from app.signals.sampling import spacing
+
+    lines = ["", "canonical channels: samples, span s, NaN (not available), unit; spacing ms mean/median/p95/max"]
+    notes = []
     for name, s in signals.items():
         span = f"{s.t[0]:.3f}..{s.t[-1]:.3f}" if len(s) else "-"
-        lines.append(f"  {name:<20} {len(s):>9} {span:>20} {int(np.isnan(s.values).sum()):>7} {s.unit}")
-    return "\n".join(lines)
+        sp = spacing(s.t)
+        lines.append(f"  {name:<20} {len(s):>9} {span:>20} {int(np.isnan(s.values).sum()):>7} {s.unit:<5} "
+                     f"{_ms(sp.mean_ms)}/{_ms(sp.median_ms)}/{_ms(sp.p95_ms)}/{_ms(sp.max_ms)}"
+                     + (" bursty" if sp.bursty else ""))
+        if sp.bursty:
+            notes.append(f"  {name}: {sp.reason}")
+    return "\n".join(lines + notes)
 
 
-def format_suggestions(loaded: LoadedDatabase, periods: dict[int, float]) -> str:
-    from app.ingest.suggest import suggest_candidates, suggest_signal_map
+def format_suggestions(loaded: LoadedDatabase, report: DecodeReport) -> str:
+    """Candidates per channel and a draft map, from the messages the log carries."""
+    from app.ingest.suggest import MIN_FRAMES, observed, suggest_candidates, suggest_signal_map
 
-    lines = ["", "no --map given; signal map candidates (score: reasons):"]
-    for channel, cands in suggest_candidates(loaded.db, periods, limit=3).items():
+    periods, counts = observed(report.ids)
+    lines = ["", f"no --map given; signal map candidates from messages with >= {MIN_FRAMES} frames in the log "
+             "(score: reasons):"]
+    for channel, cands in suggest_candidates(loaded.db, periods, limit=3, counts=counts).items():
         lines.append(f"  {channel}:" + ("" if cands else " no candidate"))
         for c in cands:
             lines.append(f"    {c.message}.{c.signal} [{c.unit}] {c.score:g}: {'; '.join(c.reasons)}")
-    draft = suggest_signal_map(loaded.db, periods).to_toml()
+    draft = suggest_signal_map(loaded.db, periods, counts=counts).to_toml()
     lines += ["", "draft map (check signs, units and scale before use):", draft]
     return "\n".join(lines)
 

@@ -9,7 +9,10 @@ kind                repair
 ==================  ===========================================================================
 ``missing_bs``      no ``BS_:`` section: an empty one is inserted
 ``missing_bu``      no ``BU_:`` node list: an empty one is inserted (before the first ``BO_``)
-``unused_val``      ``VAL_`` for a message ID or signal the file does not define: line dropped
+``unused_val``      ``VAL_`` for a message ID or signal the file does not define, or for a signal of
+                    CANdb++'s pseudo-message ``VECTOR__INDEPENDENT_SIG_MSG`` (which cantools
+                    discards): statement dropped
+``unused_comment``  ``CM_`` for that pseudo-message or one of its signals: statement dropped
 ``signal_outside``  a signal does not fit in its message's length: the ``SG_`` line is dropped
 ``signal_overlap``  two signals share bits: the second one cantools names is dropped
 ==================  ===========================================================================
@@ -36,6 +39,11 @@ _MAX_REPAIR_ROUNDS = 500  # each round fixes one cantools complaint; bounded so 
 _RE_BO = re.compile(r"^\s*BO_\s+(\d+)\s+(\w+)\s*:")
 _RE_SG = re.compile(r"^\s*SG_\s+(\w+)\s*(?:M|m\d+M?)?\s*:")
 _RE_VAL = re.compile(r"^\s*VAL_\s+(\d+)\s+(\w+)\b")
+_RE_CM = re.compile(r"^\s*CM_\s+(BO_|SG_)\s+(\d+)\s*(\w*)")
+_RE_CM_END = re.compile(r'^\s*CM_[^"]*"(?:[^"\\]|\\.)*"\s*;')  # a whole comment statement, quotes balanced
+# CANdb++ puts signals that no message carries into this pseudo-message (ID 0xC0000000, or
+# 0x80000000 in older exports); cantools discards it, so its VAL_ and CM_ lines dangle.
+PSEUDO_MESSAGE = "VECTOR__INDEPENDENT_SIG_MSG"
 _RE_NOT_FIT = re.compile(r"The signal (\w+) does not fit in message (\w+)\.")
 _RE_OVERLAP = re.compile(r"The signals (\w+) and (\w+) are overlapping in message (\w+)\.")
 _RE_SYNTAX_LINE = re.compile(r"line (\d+)")
@@ -163,6 +171,16 @@ class _DbcText:
             if done or (i < len(self.lines) and _RE_TOP.match(self.lines[i])):
                 break
 
+    def drop_comment(self, index: int) -> None:
+        """Blank a ``CM_`` statement, whose quoted text may span lines and contain ';'."""
+        end = index
+        while end + 1 < len(self.lines) and not _RE_CM_END.match("\n".join(self.lines[index:end + 1])):
+            if _RE_TOP.match(self.lines[end + 1]):
+                break  # an unclosed quote: stop at the next statement
+            end += 1
+        for i in range(index, min(end + 1, len(self.lines))):
+            self.lines[i] = ""
+
     def insert(self, index: int, line: str) -> None:
         self.lines.insert(index, line)
         self.origin.insert(index, None)
@@ -228,14 +246,27 @@ def _insert_missing_sections(doc: _DbcText, repairs: list[Repair]) -> bool:
 
 
 def _drop_unused_vals(doc: _DbcText, repairs: list[Repair]) -> None:
+    """Drop ``VAL_`` (and, for the CANdb++ pseudo-message, ``CM_``) statements cantools would reject."""
     msgs = doc.messages()
+    pseudo = {fid for fid, (name, _, _) in msgs.items() if name == PSEUDO_MESSAGE}
     for i, line in enumerate(doc.lines):
+        c = _RE_CM.match(line)
+        if c and int(c.group(2)) in pseudo:
+            what = f"signal {c.group(3)}" if c.group(1) == "SG_" else "the message"
+            repairs.append(Repair("unused_comment", doc.origin[i],
+                                  f"comment on {what} of {PSEUDO_MESSAGE} (ID {c.group(2)}), a CANdb++ "
+                                  "pseudo-message for signals no message carries, which is not loaded; dropped"))
+            doc.drop_comment(i)
+            continue
         m = _RE_VAL.match(line)
         if not m:
             continue
         frame_id, sig = int(m.group(1)), m.group(2)
         if frame_id not in msgs:
             why = f"VAL_ for signal {sig} of message ID {frame_id} which the file does not define; dropped"
+        elif frame_id in pseudo:
+            why = (f"VAL_ for signal {sig} of {PSEUDO_MESSAGE} (ID {frame_id}), a CANdb++ pseudo-message for "
+                   "signals no message carries, which is not loaded; dropped")
         elif sig not in msgs[frame_id][2]:
             why = f"VAL_ for signal {sig} which message {msgs[frame_id][0]} (ID {frame_id}) does not have; dropped"
         else:

@@ -24,6 +24,7 @@ from app.ingest.frames import FrameChunk
 from app.ingest.readers import LogReader, open_log
 from app.ingest.signalmap import ResolvedChannel, SignalMap
 from app.ingest.stats import DecodeReport, StatsAccumulator
+from app.signals.sampling import spacing
 from app.signals.signal import Interp, Signal, SignalSet
 
 Progress = Callable[[float, str], None]
@@ -155,6 +156,7 @@ def load_signals(
         labels = {int(k): str(v) for k, v in (r.signal.choices or {}).items()} if r.interp is Interp.PREVIOUS else {}
         signals.add(Signal.from_samples(channel, t_ns / 1e9, values, r.unit, r.interp, labels))
         report.channels[channel] = len(signals[channel])
+        report.sampling[channel] = spacing(signals[channel].t)
     report_progress(1.0, f"{report.frames_read} frames read, {len(signals)} channels")
     missing = {c: ("not in the signal map" if c not in resolved else
                    f"no frames of {resolved[c].message.name}" + (f" on bus {resolved[c].spec.bus}"

@@ -56,7 +56,8 @@ _RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 #: canonical unit -> {accepted spelling (normalised) -> factor to the canonical unit}
 UNIT_FACTORS: dict[str, dict[str, float]] = {
     "rpm": {"rpm": 1.0, "1/min": 1.0, "u/min": 1.0, "rev/min": 1.0, "r/min": 1.0, "min-1": 1.0, "min^-1": 1.0,
-            "rad/s": _RPM_PER_RAD_S, "rps": 60.0, "rev/s": 60.0, "deg/s": 1.0 / 6.0, "krpm": 1000.0},
+            "rad/s": _RPM_PER_RAD_S, "rads/s": _RPM_PER_RAD_S,
+            "rad/sec": _RPM_PER_RAD_S, "rps": 60.0, "rev/s": 60.0, "deg/s": 1.0 / 6.0, "krpm": 1000.0},
     "Nm": {"nm": 1.0, "n.m": 1.0, "n*m": 1.0, "n-m": 1.0, "n·m": 1.0, "newtonmeter": 1.0, "knm": 1000.0, "dnm": 0.1},
     "km/h": {"km/h": 1.0, "kph": 1.0, "kmh": 1.0, "kmph": 1.0, "m/s": 3.6, "mph": 1.609344},
     "%": {"%": 1.0, "pct": 1.0, "percent": 1.0},
@@ -64,7 +65,14 @@ UNIT_FACTORS: dict[str, dict[str, float]] = {
 
 
 def normalise_unit(unit: str | None) -> str:
-    return "".join((unit or "").split()).lower()
+    """Lower case, no spaces, without a quantity prefix: ``"torque:N.m"`` -> ``"n.m"``.
+
+    Some inverter vendors' DBCs write units as ``quantity:unit`` (``angular_speed:rpm``,
+    ``current:A``); the quantity is dropped so the unit converts like any other.
+    """
+    text = "".join((unit or "").split()).lower()
+    quantity, sep, rest = text.partition(":")
+    return rest if sep and rest and quantity.replace("_", "").isalpha() else text
 
 
 def unit_factor(from_unit: str | None, canonical: str) -> float | None:

@@ -31,7 +31,7 @@ def test_decode_with_map_writes_tables_and_report(log: Path, tmp_path: Path,
     out = capsys.readouterr().out
     assert code == 0
     assert "frames read 299, decoded 299" in out
-    assert re.search(r"0x100\s+MCU_Torque\s+99\s+10\.102\s+1\.005\s+10\.000/20\.000\s+10\n", out)  # 1 dropped
+    assert re.search(r"0x100\s+MCU_Torque\s+99\s+10\.102\s+1\.005\s+10\.000/20\.000\s+10\.000/10\.000\s+10\n", out)
     assert "MCU_Torque.MCU_TorqueAlive (99 frames): step +1 mod 15 (fits 99.0%): 1 gaps, 1 frames missed" in out
     assert "skipped or corrupt regions: none" in out
     table = pq.read_table(tmp_path / "signals.parquet").to_pandas()

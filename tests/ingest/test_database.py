@@ -140,3 +140,45 @@ def test_reference_dbc_loads_strictly() -> None:
     loaded = load_database(Path(__file__).resolve().parents[2] / "dbc" / "lashscope_ev.dbc", tolerant=False)
     assert {m.name for m in loaded.db.messages} >= {"MCU_Torque", "MCU_Speed", "MCU_Fast", "VCU_Pedal"}
     assert loaded.db.get_message_by_name("MCU_Fast").cycle_time == 1
+
+
+def _candb_export() -> str:
+    """A DBC shaped like a CANdb++ export: signals no message carries sit in VECTOR__INDEPENDENT_SIG_MSG."""
+    return (HEADER
+            + 'BO_ 3221225472 VECTOR__INDEPENDENT_SIG_MSG: 0 Vector__XXX\n'
+            + ' SG_ Spare_Current : 0|16@1- (0.1,0) [-2000|2000] "current:A" Vector__XXX\n\n'
+            + 'BO_ 2365565953 MC_Torque_And_Timer_Info: 8 A\n'
+            + ' SG_ INV_Torque_Feedback : 16|16@1- (0.1,0) [-3276.8|3276.7] "torque:N.m" A\n'
+            + ' SG_ INV_State : 0|3@1+ (1,0) [0|7] "" A\n\n'
+            + 'BO_ 2147483648 VECTOR__INDEPENDENT_SIG_MSG: 0 Vector__XXX\n'
+            + ' SG_ StateContactorPositive : 0|3@1- (1,0) [0|0] "" Vector__XXX\n\n'
+            + 'CM_ BO_ 3221225472 "This is a message for not used signals, created by Vector CANdb++ DBC OLE DB '
+              'Provider.";\n'  # line 20
+            + 'CM_ SG_ 2147483648 StateContactorPositive "state; see\nthe contactor spec";\n'  # lines 21-22
+            + 'CM_ SG_ 2365565953 INV_Torque_Feedback "Estimated motor torque";\n'
+            + 'VAL_ 2147483648 StateContactorPositive 0 "INVALID" 1 "OPEN" 2 "CLOSED" ;\n'  # line 24
+            + 'VAL_ 2365565953 INV_State 0 "Off" 1 "On" ;\n')
+
+
+def test_candb_pseudo_message_statements_dropped_and_reported(tmp_path: Path) -> None:
+    path = _dbc(tmp_path, _candb_export(), name="candb.dbc")
+    loaded = load_database(path)
+    assert [(r.kind, r.line) for r in loaded.repairs] == [
+        ("unused_comment", 20), ("unused_comment", 21), ("unused_val", 24)]
+    assert "VECTOR__INDEPENDENT_SIG_MSG (ID 2147483648)" in loaded.repairs[2].message
+    assert "StateContactorPositive" in loaded.repairs[2].message
+    assert [m.name for m in loaded.db.messages] == ["MC_Torque_And_Timer_Info"]
+    msg = loaded.db.get_message_by_name("MC_Torque_And_Timer_Info")
+    assert msg.frame_id == 0x0CFFAC01 and msg.is_extended_frame
+    assert msg.get_signal_by_name("INV_State").choices == {0: "Off", 1: "On"}  # a real message's VAL_ stays
+    assert msg.get_signal_by_name("INV_Torque_Feedback").comment == "Estimated motor torque"
+    with pytest.raises(DatabaseError, match=r"candb\.dbc:24: .*unused VAL_.*StateContactorPositive"):
+        load_database(path, tolerant=False)
+
+
+def test_unclosed_pseudo_message_comment_stops_at_next_statement(tmp_path: Path) -> None:
+    body = _candb_export().replace('the contactor spec";', 'the contactor spec')
+    loaded = load_database(_dbc(tmp_path, body))
+    assert [(r.kind, r.line) for r in loaded.repairs][1:] == [("unused_comment", 21), ("unused_val", 24)]
+    assert loaded.db.get_message_by_name("MC_Torque_And_Timer_Info").get_signal_by_name(
+        "INV_Torque_Feedback").comment == "Estimated motor torque"

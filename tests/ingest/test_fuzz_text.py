@@ -114,6 +114,10 @@ def test_asc_gzip_truncated_salvages_and_reports() -> None:
      "      2 2.000 DT 1 0100 Rx -  4 AA BB\n", "short_data"),
     (";$FILEVERSION=1.1\n;$STARTTIME=44548.5\n     1)  1.0  Rx  0100  1  AA\n",
      "     2)  2.0  Rx  0100  2  AA QQ\n", "non_hex"),
+    ("000000EAx0CFFAC0100007B0000000000\n", "000000EBx0CFFAC0100007B000000000\n", "short_data"),
+    ("000000EAx0CFFAC0100007B0000000000\n", "000000EBx0CFFAC0100007B00000000000000\n", "bad_line"),
+    ("000000EAx0CFFAC0100007B0000000000\n", "0000G0EBx0CFFAC0100007B0000000000\n", "bad_timestamp"),
+    ("000000EAx0CFFAC0100007B0000000000\n", "000000EBx0CFFAC\n", "bad_line"),
 ])
 def test_other_text_formats_damage(fmt_text: str, bad: str, kind: str) -> None:
     good_line = fmt_text.splitlines()[-1] + "\n"

@@ -28,7 +28,7 @@ UPLOAD_DOC = {
 
 
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=LogOut, openapi_extra=UPLOAD_DOC,
-             summary="Upload a CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4; gzip accepted)")
+             summary="Upload a CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4, TCU text; gzip accepted)")
 async def upload_log(request: Request, response: Response, store: StoreDep, settings: SettingsDep,
                      filename: Annotated[str | None, Query(description="name for a raw-body upload")] = None
                      ) -> LogOut:

@@ -1,4 +1,4 @@
-"""CAN log readers, chosen by content: BLF, ASC, candump -L, PEAK TRC, SavvyCAN/GVRET CSV, MF4.
+"""CAN log readers, chosen by content: BLF, ASC, candump -L, PEAK TRC, SavvyCAN/GVRET CSV, MF4, TCU text.
 
 Usage::
 
@@ -35,6 +35,7 @@ from app.ingest.readers.candump import CandumpReader
 from app.ingest.readers.gvret_csv import GvretCsvReader
 from app.ingest.readers.mf4 import MF4Reader
 from app.ingest.readers.sniff import FORMATS, sniff_format, unsupported
+from app.ingest.readers.tcu import TcuReader
 from app.ingest.readers.trc import TRCReader
 
 __all__ = ["FORMATS", "READERS", "LogReader", "open_log", "sniff_format"]
@@ -71,6 +72,7 @@ READERS: dict[str, type] = {
     "trc": TRCReader,
     "gvret_csv": GvretCsvReader,
     "mf4": MF4Reader,
+    "tcu": TcuReader,
 }
 
 

@@ -1,4 +1,5 @@
-"""Helpers shared by the text readers: exact decimal times, hex bytes, DLC tables, bounded line reading."""
+"""Helpers shared by the text readers: exact decimal times, hex bytes, DLC tables, bounded line reading,
+and :class:`LineFrameReader`, the reading loop of every format with one frame per line."""
 
 from __future__ import annotations
 
@@ -7,7 +8,8 @@ from collections.abc import Callable, Iterable, Iterator
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
-from app.ingest.frames import LogMeta
+from app.ingest.frames import FrameChunk, LogMeta
+from app.ingest.readers._base import BaseReader, ChunkBuilder
 from app.ingest.readers._source import ByteStream, StreamDamage
 
 # CAN FD DLC code -> payload length (codes above 15 read as 64, like python-can's ``dlc2len``)
@@ -188,3 +190,48 @@ def first_stamp(lines: Iterable[str], parse: Callable[[str], tuple[Any, ...] | N
         if frame is not None:
             return int(frame[0])
     return None
+
+
+LineFrame = tuple[int, int, int, int, int, bytes]  # absolute t_ns, channel, arb_id, flags, dlc, payload
+
+
+class LineFrameReader(BaseReader):
+    """A text log with one frame per line (candump, SavvyCAN CSV, TCU): the shared reading loop.
+
+    Subclasses turn a line into a :data:`LineFrame` in :meth:`_frame` (None for lines that
+    carry no frame, :class:`BadLine` for damage, reported with the line number as a skipped
+    ``unit``). The first frame's time sets the origin through :meth:`_set_origin` (an epoch
+    stamp becomes ``start_time``; a device clock stays as logged).
+    """
+
+    unit = "line"  # what a skipped line is called in the report ("row" for CSV)
+    _t0: int | None = None
+
+    def _frame(self, line: str) -> LineFrame | None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _set_origin(self, t: int) -> None:
+        self._t0 = epoch_origin(self.meta, t)
+
+    def _iter_chunks(self) -> Iterator[FrameChunk]:
+        builder = ChunkBuilder(self.chunk_frames)
+        lines = LineSource(self._stream, self._long_line, self.damage)
+        for line_no, line in lines.lines():
+            try:
+                frame = self._frame(line)
+            except BadLine as bad:
+                self.problem(bad.kind, f"{self.unit} skipped: {bad.message}", line=line_no)
+                continue
+            if frame is None:
+                continue
+            t, channel, ident, fl, dlc, payload = frame
+            if self._t0 is None:
+                self._set_origin(t)
+            builder.add(t - (self._t0 or 0), channel, ident, fl, dlc, payload)
+            if builder.full:
+                yield builder.take()
+        if builder.n:
+            yield builder.take()
+
+    def _long_line(self, line_no: int) -> None:
+        self.problem("bad_line", f"{self.unit} skipped: longer than 64 kB (binary data?)", line=line_no)

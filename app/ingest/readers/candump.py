@@ -20,16 +20,14 @@ Error frames keep the error class bits as ``arb_id`` and the 8 detail bytes as d
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
 
-from app.ingest.frames import FrameChunk, FrameFlag
-from app.ingest.readers._base import BaseReader, ChunkBuilder
+from app.ingest.frames import FrameFlag
 from app.ingest.readers._text import (
     LEN_TO_DLC,
     BadLine,
-    LineSource,
+    LineFrame,
+    LineFrameReader,
     decimal_to_ns,
-    epoch_origin,
     first_stamp,
     printable,
 )
@@ -89,20 +87,16 @@ def parse_candump_line(s: str) -> Frame | None:
     return t, iface, ident & 0x1FFFFFFF, fl | (EXT if len(id_str) > 3 else 0), len(payload), payload
 
 
-class CandumpReader(BaseReader):
+class CandumpReader(LineFrameReader):
     """``candump -L`` reader (see the module docstring)."""
 
     fmt = "candump"
 
     def _open(self) -> None:
-        self._t0: int | None = None
         self._ifaces: dict[str, int] = {}
         t = first_stamp(self._head.decode("latin-1").splitlines()[:1000], parse_candump_line)
         if t is not None:
             self._set_origin(t)
-
-    def _set_origin(self, t: int) -> None:
-        self._t0 = epoch_origin(self.meta, t)
 
     def _channel(self, iface: str) -> int:
         ch = self._ifaces.get(iface)
@@ -111,25 +105,9 @@ class CandumpReader(BaseReader):
             self.meta.channels[ch] = iface
         return ch
 
-    def _iter_chunks(self) -> Iterator[FrameChunk]:
-        builder = ChunkBuilder(self.chunk_frames)
-        lines = LineSource(self._stream, self._long_line, self.damage)
-        for line_no, line in lines.lines():
-            try:
-                frame = parse_candump_line(line)
-            except BadLine as bad:
-                self.problem(bad.kind, f"line skipped: {bad.message}", line=line_no)
-                continue
-            if frame is None:
-                continue
-            t, iface, ident, fl, dlc, payload = frame
-            if self._t0 is None:
-                self._set_origin(t)
-            builder.add(t - (self._t0 or 0), self._channel(iface), ident, fl, dlc, payload)
-            if builder.full:
-                yield builder.take()
-        if builder.n:
-            yield builder.take()
-
-    def _long_line(self, line_no: int) -> None:
-        self.problem("bad_line", "line skipped: longer than 64 kB (binary data?)", line=line_no)
+    def _frame(self, line: str) -> LineFrame | None:
+        frame = parse_candump_line(line)
+        if frame is None:
+            return None
+        t, iface, ident, fl, dlc, payload = frame
+        return t, self._channel(iface), ident, fl, dlc, payload

@@ -16,17 +16,14 @@ counted in the report (``time_backwards``). Buses are 0-based already.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 from app.errors import LogFormatError
-from app.ingest.frames import FrameChunk, FrameFlag
-from app.ingest.readers._base import BaseReader, ChunkBuilder
+from app.ingest.frames import FrameFlag
 from app.ingest.readers._text import (
     LEN_TO_DLC,
     BadLine,
-    LineSource,
+    LineFrame,
+    LineFrameReader,
     decimal_to_ns,
-    epoch_origin,
     first_stamp,
     hex_bytes,
     parse_int,
@@ -39,13 +36,13 @@ _BOOL = {"true": True, "false": False, "1": True, "0": False}
 Frame = tuple[int, int, int, int, int, bytes]
 
 
-class GvretCsvReader(BaseReader):
+class GvretCsvReader(LineFrameReader):
     """SavvyCAN/GVRET CSV reader (see the module docstring)."""
 
     fmt = "gvret_csv"
+    unit = "row"
 
     def _open(self) -> None:
-        self._t0: int | None = None
         # column of: time, id, extended, dir (None: absent), bus, len -- the older variant by default
         self._layout: tuple[int, int, int, int | None, int, int] = (0, 1, 2, None, 3, 4)
         first = self._head.decode("latin-1").split("\n", 1)[0].strip().lstrip("\ufeff")
@@ -66,7 +63,7 @@ class GvretCsvReader(BaseReader):
             self._set_origin(t)
 
     def _set_origin(self, t: int) -> None:
-        self._t0 = epoch_origin(self.meta, t)
+        super()._set_origin(t)
         if self._t0:
             self.meta.extra["time_base"] = "epoch microseconds (system clock)"
 
@@ -101,25 +98,5 @@ class GvretCsvReader(BaseReader):
         payload = hex_bytes([x.strip() for x in f[i_len + 1:]], length)
         return t, bus, ident, fl, length, payload
 
-    def _iter_chunks(self) -> Iterator[FrameChunk]:
-        builder = ChunkBuilder(self.chunk_frames)
-        lines = LineSource(self._stream, self._long_line, self.damage)
-        for line_no, line in lines.lines():
-            try:
-                frame = self.parse_line(line)
-            except BadLine as bad:
-                self.problem(bad.kind, f"row skipped: {bad.message}", line=line_no)
-                continue
-            if frame is None:
-                continue
-            t, bus, ident, fl, length, payload = frame
-            if self._t0 is None:
-                self._set_origin(t)
-            builder.add(t - (self._t0 or 0), bus, ident, fl, length, payload)
-            if builder.full:
-                yield builder.take()
-        if builder.n:
-            yield builder.take()
-
-    def _long_line(self, line_no: int) -> None:
-        self.problem("bad_line", "row skipped: longer than 64 kB (binary data?)", line=line_no)
+    def _frame(self, line: str) -> LineFrame | None:
+        return self.parse_line(line)

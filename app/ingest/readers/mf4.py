@@ -10,12 +10,19 @@ Groups are read in record blocks of ``chunk_frames`` and merged by time, so memo
 bounded by the chunk size (per group). ``start_time`` is the MDF header's absolute time
 (stored as UTC ns in the file): ``start_clock = "mf4_header_utc"``. CANedge's compressed or
 encrypted ``.MFC``/``.MFE`` files are refused by the sniffer with a clear message.
+
+asammdf reads by random access, so a gzip-compressed MF4 (or one handed over as a stream) is
+first inflated to a temporary file in 1 MiB blocks -- never into memory -- up to a cap
+(``LASHSCOPE_MAX_INFLATED_MB``, default 4096 MiB; :data:`MAX_INFLATED_BYTES` overrides it).
+Past the cap the partial file is removed and :class:`~app.errors.InflatedTooLargeError` names
+the cap; the temporary file is removed when the reader closes.
 """
 
 from __future__ import annotations
 
 import contextlib
-import io
+import os
+import tempfile
 import warnings
 from collections.abc import Iterator
 from datetime import UTC
@@ -24,7 +31,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from app.errors import LogFormatError
+from app.errors import InflatedTooLargeError, LogFormatError, StorageError
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader
 from app.ingest.readers._source import StreamDamage
@@ -32,6 +39,17 @@ from app.ingest.readers._source import StreamDamage
 EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFlag.FD, FrameFlag.ERROR,
                                                     FrameFlag.REMOTE, FrameFlag.BRS, FrameFlag.ESI, FrameFlag.TX))
 GROUP_KINDS = ("CAN_DataFrame", "CAN_RemoteFrame", "CAN_ErrorFrame")
+MAX_INFLATED_BYTES: int | None = None  # None: LASHSCOPE_MAX_INFLATED_MB from the settings
+_BLOCK = 1 << 20
+
+
+def inflate_cap() -> int:
+    """Bytes a compressed or streamed MF4 may inflate to on disk."""
+    if MAX_INFLATED_BYTES is not None:
+        return MAX_INFLATED_BYTES
+    from app.settings import get_settings
+
+    return int(get_settings().max_inflated_mb * 2**20)
 
 
 def _field(samples: Any, name: str, n: int, default: int = 0) -> npt.NDArray[np.int64]:
@@ -83,13 +101,18 @@ class MF4Reader(BaseReader):
             import asammdf
         except ImportError as exc:  # pragma: no cover - a declared dependency
             raise LogFormatError(f"{self.name}: reading MF4 needs the asammdf package") from exc
+        self._spool: str | None = None
         if self.path is not None and not self._stream.compressed:
             source: Any = str(self.path)
-        else:  # asammdf needs random access: a gzip member or a stream is held in memory
-            try:
-                source = io.BytesIO(self._stream.read(1 << 40))
-            except StreamDamage as exc:
-                raise LogFormatError(f"{self.name}: gzip stream damaged: {exc}") from exc
+        else:  # asammdf needs random access: a gzip member or a stream goes to a temporary file first
+            source = self._spool = self._inflate(inflate_cap())
+        try:
+            self._load(asammdf, source)
+        except BaseException:
+            self.close()  # removes the temporary file
+            raise
+
+    def _load(self, asammdf: Any, source: Any) -> None:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -117,6 +140,31 @@ class MF4Reader(BaseReader):
         if not self._groups:
             self.problem("no_can_groups", "the file has no CAN_DataFrame/RemoteFrame/ErrorFrame channel group "
                          "with records (not CAN bus logging?)")
+
+    def _inflate(self, cap: int) -> str:
+        """Copy the (decompressed) stream to a temporary file, block by block, refusing more than ``cap`` bytes."""
+        fd, name = tempfile.mkstemp(prefix="lashscope-", suffix=".mf4")
+        written = 0
+        try:
+            with os.fdopen(fd, "wb") as out:
+                while block := self._stream.read(_BLOCK):
+                    written += len(block)
+                    if written > cap:
+                        raise InflatedTooLargeError(
+                            f"{self.name}: decompresses to more than the {cap / 2**20:g} MiB cap for compressed MF4 "
+                            "logs (LASHSCOPE_MAX_INFLATED_MB); decompress it yourself or raise the cap")
+                    out.write(block)
+        except StreamDamage as exc:
+            os.unlink(name)
+            raise LogFormatError(f"{self.name}: gzip stream damaged: {exc}") from exc
+        except OSError as exc:
+            os.unlink(name)
+            raise StorageError(f"{self.name}: cannot write the decompressed MF4 to a temporary file: "
+                               f"{exc.strerror or exc}") from exc
+        except BaseException:
+            os.unlink(name)
+            raise
+        return name
 
     def _blocks(self, gi: int, kind: str, cycles: int) -> Iterator[FrameChunk]:
         step = self.chunk_frames
@@ -155,6 +203,11 @@ class MF4Reader(BaseReader):
             self._mdf = None
             with contextlib.suppress(Exception):  # closing a damaged file must not mask the real error
                 mdf.close()
+        spool = getattr(self, "_spool", None)
+        if spool is not None:
+            self._spool = None
+            with contextlib.suppress(OSError):
+                os.unlink(spool)
         super().close()
 
 

@@ -13,8 +13,9 @@ import zlib
 from pathlib import PurePath
 
 from app.errors import LogFormatError, UnsupportedFormatError
+from app.ingest.readers.tcu import LINE_SHAPE as TCU_LINE
 
-FORMATS = ("blf", "asc", "candump", "trc", "gvret_csv", "mf4")
+FORMATS = ("blf", "asc", "candump", "trc", "gvret_csv", "mf4", "tcu")
 
 SUFFIXES = {
     ".blf": "blf", ".asc": "asc", ".log": "candump", ".trc": "trc", ".csv": "gvret_csv",
@@ -40,6 +41,7 @@ _LINE_RULES: dict[str, tuple[re.Pattern[str], ...]] = {
         re.compile(r"^\d+(\.\d+)?,(0x)?[0-9A-Fa-f]{1,8},(true|false),((Rx|Tx),)?\d+,\d+(,[0-9A-Fa-f]{1,2})*,?\s*$",
                    re.I),
     ),
+    "tcu": (re.compile(TCU_LINE),),
 }
 
 
