@@ -226,12 +226,17 @@ def ripple_metrics(
     t, speed = t[fin], speed[fin]
     if t.size < 8:
         raise InsufficientDataError(f"{t.size} speed samples in the event window; need at least 8")
+    t_raw, speed_raw = t, speed
     t, speed, sp = uniform_by_timestamps(t, speed)  # bursty stream: uniform at its mean spacing
     if t.size < 8:
         raise InsufficientDataError(f"{t.size} samples at the mean spacing {sp.mean_s * 1e3:.1f} ms; need at least 8")
     dt = sp.mean_s
     y = direction * (speed - rigid_trend(t, speed, torque, t_cross, p.rigid_gain_rpm_per_nms))
-    noise = noise_rms(y[t < t_cross - p.peak_lead_s]) if np.sum(t < t_cross - p.peak_lead_s) > 8 else noise_rms(y)
+    # the noise floor from the samples as logged: interpolation onto the grid would average the noise down
+    y_raw = y if t is t_raw else direction * (speed_raw - rigid_trend(t_raw, speed_raw, torque, t_cross,
+                                                                        p.rigid_gain_rpm_per_nms))
+    pre = t_raw < t_cross - p.peak_lead_s
+    noise = noise_rms(y_raw[pre]) if np.sum(pre) > 8 else noise_rms(y_raw)
     final = float(np.median(y[int(y.size * (1.0 - p.final_fraction)):]))
     i0 = int(np.searchsorted(t, t_cross - p.peak_lead_s))
     i1 = int(np.searchsorted(t, t_cross + p.peak_search_s, side="right")) - 1
@@ -314,7 +319,9 @@ def _resolution_checked(m: RippleMetrics, sp: Spacing, p: MetricParams) -> Rippl
 
     The sampling period is the mean spacing of the actual time stamps (``sp``), not the median
     of a bursty stream. Gap-open time needs ``max_gap_period_s``; shuffle frequency and damping
-    ratio need ``min_samples_per_cycle`` samples per shuffle period; the fluctuation is kept
+    ratio need ``min_samples_per_cycle`` samples per shuffle period at the mean spacing and half
+    as many at the longest gap (a burst stream's gaps alias a fast shuffle to a slower one,
+    so the frequency found is not trusted either); the fluctuation is kept
     but flagged below ``fine_samples_per_cycle`` (the peak and valley fall between samples).
     """
     why: dict[str, str] = {}
@@ -327,10 +334,11 @@ def _resolution_checked(m: RippleMetrics, sp: Spacing, p: MetricParams) -> Rippl
         changes.update(gap_open_time_s=NAN, t_gap_open_s=NAN, t_gap_close_s=NAN)
     f = m.shuffle_freq_hz
     if np.isfinite(f) and f > 0:
-        per_cycle = 1.0 / (f * dt)
-        if per_cycle < p.min_samples_per_cycle:
+        per_cycle, at_max = 1.0 / (f * dt), 1.0 / (f * sp.max_s)
+        if per_cycle < p.min_samples_per_cycle or at_max < p.min_samples_per_cycle / 2:
             text = (f"sampling too coarse for the shuffle: {per_cycle:.1f} samples per period at {f:.1f} Hz "
-                    f"({where}); needs {p.min_samples_per_cycle:g}")
+                    f"({at_max:.1f} at the longest gap; {where}); needs {p.min_samples_per_cycle:g} "
+                    f"({p.min_samples_per_cycle / 2:g} at the longest gap)")
             why["shuffle_freq_hz"] = why["damping_ratio"] = text
             changes.update(shuffle_freq_hz=NAN, damping_ratio=NAN)
         if per_cycle < p.fine_samples_per_cycle and np.isfinite(m.fluctuation_rpm):

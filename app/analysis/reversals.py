@@ -12,9 +12,10 @@ A change of state counts only when
   change (short excursions back are tolerated),
 - the old state held for ``min_dwell_s`` before it: at least ``PRIOR_SHARE`` of that time
   (generous, so a real tip-in out of a ringing coast still counts), and
-- the torque moves one way through the crossing: over ``t_cross ± rate_half_window_s`` at
+- the torque moves one way through the crossing: over ``t_cross ± rate_half_window_s`` (for
+  a coast, over twice that on the ramp side only: the coast before a tip-in may still ring) at
   most ``max_ramp_reversal`` of the torque's travel goes against the event's direction, and
-  the fitted rate has the event's sign.
+  the fitted rate (same span) has the event's sign.
 
 Changes that fail are *rejected as ringing* and counted, not listed as events.
 
@@ -76,9 +77,14 @@ def _crossing(t: FloatArray, tq: FloatArray, r: int, tip_in: bool, h: float) -> 
     return float(t[k] + (t[k + 1] - t[k]) * (-y0) / (y1 - y0)) if y1 != y0 else float(t[k])
 
 
+def _span(tc: float, half: float, side: int) -> tuple[float, float]:
+    """``tc ± half`` (``side`` 0), or ``2 half`` after (+1) / before (-1) ``tc``: the ramp side of a coast."""
+    return {0: (tc - half, tc + half), 1: (tc, tc + 2 * half), -1: (tc - 2 * half, tc)}[side]
+
+
 def _rate(t: FloatArray, tq: FloatArray, tc: float, r: int, half: float, side: int) -> float:
-    """Slope (N m/s) over ``tc ± half`` (``side`` 0), or ``2 half`` after (+1) / before (-1) ``tc``."""
-    a, b = {0: (tc - half, tc + half), 1: (tc, tc + 2 * half), -1: (tc - 2 * half, tc)}[side]
+    """Least-squares slope (N m/s) over :func:`_span`, at least the two samples around ``r``."""
+    a, b = _span(tc, half, side)
     lo = min(int(np.searchsorted(t, a)), r - 1)
     hi = max(int(np.searchsorted(t, b, side="right")), r + 1)
     if hi - lo < 2:
@@ -86,9 +92,9 @@ def _rate(t: FloatArray, tq: FloatArray, tc: float, r: int, half: float, side: i
     return float(np.polyfit(t[lo:hi] - tc, tq[lo:hi], 1)[0])
 
 
-def _against_share(t: FloatArray, tq: FloatArray, tc: float, half: float, sign: float) -> float:
-    """Share of the torque's travel over ``tc ± half`` that goes against ``sign``."""
-    m = (t >= tc - half) & (t <= tc + half)
+def _against_share(t: FloatArray, tq: FloatArray, span: tuple[float, float], sign: float) -> float:
+    """Share of the torque's travel over ``span`` (s) that goes against ``sign``."""
+    m = (t >= span[0]) & (t <= span[1])
     d = np.diff(tq[m]) * sign
     travel = float(np.abs(d).sum())
     return float(-d[d < 0].sum() / travel) if travel > 0 else 0.0
@@ -108,8 +114,10 @@ def find_reversals(t: FloatArray, tq: FloatArray, p: ReversalParams) -> tuple[li
         if new == state:
             continue  # a short excursion already ignored
         t_r = float(t[r])
-        holds = _share(t, driving, t_r, min(t_r + p.min_dwell_s, float(t[-1])), new) >= HOLD_SHARE
-        held = _share(t, driving, max(t_r - p.min_dwell_s, float(t[0])), t_r, state) >= PRIOR_SHARE
+        holds = held = True
+        if p.min_dwell_s > 0:
+            holds = _share(t, driving, t_r, min(t_r + p.min_dwell_s, float(t[-1])), new) >= HOLD_SHARE
+            held = _share(t, driving, max(t_r - p.min_dwell_s, float(t[0])), t_r, state) >= PRIOR_SHARE
         if not holds:
             ringing += 1
             continue
@@ -125,7 +133,7 @@ def find_reversals(t: FloatArray, tq: FloatArray, p: ReversalParams) -> tuple[li
         from_coast = bool(low_side.size == 0 or float(np.median(low_side)) >= -h)
         one_sided = (1 if tip_in else -1) if from_coast else 0
         rate = _rate(t, tq, tc, r, p.rate_half_window_s, one_sided)
-        if not sign * rate > 0 or _against_share(t, tq, tc, p.rate_half_window_s, sign) > p.max_ramp_reversal:
+        if not sign * rate > 0 or _against_share(t, tq, _span(tc, p.rate_half_window_s, one_sided), sign) > p.max_ramp_reversal:
             ringing += 1
             continue
         out.append(Reversal(tip_in, tc, r, rate, from_coast))

@@ -27,7 +27,7 @@ from app.signals import SignalSet
 WHEEL_PREFIX = "wheel_speed_"
 VEHICLE_SPEED = "vehicle_speed_kmh"
 SPEED = "motor_speed_rpm"
-SLIP_AVERAGE_S = 0.4  # s; longer than a 3 Hz shuffle period
+SLIP_AVERAGE_S = 0.5  # s; at least one and a half periods of a 3 Hz shuffle
 
 
 @dataclass(frozen=True)

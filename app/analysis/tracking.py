@@ -35,7 +35,7 @@ GOOD, POOR, UNKNOWN = "good", "poor", "unknown"
 
 @dataclass(frozen=True)
 class TrackingParams:
-    max_nrmse: float = 0.3
+    max_nrmse: float = 0.2
     max_freq_mismatch: float = 0.25  # |f_sim - f_meas| / f_meas
     max_poor_share: float = 0.5
     max_whole_drift: float = 0.3  # of the measured speed range (max - min over the whole log)
