@@ -104,13 +104,13 @@ def run(args: argparse.Namespace) -> int:
     candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
     if not candidates:
         raise InputError("--candidates is empty")
+    thresholds = event_params(args)  # refused before anything is decoded
     inputs = vehicle_inputs(args)
     vehicle, dbc, smap = inputs.vehicle, inputs.database, inputs.signal_map
     options = DiagnosisOptions(candidates=candidates, seed=args.seed, model=args.model)
     say = _progress(args.quiet)
     say(0.0, f"decoding {args.log}")
     signals, _ = decode_log(args.log, dbc, smap)
-    thresholds = event_params(args)
     result = diagnose_signals(signals, vehicle, options, say, thresholds)
     validation = None
     if args.validate is not None and result.decision.top:
