@@ -32,7 +32,7 @@ from app.analysis.lash import LashParams
 from app.analysis.metrics import MetricParams, ripple_metrics
 from app.analysis.sampling import mean_period
 from app.analysis.series import FloatArray, finite_signal
-from app.analysis.slip import Drive
+from app.analysis.slip import Drive, log_ratio_scale
 from app.analysis.tracking import TrackingParams, Verdict, event_verdict, log_verdict
 from app.errors import InputError, InsufficientDataError, MissingSignalError
 from app.signals import Signal, SignalSet
@@ -257,11 +257,20 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
             raise MissingSignalError(f"the analysis needs channel {name!r}; decoded channels: {sorted(signals)}")
     torque, speed = finite_signal(signals[TORQUE]), finite_signal(signals[SPEED])
     stage("events", 0.0)
-    detection = find_events(signals, opts.events, Drive(vehicle.ratio, vehicle.wheel.radius))
+    notes: list[str] = []
+    mismatch: list[str] = []  # reasons the comparison is not valid, found before any simulation
+    drive = Drive(vehicle.ratio, vehicle.wheel.radius)
+    scale = log_ratio_scale(signals, drive, opts.events.slip_min_speed_rpm)
+    if scale is not None and abs(scale - 1.0) > opts.events.max_wheel_slip:
+        mismatch.append(f"the vehicle does not fit the log: the motor turns {scale:.2f}x the speed the file's ratio "
+                        f"{vehicle.ratio:g} and tyre radius {vehicle.wheel.radius:g} m give from the road speed "
+                        f"(median over the log); wheel slip is checked against the log's own ratio "
+                        f"{vehicle.ratio * scale:.3g}")
+        drive = Drive(vehicle.ratio * scale, vehicle.wheel.radius)
+    detection = find_events(signals, opts.events, drive)
     events = detection.events
     timings["events"] = time.perf_counter() - clock
     included = [e for e in events if e.included]
-    notes: list[str] = []
     if detection.ringing:
         notes.append(f"{detection.ringing} torque changes rejected as ringing (a side shorter than "
                      f"{opts.events.min_dwell_s * 1e3:.0f} ms, or the torque not moving one way through the crossing)")
@@ -339,7 +348,8 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
         timings["simulate_whole"] = time.perf_counter() - clock - sum(timings.values())
     verdict = log_verdict([r.tracking for r in results if r.tracking is not None], opts.tracking,
                           offset.correlation if np.isfinite(offset.correlation) else None,
-                          (whole.t, whole.measured_rpm, whole.simulated_rpm) if whole is not None else None)
+                          (whole.t, whole.measured_rpm, whole.simulated_rpm) if whole is not None else None,
+                          mismatch)
     stage("done", 1.0)
     return AnalysisResult(signals, events, results, offset, whole, whole_err, timings_s=timings, notes=notes,
                           tracking=verdict)

@@ -10,7 +10,12 @@ wheel is faster than the road, the undriven wheels are not). The slip
 ``s(t) = mean(n_motor) / mean(ratio * n_ref) - 1``, means over ``[t, t + SLIP_AVERAGE_S]``,
 
 is checked where the reference is at least ``min_speed_rpm`` at the motor; ``|s| > max_slip``
-anywhere in the window excludes the event, with the worst value and its time. The average
+anywhere in the window excludes the event, with the worst value and its time.
+
+A vehicle file whose ratio or tyre radius does not fit the log would make every event "slip".
+So the log's own motor-to-road ratio (median over the log, :func:`log_ratio_scale`) is
+compared with the file's first; beyond ``max_slip`` the pipeline says so and checks slip
+against the log's ratio instead. The average
 spans a few shuffle periods: the shuffle itself swings the motor against the wheels by
 hundreds of rpm for a moment (the half-shafts winding up), a spinning wheel stays away.
 """
@@ -81,3 +86,18 @@ def slip_problem(signals: SignalSet, t0: float, t1: float, drive: Drive | None, 
     return (f"wheel slip: motor speed {float(motor[k]):.0f} rpm vs {float(road[k]):.0f} rpm from "
             f"{' / '.join(used)} x ratio {drive.ratio:g} ({100 * s[k]:+.0f} %, limit ±{100 * max_slip:g} %) "
             f"over {tk:.2f}-{tk + SLIP_AVERAGE_S:.2f} s")
+
+
+def log_ratio_scale(signals: SignalSet, drive: Drive, min_speed_rpm: float) -> float | None:
+    """Median over the log of motor speed / road speed at the motor (1.0: the file's ratio fits).
+
+    None without a reference channel or with fewer than 20 samples above ``min_speed_rpm``.
+    """
+    if SPEED not in signals or not len(signals[SPEED]):
+        return None
+    sp = signals[SPEED]
+    ref, _ = road_speed_at_motor(signals, sp.t, drive)
+    ok = np.isfinite(ref) & np.isfinite(sp.values) & (ref >= min_speed_rpm)
+    if ok.sum() < 20:
+        return None
+    return float(np.median(np.abs(sp.values[ok]) / ref[ok]))

@@ -17,6 +17,8 @@ Per log:
 - the open-loop whole-log simulation drifting away: the largest ``drift_window_s`` moving mean
   of ``simulated - measured`` above ``max_whole_drift`` of the measured speed range (wheelspin,
   brakes or grade the model does not know);
+- reasons found before the comparison (the vehicle file's ratio and tyre radius not fitting
+  the log's motor and road speeds: :func:`app.analysis.slip.log_ratio_scale`);
 - the torque-to-speed offset's correlation below ``min_offset_correlation`` (the offset is then
   not applied: the simulated ripple does not line up with the measured one at any lag).
 """
@@ -87,13 +89,15 @@ def whole_drift(t: FloatArray, measured: FloatArray, simulated: FloatArray, wind
 
 
 def log_verdict(events: list[Verdict], p: TrackingParams, offset_corr: float | None = None,
-                whole: tuple[FloatArray, FloatArray, FloatArray] | None = None) -> Verdict:
+                whole: tuple[FloatArray, FloatArray, FloatArray] | None = None,
+                found: list[str] | None = None) -> Verdict:
     """Verdict over the log from the event verdicts, the offset's correlation and the whole-log run.
 
     ``offset_corr`` None: no offset was estimated. ``whole``: ``(t, measured, simulated)`` of
-    the open-loop whole-log run, or None.
+    the open-loop whole-log run, or None. ``found``: reasons established elsewhere (e.g. the
+    vehicle's ratio not fitting the log's speeds), listed first.
     """
-    reasons: list[str] = []
+    reasons: list[str] = list(found or [])
     judged = [v for v in events if v.verdict != UNKNOWN]
     poor = [v for v in judged if v.verdict == POOR]
     if judged and len(poor) / len(judged) > p.max_poor_share:

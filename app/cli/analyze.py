@@ -110,6 +110,8 @@ def run(args: argparse.Namespace) -> int:
         print()
         print(events_table(doc))
         print()
+        for note in doc.get("notes", []):
+            print(f"note: {note}")
         for line in tracking_lines(doc):
             print(line)
         print(metrics_table(doc))
