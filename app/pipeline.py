@@ -264,7 +264,7 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     if scale is not None and abs(scale - 1.0) > opts.events.max_wheel_slip:
         mismatch.append(f"the vehicle does not fit the log: the motor turns {scale:.2f}x the speed the file's ratio "
                         f"{vehicle.ratio:g} and tyre radius {vehicle.wheel.radius:g} m give from the road speed "
-                        f"(median over the log); wheel slip is checked against the log's own ratio "
+                        f"(lower quartile over the log); wheel slip is checked against the log's own ratio "
                         f"{vehicle.ratio * scale:.3g}")
         drive = Drive(vehicle.ratio * scale, vehicle.wheel.radius)
     detection = find_events(signals, opts.events, drive)

@@ -116,3 +116,15 @@ def test_bad_event_threshold_is_a_one_line_error_naming_the_option(command: str,
     err = capsys.readouterr().err
     assert err.startswith("lashscope: error [") and "--max-ramp-reversal = 2.0: must be in [0, 1]" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_vehicle_whose_ratio_does_not_fit_the_log_is_named_and_not_mistaken_for_slip() -> None:
+    ss = SignalSet()
+    for name, ch in measured_channels(PAPER, Scenario(duration_s=20.0)).items():
+        road = name.startswith("wheel_speed") or name == "vehicle_speed_kmh"
+        ss.add(Signal.from_samples(name, ch.t, ch.values * (2.0 if road else 1.0),
+                                   interp=Interp.PREVIOUS if name.startswith("brake") else Interp.LINEAR))
+    res = analyze_signals(ss, PAPER, AnalysisOptions())
+    first = res.tracking.reasons[0]
+    assert first.startswith("the vehicle does not fit the log: the motor turns 0.50x the speed the file's ratio 11.2648")
+    assert not any(e.exclusion and e.exclusion.startswith("wheel slip") for e in res.events)

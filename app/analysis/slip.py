@@ -13,7 +13,8 @@ is checked where the reference is at least ``min_speed_rpm`` at the motor; ``|s|
 anywhere in the window excludes the event, with the worst value and its time.
 
 A vehicle file whose ratio or tyre radius does not fit the log would make every event "slip".
-So the log's own motor-to-road ratio (median over the log, :func:`log_ratio_scale`) is
+So the log's own motor-to-road ratio (lower quartile over the log, :func:`log_ratio_scale`:
+a spinning wheel only raises it, so a log that spins half the time still gives the true one) is
 compared with the file's first; beyond ``max_slip`` the pipeline says so and checks slip
 against the log's ratio instead. The average
 spans a few shuffle periods: the shuffle itself swings the motor against the wheels by
@@ -89,7 +90,7 @@ def slip_problem(signals: SignalSet, t0: float, t1: float, drive: Drive | None, 
 
 
 def log_ratio_scale(signals: SignalSet, drive: Drive, min_speed_rpm: float) -> float | None:
-    """Median over the log of motor speed / road speed at the motor (1.0: the file's ratio fits).
+    """Lower quartile over the log of motor speed / road speed at the motor (1.0: the file's ratio fits).
 
     None without a reference channel or with fewer than 20 samples above ``min_speed_rpm``.
     """
@@ -100,4 +101,4 @@ def log_ratio_scale(signals: SignalSet, drive: Drive, min_speed_rpm: float) -> f
     ok = np.isfinite(ref) & np.isfinite(sp.values) & (ref >= min_speed_rpm)
     if ok.sum() < 20:
         return None
-    return float(np.median(np.abs(sp.values[ok]) / ref[ok]))
+    return float(np.percentile(np.abs(sp.values[ok]) / ref[ok], 25.0))
