@@ -128,3 +128,12 @@ def test_a_vehicle_whose_ratio_does_not_fit_the_log_is_named_and_not_mistaken_fo
     first = res.tracking.reasons[0]
     assert first.startswith("the vehicle does not fit the log: the motor turns 0.50x the speed the file's ratio 11.2648")
     assert not any(e.exclusion and e.exclusion.startswith("wheel slip") for e in res.events)
+
+
+def test_the_command_line_defaults_are_the_event_defaults() -> None:
+    from app.analysis.events import EventParams
+    from app.cli.vehicle_args import EVENT_OPTIONS
+
+    defaults = EventParams()
+    assert {name: default for _, name, _, default, _ in EVENT_OPTIONS} == {
+        name: getattr(defaults, name) for _, name, _, _, _ in EVENT_OPTIONS}
