@@ -33,7 +33,8 @@ def _analyse(sc: Scenario, spin: Callable[[np.ndarray], np.ndarray] | None = Non
         if name.startswith("wheel_speed") and not wheels:
             continue
         v = ch.values + (spin(ch.t) if spin is not None and name == "motor_speed_rpm" else 0.0)
-        ss.add(Signal.from_samples(name, ch.t, v, interp=Interp.PREVIOUS if name.startswith("brake") else Interp.LINEAR))
+        interp = Interp.PREVIOUS if name.startswith("brake") else Interp.LINEAR
+        ss.add(Signal.from_samples(name, ch.t, v, interp=interp))
     return analyze_signals(ss, PAPER, AnalysisOptions())
 
 
@@ -85,7 +86,7 @@ def test_wheelspin_drift_makes_the_log_poor_and_excludes_the_slipping_events() -
 def test_tracking_thresholds_come_from_the_request_body() -> None:
     opts = AnalysisOptions.from_dict({"tracking": {"max_nrmse": 0.1}, "events": {"min_dwell_s": 0.2}})
     assert opts.tracking == TrackingParams(max_nrmse=0.1) and opts.events.min_dwell_s == 0.2
-    with pytest.raises(InputError, match="TrackingParams.min_offset_correlation"):
+    with pytest.raises(InputError, match=r"TrackingParams\.min_offset_correlation"):
         AnalysisOptions.from_dict({"tracking": {"min_offset_correlation": 2.0}})
 
 
@@ -126,7 +127,8 @@ def test_a_vehicle_whose_ratio_does_not_fit_the_log_is_named_and_not_mistaken_fo
                                    interp=Interp.PREVIOUS if name.startswith("brake") else Interp.LINEAR))
     res = analyze_signals(ss, PAPER, AnalysisOptions())
     first = res.tracking.reasons[0]
-    assert first.startswith("the vehicle does not fit the log: the motor turns 0.50x the speed the file's ratio 11.2648")
+    assert first.startswith("the vehicle does not fit the log: the motor turns 0.50x the speed the file's "
+                            "ratio 11.2648")
     assert not any(e.exclusion and e.exclusion.startswith("wheel slip") for e in res.events)
 
 

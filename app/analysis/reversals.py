@@ -108,8 +108,7 @@ def find_reversals(t: FloatArray, tq: FloatArray, p: ReversalParams) -> tuple[li
     state = bool(driving[0])
     out: list[Reversal] = []
     ringing = 0
-    for r in flips:
-        r = int(r)
+    for r in (int(i) for i in flips):
         new = bool(driving[r])
         if new == state:
             continue  # a short excursion already ignored
@@ -133,7 +132,8 @@ def find_reversals(t: FloatArray, tq: FloatArray, p: ReversalParams) -> tuple[li
         from_coast = bool(low_side.size == 0 or float(np.median(low_side)) >= -h)
         one_sided = (1 if tip_in else -1) if from_coast else 0
         rate = _rate(t, tq, tc, r, p.rate_half_window_s, one_sided)
-        if not sign * rate > 0 or _against_share(t, tq, _span(tc, p.rate_half_window_s, one_sided), sign) > p.max_ramp_reversal:
+        against = _against_share(t, tq, _span(tc, p.rate_half_window_s, one_sided), sign)
+        if not sign * rate > 0 or against > p.max_ramp_reversal:
             ringing += 1
             continue
         out.append(Reversal(tip_in, tc, r, rate, from_coast))

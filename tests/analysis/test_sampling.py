@@ -45,7 +45,7 @@ def test_bursty_stream_is_resampled_by_its_time_stamps_at_the_mean_spacing() -> 
     assert grid[0] == t[0] and grid[-1] <= t[-1]
     assert np.max(np.abs(yu - 100.0 * np.sin(2 * np.pi * 1.5 * grid))) < 6.0  # linear between bursts 60 ms apart
     tr = np.arange(0.0, 1.0, 0.01)
-    same_t, same_y, _ = uniform_by_timestamps(tr, np.sin(tr))
+    same_t, _, _ = uniform_by_timestamps(tr, np.sin(tr))
     assert same_t is tr  # a regular stream is left alone
 
 
