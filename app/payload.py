@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from app.analysis.compare import summarize
+from app.analysis.compare import resolution_reasons, summarize
+from app.analysis.sampling import spacing
 from app.pipeline import AnalysisResult
 
 SERIES_COLUMNS = ("measured_rpm", "simulated_rpm", "torque_nm")
@@ -34,6 +35,7 @@ def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.N
         d["error"] = er.error
         d["has_series"] = er.aligned is not None
         d["has_metrics"] = er.comparison is not None
+        d["tracking"] = er.tracking.to_dict() if er.tracking is not None else None
         events.append(d)
         if er.aligned is not None:
             a = er.aligned
@@ -47,6 +49,7 @@ def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.N
             m["kind"] = er.event.kind.value
             m["t_cross_s"] = er.event.t_cross_s
             m["sim_gap_open_time_s"] = er.sim_gap_open_time_s
+            m["tracking"] = er.tracking.to_dict() if er.tracking is not None else None
             metrics.append(m)
     for key, chunks in parts.items():
         arrays[f"ev_{key}"] = np.concatenate(chunks) if chunks else np.empty(0)
@@ -70,13 +73,18 @@ def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.N
         "events": len(res.events), "included": included, "excluded": len(res.events) - included,
         "with_metrics": len(comparisons), "tip_in": sum(1 for e in res.events if e.kind.value == "tip_in"),
         "tip_out": sum(1 for e in res.events if e.kind.value == "tip_out"),
-        "offset_ms": res.offset.lag_s * 1e3, "metrics": summarize(comparisons) if comparisons else {},
+        "offset_ms": res.offset.lag_s * 1e3 if res.offset.applied else 0.0, "offset_applied": res.offset.applied,
+        "offset_correlation": res.offset.correlation,
+        "metrics": summarize(comparisons) if comparisons else {},
+        "resolution": resolution_reasons(comparisons),
+        "tracking": res.tracking.to_dict(),
         "whole_rms_rpm": res.whole_error.rms_rpm if res.whole_error else None,
         "whole_nrmse": res.whole_error.nrmse if res.whole_error else None,
     }
     doc = {
         "schema": 1, "summary": summary, "events": events, "metrics": metrics, "event_rows": rows,
         "offset": asdict(res.offset), "whole": whole, "signals": signals, "ingest": res.ingest,
-        "timings_s": res.timings_s, "notes": res.notes,
+        "timings_s": res.timings_s, "notes": res.notes, "tracking": res.tracking.to_dict(),
+        "sampling": {name: spacing(sig.t).to_dict() for name, sig in sorted(res.signals.items())},
     }
     return doc, arrays

@@ -27,10 +27,13 @@ import numpy as np
 
 from app.analysis.align import OffsetEstimate, common_time_base, estimate_lag, overlap, shift
 from app.analysis.compare import EventComparison, SpeedError, compare_event, speed_error
-from app.analysis.events import SPEED, TORQUE, Event, EventParams, detect_events
+from app.analysis.events import SPEED, TORQUE, Event, EventParams, find_events
 from app.analysis.lash import LashParams
 from app.analysis.metrics import MetricParams, ripple_metrics
-from app.analysis.series import FloatArray, finite_signal, median_period
+from app.analysis.sampling import mean_period
+from app.analysis.series import FloatArray, finite_signal
+from app.analysis.slip import Drive, log_ratio_scale
+from app.analysis.tracking import TrackingParams, Verdict, event_verdict, log_verdict
 from app.errors import InputError, InsufficientDataError, MissingSignalError
 from app.signals import Signal, SignalSet
 from sim import SimError, SimResult, Vehicle, simulate
@@ -50,6 +53,7 @@ class AnalysisOptions:
     model: Literal["multibody", "two_inertia"] = "multibody"
     events: EventParams = field(default_factory=EventParams)
     metrics: MetricParams = field(default_factory=MetricParams)
+    tracking: TrackingParams = field(default_factory=TrackingParams)
     fit_offset: bool = True
     max_offset_s: float = 0.05  # the torque-to-speed offset is searched within ± this
     event_dt_s: float = 0.001  # time base of the per-event aligned series
@@ -64,11 +68,13 @@ class AnalysisOptions:
         data = dict(data or {})
         ev_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("events", {}).items()}
         mp_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("metrics", {}).items()}
+        tr_kw: dict[str, Any] = dict(data.pop("tracking", {}) or {})
         try:
             if isinstance(mp_kw.get("lash"), dict):
                 lash_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in mp_kw["lash"].items()}
                 mp_kw["lash"] = LashParams(**lash_kw)
-            opts = cls(events=EventParams(**ev_kw), metrics=MetricParams(**mp_kw), **data)
+            opts = cls(events=EventParams(**ev_kw), metrics=MetricParams(**mp_kw), tracking=TrackingParams(**tr_kw),
+                       **data)
         except (TypeError, ValueError) as exc:
             raise InputError(f"analysis options: {exc}") from exc
         if opts.model not in ("multibody", "two_inertia"):
@@ -104,6 +110,7 @@ class EventResult:
     comparison: EventComparison | None = None
     sim_gap_open_time_s: float = float("nan")  # the simulator's own first-gap-open to last-gap-close time
     error: str | None = None  # why this included event has no metrics (simulation failed, too few samples)
+    tracking: Verdict | None = None  # does the simulation follow the measured speed here (None: no metrics)
 
 
 @dataclass(frozen=True)
@@ -117,6 +124,7 @@ class AnalysisResult:
     ingest: dict[str, Any] = field(default_factory=dict)
     timings_s: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    tracking: Verdict = field(default_factory=lambda: Verdict("unknown", ["no analysed event to judge"]))
 
 
 def decode_log(log_path: Path, database: Path, signal_map: Path,
@@ -249,10 +257,23 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
             raise MissingSignalError(f"the analysis needs channel {name!r}; decoded channels: {sorted(signals)}")
     torque, speed = finite_signal(signals[TORQUE]), finite_signal(signals[SPEED])
     stage("events", 0.0)
-    events = detect_events(signals, opts.events)
+    notes: list[str] = []
+    mismatch: list[str] = []  # reasons the comparison is not valid, found before any simulation
+    drive = Drive(vehicle.ratio, vehicle.wheel.radius)
+    scale = log_ratio_scale(signals, drive, opts.events.slip_min_speed_rpm)
+    if scale is not None and abs(scale - 1.0) > opts.events.max_wheel_slip:
+        mismatch.append(f"the vehicle does not fit the log: the motor turns {scale:.2f}x the speed the file's ratio "
+                        f"{vehicle.ratio:g} and tyre radius {vehicle.wheel.radius:g} m give from the road speed "
+                        f"(lower quartile over the log); wheel slip is checked against the log's own ratio "
+                        f"{vehicle.ratio * scale:.3g}")
+        drive = Drive(vehicle.ratio * scale, vehicle.wheel.radius)
+    detection = find_events(signals, opts.events, drive)
+    events = detection.events
     timings["events"] = time.perf_counter() - clock
     included = [e for e in events if e.included]
-    notes: list[str] = []
+    if detection.ringing:
+        notes.append(f"{detection.ringing} torque changes rejected as ringing (a side shorter than "
+                     f"{opts.events.min_dwell_s * 1e3:.0f} ms, or the torque not moving one way through the crossing)")
 
     # 1. simulate each event window, on a fine common time base
     sims: dict[int, tuple[SimResult, FloatArray]] = {}
@@ -274,10 +295,14 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     if opts.fit_offset and opts.max_offset_s > 0:
         pairs = [(_sim_signal(r).at(g), speed.at(g)) for r, g in sims.values()]
         offset = _pooled_lag(pairs, dt, opts.max_offset_s)
-        if offset.samples and abs(offset.lag_s) >= 0.95 * opts.max_offset_s:
+        if np.isfinite(offset.correlation) and offset.correlation < opts.tracking.min_offset_correlation:
+            offset = replace(offset, applied=False)
+            notes.append(f"torque-to-speed offset {offset.lag_s * 1e3:.1f} ms not applied: its correlation "
+                         f"{offset.correlation:.2f} is below {opts.tracking.min_offset_correlation:g}")
+        elif offset.samples and abs(offset.lag_s) >= 0.95 * opts.max_offset_s:
             notes.append(f"torque-to-speed offset {offset.lag_s * 1e3:.1f} ms is at the search bound "
                          f"±{opts.max_offset_s * 1e3:.0f} ms")
-    lag = offset.lag_s
+    lag = offset.lag_s if offset.applied else 0.0
     torque_shifted = shift(torque, lag)
 
     # 3. metrics per event, measured vs offset-corrected simulation
@@ -302,7 +327,8 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
             continue
         comparison = compare_event(ev.index, m_meas, m_sim, aligned.measured_rpm, aligned.simulated_rpm)
         gap_time = unloaded_time(res.gap_events, ev.t_cross_s - 0.2, ev.t_cross_s + 0.3)
-        results.append(EventResult(ev, aligned, comparison, gap_time))
+        results.append(EventResult(ev, aligned, comparison, gap_time,
+                                   tracking=event_verdict(comparison, opts.tracking)))
     stage("metrics", 0.75)
     timings["align_metrics"] = time.perf_counter() - clock - sum(timings.values())
 
@@ -311,7 +337,7 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     whole_err: SpeedError | None = None
     if opts.whole_log:
         t0, t1 = overlap([torque, speed])
-        dt_whole = whole_log_output_dt(t1 - t0, median_period(speed.t))
+        dt_whole = whole_log_output_dt(t1 - t0, mean_period(speed.t))
         try:
             res = _simulate(vehicle, torque, speed, t0, t1, opts, dt_whole)
             grid = common_time_base(t0, t1, dt_whole)
@@ -320,8 +346,13 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
         except (SimError, InsufficientDataError) as exc:
             notes.append(f"whole-log simulation failed: {exc}")
         timings["simulate_whole"] = time.perf_counter() - clock - sum(timings.values())
+    verdict = log_verdict([r.tracking for r in results if r.tracking is not None], opts.tracking,
+                          offset.correlation if np.isfinite(offset.correlation) else None,
+                          (whole.t, whole.measured_rpm, whole.simulated_rpm) if whole is not None else None,
+                          mismatch)
     stage("done", 1.0)
-    return AnalysisResult(signals, events, results, offset, whole, whole_err, timings_s=timings, notes=notes)
+    return AnalysisResult(signals, events, results, offset, whole, whole_err, timings_s=timings, notes=notes,
+                          tracking=verdict)
 
 
 def run_analysis(log_path: Path, vehicle: VehicleInputs, options: AnalysisOptions | None = None,

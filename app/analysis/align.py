@@ -26,6 +26,7 @@ class OffsetEstimate:
     lag_s: float  # target lags reference by this much (s); 0.0 when not estimable
     correlation: float  # normalised cross-correlation at the lag, in [-1, 1]; NaN when not estimable
     samples: int  # samples that entered the estimate
+    applied: bool = True  # False: too weakly correlated to shift the simulation by (lag_s kept for reference)
 
 
 def common_time_base(t0: float, t1: float, dt: float) -> FloatArray:

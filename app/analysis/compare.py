@@ -88,3 +88,18 @@ def summarize(comparisons: list[EventComparison]) -> dict[str, dict[str, float]]
 
 def _nanmedian(x: FloatArray) -> float:
     return float(np.nanmedian(x)) if np.isfinite(x).any() else float("nan")
+
+
+def resolution_reasons(comparisons: list[EventComparison]) -> dict[str, str]:
+    """Per metric the sampling cannot resolve in some event: why, and in how many events.
+
+    Measured and simulated speeds share the measured time stamps, so the measured reasons hold
+    for both (:func:`app.analysis.metrics.ripple_metrics`).
+    """
+    first: dict[str, str] = {}
+    count: dict[str, int] = {}
+    for c in comparisons:
+        for k, why in c.measured.resolution.items():
+            first.setdefault(k, why)
+            count[k] = count.get(k, 0) + 1
+    return {k: f"{first[k]} ({count[k]} of {len(comparisons)} events)" for k in first}

@@ -1,23 +1,25 @@
-"""Tip-in and tip-out events from motor-torque zero crossings, corroborated by the pedal.
+"""Tip-in and tip-out events a driver makes, corroborated by the pedal.
 
-A torque reversal is tracked with a hysteresis band ``±hysteresis_nm``: the torque must
-leave the band on one side and reach it on the other. The crossing time is where the
-torque passes zero between those two band exits (linear interpolation)::
+The torque is *driving* above ``+hysteresis_nm`` and not driving otherwise (coasting in the
+band, regenerating below it); a tip-in enters the driving state, a tip-out leaves it, each
+only when both sides dwell and the torque moves one way through the crossing (inverter
+ringing is rejected: :mod:`app.analysis.reversals`). The crossing time is where the torque
+passes zero next to the band exit (linear interpolation)::
 
     torque
       ^            ______  +h .............  the torque reaches +h: reversal confirmed
       |           /
     0 +----------x------------------------   t_cross = interpolated zero crossing
       |  ______ /
-      |            -h ....................   the torque left -h: candidate starts
+      |            -h ....................   (regeneration; a coast at 0 N m counts as well)
       +-------------------------------------> t
          |<- pre_s ->|<----- post_s ----->|  event window [t_start, t_end]
 
 A candidate becomes an event when the torque step (median before vs after) is at least
 ``min_step_nm`` and the torque rate at the crossing is at least ``min_rate_nm_s``.
 Events are then *excluded* (kept in the list with a reason) for missing data, braking,
-low speed, a pedal that does not corroborate the reversal, or a window cut short by the
-next reversal.
+low speed, wheel slip, a pedal that does not corroborate the reversal, or a window cut
+short by the next reversal.
 """
 
 from __future__ import annotations
@@ -27,7 +29,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from app.analysis.series import FloatArray, finite_signal, median_in
+from app.analysis.reversals import Reversal, ReversalParams, find_reversals
+from app.analysis.series import finite_signal, median_in
+from app.analysis.slip import Drive, slip_problem
 from app.errors import InsufficientDataError, MissingSignalError
 from app.signals import Signal, SignalSet
 
@@ -38,17 +42,21 @@ VEHICLE_SPEED = "vehicle_speed_kmh"
 
 
 class EventKind(enum.StrEnum):
-    TIP_IN = "tip_in"  # torque from negative (regen/coast) to positive (drive)
-    TIP_OUT = "tip_out"  # torque from positive to negative
+    TIP_IN = "tip_in"  # torque from regeneration or coast (|T| <= hysteresis) to drive
+    TIP_OUT = "tip_out"  # torque from drive to coast or regeneration
 
 
 @dataclass(frozen=True)
 class EventParams:
     """Detection and exclusion thresholds (units in the names)."""
 
-    hysteresis_nm: float = 5.0
+    hysteresis_nm: float = 5.0  # driving above +this; coasting within ±this; regenerating below -this
     min_step_nm: float = 30.0
-    min_rate_nm_s: float = 100.0
+    min_rate_nm_s: float = 100.0  # in the event's direction (a tip-in with a falling torque is ringing)
+    min_dwell_s: float = 0.08  # each side of a reversal must hold this long (inverter ringing does not)
+    max_ramp_reversal: float = 0.3  # share of torque travel against the event's direction allowed at the crossing
+    max_wheel_slip: float = 0.15  # |motor / (ratio x road speed) - 1| above this in the window = wheel slip
+    slip_min_speed_rpm: float = 300.0  # slip is checked where the road speed at the motor is at least this
     rate_half_window_s: float = 0.02  # torque slope fitted over t_cross ± this (at least 2 samples)
     step_before_s: tuple[float, float] = (0.30, 0.05)  # torque_before: median over t_cross - [a, b]
     step_after_s: tuple[float, float] = (0.15, 0.45)  # torque_after: median over t_cross + [a, b]
@@ -64,11 +72,16 @@ class EventParams:
     max_sample_gap_s: float = 0.1  # larger gaps in torque/speed inside a window = missing data
 
     def __post_init__(self) -> None:
-        for name in ("hysteresis_nm", "min_step_nm", "pre_s", "post_s", "max_sample_gap_s"):
+        for name in ("hysteresis_nm", "min_step_nm", "pre_s", "post_s", "max_sample_gap_s", "max_wheel_slip"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"EventParams.{name} = {getattr(self, name)!r}: must be > 0")
         if self.min_post_s > self.post_s:
             raise ValueError(f"EventParams.min_post_s = {self.min_post_s!r}: must not exceed post_s = {self.post_s}")
+        for name in ("min_rate_nm_s", "min_dwell_s", "min_pedal_step_pct", "slip_min_speed_rpm"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"EventParams.{name} = {getattr(self, name)!r}: must be >= 0")
+        if not 0 <= self.max_ramp_reversal <= 1:
+            raise ValueError(f"EventParams.max_ramp_reversal = {self.max_ramp_reversal!r}: must be in [0, 1]")
 
 
 @dataclass(frozen=True)
@@ -88,6 +101,7 @@ class Event:
     pedal_before_pct: float | None = None
     pedal_after_pct: float | None = None
     pedal_corroborated: bool | None = None  # None: the log has no pedal channel
+    from_coast: bool = False  # the not-driving side is a coast (|T| <= hysteresis), not regeneration
     exclusion: str | None = None  # why the event is not analysed; None = included
 
     @property
@@ -104,45 +118,6 @@ class Event:
         d["kind"] = self.kind.value
         d["included"] = self.included
         return d
-
-
-@dataclass(frozen=True)
-class _Candidate:
-    kind: EventKind
-    t_cross: float
-    i_left: int  # last sample outside the band on the old side
-    i_right: int  # first sample outside the band on the new side
-
-
-def _candidates(t: FloatArray, tq: FloatArray, h: float) -> list[_Candidate]:
-    state = np.where(tq > h, 1, np.where(tq < -h, -1, 0))
-    idx = np.flatnonzero(state)
-    if idx.size < 2:
-        return []
-    s = state[idx]
-    flips = np.flatnonzero(s[1:] != s[:-1])
-    out: list[_Candidate] = []
-    for f in flips:
-        i_left, i_right = int(idx[f]), int(idx[f + 1])
-        seg = tq[i_left:i_right + 1]
-        # last sign change between the band exits: the crossing that ends the reversal
-        sign_change = np.flatnonzero(np.signbit(seg[:-1]) != np.signbit(seg[1:]))
-        k = i_left + int(sign_change[-1]) if sign_change.size else i_left
-        t0, t1, y0, y1 = t[k], t[k + 1], tq[k], tq[k + 1]
-        tc = float(t0 + (t1 - t0) * (-y0) / (y1 - y0)) if y1 != y0 else float(t0)
-        kind = EventKind.TIP_IN if s[f + 1] > 0 else EventKind.TIP_OUT
-        out.append(_Candidate(kind, tc, i_left, i_right))
-    return out
-
-
-def _rate(t: FloatArray, tq: FloatArray, c: _Candidate, half: float) -> float:
-    lo = int(np.searchsorted(t, c.t_cross - half))
-    hi = int(np.searchsorted(t, c.t_cross + half, side="right"))
-    lo, hi = min(lo, c.i_left), max(hi, c.i_right + 1)
-    if hi - lo < 2:
-        return float("nan")
-    slope = np.polyfit(t[lo:hi] - c.t_cross, tq[lo:hi], 1)[0]
-    return float(slope)
 
 
 def _gap_problem(sig: Signal, t0: float, t1: float, max_gap: float) -> str | None:
@@ -174,20 +149,37 @@ def _brake_problem(signals: SignalSet, t0: float, t1: float, threshold: float) -
     return None
 
 
-def detect_events(signals: SignalSet, params: EventParams | None = None) -> list[Event]:
+@dataclass(frozen=True)
+class Detection:
+    """Events (excluded ones with their reason) and how many torque changes were rejected as ringing."""
+
+    events: list[Event]
+    ringing: int = 0  # state changes that did not dwell or did not move one way (inverter ringing)
+    small: int = 0  # reversals below min_step_nm or min_rate_nm_s
+
+
+def detect_events(signals: SignalSet, params: EventParams | None = None, drive: Drive | None = None) -> list[Event]:
+    """Find tip-in/tip-out events; excluded ones are returned too, with the reason (see :func:`find_events`)."""
+    return find_events(signals, params, drive).events
+
+
+def find_events(signals: SignalSet, params: EventParams | None = None, drive: Drive | None = None) -> Detection:
     """Find tip-in/tip-out events; excluded ones are returned too, with the reason.
 
     Parameters
     ----------
     signals
         Must hold ``motor_torque_nm`` and ``motor_speed_rpm``; ``pedal_pct``,
-        ``vehicle_speed_kmh`` and ``brake*`` channels are used when present.
+        ``vehicle_speed_kmh``, ``wheel_speed_*_rpm`` and ``brake*`` channels are used when present.
     params
         Thresholds; defaults suit 10-100 ms CAN periods and passenger-car torques.
+    drive
+        Overall ratio and tyre radius, for the wheel-slip check (:mod:`app.analysis.slip`);
+        None skips it.
 
     Returns
     -------
-    list of Event, in time order, ``index`` counting from 0.
+    Detection; its events in time order, ``index`` counting from 0.
     """
     p = params or EventParams()
     for name in (TORQUE, SPEED):
@@ -201,19 +193,21 @@ def detect_events(signals: SignalSet, params: EventParams | None = None) -> list
     pedal = signals.get(PEDAL)
     vspeed = signals.get(VEHICLE_SPEED)
 
-    accepted: list[tuple[_Candidate, float, float, float]] = []
-    for c in _candidates(t, tq, p.hysteresis_nm):
+    found, ringing = find_reversals(t, tq, ReversalParams(p.hysteresis_nm, p.min_dwell_s, p.max_ramp_reversal,
+                                                          p.rate_half_window_s))
+    accepted: list[tuple[Reversal, float, float]] = []
+    for c in found:
         before = median_in(torque, c.t_cross - p.step_before_s[0], c.t_cross - p.step_before_s[1])
         after = median_in(torque, c.t_cross + p.step_after_s[0], c.t_cross + p.step_after_s[1])
-        before = float(tq[c.i_left]) if not np.isfinite(before) else before
-        after = float(tq[c.i_right]) if not np.isfinite(after) else after
-        rate = _rate(t, tq, c, p.rate_half_window_s)
-        if abs(after - before) < p.min_step_nm or not abs(rate) >= p.min_rate_nm_s:
+        before = float(tq[max(c.index - 1, 0)]) if not np.isfinite(before) else before
+        after = float(tq[c.index]) if not np.isfinite(after) else after
+        if abs(after - before) < p.min_step_nm or not abs(c.rate_nm_s) >= p.min_rate_nm_s:
             continue
-        accepted.append((c, before, after, rate))
+        accepted.append((c, before, after))
 
     events: list[Event] = []
-    for n, (c, before, after, rate) in enumerate(accepted):
+    for n, (c, before, after) in enumerate(accepted):
+        kind = EventKind.TIP_IN if c.tip_in else EventKind.TIP_OUT
         t_start = c.t_cross - p.pre_s
         t_end = c.t_cross + p.post_s
         exclusion: str | None = None
@@ -230,11 +224,11 @@ def detect_events(signals: SignalSet, params: EventParams | None = None) -> list
         if pedal is not None and len(pedal):
             pb = float(pedal.at([c.t_cross - p.pedal_lead_s])[0])
             pa = float(pedal.at([c.t_cross + p.pedal_lag_s])[0])
-            step = (pa - pb) if c.kind is EventKind.TIP_IN else (pb - pa)
+            step = (pa - pb) if c.tip_in else (pb - pa)
             corroborated = bool(np.isfinite(step) and step >= p.min_pedal_step_pct)
             if not corroborated:
                 exclusion = exclusion or (
-                    f"pedal does not corroborate the {c.kind.value}: {pb:.1f} % -> {pa:.1f} % "
+                    f"pedal does not corroborate the {kind.value}: {pb:.1f} % -> {pa:.1f} % "
                     f"(need a {p.min_pedal_step_pct:g} % step)")
         exclusion = exclusion or _brake_problem(signals, t_start, t_end, p.brake_threshold)
         ms = float(speed.at([c.t_cross])[0])
@@ -245,10 +239,12 @@ def detect_events(signals: SignalSet, params: EventParams | None = None) -> list
                     f"too low speed: vehicle speed {vs:.1f} km/h < {p.min_vehicle_speed_kmh:g} km/h")
         elif np.isfinite(ms) and abs(ms) < p.min_motor_speed_rpm:
             exclusion = exclusion or f"too low speed: motor speed {ms:.0f} rpm < {p.min_motor_speed_rpm:g} rpm"
+        exclusion = exclusion or slip_problem(signals, t_start, t_end, drive, p.max_wheel_slip, p.slip_min_speed_rpm)
         events.append(Event(
-            index=n, kind=c.kind, t_cross_s=c.t_cross, t_start_s=t_start, t_end_s=t_end,
-            torque_before_nm=before, torque_after_nm=after, torque_rate_nm_s=rate,
+            index=n, kind=kind, t_cross_s=c.t_cross, t_start_s=t_start, t_end_s=t_end,
+            torque_before_nm=before, torque_after_nm=after, torque_rate_nm_s=c.rate_nm_s,
             vehicle_speed_kmh=vs if vs is not None and np.isfinite(vs) else None, motor_speed_rpm=ms,
-            pedal_before_pct=pb, pedal_after_pct=pa, pedal_corroborated=corroborated, exclusion=exclusion,
+            pedal_before_pct=pb, pedal_after_pct=pa, pedal_corroborated=corroborated, from_coast=c.from_coast,
+            exclusion=exclusion,
         ))
-    return events
+    return Detection(events, ringing, len(found) - len(accepted))

@@ -25,14 +25,15 @@ reflected inertia known, ``g = 60 / (2 pi J_eq)`` rpm/(N m s) is fixed and only 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
 from scipy.signal import find_peaks
 
 from app.analysis.lash import NO_GAP, LashParams, free_rotor_interval
-from app.analysis.series import FloatArray, median_period, noise_rms, parabolic_vertex
+from app.analysis.sampling import Spacing, uniform_by_timestamps
+from app.analysis.series import FloatArray, noise_rms, parabolic_vertex
 from app.errors import InsufficientDataError
 from app.signals import Signal
 
@@ -58,6 +59,10 @@ class MetricParams:
     # the gap-open time needs it (the pipeline takes it from the vehicle). None: gap_open_time_s is NaN.
     free_rotor_inertia_kgm2: float | None = None
     lash: LashParams = field(default_factory=LashParams)
+    # Resolution the sampling must offer (app.analysis.sampling): coarser sampling nulls the metric with a reason.
+    max_gap_period_s: float = 0.012  # gap-open time (20-30 ms phase) needs a mean spacing at most this
+    min_samples_per_cycle: float = 6.0  # shuffle frequency and damping need this many samples per period
+    fine_samples_per_cycle: float = 10.0  # below this the fluctuation is flagged as approximate (value kept)
 
 
 @dataclass(frozen=True)
@@ -80,6 +85,9 @@ class RippleMetrics:
     noise_rpm: float
     sample_period_s: float
     gap_rotor_inertia_kgm2: float  # inertia the speed slope implies while the gap is open
+    # metric name -> why the sampling cannot support it; the metric is NaN (null) unless the reason
+    # starts with "approximate"
+    resolution: dict[str, str] = field(default_factory=dict)
 
     def values(self) -> dict[str, float]:
         return {k: getattr(self, k) for k in METRIC_NAMES}
@@ -218,9 +226,17 @@ def ripple_metrics(
     t, speed = t[fin], speed[fin]
     if t.size < 8:
         raise InsufficientDataError(f"{t.size} speed samples in the event window; need at least 8")
-    dt = median_period(t)
+    t_raw, speed_raw = t, speed
+    t, speed, sp = uniform_by_timestamps(t, speed)  # bursty stream: uniform at its mean spacing
+    if t.size < 8:
+        raise InsufficientDataError(f"{t.size} samples at the mean spacing {sp.mean_s * 1e3:.1f} ms; need at least 8")
+    dt = sp.mean_s
     y = direction * (speed - rigid_trend(t, speed, torque, t_cross, p.rigid_gain_rpm_per_nms))
-    noise = noise_rms(y[t < t_cross - p.peak_lead_s]) if np.sum(t < t_cross - p.peak_lead_s) > 8 else noise_rms(y)
+    # the noise floor from the samples as logged: interpolation onto the grid would average the noise down
+    y_raw = y if t is t_raw else direction * (speed_raw - rigid_trend(t_raw, speed_raw, torque, t_cross,
+                                                                        p.rigid_gain_rpm_per_nms))
+    pre = t_raw < t_cross - p.peak_lead_s
+    noise = noise_rms(y_raw[pre]) if np.sum(pre) > 8 else noise_rms(y_raw)
     final = float(np.median(y[int(y.size * (1.0 - p.final_fraction)):]))
     i0 = int(np.searchsorted(t, t_cross - p.peak_lead_s))
     i1 = int(np.searchsorted(t, t_cross + p.peak_search_s, side="right")) - 1
@@ -231,8 +247,9 @@ def ripple_metrics(
     if p.free_rotor_inertia_kgm2 is not None:
         lash = free_rotor_interval(t, speed, torque, t_cross, direction, p.free_rotor_inertia_kgm2, noise, p.lash)
     if found is None:
-        return RippleMetrics(NAN, NAN, lash.duration_s, NAN, NAN, NAN, NAN, NAN, lash.t_open_s, lash.t_close_s,
-                             NAN, NAN, NAN, noise, dt, lash.rotor_inertia_kgm2)
+        return _resolution_checked(RippleMetrics(
+            NAN, NAN, lash.duration_s, NAN, NAN, NAN, NAN, NAN, lash.t_open_s, lash.t_close_s,
+            NAN, NAN, NAN, noise, dt, lash.rotor_inertia_kgm2), sp, p)
     ip, iv = found
     off_p, y_peak = parabolic_vertex(y, ip)
     t_peak = float(t[ip] + off_p * dt)
@@ -277,7 +294,7 @@ def ripple_metrics(
     elif not outside.size:
         settle = t_peak - t_cross
 
-    return RippleMetrics(
+    return _resolution_checked(RippleMetrics(
         fluctuation_rpm=y_peak - y_valley if np.isfinite(y_valley) else NAN,
         rise_height_rpm=y_peak - base if np.isfinite(base) else NAN,
         gap_open_time_s=lash.duration_s,
@@ -294,4 +311,39 @@ def ripple_metrics(
         noise_rpm=noise,
         sample_period_s=dt,
         gap_rotor_inertia_kgm2=lash.rotor_inertia_kgm2,
-    )
+    ), sp, p)
+
+
+def _resolution_checked(m: RippleMetrics, sp: Spacing, p: MetricParams) -> RippleMetrics:
+    """``m`` with the metrics its sampling cannot resolve set to NaN, each with the reason.
+
+    The sampling period is the mean spacing of the actual time stamps (``sp``), not the median
+    of a bursty stream. Gap-open time needs ``max_gap_period_s``; shuffle frequency and damping
+    ratio need ``min_samples_per_cycle`` samples per shuffle period at the mean spacing and half
+    as many at the longest gap (a burst stream's gaps alias a fast shuffle to a slower one,
+    so the frequency found is not trusted either); the fluctuation is kept
+    but flagged below ``fine_samples_per_cycle`` (the peak and valley fall between samples).
+    """
+    why: dict[str, str] = {}
+    dt = sp.mean_s
+    where = f"mean spacing {dt * 1e3:.1f} ms, max {sp.max_s * 1e3:.1f} ms"
+    changes: dict[str, float] = {}
+    if dt > p.max_gap_period_s:
+        why["gap_open_time_s"] = (f"sampling too coarse for the gap-open time: {where}; needs a mean spacing "
+                                  f"<= {p.max_gap_period_s * 1e3:.0f} ms")
+        changes.update(gap_open_time_s=NAN, t_gap_open_s=NAN, t_gap_close_s=NAN)
+    f = m.shuffle_freq_hz
+    if np.isfinite(f) and f > 0:
+        per_cycle, at_max = 1.0 / (f * dt), 1.0 / (f * sp.max_s)
+        if per_cycle < p.min_samples_per_cycle or at_max < p.min_samples_per_cycle / 2:
+            text = (f"sampling too coarse for the shuffle: {per_cycle:.1f} samples per period at {f:.1f} Hz "
+                    f"({at_max:.1f} at the longest gap; {where}); needs {p.min_samples_per_cycle:g} "
+                    f"({p.min_samples_per_cycle / 2:g} at the longest gap)")
+            why["shuffle_freq_hz"] = why["damping_ratio"] = text
+            changes.update(shuffle_freq_hz=NAN, damping_ratio=NAN)
+        if per_cycle < p.fine_samples_per_cycle and np.isfinite(m.fluctuation_rpm):
+            why["fluctuation_rpm"] = (f"approximate: {per_cycle:.1f} samples per shuffle period ({where}); "
+                                      "peak and valley may fall between samples")
+    if not why:
+        return m
+    return replace(m, resolution=why, **changes)

@@ -51,3 +51,11 @@ def noise_rms(y: FloatArray) -> float:
     if y.size < 5:
         return 0.0
     return float(np.std(np.diff(y, 2)) / np.sqrt(6.0))
+
+
+def moving_mean(t: FloatArray, y: FloatArray, window_s: float) -> FloatArray:
+    """Mean of ``y`` over ``[t_i, t_i + window_s]`` for every sample ``i`` (finite ``y``, increasing ``t``)."""
+    c = np.concatenate(([0.0], np.cumsum(y)))
+    i = np.arange(t.size)
+    hi = np.searchsorted(t, t + window_s, side="right")
+    return np.asarray((c[hi] - c[i]) / (hi - i), dtype=np.float64)

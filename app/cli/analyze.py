@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli.vehicle_args import add_log_and_vehicle, vehicle_inputs
+from app.cli.vehicle_args import add_log_and_vehicle, event_params, vehicle_inputs
 
 
 def register(sub: Any) -> None:
@@ -36,7 +36,7 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
     from app.storage.results import json_safe
 
     inputs = vehicle_inputs(args)
-    opts = AnalysisOptions(model=args.model, whole_log=not args.no_whole_log)
+    opts = AnalysisOptions(model=args.model, whole_log=not args.no_whole_log, events=event_params(args))
     doc, arrays = result_payload(run_analysis(args.log, inputs, opts))
     if getattr(args, "tolerance", 0):
         from types import SimpleNamespace
@@ -97,7 +97,7 @@ def tolerance_table(tol: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.cli.report import events_table, metrics_table, summary_line
+    from app.cli.report import events_table, metrics_table, summary_line, tracking_lines
 
     doc = analysis_doc(args)
     text = json.dumps(doc, indent=1)
@@ -110,6 +110,10 @@ def run(args: argparse.Namespace) -> int:
         print()
         print(events_table(doc))
         print()
+        for note in doc.get("notes", []):
+            print(f"note: {note}")
+        for line in tracking_lines(doc):
+            print(line)
         print(metrics_table(doc))
         if "gap_sensitivity" in doc:
             print()

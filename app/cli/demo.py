@@ -42,7 +42,7 @@ def counter_gaps_table(doc: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.cli.report import events_table, metrics_table, summary_line
+    from app.cli.report import events_table, metrics_table, summary_line, tracking_lines
     from app.demo.build import build_demo_log
     from app.demo.plot import overlay_png
     from app.jobs import JobRunner
@@ -99,6 +99,8 @@ def run(args: argparse.Namespace) -> int:
         print()
         print(events_table(doc))
         print()
+        for line in tracking_lines(doc):  # none when the simulation tracks, as it should on the demo
+            print(line)
         print(metrics_table(doc))
         print()
         print(counter_gaps_table(doc))

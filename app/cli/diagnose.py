@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from app.cli.vehicle_args import add_log_and_vehicle, vehicle_inputs
+from app.cli.vehicle_args import add_log_and_vehicle, event_params, vehicle_inputs
 
 
 def register(sub: Any) -> None:
@@ -104,18 +104,19 @@ def run(args: argparse.Namespace) -> int:
     candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
     if not candidates:
         raise InputError("--candidates is empty")
+    thresholds = event_params(args)  # refused before anything is decoded
     inputs = vehicle_inputs(args)
     vehicle, dbc, smap = inputs.vehicle, inputs.database, inputs.signal_map
     options = DiagnosisOptions(candidates=candidates, seed=args.seed, model=args.model)
     say = _progress(args.quiet)
     say(0.0, f"decoding {args.log}")
     signals, _ = decode_log(args.log, dbc, smap)
-    result = diagnose_signals(signals, vehicle, options, say)
+    result = diagnose_signals(signals, vehicle, options, say, thresholds)
     validation = None
     if args.validate is not None and result.decision.top:
         say(0.0, f"decoding {args.validate}")
         other, _ = decode_log(args.validate, dbc, smap)
-        validation = validate_on(result, other, vehicle, progress=say).to_dict()
+        validation = validate_on(result, other, vehicle, progress=say, event_params=thresholds).to_dict()
     elif args.validate is not None:
         validation = {"skipped": f"decision {result.decision.status}: no effect to validate"}
     doc = report_dict(result, validation)

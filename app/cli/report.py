@@ -24,11 +24,16 @@ def _f(v: Any, scale: float = 1.0, digits: int = 1) -> str:
 
 
 def events_table(doc: dict[str, Any]) -> str:
-    lines = [f"{'#':>3} {'kind':<8} {'t (s)':>8} {'torque (N m)':>15} {'rate (N m/s)':>12} {'km/h':>6}  status"]
+    lines = [f"{'#':>3} {'kind':<8} {'side':<6} {'t (s)':>8} {'torque (N m)':>15} {'rate (N m/s)':>12} {'km/h':>6}"
+             "  status"]
     for e in doc["events"]:
         status = "analysed" if e["has_metrics"] else (e["exclusion"] or e["error"] or "-")
+        tr = e.get("tracking") or {}
+        if e["has_metrics"] and tr.get("verdict") == "poor":
+            status += ", does not track: " + "; ".join(tr.get("reasons", []))
+        side = "coast" if e.get("from_coast") else "regen"  # the not-driving side of the reversal
         torque = f"{e['torque_before_nm']:.0f} -> {e['torque_after_nm']:.0f}"
-        lines.append(f"{e['index']:>3} {e['kind']:<8} {e['t_cross_s']:>8.2f} {torque:>15} "
+        lines.append(f"{e['index']:>3} {e['kind']:<8} {side:<6} {e['t_cross_s']:>8.2f} {torque:>15} "
                      f"{e['torque_rate_nm_s']:>12.0f} {_f(e['vehicle_speed_kmh']):>6}  {status}")
     return "\n".join(lines)
 
@@ -49,12 +54,33 @@ def metrics_table(doc: dict[str, Any]) -> str:
         if row:
             lines.append(f"{label:<30} {'':>10} {'':>10} {_f(row['difference_median'], 1.0, 3):>10}  "
                          f"{'rpm' if key == 'rms_rpm' else '-'}")
+    labels = {key: label for key, label, _, _ in METRIC_ROWS}
+    for key, why in (doc["summary"].get("resolution") or {}).items():
+        lines.append(f"  {labels.get(key, key)}: {why}")
     return "\n".join(lines)
+
+
+def tracking_lines(doc: dict[str, Any]) -> list[str]:
+    """A warning above the medians when the simulation does not track the measurement (empty when it does)."""
+    tr = doc["summary"].get("tracking") or {}
+    if tr.get("verdict") == "good":
+        return []
+    head = ("WARNING: the simulation does not track this log; the differences below are not a valid comparison:"
+            if tr.get("verdict") == "poor" else "WARNING: tracking could not be judged:")
+    return [head, *(f"  - {r}" for r in tr.get("reasons", []))]
 
 
 def summary_line(doc: dict[str, Any]) -> str:
     s = doc["summary"]
     whole = doc.get("whole") or {}
     return (f"{s['events']} events ({s['tip_in']} tip-in, {s['tip_out']} tip-out): {s['with_metrics']} analysed, "
-            f"{s['excluded']} excluded; torque-to-speed offset {_f(s['offset_ms'])} ms; whole-log speed RMS "
-            f"{_f(whole.get('rms_rpm'))} rpm")
+            f"{s['excluded']} excluded; {_offset_text(doc)}; whole-log speed RMS "
+            f"{_f(whole.get('rms_rpm'))} rpm; tracking {(s.get('tracking') or {}).get('verdict', '-')}")
+
+
+def _offset_text(doc: dict[str, Any]) -> str:
+    s, off = doc["summary"], doc.get("offset") or {}
+    if s.get("offset_applied", True):
+        return f"torque-to-speed offset {_f(s['offset_ms'])} ms"
+    return (f"torque-to-speed offset not applied (estimate {_f(off.get('lag_s'), 1e3)} ms at correlation "
+            f"{_f(off.get('correlation'), 1.0, 2)})")

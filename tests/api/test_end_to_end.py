@@ -50,6 +50,15 @@ def test_upload_analyse_and_read_everything(server: Server, demo_log: Path) -> N
         for m in metrics["events"]:
             assert m["measured"]["shuffle_freq_hz"] is None or 5 < m["measured"]["shuffle_freq_hz"] < 11
             assert m["rms_rpm"] is not None and m["nrmse"] is not None
+            assert m["tracking"] == {"verdict": "good", "reasons": []}
+            assert m["measured"]["resolution"] == {}  # 10 ms messages resolve every metric
+        # the demo's simulation tracks: the verdict says so, the offset is applied
+        assert metrics["tracking"] == metrics["summary"]["tracking"] == {"verdict": "good", "reasons": []}
+        assert metrics["summary"]["offset_applied"] is True and metrics["offset"]["applied"] is True
+        assert metrics["sampling"]["motor_speed_rpm"]["mean_s"] == pytest.approx(0.01, rel=0.05)
+        assert metrics["sampling"]["motor_speed_rpm"]["bursty"] is False
+        assert c.get(f"/analyses/{analysis_id}").json()["summary"]["tracking"]["verdict"] == "good"
+        assert all(e["tracking"] is None for e in events if not e["has_metrics"])
 
         full = c.get(f"/analyses/{analysis_id}/speed", params={"max_points": 0}).json()
         small = c.get(f"/analyses/{analysis_id}/speed", params={"max_points": 2000}).json()

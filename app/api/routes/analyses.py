@@ -84,7 +84,8 @@ def get_metrics(analysis_id: str, store: StoreDep, cache: ResultsDep) -> dict[st
     _, files = finished(store, cache, analysis_id)
     d = files.doc
     return {"analysis_id": analysis_id, "summary": d["summary"], "offset": d["offset"], "whole": d["whole"],
-            "events": d["metrics"], "notes": d["notes"]}
+            "events": d["metrics"], "notes": d["notes"], "tracking": d.get("tracking"),
+            "sampling": d.get("sampling")}  # absent from results stored before they existed
 
 
 @router.get("/{analysis_id}/tolerance", summary="Predicted ripple band over the vehicle's tolerances (background job)",
