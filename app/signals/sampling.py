@@ -11,7 +11,7 @@ stamps, never ``n * median``. :func:`spacing` measures a signal's time stamps;
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -45,6 +45,26 @@ class Spacing:
     @property
     def rate_hz(self) -> float | None:
         return None if not self.mean_ms else 1000.0 / self.mean_ms
+
+    @property
+    def mean_s(self) -> float:
+        """The mean spacing in s, NaN with fewer than two samples (for arithmetic on the period)."""
+        return _seconds(self.mean_ms)
+
+    @property
+    def median_s(self) -> float:
+        return _seconds(self.median_ms)
+
+    @property
+    def max_s(self) -> float:
+        return _seconds(self.max_ms)
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def _seconds(ms: float | None) -> float:
+    return float("nan") if ms is None else ms / 1000.0
 
 
 def burst_reason(intervals: int, mean_ms: float | None, median_ms: float | None, max_ms: float | None) -> str:

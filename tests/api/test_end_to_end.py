@@ -55,7 +55,7 @@ def test_upload_analyse_and_read_everything(server: Server, demo_log: Path) -> N
         # the demo's simulation tracks: the verdict says so, the offset is applied
         assert metrics["tracking"] == metrics["summary"]["tracking"] == {"verdict": "good", "reasons": []}
         assert metrics["summary"]["offset_applied"] is True and metrics["offset"]["applied"] is True
-        assert metrics["sampling"]["motor_speed_rpm"]["mean_s"] == pytest.approx(0.01, rel=0.05)
+        assert metrics["sampling"]["motor_speed_rpm"]["mean_ms"] == pytest.approx(10.0, rel=0.05)
         assert metrics["sampling"]["motor_speed_rpm"]["bursty"] is False
         assert c.get(f"/analyses/{analysis_id}").json()["summary"]["tracking"]["verdict"] == "good"
         assert all(e["tracking"] is None for e in events if not e["has_metrics"])
