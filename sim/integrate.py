@@ -106,6 +106,60 @@ def wheel_load(road: np.ndarray, wheel_drag: np.ndarray, omega_w: float, share: 
     return load
 
 
+@njit(cache=True)
+def _gap_event(j: int, d: float, t: float, dt: float, chalf: np.ndarray, is_open: np.ndarray, d_prev: np.ndarray,
+               ev_gap: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray, n_ev: int) -> int:
+    """Gap ``j`` opened or closed within the last step: flip its state, log the crossing of
+    ``|delta| = alpha`` (time interpolated in the step) while there is room. Returns the event count."""
+    now_open = abs(d) < chalf[j]
+    is_open[j] = now_open
+    if n_ev < ev_gap.size:
+        a0 = abs(d_prev[j]) - chalf[j]
+        a1 = abs(d) - chalf[j]
+        frac = a0 / (a0 - a1) if a0 != a1 else 1.0
+        ev_gap[n_ev] = j
+        ev_t[n_ev] = t - dt + min(max(frac, 0.0), 1.0) * dt
+        ev_kind[n_ev] = 1 if now_open else 0
+        n_ev += 1
+    return n_ev
+
+
+@njit(cache=True)
+def _general_couplings(
+    nch: int, ca: np.ndarray, cb: np.ndarray, cb2: np.ndarray, theta: np.ndarray, omega: np.ndarray, th_h: float,
+    om_h: float, t: float, dt: float, cr: np.ndarray, ce: np.ndarray, ck: np.ndarray, ck3: np.ndarray,
+    cc: np.ndarray, chalf: np.ndarray, tau: np.ndarray, acc: np.ndarray, is_open: np.ndarray, d_prev: np.ndarray,
+    ev_gap: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray, n_ev: int,
+) -> tuple[float, int]:
+    """Coupling torques of any chain into ``tau``/``acc`` (coupling j joins ca[j] to cb[j], or to the
+    mean of cb[j] and cb2[j]); gap crossings logged. Returns the housing torque sum and the event count."""
+    acc_h = 0.0
+    for j in range(nch):
+        a = ca[j]
+        bb = cb[j]
+        b2 = cb2[j]
+        if b2 < 0:
+            d = theta[a] - cr[j] * theta[bb] - ce[j] * th_h
+            dd = omega[a] - cr[j] * omega[bb] - ce[j] * om_h
+        else:
+            d = theta[a] - cr[j] * (0.5 * (theta[bb] + theta[b2])) - ce[j] * th_h
+            dd = omega[a] - cr[j] * (0.5 * (omega[bb] + omega[b2])) - ce[j] * om_h
+        f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+        tau[j] = f
+        acc[a] -= f
+        if b2 < 0:
+            acc[bb] += cr[j] * f
+        else:
+            acc[bb] += 0.5 * cr[j] * f
+            acc[b2] += 0.5 * cr[j] * f
+        acc_h += ce[j] * f
+        if chalf[j] > 0.0:
+            if (abs(d) < chalf[j]) != is_open[j]:
+                n_ev = _gap_event(j, d, t, dt, chalf, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
+            d_prev[j] = d
+    return acc_h, n_ev
+
+
 @njit(cache=True, nogil=True)
 def _initial_forces(
     theta: np.ndarray, omega: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
@@ -202,6 +256,10 @@ def run_chain(
     d_prev = np.zeros(nc)
     is_open = np.zeros(nc, dtype=np.bool_)
     tyre_tau = tyre[2] if vehicle >= 0 else 0.0
+    serial = True
+    for j in range(nch):
+        if ca[j] != j or cb[j] != j + 1 or cb2[j] >= 0:
+            serial = False
     k_lag = 0
     t_air, k_lag = input_at(tin, tq, linear, t0 - lag[0], k_lag)
     a_lag = 1.0 - math.exp(-dt / lag[1]) if lag[1] > 0.0 else 1.0
@@ -230,38 +288,22 @@ def run_chain(
             for b in range(nb):
                 acc[b] = 0.0
             acc_h = 0.0  # torque on the housing: mesh reactions, stator, mount
-            for j in range(nch):  # coupling j joins body ca[j] to cb[j] (and cb2[j])
-                a = ca[j]
-                bb = cb[j]
-                b2 = cb2[j]
-                if b2 < 0:
-                    d = theta[a] - cr[j] * theta[bb] - ce[j] * th_h
-                    dd = omega[a] - cr[j] * omega[bb] - ce[j] * om_h
-                else:
-                    d = theta[a] - cr[j] * (0.5 * (theta[bb] + theta[b2])) - ce[j] * th_h
-                    dd = omega[a] - cr[j] * (0.5 * (omega[bb] + omega[b2])) - ce[j] * om_h
-                f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
-                tau[j] = f
-                acc[a] -= f
-                if b2 < 0:
-                    acc[bb] += cr[j] * f
-                else:
-                    acc[bb] += 0.5 * cr[j] * f
-                    acc[b2] += 0.5 * cr[j] * f
-                acc_h += ce[j] * f
-                if chalf[j] > 0.0:
-                    now_open = abs(d) < chalf[j]
-                    if now_open != is_open[j]:
-                        is_open[j] = now_open
-                        if n_ev < ev_gap.size:  # crossing of |delta| = alpha within the last step
-                            a0 = abs(d_prev[j]) - chalf[j]
-                            a1 = abs(d) - chalf[j]
-                            frac = a0 / (a0 - a1) if a0 != a1 else 1.0
-                            ev_gap[n_ev] = j
-                            ev_t[n_ev] = t - dt + min(max(frac, 0.0), 1.0) * dt
-                            ev_kind[n_ev] = 1 if now_open else 0
-                            n_ev += 1
-                    d_prev[j] = d
+            if serial:  # the usual chain, body j to body j + 1: no index loads in the hot loop
+                for j in range(nch):
+                    d = theta[j] - cr[j] * theta[j + 1] - ce[j] * th_h
+                    dd = omega[j] - cr[j] * omega[j + 1] - ce[j] * om_h
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+                    tau[j] = f
+                    acc[j] -= f
+                    acc[j + 1] += cr[j] * f
+                    acc_h += ce[j] * f
+                    if chalf[j] > 0.0:
+                        if (abs(d) < chalf[j]) != is_open[j]:
+                            n_ev = _gap_event(j, d, t, dt, chalf, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
+                        d_prev[j] = d
+            else:  # any chain (branches, 3-body differential): not inlined, to keep this loop tight
+                acc_h, n_ev = _general_couplings(nch, ca, cb, cb2, theta, omega, th_h, om_h, t, dt, cr, ce, ck, ck3, cc,
+                                                 chalf, tau, acc, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
             if housing >= 0:
                 f = contact_torque(th_h, om_h, ck[nch], ck3[nch], cc[nch], 0.0)  # mount to ground
                 tau[nch] = f
