@@ -29,7 +29,7 @@ from sim.params_base import (
     CONTACT_RADIUS_MM, DAMPING, INERTIA, LASH_RAD, MASS, MAX_SEGMENTS, MM_FIELDS, MODULE_MM, RATIO, SEGMENTS,
     STIFFNESS, TEETH, WHEEL_RADIUS, Gap, gap_from_mm,
 )
-from sim.stages import Stage, check_topology, parse_chain, split_ends, stage_dict
+from sim.stages import Stage, gap_table, check_topology, parse_chain, split_ends, stage_dict
 from sim.optional import Drag, Effects, ProgressiveStiffness, SpeedSensor, TorqueLag, TyreSlip
 
 @dataclass(frozen=True, kw_only=True)
@@ -162,8 +162,10 @@ class Vehicle:
                                          "[[stage]] tables)")
         validate(self, "", _cross_checks)
         if self.stages:
+            from sim.layout import stage_checks
+
             check_topology(self.stages)
-            _stage_checks(self)
+            stage_checks(self)
         for path, band in self.tolerances.items():
             value = self.get(path)  # raises ParameterError for unknown paths
             if not isinstance(value, int | float) or isinstance(value, bool):
@@ -243,7 +245,7 @@ class Vehicle:
                 banded.add(parts[1])
             if parts[0] == "gaps" and len(parts) == 3:
                 self.gap(parts[1])  # validates the gap name
-                gap = _gap_table(data, parts[1])
+                gap = gap_table(data, parts[1])
                 if parts[2] in MM_FIELDS:
                     gap.pop(parts[2][:-3], None)  # converted with the (possibly changed) radius on rebuild
                 elif parts[2] not in gap:
@@ -258,7 +260,7 @@ class Vehicle:
                 raise ParameterError(path, value, "no such vehicle field")
             node[parts[-1]] = list(value) if isinstance(value, tuple) else value
         for name in moved - banded:
-            _move_band(_gap_table(data, name), self.gap(name))
+            _move_band(gap_table(data, name), self.gap(name))
         if self.stages:
             data["stage"] = list(data["stage"].values())
         return Vehicle.from_dict(data)
@@ -267,7 +269,15 @@ class Vehicle:
     @functools.cached_property
     def chain(self) -> tuple[Stage, ...]:
         """The driveline as stages from rotor to wheels; the classic layout as its five stages."""
+        from sim.layout import legacy_stages
+
         return self.stages or legacy_stages(self)
+
+    def as_stages(self) -> Vehicle:
+        """The same driveline written as a stage chain (a classic file converted; a chain unchanged)."""
+        from sim.layout import stage_layout
+
+        return self if self.stages else Vehicle.from_dict(stage_layout(self))
 
     def stage(self, name: str) -> Stage:
         """The stage called ``name`` (ParameterError naming the known ones otherwise)."""
@@ -339,34 +349,6 @@ class Vehicle:
         return tuple(self.gap_speed_ratio(g) / self.gap(g).arc_mm(1.0, name=g) for g in self.gap_names)
 
 
-def legacy_stages(v: Vehicle) -> tuple[Stage, ...]:
-    """The classic layout as stages: spline, mesh1, mesh2 (gear pairs), differential, halfshaft."""
-    red, hs, g, ps = v.reducer, v.halfshaft, v.gaps, v.effects.progressive_stiffness
-    assert red is not None and hs is not None and g is not None
-    return (
-        Stage(kind="spline", name="spline", stiffness=red.spline_stiffness, damping=red.spline_damping,
-              inertia=red.input_shaft_inertia, lash_rad=g.spline, cubic_stiffness=ps.spline),
-        Stage(kind="gear", name="mesh1", ratio=red.ratio1, stiffness=red.mesh1_stiffness, damping=red.mesh1_damping,
-              inertia=red.intermediate_inertia, lash_rad=g.mesh1, cubic_stiffness=ps.mesh1),
-        Stage(kind="gear", name="mesh2", ratio=red.ratio2, stiffness=red.mesh2_stiffness, damping=red.mesh2_damping,
-              inertia=red.differential_inertia, lash_rad=g.mesh2, cubic_stiffness=ps.mesh2),
-        Stage(kind="differential", name="differential", stiffness=red.diff_stiffness, damping=red.diff_damping,
-              inertia=red.side_gears_inertia, lash_rad=g.differential, cubic_stiffness=ps.differential),
-        Stage(kind="halfshaft", name="halfshaft", stiffness=hs.stiffness, damping=hs.damping, inertia=hs.inertia,
-              segments=hs.segments, count=hs.count, lash_rad=g.halfshaft, cubic_stiffness=ps.halfshaft),
-    )
-
-
-def _gap_table(data: dict[str, Any], name: str) -> dict[str, Any]:
-    """The dict of gap ``name`` inside :meth:`Vehicle.to_dict` output (stage tables keyed by name)."""
-    if "gaps" in data:
-        return data["gaps"][name]  # type: ignore[no-any-return]
-    stages = data["stage"]
-    if name in stages:
-        return stages[name]["lash_rad"]  # type: ignore[no-any-return]
-    return stages[name.removesuffix("_right")]["right"]["lash_rad"]  # type: ignore[no-any-return]
-
-
 def _cross_checks(obj: Any, prefix: str) -> None:
     if isinstance(obj, Gap) and obj.min > obj.max:
         raise ParameterError(f"{prefix}min", obj.min, f"must be <= {prefix}max = {obj.max!r}")
@@ -378,22 +360,6 @@ def _cross_checks(obj: Any, prefix: str) -> None:
                              f"total ratio {obj.ratio:.4g} outside the physical range [{RATIO[0]:g}, {RATIO[1]:g}]")
     if isinstance(obj, Halfshaft) and obj.count > 2:
         raise ParameterError(f"{prefix}count", obj.count, "must be 1 or 2 driven half-shafts")
-
-
-def _stage_checks(v: Vehicle) -> None:
-    """Whole-vehicle checks of a stage chain: total ratio, and effects that name classic gaps."""
-    if not RATIO[0] <= v.ratio <= RATIO[1]:
-        raise ParameterError("stage", f"total ratio {v.ratio:.4g}",
-                             f"outside the physical range [{RATIO[0]:g}, {RATIO[1]:g}] (product of the stage ratios)")
-    ps = v.effects.progressive_stiffness
-    for g in GAP_NAMES:
-        if getattr(ps, g) != 0.0:
-            raise ParameterError(f"effects.progressive_stiffness.{g}", getattr(ps, g),
-                                 "names a classic-layout gap; a stage chain gives cubic_stiffness on each stage")
-    last = v.stages[-1]
-    if last.right is not None and v.effects.tyre_slip.enabled:
-        raise ParameterError("effects.tyre_slip.enabled", True,
-                             f"not available with unequal half-shafts (stage '{last.name}' has a right shaft)")
 
 
 def _move_band(gap: dict[str, Any], old: Gap) -> None:

@@ -306,3 +306,13 @@ def stage_dict(s: Stage) -> dict[str, Any]:
                         for k, v in dataclasses.asdict(s.right).items()}
         out["right"]["lash_rad"] = dataclasses.asdict(s.right.lash_rad)
     return out
+
+
+def gap_table(data: dict[str, Any], name: str) -> dict[str, Any]:
+    """The dict of gap ``name`` inside :meth:`Vehicle.to_dict` output (stage tables keyed by name)."""
+    if "gaps" in data:
+        return data["gaps"][name]  # type: ignore[no-any-return]
+    stages = data["stage"]
+    if name in stages:
+        return stages[name]["lash_rad"]  # type: ignore[no-any-return]
+    return stages[name.removesuffix("_right")]["right"]["lash_rad"]  # type: ignore[no-any-return]
