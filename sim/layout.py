@@ -69,6 +69,15 @@ def stage_layout(v: Vehicle) -> dict[str, Any]:
     return data
 
 
+def shaft_gap(v: Vehicle) -> str:
+    """The gap sensitivities are normalised to and the free rotor side ends at: the (left) half-shaft
+    gap, or the last gap of a chain without half-shafts."""
+    for s in v.chain:
+        if s.kind == "halfshaft":
+            return s.name
+    return v.gap_names[-1]
+
+
 def stage_checks(v: Vehicle) -> None:
     """Whole-vehicle checks of a stage chain: total ratio, and effects that name classic gaps."""
     if not RATIO[0] <= v.ratio <= RATIO[1]:

@@ -138,7 +138,7 @@ class _Builder:
         """``seg`` equal pieces from body ``a`` to a new wheel body; ``n`` equal shafts lumped in parallel."""
         j_seg = n * j / seg
         self.inertia[a] += 0.5 * j_seg
-        nodes = [a, *(self.body(f"{'halfshaft' if name == 'halfshaft' else name}_node{i}", j_seg)
+        nodes = [a, *(self.body(f"{name}_node{i}", j_seg)
                       for i in range(1, seg))]
         w = self.body(wheel_name, wheel_j + 0.5 * j_seg)
         nodes.append(w)

@@ -198,8 +198,8 @@ class Vehicle:
             if "stages" in data:
                 raise ParameterError("stages", data["stages"], "unknown field; the chain is given as [[stage]]")
             return build(cls, data, "", _nested_type, _preprocess)
-        data = split_ends(data)
-        stages = parse_chain(data.pop("stage"))
+        data, first = split_ends(data)
+        stages = parse_chain(data.pop("stage"), first)
         if "housing" not in data:  # stage files: no [housing] means no housing on mounts
             data["housing"] = {"enabled": False}
         return build(cls, {**data, "stages": stages}, "", _nested_type, _preprocess)

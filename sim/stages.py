@@ -39,7 +39,8 @@ KINDS = ("spline", "gear", "planetary", "chain", "differential", "halfshaft")
 ALIASES = {"coupling": "spline", "belt": "chain"}
 DRIVE_KINDS = ("spline", "gear", "planetary", "chain")  # before the differential
 STAGE_RATIO = (0.1, 30.0)  # one stage's speed ratio input / output
-END_TABLES = {"rotor": "motor", "wheel": "wheel"}  # end entries of the chain -> their own tables
+END_TABLES = {"rotor": "motor", "wheel": "wheel"}
+RESERVED = frozenset({"rotor", "wheel", "wheels", "housing", "vehicle", "mount", "tyre"})  # end entries of the chain -> their own tables
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -151,6 +152,9 @@ def parse_stage(i: int, raw: Any) -> Stage:
     if not isinstance(name, str) or not name or not name.replace("_", "").isalnum():
         raise ParameterError(f"stage {i} {name!r}: name", name, "must be a word of letters, digits and _")
     label = _label(i, name)
+    if name in RESERVED or name.endswith(("_right", "_left")):
+        raise ParameterError(f"{label}name", name, f"reserved for the model's own bodies ({sorted(RESERVED)}, "
+                             "*_left, *_right)")
     kind = raw.get("kind")
     if kind is None:
         raise ParameterError(f"{label}kind", None, f"required field missing; one of {list(KINDS)}")
@@ -219,32 +223,36 @@ def _ratio(raw: Mapping[str, Any], kind: str, label: str) -> float:
     return ratio
 
 
-def parse_chain(raw: Any) -> tuple[Stage, ...]:
-    """Validated stages in order; raises ParameterError for a chain that is not rotor -> ... -> wheels."""
+def parse_chain(raw: Any, first: int = 0) -> tuple[Stage, ...]:
+    """Validated stages in order; raises ParameterError for a chain that is not rotor -> ... -> wheels.
+
+    ``first`` is the file index of ``raw[0]`` (1 when the file's first entry was the rotor), so
+    messages name the stage as the user counts it: ``stage 2 'chain': lash_rad``.
+    """
     if not isinstance(raw, list) or not raw:
         raise ParameterError("stage", raw, "must be a non-empty list of [[stage]] tables from rotor to wheels")
-    stages = tuple(parse_stage(i, s) for i, s in enumerate(raw))
+    stages = tuple(parse_stage(i + first, s) for i, s in enumerate(raw))
     seen: dict[str, int] = {}
-    for i, s in enumerate(stages):
-        if s.name in seen or s.name.endswith("_right") and s.name[:-6] in seen:
-            raise ParameterError(f"{_label(i, s.name)}name", s.name, f"already used by stage {seen.get(s.name, '?')}")
+    for i, s in enumerate(stages, start=first):
+        if s.name in seen:
+            raise ParameterError(f"{_label(i, s.name)}name", s.name, f"already used by stage {seen[s.name]}")
         seen[s.name] = i
-    check_topology(stages)
+    check_topology(stages, first)
     return stages
 
 
-def check_topology(stages: tuple[Stage, ...]) -> None:
+def check_topology(stages: tuple[Stage, ...], first: int = 0) -> None:
     """Rotor, drive stages, at most one differential, at most one half-shaft stage, in that order."""
     diff = -1
     for i, s in enumerate(stages):
-        label = _label(i, s.name)
+        label = _label(i + first, s.name)
         if s.kind in DRIVE_KINDS and (diff >= 0 or any(p.kind == "halfshaft" for p in stages[:i])):
             where = stages[diff] if diff >= 0 else next(p for p in stages[:i] if p.kind == "halfshaft")
             raise ParameterError(f"{label}kind", s.kind, f"a {s.kind} stage cannot follow the {where.kind} "
                                  f"'{where.name}': drive stages come before the differential and half-shafts")
         if s.kind == "differential":
             if diff >= 0:
-                raise ParameterError(f"{label}kind", s.kind, f"second differential; stage {diff} "
+                raise ParameterError(f"{label}kind", s.kind, f"second differential; stage {diff + first} "
                                      f"'{stages[diff].name}' is one already")
             if any(p.kind == "halfshaft" for p in stages[:i]):
                 raise ParameterError(f"{label}kind", s.kind, "the differential must come before the half-shafts")
@@ -254,20 +262,20 @@ def check_topology(stages: tuple[Stage, ...]) -> None:
         if s.right is not None and (diff < 0 or stages[diff].type != "open"):
             raise ParameterError(f"{label}right", "unequal shafts", "two unequal half-shafts need an open "
                                  "differential stage before them")
-    if stages[0].kind in ("differential", "halfshaft") and len(stages) == 1 and stages[0].kind == "differential":
-        raise ParameterError(f"{_label(0, stages[0].name)}kind", "differential", "no stage reaches the wheels")
 
 
-def split_ends(data: Mapping[str, Any]) -> dict[str, Any]:
+def split_ends(data: Mapping[str, Any]) -> tuple[dict[str, Any], int]:
     """Move ``kind = "rotor"``/``"wheel"`` entries at the ends of ``stage`` into ``[motor]``/``[wheel]``.
 
     The chain must run from the rotor to the wheels: the rotor is ``[motor]`` or the first entry,
-    the wheel end ``[wheel]`` or the last one; either end missing is an error naming it.
+    the wheel end ``[wheel]`` or the last one; either end missing is an error naming it. Returns
+    the data and the file index of the first remaining stage.
     """
     out = dict(data)
     raw = list(out.get("stage", []))
     if not isinstance(out.get("stage"), list):
-        return out
+        return out, 0
+    first = 1 if raw and isinstance(raw[0], Mapping) and raw[0].get("kind") == "rotor" else 0
     for kind, table in END_TABLES.items():
         idx = [i for i, s in enumerate(raw) if isinstance(s, Mapping) and s.get("kind") == kind]
         end = 0 if kind == "rotor" else len(raw) - 1
@@ -281,13 +289,16 @@ def split_ends(data: Mapping[str, Any]) -> dict[str, Any]:
                                      f"given both as a stage and as [{table}]; keep one")
             out[table] = {k: v for k, v in raw[i].items() if k not in ("kind", "name")}
         if not idx and table not in out:
-            raise ParameterError(f"stage {end}" if raw else "stage", raw[end].get("kind") if raw else None,
+            last = raw[end] if raw and isinstance(raw[end], Mapping) else {}
+            at = end + (len(data["stage"]) - len(raw))  # the file's index
+            raise ParameterError(f"{_label(at, last.get('name', last.get('kind', '?')))}kind" if raw else "stage",
+                                 last.get("kind"),
                                  f"the chain has no {kind} end: add a [{table}] table or a "
                                  f"{'first' if kind == 'rotor' else 'last'} [[stage]] with kind = \"{kind}\"")
         if idx:
             raw = [s for i, s in enumerate(raw) if i not in idx]
     out["stage"] = raw
-    return out
+    return out, first
 
 
 def stage_dict(s: Stage) -> dict[str, Any]:
