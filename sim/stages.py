@@ -273,8 +273,8 @@ def split_ends(data: Mapping[str, Any]) -> tuple[dict[str, Any], int]:
     """
     out = dict(data)
     raw = list(out.get("stage", []))
-    if not isinstance(out.get("stage"), list):
-        return out, 0
+    if not isinstance(out.get("stage"), list) or not raw:
+        return out, 0  # parse_chain names the problem
     first = 1 if raw and isinstance(raw[0], Mapping) and raw[0].get("kind") == "rotor" else 0
     for kind, table in END_TABLES.items():
         idx = [i for i, s in enumerate(raw) if isinstance(s, Mapping) and s.get("kind") == kind]
