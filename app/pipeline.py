@@ -169,6 +169,7 @@ def check_vehicle_files(driveline: Path, database: Path, signal_map: Path) -> di
         from app.errors import SignalMapError
         raise SignalMapError(f"signal map {signal_map.name} does not map {missing}, which every analysis needs")
     return {"vehicle": vehicle.name, "description": vehicle.description, "ratio": vehicle.ratio,
+            "stages": [f"{s.name} ({s.kind})" for s in vehicle.chain], "housing": vehicle.housing.enabled,
             "steps_per_simulated_s": steps, "database": database.name, "database_repairs": len(loaded.repairs),
             "channels": {c: f"{m}.{s}" for c, (m, s) in sorted(routes.items())}}
 
