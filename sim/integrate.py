@@ -124,42 +124,6 @@ def _gap_event(j: int, d: float, t: float, dt: float, chalf: np.ndarray, is_open
     return n_ev
 
 
-@njit(cache=True)
-def _general_couplings(
-    nch: int, ca: np.ndarray, cb: np.ndarray, cb2: np.ndarray, theta: np.ndarray, omega: np.ndarray, th_h: float,
-    om_h: float, t: float, dt: float, cr: np.ndarray, ce: np.ndarray, ck: np.ndarray, ck3: np.ndarray,
-    cc: np.ndarray, chalf: np.ndarray, tau: np.ndarray, acc: np.ndarray, is_open: np.ndarray, d_prev: np.ndarray,
-    ev_gap: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray, n_ev: int,
-) -> tuple[float, int]:
-    """Coupling torques of any chain into ``tau``/``acc`` (coupling j joins ca[j] to cb[j], or to the
-    mean of cb[j] and cb2[j]); gap crossings logged. Returns the housing torque sum and the event count."""
-    acc_h = 0.0
-    for j in range(nch):
-        a = ca[j]
-        bb = cb[j]
-        b2 = cb2[j]
-        if b2 < 0:
-            d = theta[a] - cr[j] * theta[bb] - ce[j] * th_h
-            dd = omega[a] - cr[j] * omega[bb] - ce[j] * om_h
-        else:
-            d = theta[a] - cr[j] * (0.5 * (theta[bb] + theta[b2])) - ce[j] * th_h
-            dd = omega[a] - cr[j] * (0.5 * (omega[bb] + omega[b2])) - ce[j] * om_h
-        f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
-        tau[j] = f
-        acc[a] -= f
-        if b2 < 0:
-            acc[bb] += cr[j] * f
-        else:
-            acc[bb] += 0.5 * cr[j] * f
-            acc[b2] += 0.5 * cr[j] * f
-        acc_h += ce[j] * f
-        if chalf[j] > 0.0:
-            if (abs(d) < chalf[j]) != is_open[j]:
-                n_ev = _gap_event(j, d, t, dt, chalf, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
-            d_prev[j] = d
-    return acc_h, n_ev
-
-
 @njit(cache=True, nogil=True)
 def _initial_forces(
     theta: np.ndarray, omega: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
@@ -301,9 +265,30 @@ def run_chain(
                         if (abs(d) < chalf[j]) != is_open[j]:
                             n_ev = _gap_event(j, d, t, dt, chalf, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
                         d_prev[j] = d
-            else:  # any chain (branches, 3-body differential): not inlined, to keep this loop tight
-                acc_h, n_ev = _general_couplings(nch, ca, cb, cb2, theta, omega, th_h, om_h, t, dt, cr, ce, ck, ck3, cc,
-                                                 chalf, tau, acc, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
+            else:  # any chain: coupling j joins ca[j] to cb[j], or to the mean of cb[j] and cb2[j]
+                for j in range(nch):
+                    a = ca[j]
+                    bb = cb[j]
+                    b2 = cb2[j]
+                    if b2 < 0:
+                        d = theta[a] - cr[j] * theta[bb] - ce[j] * th_h
+                        dd = omega[a] - cr[j] * omega[bb] - ce[j] * om_h
+                    else:
+                        d = theta[a] - cr[j] * (0.5 * (theta[bb] + theta[b2])) - ce[j] * th_h
+                        dd = omega[a] - cr[j] * (0.5 * (omega[bb] + omega[b2])) - ce[j] * om_h
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+                    tau[j] = f
+                    acc[a] -= f
+                    if b2 < 0:
+                        acc[bb] += cr[j] * f
+                    else:
+                        acc[bb] += 0.5 * cr[j] * f
+                        acc[b2] += 0.5 * cr[j] * f
+                    acc_h += ce[j] * f
+                    if chalf[j] > 0.0:
+                        if (abs(d) < chalf[j]) != is_open[j]:
+                            n_ev = _gap_event(j, d, t, dt, chalf, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
+                        d_prev[j] = d
             if housing >= 0:
                 f = contact_torque(th_h, om_h, ck[nch], ck3[nch], cc[nch], 0.0)  # mount to ground
                 tau[nch] = f
