@@ -201,9 +201,8 @@ def free_rotor_inertia(vehicle: Vehicle) -> float:
     ratio to the rotor. With the reducer gaps open as well only the rotor moves freely; the
     gap-open estimate fits a rescaling of this inertia (``MetricParams.lash.inertia_range``).
     """
-    from sim.model import build_chain
-
     from sim.layout import shaft_gap
+    from sim.model import build_chain
 
     chain = build_chain(vehicle)
     last = int(chain.ca[chain.gap_coupling[shaft_gap(vehicle)]])

@@ -372,7 +372,8 @@ def run_chain_batch(
     for v in range(nv):
         st, _, ne = run_chain(
             inertia[v], ca, cb, cr, ce, ck[v], ck3[v], cc[v], chalf[v], cb2, rotor, housing, wheel, wheel2,
-            wheel_drag[v], road[v], rotor_drag[v], lag, sensor_tau, vehicle, tyre[v], tin, tq, linear, t0, dt[v], n_out, sub[v],
+            wheel_drag[v], road[v], rotor_drag[v], lag, sensor_tau, vehicle, tyre[v], tin, tq, linear, t0, dt[v],
+            n_out, sub[v],
             theta0[v], omega0[v],
             speed_limit, out_res[v], sens, torq, dummy_f, dummy_t, dummy_o, ev_gap[v], ev_t[v], ev_kind[v],
         )

@@ -22,8 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.errors import ParameterError
-from sim.metrics import impact_induced_fluctuation, peak_to_valley, unloaded_time
 from sim.layout import shaft_gap
+from sim.metrics import impact_induced_fluctuation, peak_to_valley, unloaded_time
 from sim.params import GAP_NAMES, Vehicle
 from sim.simulate import SimResult, simulate
 from sim.whatif import WhatIf

@@ -25,12 +25,23 @@ from typing import Any
 from sim.errors import ParameterError
 from sim.fields import ANY, INT_POS, NONNEG, POS, build, check, field_meta, flag, to_plain, validate
 from sim.fields import num as _f
-from sim.params_base import (
-    CONTACT_RADIUS_MM, DAMPING, INERTIA, LASH_RAD, MASS, MAX_SEGMENTS, MM_FIELDS, MODULE_MM, RATIO, SEGMENTS,
-    STIFFNESS, TEETH, WHEEL_RADIUS, Gap, gap_from_mm,
-)
-from sim.stages import Stage, gap_table, check_topology, parse_chain, split_ends, stage_dict
 from sim.optional import Drag, Effects, ProgressiveStiffness, SpeedSensor, TorqueLag, TyreSlip
+from sim.params_base import (
+    DAMPING,
+    INERTIA,
+    MASS,
+    MM_FIELDS,
+    MODULE_MM,
+    RATIO,
+    SEGMENTS,
+    STIFFNESS,
+    TEETH,
+    WHEEL_RADIUS,
+    Gap,
+    gap_from_mm,
+)
+from sim.stages import Stage, check_topology, gap_table, parse_chain, split_ends, stage_dict
+
 
 @dataclass(frozen=True, kw_only=True)
 class Motor:
@@ -294,7 +305,8 @@ class Vehicle:
     def gap(self, name: str) -> Gap:
         """The gap ``name`` (a stage name, or ``<halfshaft stage>_right`` for an unequal right shaft)."""
         if not self.stages and self.gaps is not None and name in GAP_NAMES:
-            return getattr(self.gaps, name)  # type: ignore[no-any-return]
+            gap: Gap = getattr(self.gaps, name)
+            return gap
         for s in self.stages:
             if name in s.gap_names():
                 return s.lash_rad if name == s.name or s.right is None else s.right.lash_rad

@@ -13,7 +13,6 @@ from typing import Any
 from sim.errors import ParameterError
 from sim.fields import NONNEG, POS, check
 from sim.fields import num as _f
-from sim.optional import CUBIC_STIFFNESS as CUBIC
 
 # Physical limits (inclusive) of the description's fields; docs/simulation.md explains each.
 INERTIA = (1e-6, 1e4)  # kg m^2: a small pinion .. a heavy-truck wheel set

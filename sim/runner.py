@@ -63,7 +63,8 @@ def run_from_state(
     ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
     status, t_fail, n_ev = run_chain(
         chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf, chain.cb2,
-        chain.rotor, chain.housing, chain.wheel, chain.wheel2, chain.wheel_drag, chain.road, chain.rotor_drag, np.array(lag, dtype=np.float64),
+        chain.rotor, chain.housing, chain.wheel, chain.wheel2, chain.wheel_drag, chain.road, chain.rotor_drag,
+        np.array(lag, dtype=np.float64),
         float(sensor_tau), chain.vehicle, np.array([chain.tyre[0], chain.tyre[1], tyre0]),
         np.ascontiguousarray(t_in, dtype=np.float64), np.ascontiguousarray(q_in, dtype=np.float64), linear,
         float(t0), float(step), int(n_out), int(sub), np.array(theta0, dtype=np.float64),

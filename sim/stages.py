@@ -33,14 +33,15 @@ from typing import Any
 from sim.errors import ParameterError
 from sim.fields import INT_POS, NONNEG, POS, check
 from sim.fields import num as _f
-from sim.params_base import CUBIC, DAMPING, INERTIA, LASH_RAD, SEGMENTS, STIFFNESS, TEETH, Gap, gap_from_mm
+from sim.optional import CUBIC_STIFFNESS as CUBIC
+from sim.params_base import DAMPING, INERTIA, LASH_RAD, SEGMENTS, STIFFNESS, TEETH, Gap, gap_from_mm
 
 KINDS = ("spline", "gear", "planetary", "chain", "differential", "halfshaft")
 ALIASES = {"coupling": "spline", "belt": "chain"}
 DRIVE_KINDS = ("spline", "gear", "planetary", "chain")  # before the differential
 STAGE_RATIO = (0.1, 30.0)  # one stage's speed ratio input / output
-END_TABLES = {"rotor": "motor", "wheel": "wheel"}
-RESERVED = frozenset({"rotor", "wheel", "wheels", "housing", "vehicle", "mount", "tyre"})  # end entries of the chain -> their own tables
+END_TABLES = {"rotor": "motor", "wheel": "wheel"}  # end entries of the chain -> their own tables
+RESERVED = frozenset({"rotor", "wheel", "wheels", "housing", "vehicle", "mount", "tyre"})  # the model's own bodies
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -108,13 +109,13 @@ def _label(i: int, name: str) -> str:
 def _build_fields(cls: type, raw: Mapping[str, Any], prefix: str) -> dict[str, Any]:
     """Checked keyword arguments of ``cls`` from ``raw`` (numbers coerced, lash tables built)."""
     out: dict[str, Any] = {}
-    metas = {f.name: f.metadata for f in dataclasses.fields(cls)}
+    metas: dict[str, Mapping[str, Any]] = {f.name: f.metadata for f in dataclasses.fields(cls)}
     for key, value in raw.items():
         path = f"{prefix}{key}"
         if key == "lash_rad":
             out[key] = _gap(value, path)
             continue
-        meta = metas.get(key, {})
+        meta: Mapping[str, Any] = metas.get(key, {})
         if "rule" in meta:
             if isinstance(value, int) and not isinstance(value, bool) and meta["rule"] != INT_POS:
                 value = float(value)
@@ -219,7 +220,8 @@ def _ratio(raw: Mapping[str, Any], kind: str, label: str) -> float:
         ratio = 1.0 + teeth[1] / teeth[0] if kind == "planetary" else teeth[1] / teeth[0]
         check(f"{label}teeth", ratio, POS, STAGE_RATIO, "(speed ratio)")
     if kind == "planetary" and ratio <= 1.0:
-        raise ParameterError(f"{label}ratio", ratio, "a planetary stage (sun in, carrier out, ring fixed) has ratio > 1")
+        raise ParameterError(f"{label}ratio", ratio,
+                             "a planetary stage (sun in, carrier out, ring fixed) has ratio > 1")
     return ratio
 
 
@@ -322,8 +324,8 @@ def stage_dict(s: Stage) -> dict[str, Any]:
 def gap_table(data: dict[str, Any], name: str) -> dict[str, Any]:
     """The dict of gap ``name`` inside :meth:`Vehicle.to_dict` output (stage tables keyed by name)."""
     if "gaps" in data:
-        return data["gaps"][name]  # type: ignore[no-any-return]
+        return data["gaps"][name]
     stages = data["stage"]
     if name in stages:
-        return stages[name]["lash_rad"]  # type: ignore[no-any-return]
-    return stages[name.removesuffix("_right")]["right"]["lash_rad"]  # type: ignore[no-any-return]
+        return stages[name]["lash_rad"]
+    return stages[name.removesuffix("_right")]["right"]["lash_rad"]

@@ -36,7 +36,8 @@ EFFECT = Effect(
     id="backlash",
     title="Backlash sizes off nominal (reducer and half-shaft)",
     params=(
-        ParamSpec("reducer_scale", "-", 0.25, 2.0, 1.0, "gaps upstream of the half-shafts (spline, gear stages, differential) x nominal"),
+        ParamSpec("reducer_scale", "-", 0.25, 2.0, 1.0,
+                  "gaps upstream of the half-shafts (spline, gear stages, differential) x nominal"),
         ParamSpec("halfshaft_scale", "-", 0.25, 2.0, 1.0, "half-shaft gaps x nominal"),
     ),
     vehicle_change=_changes,

@@ -134,7 +134,7 @@ class Effect:
         return vehicle.with_changes(self.vehicle_change(vehicle, values))
 
     def describe(self, vehicle: Any = None) -> dict[str, Any]:
-        """Plain description; with ``vehicle``, also ``not_applicable``: the reason it does not apply ("" if it does)."""
+        """Plain description; with ``vehicle`` also ``not_applicable``: why it does not apply ("" if it does)."""
         out = {
             "id": self.id,
             "title": self.title,

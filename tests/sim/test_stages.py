@@ -143,7 +143,8 @@ def test_a_topology_that_is_not_a_rotor_to_wheel_chain_is_refused() -> None:
         *missing,
         (two_diffs, "stage 4 'diff2': kind = 'differential': second differential; stage 3 'differential'"),
         (_reorder([0, 1, 4, 2, 3, 5]), "stage 2 'halfshaft': kind = 'halfshaft': the half-shafts must be the last"),
-        (_reorder([0, 1, 3, 2, 4, 5]), "stage 3 'chain': kind = 'chain': a chain stage cannot follow the differential 'differential'"),
+        (_reorder([0, 1, 3, 2, 4, 5]), "stage 3 'chain': kind = 'chain': a chain stage cannot follow the "
+                                       "differential 'differential'"),
         (_reorder([0, 2, 1, 3, 4, 5]) | {"motor": {"rotor_inertia": 0.04}},
          "stage 0 'rotor': kind = 'rotor': given both"),
         (_reorder([1, 0, 2, 3, 4, 5]), "stage 1 'rotor': kind = 'rotor': the rotor must be the first entry"),
