@@ -58,8 +58,9 @@ def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaPara
     Reducer inertias are referred to the motor (paper: "equivalent to the motor inertia"), half
     of the half-shaft inertia to each end, all coupling compliances added in series and
     referred to the half-shaft, and all five clearances summed in half-shaft angle. The
-    paper's model has no tyre compliance and linear springs: tyre slip and progressive
-    stiffness are left out of the projection.
+    paper's model has no tyre compliance, linear springs and only viscous drag: tyre slip,
+    progressive stiffness and Coulomb drag are left out of the projection. Unequal half-shafts
+    enter as the parallel pair (stiffness and damping summed, mean lash).
     """
     if vehicle.effects.tyre_slip.enabled:
         vehicle = vehicle.with_changes({"effects.tyre_slip.enabled": False})
@@ -90,7 +91,8 @@ def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaPara
     return TwoInertiaParams(
         jm=jm, bm=float(m.rotor_drag[0]), ratio=i,
         khs=1.0 / compliance / n, chs=1.0 / damp_compliance / n, alpha=alpha_w,
-        jw=(wheel_own + extra) / n, n_shafts=n, road=tuple(float(x) for x in m.road),
+        jw=(wheel_own + extra) / n, bw=float(m.wheel_drag[0]) * len(m.wheels) / n, n_shafts=n,
+        road=tuple(float(x) for x in m.road),
     )
 
 

@@ -147,3 +147,29 @@ def test_service_accepts_every_preset(tmp_path: Path) -> None:
         assert summary["vehicle"] == name and summary["ratio"] == pytest.approx(load_vehicle(name).ratio)
         assert 1e3 < summary["steps_per_simulated_s"] < 1e6
         assert summary["stages"][-1].startswith("halfshaft")
+
+
+def test_gap_sensitivity_two_inertia_and_free_inertia_on_a_chain_drive() -> None:
+    from app.pipeline import free_rotor_inertia, gap_sensitivity
+
+    v = load_vehicle("chain_drive")
+    doc = gap_sensitivity(v)
+    rows = {r["gap"]: r for r in doc["gaps"]}
+    assert list(rows) == ["motor_shaft", "chain", "differential", "halfshaft"]
+    assert doc["sensitivity_unit"] == "rad"  # not every stage gives a contact radius
+    assert rows["halfshaft"]["sensitivity"] == pytest.approx(100.0) and "halfshaft = 100" in doc[
+        "sensitivity_definition"]
+    assert rows["chain"]["nominal_rad"] == 0.019 and rows["chain"]["removed"]["impact_rpm"] != doc["nominal"][
+        "impact_rpm"]
+    # rotor, motor shaft, sprocket + case and side gears, each times its squared speed ratio to the rotor
+    m = build_chain(v)
+    expected = 0.0383 + 0.0008 + 0.015 / (42 / 11) ** 2 + (0.0012 + 2 * 0.002 / 2) / (42 / 11) ** 2
+    assert free_rotor_inertia(v) == pytest.approx(expected, rel=1e-9) and m.n_bodies == 5
+    t, q = np.array([0.0, 2.0]), np.array([60.0, 60.0])
+    for veh in (v, unequal_chain_drive()):
+        two = simulate(veh, t, q, model="two_inertia", speed0_rpm=2000.0, output_dt=0.002)
+        multi = simulate(veh, t, q, speed0_rpm=2000.0, output_dt=0.002)
+        gain_two, gain_multi = two.motor_speed_rpm[-1] - 2000.0, multi.motor_speed_rpm[-1] - 2000.0
+        assert gain_multi > 300.0  # 60 N m on a 300 kg car for 2 s
+        # the lumped model accelerates alike; it leaves out only the Coulomb drag (~0.6 N m at the rotor)
+        assert gain_two == pytest.approx(gain_multi, rel=0.03)
