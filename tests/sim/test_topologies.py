@@ -173,3 +173,16 @@ def test_gap_sensitivity_two_inertia_and_free_inertia_on_a_chain_drive() -> None
         assert gain_multi > 300.0  # 60 N m on a 300 kg car for 2 s
         # the lumped model accelerates alike; it leaves out only the Coulomb drag (~0.6 N m at the rotor)
         assert gain_two == pytest.approx(gain_multi, rel=0.03)
+
+
+def test_too_costly_stage_chain_names_the_stage_field() -> None:
+    from app.vehicle_check import suspect_fields, trial_vehicle
+
+    assert suspect_fields(load_vehicle("chain_drive")) == []
+    v = load_vehicle("chain_drive").with_changes({"stage.motor_shaft.inertia": 1e-6,
+                                                  "stage.motor_shaft.stiffness": 1e8})
+    # compared with the paper's stage of the same kind (its spline: 3e4 N m/rad, 0.0015 kg m^2)
+    assert suspect_fields(v) == [("stage.motor_shaft.stiffness", 1e8, 3e4), ("stage.motor_shaft.inertia", 1e-6, 0.0015)]
+    with pytest.raises(ParameterError, match=r"^stage\.motor_shaft\.stiffness = 100000000\.0: driveline car\.toml "
+                                             r"needs 1\.\d+e\+07 integrator steps"):
+        trial_vehicle(v, "car.toml")
