@@ -183,7 +183,11 @@ class Vehicle:
                 raise ParameterError(f"tolerances.{path}", band, "only numeric fields can have a band")
             if len(band) != 2 or not all(math.isfinite(b) for b in band) or band[0] > band[1]:
                 raise ParameterError(f"tolerances.{path}", band, "must be [min, max] with min <= max")
-            meta = field_meta(Vehicle, path, _nested_type)
+            parts = path.split(".")
+            if parts[0] == "stage" and len(parts) >= 3:  # a stage field: its own metadata (right shaft: Shaft's)
+                meta = field_meta(Shaft if parts[2] == "right" else Stage, parts[-1], _nested_type)
+            else:
+                meta = field_meta(Vehicle, path, _nested_type)
             if meta is not None:  # every sampled variant must be a valid vehicle
                 for end, b in zip(("min", "max"), band, strict=True):
                     check(f"tolerances.{path}[{end}]", b, meta["rule"], meta.get("limits"), meta.get("unit", ""))

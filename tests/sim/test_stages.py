@@ -101,6 +101,12 @@ def _chain_with(stage: int, **fields: Any) -> dict[str, Any]:
     return data
 
 
+def _chain_without(stage: int, key: str) -> dict[str, Any]:
+    data = preset_data("chain_drive")
+    data["stage"][stage].pop(key)
+    return data
+
+
 @pytest.mark.parametrize(("data", "message"), [
     (_chain_with(2, lash_rad=-0.1), "stage 2 'chain': lash_rad = -0.1: must be >= 0"),
     (_chain_with(2, stiffness=1e30), "stage 2 'chain': stiffness = 1e+30: outside the physical range"),
@@ -115,6 +121,11 @@ def _chain_with(stage: int, **fields: Any) -> dict[str, Any]:
     (_chain_with(2, name="differential"), "stage 3 'differential': name = 'differential': already used by stage 2"),
     (_chain_with(4, right={"stiffness": 5000.0}), "stage 4 'halfshaft': right.damping = None: required field"),
     (_chain_with(2, lash_rad={"nominal": 0.02, "min": 0.03}), "stage 2 'chain': lash_rad = 0.02: must lie within"),
+    (_chain_without(2, "stiffness"), "stage 2 'chain': stiffness = None: required field missing for a chain stage"),
+    (_chain_without(3, "damping"), "stage 3 'differential': damping = None: required field missing"),
+    (_chain_without(2, "kind"), "stage 2 'chain': kind = None: required field missing"),
+    (preset_data("chain_drive") | {"tolerances": {"stage.chain.stiffness": [0.0, 4e4]}},
+     "tolerances.stage.chain.stiffness[min] = 0.0: must be > 0"),
 ])
 def test_bad_stage_fields_are_named_in_one_line(data: dict[str, Any], message: str) -> None:
     with pytest.raises(ParameterError) as exc:
