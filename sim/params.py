@@ -39,8 +39,9 @@ from sim.params_base import (
     WHEEL_RADIUS,
     Gap,
     gap_from_mm,
+    move_band,
 )
-from sim.stages import Stage, check_topology, gap_table, parse_chain, split_ends, stage_dict
+from sim.stages import Shaft, Stage, check_topology, gap_table, parse_chain, split_ends, stage_dict
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -275,7 +276,7 @@ class Vehicle:
                 raise ParameterError(path, value, "no such vehicle field")
             node[parts[-1]] = list(value) if isinstance(value, tuple) else value
         for name in moved - banded:
-            _move_band(gap_table(data, name), self.gap(name))
+            move_band(gap_table(data, name), self.gap(name))
         if self.stages:
             data["stage"] = list(data["stage"].values())
         return Vehicle.from_dict(data)
@@ -376,29 +377,6 @@ def _cross_checks(obj: Any, prefix: str) -> None:
                              f"total ratio {obj.ratio:.4g} outside the physical range [{RATIO[0]:g}, {RATIO[1]:g}]")
     if isinstance(obj, Halfshaft) and obj.count > 2:
         raise ParameterError(f"{prefix}count", obj.count, "must be 1 or 2 driven half-shafts")
-
-
-def _move_band(gap: dict[str, Any], old: Gap) -> None:
-    """Carry a gap's tolerance band along when a what-if changes its nominal size (``gap`` is its dict).
-
-    The band is kept (as before bands were checked) and only widened to take in the new
-    nominal, so a removed or enlarged gap is still a valid description whose band contains
-    its size. Values that are not numbers are left for validation to name.
-    """
-    if "nominal_mm" in gap:
-        mm, radius = gap["nominal_mm"], gap.get("radius_mm", 0.0)
-        if not (_is_num(mm) and _is_num(radius) and radius > 0):
-            return
-        new = mm / radius
-    else:
-        new = gap.get("nominal")
-        if not _is_num(new):
-            return
-    gap["min"], gap["max"] = min(old.min, new), max(old.max, new)
-
-
-def _is_num(x: Any) -> bool:
-    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
 
 _TABLES: dict[str, type] = {c.__name__: c for c in (

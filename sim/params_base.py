@@ -6,6 +6,7 @@ layout use the same limits and the same :class:`Gap` without importing each othe
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -84,3 +85,26 @@ def gap_from_mm(value: Mapping[str, Any], path: str) -> dict[str, Any]:
         check(f"{path}{key}", mm, NONNEG)
         out[rad_key] = mm / radius
     return out
+
+
+def move_band(gap: dict[str, Any], old: Gap) -> None:
+    """Carry a gap's tolerance band along when a what-if changes its nominal size (``gap`` is its dict).
+
+    The band is kept (as before bands were checked) and only widened to take in the new
+    nominal, so a removed or enlarged gap is still a valid description whose band contains
+    its size. Values that are not numbers are left for validation to name.
+    """
+    if "nominal_mm" in gap:
+        mm, radius = gap["nominal_mm"], gap.get("radius_mm", 0.0)
+        if not (_is_num(mm) and _is_num(radius) and radius > 0):
+            return
+        new = mm / radius
+    else:
+        new = gap.get("nominal")
+        if not _is_num(new):
+            return
+    gap["min"], gap["max"] = min(old.min, new), max(old.max, new)
+
+
+def _is_num(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
