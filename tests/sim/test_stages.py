@@ -189,3 +189,20 @@ def test_input_referred_values_are_converted_with_the_ratio() -> None:
     a, b = build_chain(out), build_chain(inp)
     assert np.allclose(a.ck, b.ck, rtol=1e-12) and np.allclose(a.chalf, b.chalf, rtol=1e-12)
     assert inp.motor_side_gaps == pytest.approx(out.motor_side_gaps, rel=1e-12)
+
+
+def test_the_documented_full_example_loads_and_runs() -> None:
+    from tests.conftest import REPO
+
+    doc = (REPO / "docs" / "simulation.md").read_text(encoding="utf-8")
+    start = doc.index("```toml", doc.index("Full example"))
+    v = load_vehicle_text(doc[start + len("```toml"):doc.index("```", start + 7)])
+    assert [s.kind for s in v.stages] == ["spline", "planetary", "chain", "differential", "halfshaft"]
+    assert v.ratio == pytest.approx(4.0 * 2.5) and v.housing.enabled
+    assert v.gap_names == ("input", "planet", "chain", "diff", "shafts", "shafts_right")
+    m = build_chain(v)
+    assert m.ce[m.coupling_names.index("planet")] == pytest.approx(1 - 4.0)  # no reversal before it
+    assert m.ce[m.coupling_names.index("chain")] == pytest.approx(1 - 2.5)
+    t, q = tip_in_torque(0.3, duration_s=0.3)
+    r = simulate(v, t, q, speed0_rpm=1500.0)
+    assert np.ptp(r.motor_speed_rpm) > 10.0 and "shafts_right" in r.coupling_torques
