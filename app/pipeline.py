@@ -177,6 +177,7 @@ def check_vehicle_files(driveline: Path, database: Path, signal_map: Path) -> di
         from app.errors import SignalMapError
         raise SignalMapError(f"signal map {signal_map.name} does not map {missing}, which every analysis needs")
     return {"vehicle": vehicle.name, "description": vehicle.description, "ratio": vehicle.ratio,
+            "stages": [f"{s.name} ({s.kind})" for s in vehicle.chain], "housing": vehicle.housing.enabled,
             "steps_per_simulated_s": steps, "database": database.name, "database_repairs": len(loaded.repairs),
             "channels": {c: f"{m}.{s}" for c, (m, s) in sorted(routes.items())}}
 
@@ -208,10 +209,11 @@ def free_rotor_inertia(vehicle: Vehicle) -> float:
     ratio to the rotor. With the reducer gaps open as well only the rotor moves freely; the
     gap-open estimate fits a rescaling of this inertia (``MetricParams.lash.inertia_range``).
     """
+    from sim.layout import shaft_gap
     from sim.model import build_chain
 
     chain = build_chain(vehicle)
-    last = int(chain.ca[chain.gap_coupling["halfshaft"]])
+    last = int(chain.ca[chain.gap_coupling[shaft_gap(vehicle)]])
     return float(sum(chain.inertia[b] * chain.speed_ratio[b] ** 2 for b in range(last + 1)))
 
 
@@ -414,23 +416,26 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
     ``sensitivity_per_mm`` (None without radii) and ``sensitivity_per_rad`` per gap.
     ``sensitivity`` is the one in ``sensitivity_unit``.
     """
-    from sim import GAP_NAMES, WhatIf
+    from sim import WhatIf
+    from sim.layout import shaft_gap
     from sim.paper import run_case, sensitivities, sensitivity_unit
+
+    names = vehicle.gap_names  # the classic five, or the stage chain's gaps
 
     cases = {"nominal": run_case(vehicle, "nominal"), "zero_gaps": run_case(vehicle, "zero_gaps",
                                                                               WhatIf(gap_scale={"all": 0.0}))}
     gaps: list[dict[str, Any]] = []
-    for i, g in enumerate(GAP_NAMES, start=1):
-        progress("gap_sensitivity", i / (len(GAP_NAMES) + 1))
+    for i, g in enumerate(names, start=1):
+        progress("gap_sensitivity", i / (len(names) + 1))
         removed = cases[f"no_gap{i}"] = run_case(vehicle, f"no_gap{i}", WhatIf(gap_scale={g: 0.0}))
         halved = run_case(vehicle, f"half_gap{i}", WhatIf(gap_scale={g: 0.5}))
-        gap = getattr(vehicle.gaps, g)
+        gap = vehicle.gap(g)
         gaps.append({"gap": g, "nominal_rad": gap.nominal, "radius_mm": gap.radius_mm or None,
                      "clearance_mm": gap.arc_mm(name=g) if gap.radius_mm > 0 else None,
                      "removed": _case(removed), "halved": _case(halved)})
     unit = sensitivity_unit(vehicle)
     per_rad = sensitivities(vehicle, cases, per="rad")
-    per_mm = sensitivities(vehicle, cases, per="mm") if unit == "mm" else [None] * len(GAP_NAMES)
+    per_mm = sensitivities(vehicle, cases, per="mm") if unit == "mm" else [None] * len(names)
     for row, s_mm, s_rad in zip(gaps, per_mm, per_rad, strict=True):
         row["sensitivity_per_mm"] = None if s_mm is None else float(s_mm)
         row["sensitivity_per_rad"] = float(s_rad)
@@ -441,7 +446,8 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
             "scenario": "tip-in -50 -> +150 N m over 0.135 s (sim.paper)",
             "sensitivity_unit": unit,
             "sensitivity_definition": ("S_i = (impact-induced fluctuation, nominal - with gap i removed) / size of "
-                                       f"gap i, normalised to halfshaft = 100; sensitivity is per {unit}: size = "
+                                       f"gap i, normalised to {shaft_gap(vehicle)} = 100; sensitivity is per {unit}: "
+                                       "size = "
                                        f"{size}"),
             "nominal": _case(cases["nominal"]), "zero_gaps": _case(cases["zero_gaps"]), "gaps": gaps}
 

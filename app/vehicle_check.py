@@ -33,10 +33,39 @@ def _flat(doc: dict[str, Any], prefix: str = "") -> dict[str, float]:
     return out
 
 
+# a stage is compared with the paper's stage of the same kind (a chain or planetary with its gear pair)
+_PAPER_KIND = {"spline": "spline", "gear": "mesh2", "chain": "mesh2", "planetary": "mesh2",
+               "differential": "differential", "halfshaft": "halfshaft"}
+
+
+def _flat_vehicle(vehicle: Vehicle, stage_key: Any = None) -> dict[str, float]:
+    """Numeric fields of ``vehicle`` by dotted path; ``[[stage]]`` fields as ``stage.<name>.<field>``
+    (``stage_key(stage) -> name`` renames the stage, to look up its counterpart)."""
+    doc = tomllib.loads(dump_toml(vehicle))
+    out = _flat({k: v for k, v in doc.items() if k != "stage"})
+    for st in doc.get("stage", []):
+        name = stage_key(st) if stage_key is not None else st["name"]
+        out.update(_flat({k: v for k, v in st.items() if k not in ("kind", "name")}, f"stage.{name}."))
+    return out
+
+
 def suspect_fields(vehicle: Vehicle) -> list[tuple[str, float, float]]:
-    """Fields (dotted TOML path, value, paper preset value) more than OUTLIER_FACTOR from the preset, worst first."""
-    mine = _flat(tomllib.loads(dump_toml(vehicle)))
-    ref = _flat(tomllib.loads(dump_toml(load_vehicle("paper"))))
+    """Fields (dotted TOML path, value, paper preset value) more than OUTLIER_FACTOR from the preset, worst first.
+
+    Stage files are compared stage by stage with the paper's stage of the same kind."""
+    paper = load_vehicle("paper")
+    mine = _flat_vehicle(vehicle)
+    ref = _flat_vehicle(paper)
+    if vehicle.stages:
+        ref.update(_flat_vehicle(paper.as_stages()))
+        by_kind = {s.name: _PAPER_KIND[s.kind] for s in vehicle.stages}
+        paper_stages = _flat_vehicle(paper.as_stages())
+        for key in list(mine):
+            parts = key.split(".")
+            if parts[0] == "stage" and len(parts) >= 3 and parts[1] in by_kind:
+                r = paper_stages.get(".".join(["stage", by_kind[parts[1]], *parts[2:]]))
+                if r is not None:
+                    ref[key] = r
     rows: list[tuple[float, str, float, float]] = []
     for key, v in mine.items():
         r = ref.get(key)

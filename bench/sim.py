@@ -13,6 +13,7 @@ Run: ``.venv/bin/python bench/sim.py`` (single process; numba compiles once and 
    LSODA tolerance is the loosest whose error is not worse than ours ("matched accuracy").
    Speed-up = LSODA seconds per simulated second / ours.
 3. 1000 Monte Carlo variants of a 2 s tip-in window over the tolerance bands.
+1b. Real-time factor of that log through every preset (``--presets``: only this part).
 4. With ``--scan``: the accuracy scan behind the step rule. Four tip-in scenarios against LSODA
    at rtol 1e-10 on a 10 us grid; for each step, the largest p2p-ripple and unloaded-time error.
 """
@@ -61,6 +62,27 @@ def ripple_per_event(t: np.ndarray, speed: np.ndarray, period: float = 1.5) -> n
     return np.array([peak_to_valley(t, speed, a, a + period) for a in edges])
 
 
+def presets_realtime(t: np.ndarray, q: np.ndarray) -> None:
+    """Real-time factor (CPU, best of 3) of the same 60 s drive log through every shipped topology."""
+    from sim import Vehicle, preset_names
+
+    chain = load_vehicle("chain_drive").to_dict()
+    chain["stage"][-1]["right"] = {"stiffness": 8000.0, "damping": 2.0, "inertia": 0.003, "lash_rad": 0.004}
+    cases = [(name, load_vehicle(name)) for name in preset_names()]
+    cases.append(("chain_drive, unequal half-shafts", Vehicle.from_dict(chain)))
+    print("[1b] real-time factor per preset (same log, CPU time, best of 3):")
+    for name, v in cases:
+        simulate(v, t[:50], q[:50])  # compile / cache load outside the timing
+        cpus = []
+        for _ in range(3):
+            c1 = time.process_time()
+            res = simulate(v, t, q)
+            cpus.append(time.process_time() - c1)
+        m = build_chain(v)
+        print(f"    {name:<34} {m.n_bodies:2d} bodies, {len(v.gap_names)} gaps, step {res.dt * 1e6:6.1f} us: "
+              f"{float(res.t[-1] - res.t[0]) / min(cpus):5.0f}x real time")
+
+
 def main() -> None:
     v = load_vehicle("paper")
     t, q = drive_log()
@@ -88,6 +110,8 @@ def main() -> None:
           f"{ours_cpu * 1e3:.1f} ms CPU -> {sim_span / ours_cpu:.0f}x real time (best of 5)")
     print(f"    previous step rule (step {old.dt * 1e6:.1f} us): {old_cpu * 1e3:.1f} ms CPU -> "
           f"{sim_span / old_cpu:.0f}x real time; now {old_cpu / ours_cpu:.2f}x faster")
+
+    presets_realtime(t, q)
 
     # --- 2. LSODA at matched accuracy on the first LSODA_SPAN seconds --------------------------
     m = build_chain(v)
@@ -168,5 +192,7 @@ def step_scan() -> None:
 if __name__ == "__main__":
     if "--scan" in sys.argv[1:]:
         step_scan()
+    elif "--presets" in sys.argv[1:]:
+        presets_realtime(*drive_log())
     else:
         main()

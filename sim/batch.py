@@ -12,10 +12,10 @@ from numpy.typing import ArrayLike, NDArray
 from sim.budget import MAX_BATCH_STEPS, MAX_STEPS, check_output, check_steps
 from sim.errors import InstabilityError, ParameterError
 from sim.inputs import prepare_input
-from sim.integrate import STATUS_OK, is_serial_chain, run_chain_batch
+from sim.integrate import STATUS_OK, is_kernel_layout, run_chain_batch
 from sim.metrics import peak_to_valley, unloaded_time
 from sim.model import build_chain, deflections, quasi_static_full
-from sim.params import GAP_NAMES, Vehicle
+from sim.params import Vehicle
 from sim.simulate import RPM, _grid, _pair_events, choose_step, initial_speed
 
 F64 = NDArray[np.float64]
@@ -65,8 +65,8 @@ def simulate_batch(
         except ParameterError as exc:
             raise ParameterError(f"variants[{k}].{exc.field}", exc.value, exc.reason) from exc
     ref = chains[0]
-    if not is_serial_chain(ref.ca, ref.cb, ref.housing):
-        raise ValueError("the kernel needs the serial chain layout of sim.model.build_chain")
+    if not is_kernel_layout(ref.ca, ref.cb, ref.housing):
+        raise ValueError("the kernel needs the layout of sim.model.build_chain (mount last)")
     for k, c in enumerate(chains):
         if c.body_names != ref.body_names:
             raise ParameterError(f"variants[{k}]", variants[k], "changes the model topology; batch needs one topology")
@@ -98,7 +98,8 @@ def simulate_batch(
     eff = vehicle.effects
     run_chain_batch(
         stack("inertia"), ref.ca, ref.cb, ref.cr, ref.ce, stack("ck"), stack("ck3"), stack("cc"), stack("chalf"),
-        ref.rotor, ref.housing, ref.wheel, stack("road"), stack("rotor_drag"),
+        ref.cb2, ref.rotor, ref.housing, ref.wheel, ref.wheel2, stack("wheel_drag"), stack("road"),
+        stack("rotor_drag"),
         np.array([eff.torque_lag.delay_s, eff.torque_lag.tau_s]), eff.speed_sensor.tau_s,
         ref.vehicle, np.stack([[c.tyre[0], c.tyre[1], s[2]] for c, s in zip(chains, states, strict=True)]),
         inp.t, inp.torque, inp.linear, t0, np.array([s[0] for s in steps]), n_out,
@@ -111,10 +112,11 @@ def simulate_batch(
         raise InstabilityError(f"variant {int(bad[0])} ({dict(variants[int(bad[0])])}) diverged")
     events = []
     for v in range(nv):
-        raw = [(GAP_NAMES[int(ev_gap[v, k])], float(ev_t[v, k]), int(ev_kind[v, k]))
-               for k in range(int(n_events[v])) if int(ev_gap[v, k]) < len(GAP_NAMES)]
+        gap_of = {j: g for g, j in chains[v].gap_coupling.items()}
+        raw = [(gap_of[int(ev_gap[v, k])], float(ev_t[v, k]), int(ev_kind[v, k]))
+               for k in range(int(n_events[v])) if int(ev_gap[v, k]) in gap_of]
         delta = deflections(chains[v], states[v][0])
-        open0 = {g: bool(abs(delta[j]) < chains[v].chalf[j]) for j, g in enumerate(GAP_NAMES)}
+        open0 = {g: bool(abs(delta[j]) < chains[v].chalf[j]) for g, j in chains[v].gap_coupling.items()}
         events.append(_pair_events(raw, open0, t0))
     t = np.asarray(t0 + np.arange(n_out) * output_dt, dtype=np.float64)
     return BatchResult(t=t, motor_speed_rpm=out * RPM, variants=tuple(variants), gap_events=tuple(events))
@@ -175,8 +177,8 @@ def tolerance_analysis(
     if distribution not in ("uniform", "normal"):
         raise ParameterError("distribution", distribution, "must be 'uniform' or 'normal'")
     rng = np.random.default_rng(seed)
-    bands: dict[str, tuple[float, float]] = {f"gaps.{g}": (getattr(vehicle.gaps, g).min, getattr(vehicle.gaps, g).max)
-                                             for g in GAP_NAMES}
+    bands: dict[str, tuple[float, float]] = {f"gaps.{g}": (vehicle.gap(g).min, vehicle.gap(g).max)
+                                             for g in vehicle.gap_names}
     bands.update(vehicle.tolerances)
     fields = tuple(bands)
     lo = np.array([bands[f][0] for f in fields])

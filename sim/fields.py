@@ -156,6 +156,8 @@ def build(cls: type[T], data: Mapping[str, Any], prefix: str, nested: NestedType
             if not isinstance(value, Mapping):
                 raise ParameterError(path, value, "must be a table")
             kwargs[name] = build(sub, value, path + ".", nested, pre)
+        elif name == "stages":  # already built and checked by sim.stages
+            kwargs[name] = tuple(value)
         elif name == "tolerances":
             if not isinstance(value, Mapping):
                 raise ParameterError(path, value, "must be a table of [min, max]")

@@ -87,17 +87,48 @@ def road_load_torque(road: np.ndarray, omega_v: float) -> float:
     return road[0] * force
 
 
-def is_serial_chain(ca: np.ndarray, cb: np.ndarray, housing: int) -> bool:
-    """True when couplings join bodies ``j -> j + 1`` in order, followed only by the housing mount."""
+def is_kernel_layout(ca: np.ndarray, cb: np.ndarray, housing: int) -> bool:
+    """True when every coupling but the last joins two bodies and the last (only) is the housing mount."""
     nch = ca.size - (1 if housing >= 0 else 0)
-    serial = bool(np.array_equal(ca[:nch], np.arange(nch)) and np.array_equal(cb[:nch], np.arange(1, nch + 1)))
-    return serial and (housing < 0 or (int(ca[nch]) == housing and int(cb[nch]) == -1))
+    inner = bool(np.all(cb[:nch] >= 0) and np.all(ca[:nch] != housing))
+    return inner and (housing < 0 or (int(ca[nch]) == housing and int(cb[nch]) == -1))
+
+
+@njit(cache=True, inline="always")
+def wheel_load(road: np.ndarray, wheel_drag: np.ndarray, omega_w: float, share: float) -> float:
+    """Road load, brake and hub drag (N m) on one wheel body carrying ``share`` of the car."""
+    load = road_load_torque(road, omega_w)
+    if road[5] != 0.0:
+        load += road[5] * math.tanh(omega_w / 0.05)
+    load *= share
+    if wheel_drag[0] != 0.0 or wheel_drag[1] != 0.0:
+        load += wheel_drag[0] * omega_w + wheel_drag[1] * math.tanh(omega_w / 0.05)
+    return load
+
+
+@njit(cache=True)
+def _gap_event(j: int, d: float, t: float, dt: float, chalf: np.ndarray, is_open: np.ndarray, d_prev: np.ndarray,
+               ev_gap: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray, n_ev: int) -> int:
+    """Gap ``j`` opened or closed within the last step: flip its state, log the crossing of
+    ``|delta| = alpha`` (time interpolated in the step) while there is room. Returns the event count."""
+    now_open = abs(d) < chalf[j]
+    is_open[j] = now_open
+    if n_ev < ev_gap.size:
+        a0 = abs(d_prev[j]) - chalf[j]
+        a1 = abs(d) - chalf[j]
+        frac = a0 / (a0 - a1) if a0 != a1 else 1.0
+        ev_gap[n_ev] = j
+        ev_t[n_ev] = t - dt + min(max(frac, 0.0), 1.0) * dt
+        ev_kind[n_ev] = 1 if now_open else 0
+        n_ev += 1
+    return n_ev
 
 
 @njit(cache=True, nogil=True)
 def _initial_forces(
     theta: np.ndarray, omega: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
-    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, rotor: int, housing: int, wheel: int,
+    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cb2: np.ndarray, rotor: int, housing: int,
+    wheel: int, wheel2: int, wheel_drag: np.ndarray,
     vehicle: int, road: np.ndarray, rotor_drag: np.ndarray, t_air: float, tyre_tau: float,
     delta: np.ndarray, acc: np.ndarray,
 ) -> None:
@@ -112,13 +143,20 @@ def _initial_forces(
         bb = cb[j]
         d = theta[a] - ce[j] * th_h
         dd = omega[a] - ce[j] * om_h
-        if bb >= 0:
+        b2 = cb2[j]
+        if b2 >= 0:
+            d -= cr[j] * (0.5 * (theta[bb] + theta[b2]))
+            dd -= cr[j] * (0.5 * (omega[bb] + omega[b2]))
+        elif bb >= 0:
             d -= cr[j] * theta[bb]
             dd -= cr[j] * omega[bb]
         f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
         delta[j] = d
         acc[a] -= f
-        if bb >= 0:
+        if b2 >= 0:
+            acc[bb] += 0.5 * cr[j] * f
+            acc[b2] += 0.5 * cr[j] * f
+        elif bb >= 0:
             acc[bb] += cr[j] * f
         if housing >= 0:
             acc[housing] += ce[j] * f
@@ -129,17 +167,21 @@ def _initial_forces(
     if vehicle >= 0:
         acc[wheel] -= tyre_tau
         acc[vehicle] += tyre_tau - road_load_torque(road, omega[vehicle])
+        acc[wheel] -= road[5] * math.tanh(omega[wheel] / 0.05)
+        acc[wheel] -= wheel_load(road, wheel_drag, omega[wheel], 0.0)
+    elif wheel2 < 0:
+        acc[wheel] -= wheel_load(road, wheel_drag, omega[wheel], 1.0)
     else:
-        acc[wheel] -= road_load_torque(road, omega[wheel])
-    acc[wheel] -= road[5] * math.tanh(omega[wheel] / 0.05)
+        acc[wheel] -= wheel_load(road, wheel_drag, omega[wheel], 0.5)
+        acc[wheel2] -= wheel_load(road, wheel_drag, omega[wheel2], 0.5)
 
 
 @njit(cache=True, nogil=True)
 def run_chain(
     inertia: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
-    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray,
-    rotor: int, housing: int, wheel: int, road: np.ndarray, rotor_drag: np.ndarray,
-    lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray,
+    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cb2: np.ndarray,
+    rotor: int, housing: int, wheel: int, wheel2: int, wheel_drag: np.ndarray, road: np.ndarray,
+    rotor_drag: np.ndarray, lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray,
     tin: np.ndarray, tq: np.ndarray, linear: bool,
     t0: float, dt: float, n_out: int, sub: int, theta0: np.ndarray, omega0: np.ndarray, speed_limit: float,
     out_res: np.ndarray, out_sensor: np.ndarray, out_torque: np.ndarray, out_omega: np.ndarray,
@@ -158,10 +200,10 @@ def run_chain(
     Gap events (coupling index, time interpolated within the step, 1=open 0=close) go to
     ``ev_*`` up to their length. Returns ``(status, t_fail, n_events)``.
 
-    The step loop assumes the serial chain of :func:`sim.model.build_chain` (coupling ``j``
-    joins bodies ``j`` and ``j + 1``, then the mount of the housing to ground, if any): no index
-    arrays to chase and the housing torque summed in a register. :func:`is_serial_chain`
-    checks a model; ``ca``/``cb`` only serve the initial state.
+    Coupling ``j`` joins ``ca[j]`` to ``cb[j]`` (and, for the 3-body open differential, to the
+    mean of ``cb[j]`` and ``cb2[j]``); the housing mount, if any, is the last coupling and its
+    torque is summed in a register. :func:`is_kernel_layout` checks a model. Two wheel bodies
+    (``wheel2 >= 0``, unequal half-shafts) each take half of the road load and brake.
     """
     nb = inertia.size
     nc = ca.size
@@ -178,14 +220,18 @@ def run_chain(
     d_prev = np.zeros(nc)
     is_open = np.zeros(nc, dtype=np.bool_)
     tyre_tau = tyre[2] if vehicle >= 0 else 0.0
+    serial = True
+    for j in range(nch):
+        if ca[j] != j or cb[j] != j + 1 or cb2[j] >= 0:
+            serial = False
     k_lag = 0
     t_air, k_lag = input_at(tin, tq, linear, t0 - lag[0], k_lag)
     a_lag = 1.0 - math.exp(-dt / lag[1]) if lag[1] > 0.0 else 1.0
     a_sen = 1.0 - math.exp(-dt / sensor_tau) if sensor_tau > 0.0 else 1.0
     c_sen = min(1.0, 0.5 * dt / sensor_tau) if sensor_tau > 0.0 else 1.0
     # start: speeds half a step back, so the first kick lands on the midpoint
-    _initial_forces(theta, omega, ca, cb, cr, ce, ck, ck3, cc, chalf, rotor, housing, wheel, vehicle, road,
-                    rotor_drag, t_air, tyre_tau, d_prev, acc)
+    _initial_forces(theta, omega, ca, cb, cr, ce, ck, ck3, cc, chalf, cb2, rotor, housing, wheel, wheel2, wheel_drag,
+                    vehicle, road, rotor_drag, t_air, tyre_tau, d_prev, acc)
     for j in range(nc):
         is_open[j] = chalf[j] > 0.0 and abs(d_prev[j]) < chalf[j]
     for b in range(nb):
@@ -206,27 +252,43 @@ def run_chain(
             for b in range(nb):
                 acc[b] = 0.0
             acc_h = 0.0  # torque on the housing: mesh reactions, stator, mount
-            for j in range(nch):  # serial chain: coupling j joins body j to body j + 1
-                d = theta[j] - cr[j] * theta[j + 1] - ce[j] * th_h
-                dd = omega[j] - cr[j] * omega[j + 1] - ce[j] * om_h
-                f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
-                tau[j] = f
-                acc[j] -= f
-                acc[j + 1] += cr[j] * f
-                acc_h += ce[j] * f
-                if chalf[j] > 0.0:
-                    now_open = abs(d) < chalf[j]
-                    if now_open != is_open[j]:
-                        is_open[j] = now_open
-                        if n_ev < ev_gap.size:  # crossing of |delta| = alpha within the last step
-                            a0 = abs(d_prev[j]) - chalf[j]
-                            a1 = abs(d) - chalf[j]
-                            frac = a0 / (a0 - a1) if a0 != a1 else 1.0
-                            ev_gap[n_ev] = j
-                            ev_t[n_ev] = t - dt + min(max(frac, 0.0), 1.0) * dt
-                            ev_kind[n_ev] = 1 if now_open else 0
-                            n_ev += 1
-                    d_prev[j] = d
+            if serial:  # the usual chain, body j to body j + 1: no index loads in the hot loop
+                for j in range(nch):
+                    d = theta[j] - cr[j] * theta[j + 1] - ce[j] * th_h
+                    dd = omega[j] - cr[j] * omega[j + 1] - ce[j] * om_h
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+                    tau[j] = f
+                    acc[j] -= f
+                    acc[j + 1] += cr[j] * f
+                    acc_h += ce[j] * f
+                    if chalf[j] > 0.0:
+                        if (abs(d) < chalf[j]) != is_open[j]:
+                            n_ev = _gap_event(j, d, t, dt, chalf, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
+                        d_prev[j] = d
+            else:  # any chain: coupling j joins ca[j] to cb[j], or to the mean of cb[j] and cb2[j]
+                for j in range(nch):
+                    a = ca[j]
+                    bb = cb[j]
+                    b2 = cb2[j]
+                    if b2 < 0:
+                        d = theta[a] - cr[j] * theta[bb] - ce[j] * th_h
+                        dd = omega[a] - cr[j] * omega[bb] - ce[j] * om_h
+                    else:
+                        d = theta[a] - cr[j] * (0.5 * (theta[bb] + theta[b2])) - ce[j] * th_h
+                        dd = omega[a] - cr[j] * (0.5 * (omega[bb] + omega[b2])) - ce[j] * om_h
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+                    tau[j] = f
+                    acc[a] -= f
+                    if b2 < 0:
+                        acc[bb] += cr[j] * f
+                    else:
+                        acc[bb] += 0.5 * cr[j] * f
+                        acc[b2] += 0.5 * cr[j] * f
+                    acc_h += ce[j] * f
+                    if chalf[j] > 0.0:
+                        if (abs(d) < chalf[j]) != is_open[j]:
+                            n_ev = _gap_event(j, d, t, dt, chalf, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
+                        d_prev[j] = d
             if housing >= 0:
                 f = contact_torque(th_h, om_h, ck[nch], ck3[nch], cc[nch], 0.0)  # mount to ground
                 tau[nch] = f
@@ -239,10 +301,19 @@ def run_chain(
             if vehicle >= 0:
                 acc[wheel] -= tyre_tau
                 acc[vehicle] += tyre_tau - road_load_torque(road, omega[vehicle])
-            else:
+                if road[5] != 0.0:
+                    acc[wheel] -= road[5] * math.tanh(omega[wheel] / 0.05)
+                if wheel_drag[0] != 0.0 or wheel_drag[1] != 0.0:
+                    acc[wheel] -= wheel_load(road, wheel_drag, omega[wheel], 0.0)
+            elif wheel2 < 0:
                 acc[wheel] -= road_load_torque(road, omega[wheel])
-            if road[5] != 0.0:
-                acc[wheel] -= road[5] * math.tanh(omega[wheel] / 0.05)
+                if road[5] != 0.0:
+                    acc[wheel] -= road[5] * math.tanh(omega[wheel] / 0.05)
+                if wheel_drag[0] != 0.0 or wheel_drag[1] != 0.0:
+                    acc[wheel] -= wheel_load(road, wheel_drag, omega[wheel], 0.0)
+            else:
+                acc[wheel] -= wheel_load(road, wheel_drag, omega[wheel], 0.5)
+                acc[wheel2] -= wheel_load(road, wheel_drag, omega[wheel2], 0.5)
             if s == 0:  # output row: speeds synchronised with the angles by half of this step's kick
                 res = omega[rotor] + 0.5 * dtj[rotor] * acc[rotor]
                 if housing >= 0:
@@ -280,8 +351,9 @@ def run_chain(
 @njit(cache=True, nogil=True)
 def run_chain_batch(
     inertia: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
-    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray,
-    rotor: int, housing: int, wheel: int, road: np.ndarray, rotor_drag: np.ndarray,
+    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cb2: np.ndarray,
+    rotor: int, housing: int, wheel: int, wheel2: int, wheel_drag: np.ndarray, road: np.ndarray,
+    rotor_drag: np.ndarray,
     lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray, tin: np.ndarray, tq: np.ndarray, linear: bool,
     t0: float, dt: np.ndarray, n_out: int, sub: np.ndarray, theta0: np.ndarray, omega0: np.ndarray,
     speed_limit: float, out_res: np.ndarray, ev_gap: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray,
@@ -299,8 +371,9 @@ def run_chain_batch(
     torq = np.zeros(n_out)
     for v in range(nv):
         st, _, ne = run_chain(
-            inertia[v], ca, cb, cr, ce, ck[v], ck3[v], cc[v], chalf[v], rotor, housing, wheel, road[v],
-            rotor_drag[v], lag, sensor_tau, vehicle, tyre[v], tin, tq, linear, t0, dt[v], n_out, sub[v],
+            inertia[v], ca, cb, cr, ce, ck[v], ck3[v], cc[v], chalf[v], cb2, rotor, housing, wheel, wheel2,
+            wheel_drag[v], road[v], rotor_drag[v], lag, sensor_tau, vehicle, tyre[v], tin, tq, linear, t0, dt[v],
+            n_out, sub[v],
             theta0[v], omega0[v],
             speed_limit, out_res[v], sens, torq, dummy_f, dummy_t, dummy_o, ev_gap[v], ev_t[v], ev_kind[v],
         )

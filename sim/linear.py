@@ -22,7 +22,10 @@ def coupling_rows(m: ChainModel) -> F64:
     G = np.zeros((m.n_couplings, m.n_bodies))
     for j in range(m.n_couplings):
         G[j, m.ca[j]] += 1.0
-        if m.cb[j] >= 0:
+        if m.cb2[j] >= 0:  # 3-body open differential: the mean of both side gears
+            G[j, m.cb[j]] -= 0.5 * m.cr[j]
+            G[j, m.cb2[j]] -= 0.5 * m.cr[j]
+        elif m.cb[j] >= 0:
             G[j, m.cb[j]] -= m.cr[j]
         if m.housing >= 0:
             G[j, m.housing] -= m.ce[j]
@@ -40,6 +43,8 @@ def linear_matrices(m: ChainModel, ck: F64 | None = None) -> tuple[F64, F64, F64
     K = G.T @ (k[:, None] * G)
     C = G.T @ (m.cc[:, None] * G)
     C[m.rotor, m.rotor] += m.rotor_drag[0]
+    for w in m.wheels:
+        C[w, w] += m.wheel_drag[0]
     if m.vehicle >= 0:
         g = np.zeros(m.n_bodies)
         g[m.wheel], g[m.vehicle] = 1.0, -1.0

@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.params import GAP_NAMES, Vehicle
+from sim.params import Vehicle
 
 F64 = NDArray[np.float64]
 GRAVITY = 9.81
@@ -78,6 +78,14 @@ class ChainModel:
     rotor_drag: F64  # (2,) viscous N m s/rad, Coulomb N m
     vehicle: int = -1  # vehicle body behind the tyres (tyre slip on), -1 = folded into the wheels
     tyre: F64 = field(default_factory=lambda: np.zeros(2))  # (2,) k_t N m/rad, R/sigma 1/rad
+    # open differential with unequal shafts: coupling j drives b and b2 (delta uses their mean), -1 = none
+    cb2: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    wheel2: int = -1  # second wheel body (unequal shafts): each wheel carries half the car and road load
+    wheel_drag: F64 = field(default_factory=lambda: np.zeros(2))  # (2,) per wheel body: N m s/rad, N m
+
+    def __post_init__(self) -> None:
+        if self.cb2.size != self.ca.size:
+            object.__setattr__(self, "cb2", np.full(self.ca.size, -1, dtype=np.int64))
 
     @property
     def n_bodies(self) -> int:
@@ -87,93 +95,167 @@ class ChainModel:
     def n_couplings(self) -> int:
         return int(self.ca.size)
 
+    @property
+    def wheels(self) -> tuple[int, ...]:
+        return (self.wheel,) if self.wheel2 < 0 else (self.wheel, self.wheel2)
+
+    def b_angle(self, theta: F64) -> F64:
+        """Angle of each coupling's b side (mean of both side gears for the 3-body differential; 0: ground)."""
+        b = np.where(self.cb >= 0, theta[np.maximum(self.cb, 0)], 0.0)
+        two = self.cb2 >= 0
+        return np.asarray(np.where(two, 0.5 * (b + theta[np.maximum(self.cb2, 0)]), b), dtype=np.float64)
+
+
+# classic-layout body and coupling names, kept so stored results and reports do not change
+_LEGACY_BODY = {"spline": "input_shaft", "mesh1": "intermediate", "mesh2": "differential", "differential": "side_gears"}
+_LEGACY_COUPLING = {"mesh1": "gear1", "mesh2": "gear2", "differential": "diff"}
+Row = tuple[str, int, int, int, float, float, float, float, float, float, float]  # see _Builder.couple
+
+
+class _Builder:
+    """Bodies and coupling rows appended in chain order."""
+
+    def __init__(self) -> None:
+        self.names: list[str] = []
+        self.inertia: list[float] = []
+        self.rows: list[Row] = []
+        self.gaps: dict[str, int] = {}
+
+    def body(self, name: str, inertia: float) -> int:
+        self.names.append(name)
+        self.inertia.append(inertia)
+        return len(self.names) - 1
+
+    def couple(self, name: str, a: int, b: int, r: float, e: float, k: float, c: float, half: float,
+               report: float, k3: float, b2: int = -1, gap: str = "") -> None:
+        """Coupling a -> b (and b2) with values in a's angle; ``gap`` names the lash it carries."""
+        if gap:
+            self.gaps[gap] = len(self.rows)
+        self.rows.append((name, a, b, b2, r, e, k, c, half, report, k3))
+
+    def shaft(self, name: str, a: int, wheel_name: str, wheel_j: float, n: int, k: float, c: float, j: float,
+              lash: float, k3: float, seg: int, gap: str) -> int:
+        """``seg`` equal pieces from body ``a`` to a new wheel body; ``n`` equal shafts lumped in parallel."""
+        j_seg = n * j / seg
+        self.inertia[a] += 0.5 * j_seg
+        nodes = [a, *(self.body(f"{name}_node{i}", j_seg)
+                      for i in range(1, seg))]
+        w = self.body(wheel_name, wheel_j + 0.5 * j_seg)
+        nodes.append(w)
+        for i in range(seg):  # seg pieces in series each deflect x/seg: k -> k seg, k3 -> k3 seg^3
+            self.couple(name if seg == 1 else f"{name}{i + 1}", nodes[i], nodes[i + 1], 1.0, 0.0, n * k * seg,
+                        n * c * seg, lash / 2 if i == 0 else 0.0, 1.0 / n, n * k3 * seg**3, gap=gap if i == 0 else "")
+        return w
+
 
 def build_chain(v: Vehicle) -> ChainModel:
-    """Bodies and couplings of the multibody model for ``v`` (see the module docstring)."""
-    red, hs, n = v.reducer, v.halfshaft, v.halfshaft.count
-    r1, r2 = red.ratio1, red.ratio2
-    seg = hs.segments
-    j_seg = n * hs.inertia / seg  # both shafts' inertia per segment
-    names = ["rotor", "input_shaft", "intermediate", "differential", "side_gears"]
-    inertia = [v.motor.rotor_inertia, red.input_shaft_inertia, red.intermediate_inertia,
-               red.differential_inertia, red.side_gears_inertia + 0.5 * j_seg]
-    names += [f"halfshaft_node{i}" for i in range(1, seg)]
-    inertia += [j_seg] * (seg - 1)
+    """Bodies and couplings of the multibody model for ``v`` (see the module docstring).
+
+    Works on :attr:`Vehicle.chain`, so a classic file and its stage equivalent give the same
+    arrays. Each stage's values are converted from their stated shaft to the input shaft
+    (``a``): stiffness and damping / f^2, cubic stiffness / f^4, lash * f, with f the stage
+    ratio when they are stated on the output shaft.
+    """
+    stages = v.chain
+    legacy = not v.stages
+    hs = stages[-1] if stages[-1].kind == "halfshaft" else None
+    n = v.driven_wheels
+    split = hs is not None and hs.right is not None
     tyre = v.effects.tyre_slip
     vehicle_j = v.body.mass * v.wheel.radius**2
-    wheel_j = n * v.wheel.inertia + 0.5 * j_seg
-    if not tyre.enabled:
-        wheel_j = n * v.wheel.inertia + vehicle_j + 0.5 * j_seg  # I_W = I_w + M R^2 / 2 per wheel
-    names.append("wheels")
-    inertia.append(wheel_j)
-    wheel = len(names) - 1
-    vehicle = -1
-    if tyre.enabled:
-        names.append("vehicle")
-        inertia.append(vehicle_j)
-        vehicle = len(names) - 1
-    housing = -1
-    if v.housing.enabled:
-        names.append("housing")
-        inertia.append(v.housing.inertia)
-        housing = len(names) - 1
+    bld = _Builder()
+    cur = bld.body("rotor", v.motor.rotor_inertia)
+    sense = 1.0  # true turning sense of the current body
+    diff = None
+    for s in stages:
+        if s.kind == "halfshaft":
+            break
+        if not s.has_coupling:  # solid axle: the shafts start at the ring gear's body
+            bld.inertia[cur] += s.inertia
+            continue
+        if s.kind == "differential" and split:
+            diff = s  # 3-body coupling, built with the shafts
+            continue
+        f, r = s.to_input, s.ratio
+        e = sense * (1.0 + r) if s.kind == "gear" else (sense * (1.0 - r) if s.kind in ("planetary", "chain") else 0.0)
+        nxt = bld.body(_LEGACY_BODY.get(s.name, s.name) if legacy else s.name, s.inertia)
+        bld.couple(_LEGACY_COUPLING.get(s.name, s.name) if legacy else s.name, cur, nxt, r, e, s.stiffness / f**2,
+                   s.damping / f**2, s.lash_rad.nominal * f / 2, r, s.cubic_stiffness / f**4, gap=s.name)
+        if s.kind == "gear":
+            sense = -sense
+        cur = nxt
+    wheel, wheel2, own = cur, -1, n * v.wheel.inertia
+    if hs is not None and diff is not None and hs.right is not None:
+        left = bld.body(f"{diff.name}_left", 0.5 * diff.inertia)
+        wheel_j = v.wheel.inertia + (0.0 if tyre.enabled else 0.5 * vehicle_j)
+        first = len(bld.rows)
+        wheel = bld.shaft(hs.name, left, "wheel_left", wheel_j, 1, hs.stiffness, hs.damping, hs.inertia,
+                          hs.lash_rad.nominal, hs.cubic_stiffness, hs.segments, hs.name)
+        rs = hs.right
+        right = bld.body(f"{diff.name}_right", 0.5 * diff.inertia)
+        wheel2 = bld.shaft(f"{hs.name}_right", right, "wheel_right", wheel_j, 1, rs.stiffness, rs.damping, rs.inertia,
+                           rs.lash_rad.nominal, rs.cubic_stiffness, hs.segments, f"{hs.name}_right")
+        bld.gaps = {g: (j + 1 if j >= first else j) for g, j in bld.gaps.items()}
+        bld.gaps[diff.name] = first
+        bld.rows.insert(first, (diff.name, cur, left, right, 1.0, 0.0, diff.stiffness, diff.damping,
+                                diff.lash_rad.nominal / 2, 1.0, diff.cubic_stiffness))
+        own = v.wheel.inertia
+    elif hs is not None:
+        wheel_j = own + (0.0 if tyre.enabled else vehicle_j)  # I_W = I_w + M R^2 / 2 per wheel
+        wheel = bld.shaft(hs.name, cur, "wheels", wheel_j, n, hs.stiffness, hs.damping, hs.inertia,
+                          hs.lash_rad.nominal, hs.cubic_stiffness, hs.segments, hs.name)
+    else:  # the last stage drives the wheels directly
+        bld.names[cur] = "wheels"
+        bld.inertia[cur] += own + (0.0 if tyre.enabled else vehicle_j)
+    return _finish(v, bld, wheel, wheel2, own / v.wheel.inertia)
 
-    g = v.gaps
-    ps = v.effects.progressive_stiffness
-    k_seg, c_seg = n * hs.stiffness * seg, n * hs.damping * seg
-    # name, a, b, r, e, k (a angle), c (a angle), half gap (a angle), report factor, cubic k3 (a angle)
-    rows: list[tuple[str, int, int, float, float, float, float, float, float, float]] = [
-        ("spline", 0, 1, 1.0, 0.0, red.spline_stiffness, red.spline_damping, g.spline.nominal / 2, 1.0, ps.spline),
-        ("gear1", 1, 2, r1, 1.0 + r1, red.mesh1_stiffness / r1**2, red.mesh1_damping / r1**2,
-         g.mesh1.nominal * r1 / 2, r1, ps.mesh1 / r1**4),
-        ("gear2", 2, 3, r2, -(1.0 + r2), red.mesh2_stiffness / r2**2, red.mesh2_damping / r2**2,
-         g.mesh2.nominal * r2 / 2, r2, ps.mesh2 / r2**4),
-        ("diff", 3, 4, 1.0, 0.0, red.diff_stiffness, red.diff_damping, g.differential.nominal / 2, 1.0,
-         ps.differential),
-    ]
-    chain_nodes = [4, *range(5, 5 + seg - 1), wheel]
-    for i in range(seg):
-        name = "halfshaft" if seg == 1 else f"halfshaft{i + 1}"
-        half = g.halfshaft.nominal / 2 if i == 0 else 0.0
-        # seg equal pieces in series: each deflects x/seg, so k -> k seg and k3 -> k3 seg^3
-        rows.append((name, chain_nodes[i], chain_nodes[i + 1], 1.0, 0.0, k_seg, c_seg, half, 1.0,
-                     n * ps.halfshaft * seg**3))
+
+def _finish(v: Vehicle, bld: _Builder, wheel: int, wheel2: int, per_body: float) -> ChainModel:
+    """Vehicle body, housing and mount, ratios and road data around the built chain."""
+    tyre = v.effects.tyre_slip
+    vehicle = bld.body("vehicle", v.body.mass * v.wheel.radius**2) if tyre.enabled else -1
+    housing = bld.body("housing", v.housing.inertia) if v.housing.enabled else -1
     if housing >= 0:
-        rows.append(("mount", housing, -1, 1.0, 0.0, v.housing.mount_stiffness, v.housing.mount_damping, 0.0, -1.0,
-                     ps.mount))
-    cols = list(zip(*rows, strict=True))
-
-    ratio = np.zeros(len(names))
+        bld.couple("mount", housing, -1, 1.0, 0.0, v.housing.mount_stiffness, v.housing.mount_damping, 0.0, -1.0,
+                   v.effects.progressive_stiffness.mount)
+    cols = list(zip(*bld.rows, strict=True))
+    ratio = np.zeros(len(bld.names))
     ratio[0] = 1.0
-    for _, a, b, r, *_rest in rows:
+    for _, a, b, b2, r, *_rest in bld.rows:
         if b >= 0 and a != housing:
             ratio[b] = ratio[a] / r
+        if b2 >= 0:
+            ratio[b2] = ratio[a] / r
     if vehicle >= 0:
         ratio[vehicle] = ratio[wheel]
     half_rho_cda = 0.5 * v.body.air_density * v.body.drag_area
     sin_grade = float(np.sin(np.arctan(v.body.grade_percent / 100.0)))
     eff = v.effects.drag
+    n = v.driven_wheels
     return ChainModel(
-        body_names=tuple(names),
-        inertia=np.asarray(inertia, dtype=np.float64),
+        body_names=tuple(bld.names),
+        inertia=np.asarray(bld.inertia, dtype=np.float64),
         coupling_names=tuple(cols[0]),
         ca=np.asarray(cols[1], dtype=np.int64),
         cb=np.asarray(cols[2], dtype=np.int64),
-        cr=np.asarray(cols[3], dtype=np.float64),
-        ce=np.asarray(cols[4], dtype=np.float64) * (1.0 if housing >= 0 else 0.0),
-        ck=np.asarray(cols[5], dtype=np.float64),
-        ck3=np.asarray(cols[9], dtype=np.float64),
-        cc=np.asarray(cols[6], dtype=np.float64),
-        chalf=np.asarray(cols[7], dtype=np.float64),
-        creport=np.asarray(cols[8], dtype=np.float64),
-        gap_coupling={name: i for i, name in enumerate(GAP_NAMES)},
+        cb2=np.asarray(cols[3], dtype=np.int64),
+        cr=np.asarray(cols[4], dtype=np.float64),
+        ce=np.asarray(cols[5], dtype=np.float64) * (1.0 if housing >= 0 else 0.0),
+        ck=np.asarray(cols[6], dtype=np.float64),
+        cc=np.asarray(cols[7], dtype=np.float64),
+        chalf=np.asarray(cols[8], dtype=np.float64),
+        creport=np.asarray(cols[9], dtype=np.float64),
+        ck3=np.asarray(cols[10], dtype=np.float64),
+        gap_coupling=dict(bld.gaps),
         rotor=0,
         housing=housing,
         wheel=wheel,
+        wheel2=wheel2,
         speed_ratio=ratio,
         road=np.array([v.wheel.radius, v.body.mass, v.body.rolling_resistance, half_rho_cda, sin_grade,
                        v.body.brake_torque]),
-        rotor_drag=np.array([v.motor.viscous_damping + eff.viscous_nms, eff.coulomb_nm]),
+        rotor_drag=np.array([v.motor.viscous_damping + eff.viscous_nms, v.motor.coulomb_drag + eff.coulomb_nm]),
+        wheel_drag=np.array([per_body * v.wheel.viscous_drag, per_body * v.wheel.coulomb_drag]),
         vehicle=vehicle,
         tyre=np.array([n * tyre.slip_stiffness * v.wheel.radius**2 / tyre.relaxation_length,
                        v.wheel.radius / tyre.relaxation_length]) if tyre.enabled else np.zeros(2),
@@ -235,6 +317,8 @@ def quasi_static_full(m: ChainModel, torque: float, omega_rotor: float) -> tuple
     drag = m.rotor_drag[0] * omega_rotor + m.rotor_drag[1] * np.tanh(omega_rotor / 1.0)
     w_w = float(omega[m.wheel])
     load = road_torque(m.road, w_w)
+    if np.any(m.wheel_drag):  # hub drag of every wheel body, as in the kernel
+        load += len(m.wheels) * (m.wheel_drag[0] * w_w + m.wheel_drag[1] * np.tanh(w_w / 0.05))
     j_eq = float(np.sum(m.inertia * ratio**2))  # housing has ratio 0
     acc0 = (torque - drag - load * ratio[m.wheel]) / j_eq
     tyre_tau = 0.0
@@ -251,7 +335,11 @@ def quasi_static_full(m: ChainModel, torque: float, omega_rotor: float) -> tuple
         if a == m.housing:
             continue
         tau[j] = inflow[a] - m.inertia[a] * acc0 * ratio[a]
-        inflow[b] += m.cr[j] * tau[j]
+        if m.cb2[j] >= 0:  # open differential: equal split to both side gears
+            inflow[b] += 0.5 * m.cr[j] * tau[j]
+            inflow[m.cb2[j]] += 0.5 * m.cr[j] * tau[j]
+        else:
+            inflow[b] += m.cr[j] * tau[j]
     theta_h = 0.0
     mount = np.flatnonzero(m.ca == m.housing) if m.housing >= 0 else np.zeros(0, dtype=np.int64)
     if mount.size:
@@ -268,12 +356,13 @@ def quasi_static_full(m: ChainModel, torque: float, omega_rotor: float) -> tuple
         if a == m.housing:
             continue
         delta = np.sign(tau[j]) * m.chalf[j] + x[j]
-        theta[a] = delta + m.cr[j] * theta[b] + m.ce[j] * theta_h
+        theta_b = theta[b] if m.cb2[j] < 0 else 0.5 * (theta[b] + theta[m.cb2[j]])
+        theta[a] = delta + m.cr[j] * theta_b + m.ce[j] * theta_h
     return theta, omega, tyre_tau
 
 
 def deflections(m: ChainModel, theta: F64) -> F64:
     """Coupling deflections ``delta_j`` (rad, in a's angle) for body angles ``theta``."""
-    b_theta = np.where(m.cb >= 0, theta[np.maximum(m.cb, 0)], 0.0)
+    b_theta = m.b_angle(theta)
     h_theta = theta[m.housing] if m.housing >= 0 else 0.0
     return np.asarray(theta[m.ca] - m.cr * b_theta - m.ce * h_theta, dtype=np.float64)

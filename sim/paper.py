@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.errors import ParameterError
+from sim.layout import shaft_gap
 from sim.metrics import impact_induced_fluctuation, peak_to_valley, unloaded_time
 from sim.params import GAP_NAMES, Vehicle
 from sim.simulate import SimResult, simulate
@@ -145,21 +146,24 @@ def sensitivity_unit(vehicle: Vehicle) -> Literal["mm", "rad"]:
 
 def sensitivities(vehicle: Vehicle, cases: dict[str, CaseResult],
                   per: Literal["mm", "rad", "auto"] = "auto") -> F64:
-    """S_i = (impact_nominal - impact_without_gap_i) / dc_i, normalised to S5 = 100. Shape (5,).
+    """S_i = (impact_nominal - impact_without_gap_i) / dc_i, normalised to the half-shaft gap = 100.
+
+    One value per gap in ``vehicle.gap_names`` order (classic layout: five, S5 = halfshaft = 100).
 
     ``per="mm"``: ``dc_i`` is the gap's circumferential clearance in mm (nominal angle times
     contact radius), the paper's definition; ``per="rad"``: its angle in its own shaft;
     ``"auto"``: mm when every gap has a radius (:func:`sensitivity_unit`), else rad.
-    ``cases`` needs ``"nominal"`` and ``"no_gap1"`` .. ``"no_gap5"`` (:func:`run_case`).
+    ``cases`` needs ``"nominal"`` and ``"no_gap1"`` .. ``"no_gapN"`` (:func:`run_case`).
     """
     unit = sensitivity_unit(vehicle) if per == "auto" else per
     if unit not in ("mm", "rad"):
         raise ParameterError("per", per, "must be 'mm', 'rad' or 'auto'")
-    size = vehicle.gaps_mm if unit == "mm" else vehicle.gaps.nominal()
+    size = vehicle.gaps_mm if unit == "mm" else tuple(vehicle.gap(g).nominal for g in vehicle.gap_names)
     nom = cases["nominal"].impact_rpm
     raw = np.array([(nom - cases[f"no_gap{i}"].impact_rpm) / max(size[i - 1], 1e-12)
-                    for i in range(1, len(GAP_NAMES) + 1)])
-    return 100.0 * raw / raw[-1] if raw[-1] != 0 else raw
+                    for i in range(1, len(vehicle.gap_names) + 1)])
+    ref = raw[vehicle.gap_names.index(shaft_gap(vehicle))]
+    return 100.0 * raw / ref if ref != 0 else raw
 
 
 def sensitivity_table(vehicle: Vehicle, cases: dict[str, CaseResult]) -> str:

@@ -16,6 +16,7 @@ mm of arc (the paper's measure for comparing gear pairs and splines).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -25,20 +26,22 @@ from sim.errors import ParameterError
 from sim.fields import ANY, INT_POS, NONNEG, POS, build, check, field_meta, flag, to_plain, validate
 from sim.fields import num as _f
 from sim.optional import Drag, Effects, ProgressiveStiffness, SpeedSensor, TorqueLag, TyreSlip
-
-# Physical limits (inclusive) of the description's fields; docs/simulation.md explains each.
-INERTIA = (1e-6, 1e4)  # kg m^2: a small pinion .. a heavy-truck wheel set
-STIFFNESS = (1.0, 1e9)  # N m/rad: a soft mount .. a steel gear mesh referred to a large gear
-DAMPING = (0.0, 1e6)  # N m s/rad
-MASS = (1.0, 1e5)  # kg
-WHEEL_RADIUS = (0.05, 2.0)  # m
-TEETH = (5, 500)
-MODULE_MM = (0.1, 50.0)
-RATIO = (0.5, 50.0)  # total reducer ratio
-MAX_SEGMENTS = 20  # half-shaft segments: 20 carry its first modes; more only shrinks the step
-SEGMENTS = (1, MAX_SEGMENTS)
-LASH_RAD = (0.0, 0.2)  # total clearance in its own shaft's angle: 0.2 rad = 11.5 deg, far above any real joint
-CONTACT_RADIUS_MM = (0.0, 1000.0)
+from sim.params_base import (
+    DAMPING,
+    INERTIA,
+    MASS,
+    MM_FIELDS,
+    MODULE_MM,
+    RATIO,
+    SEGMENTS,
+    STIFFNESS,
+    TEETH,
+    WHEEL_RADIUS,
+    Gap,
+    gap_from_mm,
+    move_band,
+)
+from sim.stages import Shaft, Stage, check_topology, gap_table, parse_chain, split_ends, stage_dict
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -46,6 +49,7 @@ class Motor:
     rotor_inertia: float = _f("kg m^2", limits=INERTIA)
     viscous_damping: float = _f("N m s/rad", NONNEG, 0.0, DAMPING)
     max_power_kw: float = _f("kW", POS, 160.0, (0.1, 5000.0))
+    coulomb_drag: float = _f("N m", NONNEG, 0.0, (0.0, 1e4))  # bearing/seal friction, tanh-smoothed at 1 rad/s
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -96,6 +100,8 @@ class Halfshaft:
 class Wheel:
     inertia: float = _f("kg m^2", limits=INERTIA)  # own rotational inertia of one driven wheel
     radius: float = _f("m", limits=WHEEL_RADIUS)
+    viscous_drag: float = _f("N m s/rad (per wheel)", NONNEG, 0.0, DAMPING)  # hub bearings, brake pads
+    coulomb_drag: float = _f("N m (per wheel)", NONNEG, 0.0, (0.0, 1e4))  # tanh-smoothed at 0.05 rad/s
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -121,62 +127,6 @@ class Housing:
     mount_damping: float = _f("N m s/rad", NONNEG, 150.0, DAMPING)
 
 
-MM_FIELDS = ("nominal_mm", "min_mm", "max_mm")
-
-
-@dataclass(frozen=True, kw_only=True)
-class Gap:
-    """Total clearance (2 alpha) in its own shaft's angle, rad, with its tolerance band.
-
-    ``radius_mm`` is the contact (pitch) radius at which the clearance is a circumferential
-    arc: gear pairs the driven gear's pitch radius (the arc backlash is the same on both
-    gears), splines their pitch radius. With it the gap can be given in mm of arc
-    (``nominal_mm``, ``min_mm``, ``max_mm`` in the file, converted to rad on reading) and read
-    back in mm (:meth:`arc_mm`). 0 means not given.
-    """
-
-    nominal: float = _f("rad", NONNEG, limits=LASH_RAD)
-    min: float = _f("rad", NONNEG, -1.0, LASH_RAD)  # omitted (-1) -> same as nominal
-    max: float = _f("rad", NONNEG, -1.0, LASH_RAD)
-    radius_mm: float = _f("mm", NONNEG, 0.0, CONTACT_RADIUS_MM)
-
-    def __post_init__(self) -> None:
-        for side in ("min", "max"):
-            if getattr(self, side) == -1.0:
-                object.__setattr__(self, side, self.nominal)
-
-    def arc_mm(self, angle_rad: float | None = None, *, name: str = "gap") -> float:
-        """Circumferential clearance (mm) of ``angle_rad`` (default: the nominal) at ``radius_mm``.
-
-        Raises ParameterError naming ``gaps.<name>.radius_mm`` when the radius is not given.
-        """
-        if self.radius_mm <= 0:
-            raise ParameterError(f"gaps.{name}.radius_mm", self.radius_mm,
-                                 "contact radius not given; needed for a clearance in mm")
-        return (self.nominal if angle_rad is None else angle_rad) * self.radius_mm
-
-
-def gap_from_mm(value: Mapping[str, Any], path: str) -> dict[str, Any]:
-    """A gap table with ``nominal_mm``/``min_mm``/``max_mm`` rewritten to rad via ``radius_mm``."""
-    out = dict(value)
-    if not any(k in out for k in MM_FIELDS):
-        return out
-    radius = out.get("radius_mm")
-    if radius is None:
-        raise ParameterError(f"{path}radius_mm", None, "needed to give the gap in mm of circumferential clearance")
-    check(f"{path}radius_mm", radius, POS)
-    for key in MM_FIELDS:
-        if key not in out:
-            continue
-        rad_key = key[:-3]
-        mm = out.pop(key)
-        if rad_key in out:
-            raise ParameterError(f"{path}{key}", mm, f"give {rad_key} (rad) or {key} (mm), not both")
-        check(f"{path}{key}", mm, NONNEG)
-        out[rad_key] = mm / radius
-    return out
-
-
 GAP_NAMES: tuple[str, ...] = ("spline", "mesh1", "mesh2", "differential", "halfshaft")
 
 
@@ -198,11 +148,14 @@ class Vehicle:
 
     name: str
     motor: Motor
-    reducer: Reducer
-    halfshaft: Halfshaft
     wheel: Wheel
     body: Body
-    gaps: Gaps
+    # classic layout (two gear stages, differential, half-shafts) ...
+    reducer: Reducer | None = None
+    halfshaft: Halfshaft | None = None
+    gaps: Gaps | None = None
+    # ... or a chain of stages from rotor to wheels (sim.stages); exactly one of the two
+    stages: tuple[Stage, ...] = ()
     housing: Housing = field(default_factory=Housing)
     effects: Effects = field(default_factory=Effects)
     description: str = ""
@@ -210,14 +163,32 @@ class Vehicle:
     tolerances: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        classic = (self.reducer, self.halfshaft, self.gaps)
+        if self.stages and any(x is not None for x in classic):
+            raise ParameterError("stage", len(self.stages), "give [[stage]] tables or [reducer]/[halfshaft]/[gaps.*], "
+                                 "not both")
+        if not self.stages:
+            for name, x in zip(("reducer", "halfshaft", "gaps"), classic, strict=True):
+                if x is None:
+                    raise ParameterError(name, None, "required field missing (or describe the driveline as "
+                                         "[[stage]] tables)")
         validate(self, "", _cross_checks)
+        if self.stages:
+            from sim.layout import stage_checks
+
+            check_topology(self.stages)
+            stage_checks(self)
         for path, band in self.tolerances.items():
             value = self.get(path)  # raises ParameterError for unknown paths
             if not isinstance(value, int | float) or isinstance(value, bool):
                 raise ParameterError(f"tolerances.{path}", band, "only numeric fields can have a band")
             if len(band) != 2 or not all(math.isfinite(b) for b in band) or band[0] > band[1]:
                 raise ParameterError(f"tolerances.{path}", band, "must be [min, max] with min <= max")
-            meta = field_meta(Vehicle, path, _nested_type)
+            parts = path.split(".")
+            if parts[0] == "stage" and len(parts) >= 3:  # a stage field: its own metadata (right shaft: Shaft's)
+                meta = field_meta(Shaft if parts[2] == "right" else Stage, parts[-1], _nested_type)
+            else:
+                meta = field_meta(Vehicle, path, _nested_type)
             if meta is not None:  # every sampled variant must be a valid vehicle
                 for end, b in zip(("min", "max"), band, strict=True):
                     check(f"tolerances.{path}[{end}]", b, meta["rule"], meta.get("limits"), meta.get("unit", ""))
@@ -226,6 +197,12 @@ class Vehicle:
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (tuples as lists) that :meth:`from_dict` accepts; JSON/TOML friendly."""
         out = to_plain(self)
+        for key in ("reducer", "halfshaft", "gaps", "stages"):
+            if not out[key]:
+                out.pop(key)
+        if self.stages:
+            out.pop("stages")
+            out["stage"] = [stage_dict(s) for s in self.stages]
         out["tolerances"] = {k: [float(a), float(b)] for k, (a, b) in self.tolerances.items()}
         return out
 
@@ -233,13 +210,25 @@ class Vehicle:
     def from_dict(cls, data: Mapping[str, Any]) -> Vehicle:
         if not isinstance(data, Mapping):
             raise ParameterError("vehicle", type(data).__name__, "must be a table/dict")
-        return build(cls, data, "", _nested_type, _preprocess)
+        if "stage" not in data:
+            if "stages" in data:
+                raise ParameterError("stages", data["stages"], "unknown field; the chain is given as [[stage]]")
+            return build(cls, data, "", _nested_type, _preprocess)
+        data, first = split_ends(data)
+        stages = parse_chain(data.pop("stage"), first)
+        if "housing" not in data:  # stage files: no [housing] means no housing on mounts
+            data["housing"] = {"enabled": False}
+        return build(cls, {**data, "stages": stages}, "", _nested_type, _preprocess)
 
     # ---- dotted access and what-ifs ---------------------------------------------------
     def get(self, path: str) -> Any:
         """Value at a dotted path, e.g. ``"gaps.halfshaft.nominal"`` or ``"halfshaft.stiffness"``."""
         obj: Any = self
-        for part in path.split("."):
+        parts = path.split(".")
+        if self.stages and parts[0] in ("gaps", "stage") and len(parts) >= 2:
+            obj = self.gap(parts[1]) if parts[0] == "gaps" else self.stage(parts[1])
+            parts = parts[2:]
+        for part in parts:
             if not dataclasses.is_dataclass(obj) or part not in {f.name for f in dataclasses.fields(obj)}:
                 raise ParameterError(path, part, "no such vehicle field")
             obj = getattr(obj, part)
@@ -258,6 +247,8 @@ class Vehicle:
         all_changes = dict(changes or {})
         all_changes.update({k.replace("__", "."): v for k, v in kw.items()})
         data = self.to_dict()
+        if self.stages:  # stage tables by name while editing
+            data["stage"] = {s["name"]: s for s in data["stage"]}
         moved: set[str] = set()  # gaps whose nominal changed
         banded: set[str] = set()  # gaps whose min or max was given
         for path, value in all_changes.items():
@@ -268,10 +259,13 @@ class Vehicle:
                 moved.add(parts[1])
             if parts[0] == "gaps" and len(parts) == 3 and parts[2] in ("min", "max", "min_mm", "max_mm"):
                 banded.add(parts[1])
-            if parts[0] == "gaps" and len(parts) == 3 and parts[2] in MM_FIELDS:
-                self.get(".".join(parts[:2]))  # validates the gap name
-                gap = data["gaps"][parts[1]]
-                gap.pop(parts[2][:-3], None)  # converted with the (possibly changed) radius on rebuild
+            if parts[0] == "gaps" and len(parts) == 3:
+                self.gap(parts[1])  # validates the gap name
+                gap = gap_table(data, parts[1])
+                if parts[2] in MM_FIELDS:
+                    gap.pop(parts[2][:-3], None)  # converted with the (possibly changed) radius on rebuild
+                elif parts[2] not in gap:
+                    raise ParameterError(path, value, "no such vehicle field")
                 gap[parts[2]] = value
                 continue
             self.get(".".join(parts[:-1]) if len(parts) > 1 else parts[0])  # validates prefix
@@ -282,42 +276,94 @@ class Vehicle:
                 raise ParameterError(path, value, "no such vehicle field")
             node[parts[-1]] = list(value) if isinstance(value, tuple) else value
         for name in moved - banded:
-            _move_band(data["gaps"][name], getattr(self.gaps, name))
+            move_band(gap_table(data, name), self.gap(name))
+        if self.stages:
+            data["stage"] = list(data["stage"].values())
         return Vehicle.from_dict(data)
+
+    # ---- the chain of stages (classic layouts are read as one) ------------------------
+    @functools.cached_property
+    def chain(self) -> tuple[Stage, ...]:
+        """The driveline as stages from rotor to wheels; the classic layout as its five stages."""
+        from sim.layout import legacy_stages
+
+        return self.stages or legacy_stages(self)
+
+    def as_stages(self) -> Vehicle:
+        """The same driveline written as a stage chain (a classic file converted; a chain unchanged)."""
+        from sim.layout import stage_layout
+
+        return self if self.stages else Vehicle.from_dict(stage_layout(self))
+
+    def stage(self, name: str) -> Stage:
+        """The stage called ``name`` (ParameterError naming the known ones otherwise)."""
+        for s in self.chain:
+            if s.name == name:
+                return s
+        raise ParameterError(f"stage.{name}", name, f"no such stage; known: {[s.name for s in self.chain]}")
+
+    @property
+    def gap_names(self) -> tuple[str, ...]:
+        """Names of the backlash gaps in chain order (classic layout: :data:`GAP_NAMES`)."""
+        return GAP_NAMES if not self.stages else tuple(g for s in self.stages for g in s.gap_names())
+
+    def gap(self, name: str) -> Gap:
+        """The gap ``name`` (a stage name, or ``<halfshaft stage>_right`` for an unequal right shaft)."""
+        if not self.stages and self.gaps is not None and name in GAP_NAMES:
+            gap: Gap = getattr(self.gaps, name)
+            return gap
+        for s in self.stages:
+            if name in s.gap_names():
+                return s.lash_rad if name == s.name or s.right is None else s.right.lash_rad
+        raise ParameterError(f"gaps.{name}", name, f"no such gap; known: {list(self.gap_names)}")
+
+    def gap_speed_ratio(self, name: str) -> float:
+        """Motor speed / speed of the shaft the gap ``name`` is measured on."""
+        k = 1.0
+        for s in self.chain:
+            if name in s.gap_names():
+                return k * s.to_input
+            k *= s.ratio
+        raise ParameterError(f"gaps.{name}", name, f"no such gap; known: {list(self.gap_names)}")
+
+    @property
+    def has_housing(self) -> bool:
+        return self.housing.enabled
+
+    @property
+    def driven_wheels(self) -> int:
+        return self.chain[-1].count if self.chain[-1].kind == "halfshaft" else 1
 
     @property
     def ratio(self) -> float:
-        return self.reducer.ratio
+        """Total ratio motor speed / wheel speed."""
+        if self.reducer is not None:
+            return self.reducer.ratio
+        return math.prod(s.ratio for s in self.stages)
 
     @property
     def motor_side_gaps(self) -> tuple[float, ...]:
-        """Each gap's nominal total clearance referred to the motor angle (rad)."""
-        r1, r2 = self.reducer.ratio1, self.reducer.ratio2
-        mult = (1.0, r1, r1 * r2, r1 * r2, r1 * r2)
-        return tuple(g * m for g, m in zip(self.gaps.nominal(), mult, strict=True))
-
-
+        """Each gap's nominal total clearance referred to the motor angle (rad), in :attr:`gap_names` order."""
+        return tuple(self.gap(g).nominal * self.gap_speed_ratio(g) for g in self.gap_names)
 
     @property
     def gap_radii_mm(self) -> tuple[float, ...]:
-        """Contact (pitch) radius of each gap, mm, in :data:`GAP_NAMES` order (0 = not given)."""
-        return tuple(getattr(self.gaps, g).radius_mm for g in GAP_NAMES)
+        """Contact (pitch) radius of each gap, mm, in :attr:`gap_names` order (0 = not given)."""
+        return tuple(self.gap(g).radius_mm for g in self.gap_names)
 
     @property
     def gaps_mm(self) -> tuple[float, ...]:
         """Each gap's nominal circumferential clearance, mm. Raises ParameterError if a radius is missing."""
-        return tuple(getattr(self.gaps, g).arc_mm(name=g) for g in GAP_NAMES)
+        return tuple(self.gap(g).arc_mm(name=g) for g in self.gap_names)
 
     @property
     def motor_angle_per_mm(self) -> tuple[float, ...]:
         """Motor angle (rad) one mm of each gap's circumferential clearance costs: ``k_i / r_i``.
 
-        ``k_i`` is the speed ratio motor / gap shaft (1, r1, r1 r2, r1 r2, r1 r2), ``r_i`` the
-        contact radius in mm. Raises ParameterError if a radius is missing.
+        ``k_i`` is the speed ratio motor / gap shaft (classic: 1, r1, r1 r2, r1 r2, r1 r2), ``r_i``
+        the contact radius in mm. Raises ParameterError if a radius is missing.
         """
-        r1, r2 = self.reducer.ratio1, self.reducer.ratio2
-        mult = (1.0, r1, r1 * r2, r1 * r2, r1 * r2)
-        return tuple(m / getattr(self.gaps, g).arc_mm(1.0, name=g) for m, g in zip(mult, GAP_NAMES, strict=True))
+        return tuple(self.gap_speed_ratio(g) / self.gap(g).arc_mm(1.0, name=g) for g in self.gap_names)
 
 
 def _cross_checks(obj: Any, prefix: str) -> None:
@@ -333,29 +379,6 @@ def _cross_checks(obj: Any, prefix: str) -> None:
         raise ParameterError(f"{prefix}count", obj.count, "must be 1 or 2 driven half-shafts")
 
 
-def _move_band(gap: dict[str, Any], old: Gap) -> None:
-    """Carry a gap's tolerance band along when a what-if changes its nominal size (``gap`` is its dict).
-
-    The band is kept (as before bands were checked) and only widened to take in the new
-    nominal, so a removed or enlarged gap is still a valid description whose band contains
-    its size. Values that are not numbers are left for validation to name.
-    """
-    if "nominal_mm" in gap:
-        mm, radius = gap["nominal_mm"], gap.get("radius_mm", 0.0)
-        if not (_is_num(mm) and _is_num(radius) and radius > 0):
-            return
-        new = mm / radius
-    else:
-        new = gap.get("nominal")
-        if not _is_num(new):
-            return
-    gap["min"], gap["max"] = min(old.min, new), max(old.max, new)
-
-
-def _is_num(x: Any) -> bool:
-    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-
-
 _TABLES: dict[str, type] = {c.__name__: c for c in (
     Motor, Reducer, Halfshaft, Wheel, Body, Gaps, Gap, Housing, Effects, TorqueLag, SpeedSensor, Drag,
     ProgressiveStiffness, TyreSlip,
@@ -366,7 +389,7 @@ def _nested_type(cls: type, name: str) -> type | None:
     """The dataclass of sub-table ``name`` of ``cls`` (from the field's annotation), or None."""
     for f in dataclasses.fields(cls):
         if f.name == name:
-            return _TABLES.get(str(f.type))
+            return _TABLES.get(str(f.type).removesuffix(" | None"))
     return None
 
 

@@ -62,11 +62,13 @@ def make_rhs(m: ChainModel, t_in: F64, q_in: F64, linear: bool) -> Callable[[flo
         f[m.rotor] += tm - m.rotor_drag[0] * w_r - m.rotor_drag[1] * np.tanh(w_r)
         if m.housing >= 0:
             f[m.housing] -= tm
-        w_w = omega[m.wheel]
-        v = w_w * radius
-        force = crr * mass * GRAVITY * np.tanh(v / 0.1) + half_rho_cda * v * abs(v) + mass * GRAVITY * sin_grade
-        road = radius * force
-        f[m.wheel] -= road + brake * np.tanh(w_w / 0.05)
+        share = 1.0 / len(m.wheels)  # unequal shafts: each wheel carries half the car
+        for w in m.wheels:
+            w_w = omega[w]
+            v = w_w * radius
+            force = crr * mass * GRAVITY * np.tanh(v / 0.1) + half_rho_cda * v * abs(v) + mass * GRAVITY * sin_grade
+            f[w] -= share * (radius * force + brake * np.tanh(w_w / 0.05))
+            f[w] -= m.wheel_drag[0] * w_w + m.wheel_drag[1] * np.tanh(w_w / 0.05)
         return np.concatenate((omega, f / m.inertia))
 
     return rhs

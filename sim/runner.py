@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.errors import InstabilityError
-from sim.integrate import STATUS_NONFINITE, STATUS_OK, is_serial_chain, run_chain
+from sim.integrate import STATUS_NONFINITE, STATUS_OK, is_kernel_layout, run_chain
 from sim.model import ChainModel
 
 F64 = NDArray[np.float64]
@@ -51,8 +51,8 @@ def run_from_state(
     ------
     InstabilityError : a state became non-finite or a speed exceeded ``speed_limit`` (rad/s)
     """
-    if not is_serial_chain(chain.ca, chain.cb, chain.housing):
-        raise ValueError("the kernel needs the serial chain layout of sim.model.build_chain")
+    if not is_kernel_layout(chain.ca, chain.cb, chain.housing):
+        raise ValueError("the kernel needs the layout of sim.model.build_chain (mount last)")
     nb, nc = chain.n_bodies, chain.n_couplings
     tyre_on = chain.vehicle >= 0
     out_res, out_sens, out_torque = np.zeros(n_out), np.zeros(n_out), np.zeros(n_out)
@@ -62,8 +62,9 @@ def run_from_state(
     ev_t = np.zeros(MAX_EVENTS)
     ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
     status, t_fail, n_ev = run_chain(
-        chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf,
-        chain.rotor, chain.housing, chain.wheel, chain.road, chain.rotor_drag, np.array(lag, dtype=np.float64),
+        chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf, chain.cb2,
+        chain.rotor, chain.housing, chain.wheel, chain.wheel2, chain.wheel_drag, chain.road, chain.rotor_drag,
+        np.array(lag, dtype=np.float64),
         float(sensor_tau), chain.vehicle, np.array([chain.tyre[0], chain.tyre[1], tyre0]),
         np.ascontiguousarray(t_in, dtype=np.float64), np.ascontiguousarray(q_in, dtype=np.float64), linear,
         float(t0), float(step), int(n_out), int(sub), np.array(theta0, dtype=np.float64),

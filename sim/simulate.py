@@ -13,7 +13,7 @@ from sim.errors import InputSignalError, ParameterError
 from sim.inputs import TorqueInput, prepare_input
 from sim.linear import step_limit, tangent_stiffness
 from sim.model import ChainModel, build_chain, quasi_static_full
-from sim.params import GAP_NAMES, Vehicle
+from sim.params import Vehicle
 from sim.runner import MAX_EVENTS, raise_status, run_from_state
 from sim.sensor import delay_sample_quantize
 from sim.two_inertia import pack, project, quasi_static, run_two_inertia
@@ -166,15 +166,13 @@ def simulate(
     sens = eff.speed_sensor
     speed = delay_sample_quantize(t, raw.sensor * RPM, sens.delay_s, sens.sample_s, sens.resolution_rpm)
     torques = {name: raw.tau[:, j] * chain.creport[j] for j, name in enumerate(chain.coupling_names)}
-    n_hs = vehicle.halfshaft.count
-    for name in torques:
-        if name.startswith("halfshaft"):
-            torques[name] = torques[name] / n_hs
     if chain.vehicle >= 0:
         torques["tyre"] = raw.tyre
-    gap_open = {g: raw.is_open[:, chain.gap_coupling[g]].copy() for g in GAP_NAMES}
-    events = _pair_events([(GAP_NAMES[j], tk, kind) for j, tk, kind in raw.events],
-                          {g: bool(raw.is_open[0, chain.gap_coupling[g]]) for g in GAP_NAMES}, t0)
+    gaps = vehicle.gap_names
+    gap_of = {j: g for g, j in chain.gap_coupling.items()}
+    gap_open = {g: raw.is_open[:, chain.gap_coupling[g]].copy() for g in gaps}
+    events = _pair_events([(gap_of[j], tk, kind) for j, tk, kind in raw.events if j in gap_of],
+                          {g: bool(raw.is_open[0, chain.gap_coupling[g]]) for g in gaps}, t0)
     w_wheel = raw.omega[:, chain.wheel]
     w_vehicle = raw.omega[:, chain.vehicle] if chain.vehicle >= 0 else w_wheel
     return SimResult(

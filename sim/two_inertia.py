@@ -58,35 +58,52 @@ def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaPara
     Reducer inertias are referred to the motor (paper: "equivalent to the motor inertia"), half
     of the half-shaft inertia to each end, all coupling compliances added in series and
     referred to the half-shaft, and all five clearances summed in half-shaft angle. The
-    paper's model has no tyre compliance and linear springs: tyre slip and progressive
-    stiffness are left out of the projection.
+    paper's model has no tyre compliance, linear springs and only viscous drag: tyre slip,
+    progressive stiffness and Coulomb drag are left out of the projection. Unequal half-shafts
+    enter as the parallel pair (stiffness and damping summed, mean lash).
     """
     if vehicle.effects.tyre_slip.enabled:
         vehicle = vehicle.with_changes({"effects.tyre_slip.enabled": False})
         chain = None
     m = chain or build_chain(vehicle)
     i = vehicle.ratio
-    n = vehicle.halfshaft.count
+    n = vehicle.driven_wheels
     wheel_own = n * vehicle.wheel.inertia + vehicle.body.mass * vehicle.wheel.radius**2
-    jw_total = float(m.inertia[m.wheel])
-    jm = float(sum(m.inertia[b] * m.speed_ratio[b] ** 2 for b in range(m.n_bodies) if b not in (m.wheel, m.housing)))
+    jw_total = float(sum(m.inertia[w] for w in m.wheels))
+    jm = float(sum(m.inertia[b] * m.speed_ratio[b] ** 2 for b in range(m.n_bodies)
+                   if b not in (*m.wheels, m.housing)))
     # half-shaft interior nodes count half to each side in this reduction
     extra = jw_total - wheel_own
     compliance = 0.0
     damp_compliance = 0.0
     alpha_w = 0.0
+    right = _right_partners(vehicle, m)  # unequal shafts: the right piece in parallel with the left
     for j in range(m.n_couplings):
-        if m.ca[j] == m.housing:
+        if m.ca[j] == m.housing or j in right.values():
             continue
+        p = right.get(j, j)
+        k, c = (m.ck[j] + m.ck[p], m.cc[j] + m.cc[p]) if p != j else (m.ck[j], m.cc[j])
+        half = 0.5 * (m.chalf[j] + m.chalf[p])
         to_wheel = i * m.speed_ratio[m.ca[j]]  # a-angle per wheel angle
-        compliance += 1.0 / (m.ck[j] * to_wheel**2)
-        damp_compliance += 1.0 / max(m.cc[j] * to_wheel**2, 1e-12)
-        alpha_w += m.chalf[j] / to_wheel
+        compliance += 1.0 / (k * to_wheel**2)
+        damp_compliance += 1.0 / max(c * to_wheel**2, 1e-12)
+        alpha_w += half / to_wheel
     return TwoInertiaParams(
         jm=jm, bm=float(m.rotor_drag[0]), ratio=i,
         khs=1.0 / compliance / n, chs=1.0 / damp_compliance / n, alpha=alpha_w,
-        jw=(wheel_own + extra) / n, n_shafts=n, road=tuple(float(x) for x in m.road),
+        jw=(wheel_own + extra) / n, bw=float(m.wheel_drag[0]) * len(m.wheels) / n, n_shafts=n,
+        road=tuple(float(x) for x in m.road),
     )
+
+
+def _right_partners(vehicle: Vehicle, m: ChainModel) -> dict[int, int]:
+    """Left half-shaft coupling -> its right counterpart (unequal shafts), else empty."""
+    last = vehicle.chain[-1]
+    if last.right is None:
+        return {}
+    names = list(m.coupling_names)
+    return {j: names.index(name.replace(last.name, f"{last.name}_right", 1)) for j, name in enumerate(names)
+            if name.startswith(last.name) and not name.startswith(f"{last.name}_right")}
 
 
 @njit(cache=True, nogil=True)

@@ -14,6 +14,16 @@ Layout (see ``sim/presets/paper.toml`` for a documented example)::
     [effects.*]    optional effects, all off by default: torque_lag, speed_sensor, drag,
                    progressive_stiffness (cubic terms), tyre_slip (enabled, slip_stiffness, relaxation_length)
     [tolerances]   "section.field" = [min, max]
+
+or, instead of [reducer], [halfshaft] and [gaps.*], the driveline as a chain of stages from the
+rotor to the wheels (``sim.stages``; the presets ``single_reduction`` and ``chain_drive`` are
+documented examples)::
+
+    [[stage]]      kind (spline, gear, planetary, chain, differential, halfshaft), name, ratio or teeth,
+                   stiffness, damping, lash_rad, cubic_stiffness (output shaft angle), inertia (output body)
+
+A stage file without [housing] has no housing on mounts; a classic file without it keeps the
+default housing (enabled), as it always had.
 """
 
 from __future__ import annotations
@@ -68,10 +78,13 @@ def dump_toml(vehicle: Vehicle) -> str:
     """TOML text that :func:`load_vehicle_text` reads back to an equal vehicle."""
     data = vehicle.to_dict()
     lines: list[str] = []
+    stages = data.pop("stage", [])
     for key, value in data.items():
         if not isinstance(value, dict):
             lines.append(f"{key} = {_value(value)}")
     _tables(data, [], lines)
+    for stage in stages:  # the chain in order, rotor side first; sub-tables written inline
+        lines += ["", "[[stage]]", *(f"{_key(k)} = {_value(v)}" for k, v in stage.items())]
     return "\n".join(lines) + "\n"
 
 
@@ -106,4 +119,6 @@ def _value(v: Any) -> str:
         return json.dumps(v)
     if isinstance(v, list | tuple):
         return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
     raise ParameterError("vehicle", v, f"cannot write a {type(v).__name__} to TOML")

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from sim.budget import MAX_OUTPUT_BYTES
 from sim.errors import InputSignalError, ParameterError
-from sim.params import GAP_NAMES, Vehicle
+from sim.params import Vehicle
 
 F64 = NDArray[np.float64]
 
@@ -25,7 +25,8 @@ class WhatIf:
 
     Attributes
     ----------
-    gap_scale : gap name -> factor on its nominal size (0 removes it); ``"all"`` scales all five
+    gap_scale : gap name -> factor on its nominal size (0 removes it); ``"all"`` scales all of them;
+        names are checked against the vehicle when applied (a stage chain names its gaps after its stages)
     torque_scale : factor on the whole torque input
     antijerk_rate : N m/s, rate limit on the torque while ``|T| < antijerk_band`` (0 = off)
     antijerk_band : N m, half-width of the band around zero torque where the limit applies
@@ -40,8 +41,6 @@ class WhatIf:
 
     def __post_init__(self) -> None:
         for name, s in self.gap_scale.items():
-            if name != "all" and name not in GAP_NAMES:
-                raise ParameterError(f"what_if.gap_scale.{name}", s, f"unknown gap; known: {GAP_NAMES} or 'all'")
             if not np.isfinite(s) or s < 0:
                 raise ParameterError(f"what_if.gap_scale.{name}", s, "must be a finite factor >= 0")
         if not np.isfinite(self.torque_scale):
@@ -52,11 +51,16 @@ class WhatIf:
             raise ParameterError("what_if.antijerk_band", self.antijerk_band, "must be a finite band >= 0 N m")
 
     def apply_vehicle(self, v: Vehicle) -> Vehicle:
+        """``v`` with the gap scales and field changes; gap names are the vehicle's (stage names on a chain)."""
         changes: dict[str, object] = dict(self.changes)
-        for name in GAP_NAMES:
+        for name, s in self.gap_scale.items():
+            if name != "all" and name not in v.gap_names:
+                raise ParameterError(f"what_if.gap_scale.{name}", s,
+                                     f"unknown gap; known: {list(v.gap_names)} or 'all'")
+        for name in v.gap_names:
             s = self.gap_scale.get(name, 1.0) * self.gap_scale.get("all", 1.0)
             if s != 1.0:
-                changes[f"gaps.{name}"] = getattr(v.gaps, name).nominal * s
+                changes[f"gaps.{name}"] = v.gap(name).nominal * s
         return v.with_changes(changes) if changes else v
 
     def apply_torque(self, t: F64, torque: F64) -> tuple[F64, F64, bool]:

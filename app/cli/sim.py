@@ -33,7 +33,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     s.add_argument("--out", type=Path, default=None, help="write t, speeds and gap states to this CSV")
     s.add_argument("--what-if", action="append", default=[], metavar="SPEC",
                    help="also run a what-if and compare with the baseline: comma-separated gap=NAME:FACTOR "
-                        "(NAME a gap or 'all', 0 removes it), torque=FACTOR, anti_jerk=N_M_PER_S, "
+                        "(NAME a gap: a stage name on a [[stage]] vehicle, or 'all'; 0 removes it), torque=FACTOR, "
+                        "anti_jerk=N_M_PER_S, "
                         "anti_jerk_band=N_M, set=dotted.field:VALUE; e.g. gap=halfshaft:0.5,torque=0.8,"
                         "anti_jerk=2000 (--out then holds the what-if run)")
     s.set_defaults(func=_simulate)

@@ -57,15 +57,23 @@ def apply_effects(vehicle: Any, settings: Mapping[str, Mapping[str, float]]) -> 
 
     Every effect's changes are computed from the same base ``vehicle`` and applied in one rebuild,
     so the result does not depend on the order of the effects. Effects that act on the input or
-    output only cannot be stored in a vehicle and raise :class:`~sim.errors.ParameterError`.
+    output only cannot be stored in a vehicle and raise :class:`~sim.errors.ParameterError`;
+    effects that do not apply to ``vehicle`` (:meth:`Effect.inapplicable`) change nothing.
     """
     changes: dict[str, Any] = {}
     for eid, values in settings.items():
         eff = get_effect(eid)
         if eff.vehicle_change is None:
             raise ParameterError(f"effects.{eid}", dict(values), "acts outside the vehicle; cannot be stored in it")
+        if eff.inapplicable(vehicle):  # e.g. housing_mount on a chain without a housing: nothing to change
+            continue
         changes.update(eff.vehicle_change(vehicle, eff.values(values)))
     return vehicle.with_changes(changes) if changes else vehicle
 
 
-__all__ = ["EFFECTS", "Effect", "ParamSpec", "apply_effects", "get_effect"]
+def applicable_effects(vehicle: Any) -> dict[str, str]:
+    """Effect id -> "" when it applies to ``vehicle``, else the reason it does not."""
+    return {eid: e.inapplicable(vehicle) for eid, e in EFFECTS.items()}
+
+
+__all__ = ["EFFECTS", "Effect", "ParamSpec", "applicable_effects", "apply_effects", "get_effect"]

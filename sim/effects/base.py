@@ -31,6 +31,7 @@ from sim.errors import ParameterError
 FloatArray = npt.NDArray[np.float64]
 Values = Mapping[str, float]
 VehicleChange = Callable[[Any, Values], dict[str, Any]]
+Applicability = Callable[[Any], str]  # vehicle -> "" when the effect applies, else the reason it does not
 InputTransform = Callable[[FloatArray, FloatArray, Values], FloatArray]
 OutputTransform = Callable[[FloatArray, FloatArray, Values], FloatArray]
 
@@ -81,6 +82,9 @@ class Effect:
     input_transform : ``f(t_fine, torque_fine, values) -> torque_fine`` or None.
     output_transform : ``f(t_fine, speed_fine, values) -> speed_fine`` or None.
     model : simulator model the effect needs (``"multibody"`` or ``"any"``).
+    applies : ``f(vehicle) -> reason`` ("" when the effect exists on that vehicle), or None (always).
+        An effect that does not apply changes nothing (:meth:`apply` returns the vehicle as it is),
+        so a fit over it finds nothing; callers should skip it and show the reason.
     """
 
     id: str
@@ -91,6 +95,7 @@ class Effect:
     output_transform: OutputTransform | None = None
     model: str = "any"
     notes: str = ""
+    applies: Applicability | None = None
     _names: tuple[str, ...] = field(init=False, repr=False, default=())
 
     def __post_init__(self) -> None:
@@ -117,14 +122,20 @@ class Effect:
             raise ParameterError(self.id, seq, f"expects {len(self.params)} values {list(self.names)}")
         return {p.name: p.check(v) for p, v in zip(self.params, seq, strict=True)}
 
+    def inapplicable(self, vehicle: Any) -> str:
+        """Why this effect does not exist on ``vehicle`` (e.g. no housing on mounts), or "" if it does."""
+        return self.applies(vehicle) if self.applies is not None else ""
+
     def apply(self, vehicle: Any, values: Values) -> Any:
-        """``vehicle`` with this effect's field changes (unchanged for input/output-only effects)."""
-        if self.vehicle_change is None:
+        """``vehicle`` with this effect's field changes (unchanged for input/output-only effects and
+        for an effect that does not apply to it, see :meth:`inapplicable`)."""
+        if self.vehicle_change is None or self.inapplicable(vehicle):
             return vehicle
         return vehicle.with_changes(self.vehicle_change(vehicle, values))
 
-    def describe(self) -> dict[str, Any]:
-        return {
+    def describe(self, vehicle: Any = None) -> dict[str, Any]:
+        """Plain description; with ``vehicle`` also ``not_applicable``: why it does not apply ("" if it does)."""
+        out = {
             "id": self.id,
             "title": self.title,
             "model": self.model,
@@ -134,3 +145,6 @@ class Effect:
                        for p in self.params],
             "notes": self.notes,
         }
+        if vehicle is not None:
+            out["not_applicable"] = self.inapplicable(vehicle)
+        return out

@@ -2,8 +2,10 @@
 
 The resolver reads rotor speed relative to the stator, so housing roll shows directly in the
 measured speed (rotor minus housing), mostly at the mount mode (12-25 Hz) excited by impacts.
-The effect rescales the mount stiffness and damping of the model's housing (switching the housing
-on with the model's values when the diagnosed vehicle has it fixed). Parameters are base-2
+The effect rescales the mount stiffness and damping of the model's housing (on the classic layout,
+switching the housing on with the model's values when the diagnosed vehicle has it fixed). A stage
+chain without a housing on mounts (no ``[housing]``, e.g. a chain drive bolted to the chassis) has
+nothing to rescale: the effect reports that it does not apply. Parameters are base-2
 logarithms of the scale factors: priors from a quarter to four times the nominal mount.
 """
 
@@ -14,7 +16,15 @@ from typing import Any
 from sim.effects.base import Effect, ParamSpec, Values
 
 
+def _applies(vehicle: Any) -> str:
+    if vehicle.stages and not vehicle.housing.enabled:
+        return "the vehicle has no drive-unit housing on mounts (no [housing] in its stage chain)"
+    return ""
+
+
 def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
+    if _applies(vehicle):  # nothing to rescale (callers that ask first skip the effect)
+        return {}
     h = vehicle.housing
     return {
         "housing.enabled": True,
@@ -32,4 +42,5 @@ EFFECT = Effect(
     ),
     vehicle_change=_changes,
     model="multibody",
+    applies=_applies,
 )

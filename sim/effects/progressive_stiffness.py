@@ -23,11 +23,18 @@ MOUNT_REF_RAD = 0.02
 
 
 def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
-    return {
-        "effects.progressive_stiffness.halfshaft": v["halfshaft_rel"] * vehicle.halfshaft.stiffness
-        / HALFSHAFT_REF_RAD**2,
-        "effects.progressive_stiffness.mount": v["mount_rel"] * vehicle.housing.mount_stiffness / MOUNT_REF_RAD**2,
-    }
+    mount = {"effects.progressive_stiffness.mount": v["mount_rel"] * vehicle.housing.mount_stiffness / MOUNT_REF_RAD**2}
+    if not vehicle.stages:
+        return {"effects.progressive_stiffness.halfshaft": v["halfshaft_rel"] * vehicle.halfshaft.stiffness
+                / HALFSHAFT_REF_RAD**2, **mount}
+    out: dict[str, Any] = mount if vehicle.housing.enabled else {}
+    for s in vehicle.stages:  # a stage chain: the cubic term of each half-shaft (both when unequal)
+        if s.kind == "halfshaft":
+            out[f"stage.{s.name}.cubic_stiffness"] = v["halfshaft_rel"] * s.stiffness / HALFSHAFT_REF_RAD**2
+            if s.right is not None:
+                out[f"stage.{s.name}.right.cubic_stiffness"] = (v["halfshaft_rel"] * s.right.stiffness
+                                                                / HALFSHAFT_REF_RAD**2)
+    return out
 
 
 EFFECT = Effect(

@@ -21,7 +21,15 @@ from sim.effects.base import Effect, ParamSpec, Values
 MIN_COMPLIANCE = 0.05  # below this (C above 20 MN per unit slip) the tyre is rigid for the driveline
 
 
+def _applies(vehicle: Any) -> str:
+    if any(s.right is not None for s in vehicle.stages):
+        return "not modelled with unequal half-shafts (two wheel bodies)"
+    return ""
+
+
 def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
+    if _applies(vehicle):
+        return {}
     if v["compliance_per_mn"] < MIN_COMPLIANCE:
         return {"effects.tyre_slip.enabled": False}
     return {
@@ -40,4 +48,5 @@ EFFECT = Effect(
     ),
     vehicle_change=_changes,
     model="multibody",
+    applies=_applies,
 )

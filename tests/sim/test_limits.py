@@ -145,7 +145,7 @@ def test_parse_what_if() -> None:
     for bad, match in [("gap=hub:0.5", r"what_if\.gap_scale\.hub"), ("torque=x", r"what_if\.torque = 'x'"),
                        ("speed=3", r"what_if = 'speed=3'"), ("gap=halfshaft", r"what_if\.gap = 'halfshaft'")]:
         with pytest.raises(ParameterError, match=match):
-            parse_what_if([bad])
+            parse_what_if([bad]).apply_vehicle(PAPER)  # gap names are the vehicle's: checked when applied
 
 
 def test_tolerance_progress_and_chunks_match_one_batch(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -69,6 +69,6 @@ def test_whatif_vehicle_and_torque() -> None:
     _, q, resampled = WhatIf(torque_scale=0.5).apply_torque(t, np.array([10.0, 20.0]))
     assert list(q) == [5.0, 10.0] and not resampled
     with pytest.raises(ParameterError, match=r"gap_scale\.gearbox"):
-        WhatIf(gap_scale={"gearbox": 0.5})
+        WhatIf(gap_scale={"gearbox": 0.5}).apply_vehicle(v)
     with pytest.raises(ParameterError):
         WhatIf(gap_scale={"spline": -1.0})
