@@ -88,6 +88,7 @@ def write_drive(path: Path, car: Car, sim: dict[str, np.ndarray], torque_t: np.n
     """Record a simulated drive (``dynamics.simulate`` output) into a BLF log; returns what was drawn."""
     rec = rec or Recording()
     db = cantools.database.load_file(str(DBC))
+    assert isinstance(db, cantools.database.can.Database)  # a .dbc file is a CAN database
     t = sim["t"]
     duration = float(t[-1])
     speed = sensor_speed(car, t, sim["speed_rel"])
