@@ -1,8 +1,12 @@
 """The generator's car: paper-preset numbers read as data, plus the truth knobs of every effect.
 
 ``Car`` holds SI values (kg m^2, N m/rad, N m s/rad, rad, kg, m, s). Fields the preset does not
-have are the generator's own nominal choices: a differential-pinion inertia, a stiff
-relaxation-length tyre with force saturation, a 2 ms moving-average speed sensor. Each effect is a
+have are the generator's own nominal choices: a differential-pinion inertia, a relaxation-length
+tyre with force saturation, a 2 ms moving-average speed sensor. The nominal tyre (2 MN per unit
+slip, 0.05 m relaxation length) is stiffer than a real one on purpose: the nominal car must lie in
+the diagnosed model's family (the real tyre is the ``tyre_slip`` case, 25-80 kN). The preset's
+differential stiffness and damping are for both side gears together; each side-gear contact
+gets half. Each effect is a
 plain field change (see :func:`with_effect`), so an effect drawn for a case is a ``Car``.
 """
 
@@ -94,14 +98,14 @@ def nominal_car(preset: Path = PRESET) -> Car:
         k_spline=red["spline_stiffness"], c_spline=red["spline_damping"],
         k_mesh1=red["mesh1_stiffness"], c_mesh1=red["mesh1_damping"],
         k_mesh2=red["mesh2_stiffness"], c_mesh2=red["mesh2_damping"],
-        k_diff=red["diff_stiffness"], c_diff=red["diff_damping"],
+        k_diff=red["diff_stiffness"] / 2, c_diff=red["diff_damping"] / 2,  # preset: both side gears together
         gap_spline=gaps["spline"]["nominal"], gap_mesh1=gaps["mesh1"]["nominal"],
         gap_mesh2=gaps["mesh2"]["nominal"], gap_diff=gaps["differential"]["nominal"],
         gap_shaft=gaps["halfshaft"]["nominal"],
         k_shaft_l=hs["stiffness"], k_shaft_r=hs["stiffness"], c_shaft_l=hs["damping"], c_shaft_r=hs["damping"],
         j_shaft=hs["inertia"], j_wheel=p["wheel"]["inertia"], radius=p["wheel"]["radius"],
         mass=mass, crr=p["body"]["rolling_resistance"], cda=p["body"]["drag_area"], rho=p["body"]["air_density"],
-        tyre_c=3.0e5, tyre_sigma=0.15, tyre_mu=1.1,
+        tyre_c=2.0e6, tyre_sigma=0.05, tyre_mu=1.1,
         j_housing=p["housing"]["inertia"], k_mount=p["housing"]["mount_stiffness"],
         c_mount=p["housing"]["mount_damping"],
     )
