@@ -13,6 +13,7 @@ speed (sensor noise and 0.5 rpm quantisation). Seeds: ``dev`` from 10 000, ``fin
 
 from __future__ import annotations
 
+import hashlib
 import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -20,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.indep.car import Car, nominal_car, with_effect
+from bench.indep.car import PRESET, Car, nominal_car, with_effect
 from bench.indep.drive import BAND_A, BAND_B, Band, Drive, make_drive
 from bench.indep.dynamics import simulate
-from bench.indep.record import Recording, sensor_speed, write_drive
+from bench.indep.record import DBC, Recording, sensor_speed, write_drive
 
 Draw = Callable[[np.random.Generator], dict[str, float]]
 
@@ -53,7 +54,7 @@ OFF = {"backlash": {"diff_scale": 1.0, "shaft_scale": 1.0, "mesh_scale": 1.0},
        "progressive_stiffness": {"shaft_rel": 0.0, "mount_rel": 0.0}, "tyre_slip": {"c_n": 2.0e6, "sigma_m": 0.05}}
 OUT_OF_LIBRARY: dict[str, Draw] = {
     "unequal_shafts": lambda r: {"left_scale": _u(r, 0.4, 0.65), "right_scale": _u(r, 1.0, 1.3)},
-    "torque_ripple": lambda r: {"amplitude_nm": _u(r, 1.5, 5.0)},
+    "torque_ripple": lambda r: {"amplitude_nm": _u(r, 4.0, 12.0)},
 }
 LIBRARY = tuple(EFFECT_DRAWS)
 FAINT_SIGMA = (2.0, 10.0)
@@ -183,9 +184,22 @@ def build(case: Case, folder: Path) -> Case:
     return case
 
 
+def generator_version() -> str:
+    """Hash of the generator's sources and the data it reads: a cached set is reused only when equal."""
+    h = hashlib.sha256()
+    for f in [*sorted(Path(__file__).parent.glob("*.py")), PRESET, DBC]:
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
 def write_manifest(path: Path, cases: list[Case]) -> None:
-    path.write_text(json.dumps([asdict(c) for c in cases], indent=1), encoding="utf-8")
+    doc = {"generator": generator_version(), "cases": [asdict(c) for c in cases]}
+    path.write_text(json.dumps(doc, indent=1), encoding="utf-8")
 
 
 def read_manifest(path: Path) -> list[Case]:
-    return [Case(**c) for c in json.loads(path.read_text(encoding="utf-8"))]
+    """Cases of a cached set; empty when it was made by another version of the generator."""
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    if not isinstance(doc, dict) or doc.get("generator") != generator_version():
+        return []
+    return [Case(**c) for c in doc["cases"]]
