@@ -7,7 +7,9 @@ half-shafts, or a first-order torque ripple). Effect sizes are the generator's o
 each maps to the library id it should be diagnosed as (``EFFECT_DRAWS``).
 
 Signal size: RMS over event windows (-0.2..+1.0 s around each torque reversal, 100 Hz) of the
-reported speed of the truth minus that of the nominal car, over the noise sigma of the log's
+reported speed of the truth minus that of the nominal car, less each window's straight-line fit
+(a speed level and slope are what the diagnosis' road-load and offset nuisances absorb, and a
+drag change otherwise shows as a drift over the whole drive), over the noise sigma of the log's
 speed (sensor noise and 0.5 rpm quantisation). Seeds: ``dev`` from 10 000, ``final`` from 50 000.
 """
 
@@ -105,9 +107,13 @@ def signal_sigma(truth: Car, drive: Drive, nominal: tuple[np.ndarray, np.ndarray
     """Truth-vs-nominal RMS of the reported speed over event windows, in noise sigmas."""
     t, a = nominal or _reported(nominal_car(), drive)
     _, b = _reported(truth, drive)
-    grid = np.concatenate([np.arange(r - 0.2, r + 1.0, 0.01) for r in drive.reversals])
-    grid = grid[(grid > 0) & (grid < t[-1])]
-    d = np.interp(grid, t, b - a)
+    parts = []
+    for r in drive.reversals:
+        g = np.arange(r - 0.2, r + 1.0, 0.01)
+        if g[0] > 0 and g[-1] < t[-1]:
+            d = np.interp(g, t, b - a)
+            parts.append(d - np.polyval(np.polyfit(g, d, 1), g))  # a window's level and slope are nuisance
+    d = np.concatenate(parts)
     return float(np.sqrt(np.mean(d * d)) / NOISE_RPM)
 
 
