@@ -168,12 +168,15 @@ def main() -> int:
     ap.add_argument("--set", choices=("dev", "final"), default="dev", dest="which")
     ap.add_argument("--quick", action="store_true", help="15 cases, 40 s drives")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes for the diagnoses")
-    ap.add_argument("--only", default=None, help="case kind: none, single, faint, pair, ool")
+    ap.add_argument("--only", default=None, choices=("none", "single", "faint", "pair", "ool"), help="one case kind")
     ap.add_argument("--generate-only", action="store_true", help="make (or check) the cached drives and stop")
     args = ap.parse_args()
     folder, todo = generate(args.which, args.quick)
     if args.only:
         todo = [c for c in todo if c.kind == args.only]
+        if not todo:
+            print(f"no cases of kind {args.only!r}; kinds: none, single, faint, pair, ool", file=sys.stderr)
+            return 2
     if args.generate_only:
         print(f"{len(todo)} cases in {folder}")
         return 0
