@@ -189,3 +189,19 @@ def test_short_drive_reads_back_through_lashscope_ingest(tmp_path):
 def _log_start(first_s: float) -> float:
     """Generator time of the ingest's zero: the first logged frame's time, to the millisecond below."""
     return float(np.floor(first_s * 1000.0) / 1000.0)
+
+
+def test_signal_size_and_manifest_round_trip(tmp_path):
+    from bench.indep.cases import NOISE_RPM, Case, read_manifest, signal_sigma, truth_car, write_manifest
+
+    d = make_drive(CAR, BAND_A, np.random.default_rng(8), 6.0)
+    assert NOISE_RPM == pytest.approx(np.hypot(0.5, 0.5 / np.sqrt(12)))
+    assert signal_sigma(truth_car({}), d) == 0.0
+    slow = signal_sigma(truth_car({"speed_sensor": {"window_s": 0.02, "delay_s": 0.0}}), d)
+    slower = signal_sigma(truth_car({"speed_sensor": {"window_s": 0.03, "delay_s": 0.005}}), d)
+    assert 2.0 < slow < slower
+    cases = [Case("none_1", "none", 1, {}, ["none"], 6.0, drive_a="none_1_A.blf", drive_b="none_1_B.blf")]
+    write_manifest(tmp_path / "m.json", cases)
+    assert read_manifest(tmp_path / "m.json") == cases
+    (tmp_path / "old.json").write_text('{"generator": "0", "cases": []}', encoding="utf-8")
+    assert read_manifest(tmp_path / "old.json") == []  # made by another generator version: not reused
