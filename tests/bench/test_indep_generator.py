@@ -195,7 +195,7 @@ def test_signal_size_and_manifest_round_trip(tmp_path):
     from bench.indep.cases import NOISE_RPM, Case, read_manifest, signal_sigma, truth_car, write_manifest
 
     d = make_drive(CAR, BAND_A, np.random.default_rng(8), 6.0)
-    assert NOISE_RPM == pytest.approx(np.hypot(0.5, 0.5 / np.sqrt(12)))
+    assert pytest.approx(np.hypot(0.5, 0.5 / np.sqrt(12))) == NOISE_RPM
     assert signal_sigma(truth_car({}), d) == 0.0
     slow = signal_sigma(truth_car({"speed_sensor": {"window_s": 0.02, "delay_s": 0.0}}), d)
     slower = signal_sigma(truth_car({"speed_sensor": {"window_s": 0.03, "delay_s": 0.005}}), d)
