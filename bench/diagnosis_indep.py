@@ -100,7 +100,7 @@ def _structured(r: Result) -> bool:
 
 
 def _label(r: Result) -> str:
-    return "+".join(r.top) if r.status in CONFIDENT else r.status
+    return f"{r.status} {'+'.join(r.top)}" if r.status in CONFIDENT else r.status
 
 
 def confusion(results: list[Result]) -> None:
@@ -187,7 +187,7 @@ def main() -> int:
         for i, r in enumerate(pool.map(diagnose, todo, [folder] * len(todo))):
             results.append(r)
             c = r.case
-            print(f"[{i + 1:2d}/{len(todo)}] {c.name[:44]:44s} {c.signal_sigma:6.1f} sigma -> {_label(r):30s} "
+            print(f"[{i + 1:2d}/{len(todo)}] {c.name[:44]:44s} {c.signal_sigma:6.1f} sigma -> {_label(r):40s} "
                   f"remainder {r.remainder or '-':10s} B shrink {100 * r.shrink_b:6.1f} %  {r.cpu_s:5.1f} s CPU"
                   + (f"  {r.error}" if r.error else ""), flush=True)
     confusion(results)
