@@ -11,7 +11,7 @@ preset and, when an effect is named, validated on drive B (``validate_on``).
 Printed: one line per case, a confusion matrix, and the issue's targets as PASS/FAIL.
 
     .venv/bin/python bench/diagnosis_indep.py --set dev --quick     # 15 cases, 40 s drives
-    .venv/bin/python bench/diagnosis_indep.py --set dev --jobs 2    # 43 cases, 60 s drives
+    .venv/bin/python bench/diagnosis_indep.py --set dev --jobs 2    # 44 cases, 60 s drives
     .venv/bin/python bench/diagnosis_indep.py --set final           # the held-back seed set
 """
 
