@@ -1,0 +1,207 @@
+"""The independent validation generator (bench/indep): import rule, physics with values, BLF round trip.
+
+No diagnosis outcome is asserted on generator cases: they judge the diagnosis, they do not tune it.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.indep.car import G, nominal_car, ratio, with_effect
+from bench.indep.drive import BAND_A, make_drive
+from bench.indep.dynamics import DT, actuator, simulate
+from bench.indep.record import DBC, MAP, RPM, Recording, sensor_speed, write_drive
+
+ROOT = Path(__file__).resolve().parents[2] / "bench" / "indep"
+CAR = nominal_car()
+V_KMH = 25.0
+
+
+def _hold_nm(car=CAR, v_kmh: float = V_KMH) -> float:
+    v = v_kmh / 3.6
+    return (car.crr * car.mass * G + 0.5 * car.rho * car.cda * v * v) * car.radius / ratio(car)
+
+
+def _run(car, torque_fn, duration: float = 3.0, v_kmh: float = V_KMH):
+    t = np.arange(round(duration / DT) + 1) * DT
+    tq = torque_fn(t)
+    return t, tq, simulate(car, t, tq, v_kmh)
+
+
+def _step(lo: float, hi: float, at: float = 0.5, ramp: float = 0.01):
+    return lambda t: lo + (hi - lo) * np.clip((t - at) / ramp, 0, 1)
+
+
+def _freq(t: np.ndarray, y: np.ndarray, t0: float, t1: float) -> float:
+    """Dominant oscillation frequency (Hz) of ``y`` on [t0, t1] from its detrended zero crossings."""
+    m = (t >= t0) & (t <= t1)
+    yy = y[m] - np.polyval(np.polyfit(t[m], y[m], 2), t[m])
+    s = np.signbit(yy)
+    cross = t[m][1:][s[1:] != s[:-1]]
+    return float((cross.size - 1) / 2 / (cross[-1] - cross[0]))
+
+
+def test_generator_imports_neither_sim_nor_app():
+    files = [*sorted(ROOT.glob("*.py")), ROOT.parent / "diagnosis_indep.py"]
+    for f in files[:-1]:
+        tree = ast.parse(f.read_text(encoding="utf-8"))
+        names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        names |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        bad = {n for n in names if n.split(".")[0] in ("sim", "app")}
+        assert not bad, f"{f.name} imports {bad}"
+    assert len(files) >= 7  # the package's modules were found
+
+
+def test_nominal_car_is_the_paper_preset():
+    assert CAR.i1 * CAR.i2 == pytest.approx(79 / 27 * 77 / 20)
+    assert (CAR.gap_spline, CAR.gap_diff, CAR.gap_shaft) == (0.014, 0.006, 0.024)
+    assert CAR.k_shaft_l == CAR.k_shaft_r == 8000.0
+
+
+def test_quasi_static_ratio_and_equal_wheels():
+    _t, _, o = _run(CAR, lambda t: np.full(t.size, _hold_nm()), 2.0)
+    wheel = 0.5 * (o["wheel_l"] + o["wheel_r"])
+    assert np.median(o["speed_rel"][-200:] / wheel[-200:]) == pytest.approx(ratio(CAR), rel=1e-4)
+    assert wheel[-1] * CAR.radius * 3.6 == pytest.approx(V_KMH, abs=0.3)  # road load held: speed constant
+    # a drive with reversals: equal half-shafts, so both wheels turn alike
+    d = make_drive(CAR, BAND_A, np.random.default_rng(5), 6.0)
+    o = simulate(CAR, d.t, d.torque, d.speed0_kmh)
+    assert np.max(np.abs(o["wheel_l"] - o["wheel_r"])) < 1e-9
+    uneq = with_effect(CAR, "unequal_shafts", {"left_scale": 0.5, "right_scale": 1.2})
+    o2 = simulate(uneq, d.t, d.torque, d.speed0_kmh)
+    # the open differential lets them differ: the softer shaft winds up further, its wheel lags in transients
+    assert np.max(np.abs(o2["wheel_l"] - o2["wheel_r"])) > 5e-3  # rad/s (stiff tyres tie both to the road)
+    loaded = d.torque[::5][: o2["t"].size] > 30.0
+    assert np.mean((o2["d_shaft_l"] - o2["d_shaft_r"])[loaded]) > 3e-3  # rad: 0.5x vs 1.2x shaft stiffness
+
+
+def test_steady_state_gap_positions():
+    tq = 40.0  # N m drive, the car accelerates gently: contact loads follow the static torque flow within 5 %
+    _, _, o = _run(CAR, lambda t: np.full(t.size, tq), 1.5)
+    i1, ig = CAR.i1, ratio(CAR)
+    m_eff_share = 1 - (CAR.j_rotor * ig**2) / (CAR.j_rotor * ig**2 + CAR.mass * CAR.radius**2)  # of the torque
+    expect = {"d_spline": CAR.gap_spline / 2 + tq * m_eff_share / CAR.k_spline,
+              "d_mesh1": CAR.gap_mesh1 / 2 + tq * i1 * m_eff_share / CAR.k_mesh1,
+              "d_mesh2": CAR.gap_mesh2 / 2 + tq * ig * m_eff_share / CAR.k_mesh2,
+              "d_diff_l": CAR.gap_diff / 2 + tq * ig / 2 * m_eff_share / CAR.k_diff,
+              "d_shaft_l": CAR.gap_shaft / 2 + tq * ig / 2 * m_eff_share / (2 * CAR.k_shaft_l)}
+    for k, v in expect.items():
+        got = float(np.mean(o[k][-400:]))
+        gap = (v - _gap(k)) / 1
+        assert got - _gap(k) == pytest.approx(gap, rel=0.05), k
+    # housing roll carries minus the output torque on its mounts
+    assert np.mean(o["housing"][-400:]) == pytest.approx(-tq * ig * m_eff_share / CAR.k_mount, rel=0.05)
+    # coasting: every contact on the other flank
+    _, _, o = _run(CAR, lambda t: np.full(t.size, -20.0), 1.5)
+    for k in expect:
+        assert np.mean(o[k][-400:]) < -_gap(k)
+
+
+def _gap(col: str) -> float:
+    return {"d_spline": CAR.gap_spline, "d_mesh1": CAR.gap_mesh1, "d_mesh2": CAR.gap_mesh2,
+            "d_diff_l": CAR.gap_diff, "d_shaft_l": CAR.gap_shaft}[col] / 2
+
+
+def _shuffle_hz(car) -> float:
+    _t, _, o = _run(car, _step(20.0, 60.0), 2.5)
+    twist = o["speed_rel"] / ratio(car) - 0.5 * (o["wheel_l"] + o["wheel_r"])
+    return _freq(o["t"], twist, 0.55, 1.6)
+
+
+def test_shuffle_frequency_and_tyre_and_hardening_knobs():
+    f0 = _shuffle_hz(CAR)
+    assert 6.5 <= f0 <= 9.0  # the paper preset's shuffle is ~7-8 Hz
+    soft_tyre = with_effect(CAR, "tyre_slip", {"c_n": 3.0e4, "sigma_m": 0.4})
+    assert _shuffle_hz(soft_tyre) < 0.9 * f0
+    hard = with_effect(CAR, "progressive_stiffness", {"shaft_rel": 2.0, "mount_rel": 0.0})
+    assert _shuffle_hz(hard) > 1.03 * f0
+
+
+def test_actuator_and_sensor_knobs():
+    t = np.arange(0, 0.3, DT)
+    step = (t >= 0.05).astype(float) * 100.0
+    lag = with_effect(CAR, "torque_lag", {"tau_s": 0.02, "dead_s": 0.01})
+    y = actuator(lag, t, step)
+    assert np.interp(0.0599, t, y) == pytest.approx(0.0, abs=1e-9)  # dead time
+    assert np.interp(0.08, t, y) == pytest.approx(100 * (1 - np.exp(-1)), rel=0.01)  # one tau after
+    assert np.array_equal(actuator(CAR, t, step), step)
+    ramp = t * 1000.0  # rad/s rising 1000 rad/s^2
+    slow = with_effect(CAR, "speed_sensor", {"window_s": 0.02, "delay_s": 0.005})
+    lagged = (ramp[-1] - sensor_speed(slow, t, ramp)[-1] / RPM) / 1000.0
+    assert lagged == pytest.approx(0.005 + (0.02 - DT) / 2, abs=2e-4)  # a window lags by half its length
+    assert (ramp[-1] - sensor_speed(CAR, t, ramp)[-1] / RPM) / 1000.0 == pytest.approx((0.002 - DT) / 2, abs=1e-6)
+
+
+def test_drag_mount_and_backlash_knobs():
+    coast = lambda t: np.zeros(t.size)  # noqa: E731
+    _, _, o = _run(CAR, coast, 1.0)
+    dragged = with_effect(CAR, "drag", {"coulomb_nm": 5.0, "viscous_nms": 0.0})
+    _, _, od = _run(dragged, coast, 1.0)
+    dec = (o["body_v"][0] - o["body_v"][-1]) - (od["body_v"][0] - od["body_v"][-1])
+    ig = ratio(CAR)
+    m_eff = CAR.mass + 2 * CAR.j_wheel / CAR.radius**2 + (CAR.j_rotor + 0.01) * ig**2 / CAR.radius**2
+    assert -dec == pytest.approx(5.0 * ig / CAR.radius / m_eff * 1.0, rel=0.1)  # m/s lost in 1 s to 5 N m
+    soft = with_effect(CAR, "housing_mount", {"k_scale": 0.5, "c_scale": 1.0})
+    _, _, oh = _run(soft, lambda t: np.full(t.size, _hold_nm()), 1.5)
+    assert np.mean(oh["housing"][-400:]) == pytest.approx(-_hold_nm() * ig / (0.5 * CAR.k_mount), rel=0.05)
+    wide = with_effect(CAR, "backlash", {"diff_scale": 2.0, "shaft_scale": 1.5, "mesh_scale": 1.0})
+    tip = _step(-20.0, 40.0, at=0.5, ramp=0.05)
+    _, _, a = _run(CAR, tip, 2.0)
+    _, _, b = _run(wide, tip, 2.0)
+
+    def travel(run, col):  # flank to flank: settled before the tip-in to settled after it (same loads)
+        before = (run["t"] > 0.35) & (run["t"] < 0.45)
+        return float(np.mean(run[col][-300:]) - np.mean(run[col][before]))
+
+    assert travel(b, "d_diff_l") - travel(a, "d_diff_l") == pytest.approx(CAR.gap_diff, rel=0.05)
+    assert travel(b, "d_shaft_l") - travel(a, "d_shaft_l") == pytest.approx(0.5 * CAR.gap_shaft, rel=0.05)
+    assert travel(b, "d_spline") - travel(a, "d_spline") == pytest.approx(0.0, abs=0.05 * CAR.gap_spline)
+
+
+def test_short_drive_reads_back_through_lashscope_ingest(tmp_path):
+    from app.analysis.diagnosis.truthlog import read_log
+
+    d = make_drive(CAR, BAND_A, np.random.default_rng(11), 10.0)
+    o = simulate(CAR, d.t, d.torque, d.speed0_kmh)
+    rec = Recording(speed_noise_rpm=0.0, torque_noise_nm=0.0, wheel_noise_rpm=0.0, jitter_s=0.0, drop_fraction=0.0,
+                    sna_fraction=0.0, max_offset_s=0.0, drop_runs_per_min=0.0, bursts_per_min=0.0)
+    info = write_drive(tmp_path / "a.blf", CAR, o, d.t, d.torque, np.random.default_rng(2), rec)
+    s = read_log(tmp_path / "a.blf", DBC, MAP)
+    tq, sp = s["motor_torque_nm"], s["motor_speed_rpm"]
+    assert 990 <= tq.t.size <= 1000 and 990 <= sp.t.size <= 1000  # 10 ms frames, none dropped
+    t0 = _log_start(info["first_s"])
+    assert np.max(np.abs(tq.values - np.interp(tq.t + t0, d.t, d.torque))) <= 0.05 + 1e-3  # 0.1 N m steps
+    ref = np.interp(sp.t + t0, o["t"], sensor_speed(CAR, o["t"], o["speed_rel"]))
+    assert np.max(np.abs(sp.values - ref)) <= 0.25 + 1e-2  # 0.5 rpm steps
+    # the realistic recording: SNA frames become NaN, drops thin the frames
+    write_drive(tmp_path / "b.blf", CAR, o, d.t, d.torque, np.random.default_rng(3),
+                Recording(sna_fraction=0.01, drop_fraction=0.05))
+    s2 = read_log(tmp_path / "b.blf", DBC, MAP)
+    n_nan = int(np.isnan(s2["motor_speed_rpm"].values).sum() + np.isnan(s2["motor_torque_nm"].values).sum())
+    assert 2 <= n_nan <= 60
+    assert s2["motor_speed_rpm"].t.size < 960
+
+
+def _log_start(first_s: float) -> float:
+    """Generator time of the ingest's zero: the first logged frame's time, to the millisecond below."""
+    return float(np.floor(first_s * 1000.0) / 1000.0)
+
+
+def test_signal_size_and_manifest_round_trip(tmp_path):
+    from bench.indep.cases import NOISE_RPM, Case, read_manifest, signal_sigma, truth_car, write_manifest
+
+    d = make_drive(CAR, BAND_A, np.random.default_rng(8), 6.0)
+    assert pytest.approx(np.hypot(0.5, 0.5 / np.sqrt(12))) == NOISE_RPM
+    assert signal_sigma(truth_car({}), d) == 0.0
+    slow = signal_sigma(truth_car({"speed_sensor": {"window_s": 0.02, "delay_s": 0.0}}), d)
+    slower = signal_sigma(truth_car({"speed_sensor": {"window_s": 0.03, "delay_s": 0.005}}), d)
+    assert 2.0 < slow < slower
+    cases = [Case("none_1", "none", 1, {}, ["none"], 6.0, drive_a="none_1_A.blf", drive_b="none_1_B.blf")]
+    write_manifest(tmp_path / "m.json", cases)
+    assert read_manifest(tmp_path / "m.json") == cases
+    (tmp_path / "old.json").write_text('{"generator": "0", "cases": []}', encoding="utf-8")
+    assert read_manifest(tmp_path / "old.json") == []  # made by another generator version: not reused
