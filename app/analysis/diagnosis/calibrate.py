@@ -26,7 +26,7 @@ from app.analysis.diagnosis.forward import (
     Nuisance,
     best_offset,
     prediction,
-    simulate_event,
+    simulate_events,
     vehicle_with,
     weighted_residual,
 )
@@ -153,7 +153,7 @@ class _Problem:
         nui, settings = self.decode(u)
         try:
             veh = vehicle_with(self.base, nui, settings)
-            outs = [simulate_event(ev, veh, nui.gain, settings, self.model) for ev in self.events]
+            outs = simulate_events(self.events, veh, nui.gain, settings, self.model)
         except SimError:
             return np.full(self.n_res, _PENALTY)
         self.last_offset = best_offset(self.events, outs, self.bounds.offset_s)

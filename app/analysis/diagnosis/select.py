@@ -33,8 +33,9 @@ from app.analysis.diagnosis.forward import (
     DiagEvent,
     Prediction,
     input_uncertainty,
-    predict,
+    prediction,
     rigid_inertia,
+    simulate_events,
     torque_quantisation_variance,
     vehicle_with,
     weighted_residual,
@@ -112,8 +113,9 @@ def evaluate(base: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], mode
     veh = vehicle_with(base, fitted.nuisance, fitted.settings)
     scores: dict[int, EventScore] = {}
     preds: dict[int, Prediction] = {}
-    for ev in events:
-        pred = predict(ev, veh, fitted.nuisance, fitted.settings, model)
+    outs = simulate_events(events, veh, fitted.nuisance.gain, fitted.settings, model)
+    for ev, out in zip(events, outs, strict=True):
+        pred = prediction(ev, out, fitted.nuisance.offset_s)
         r = weighted_residual(ev, pred)
         ph = phases[ev.index] if phases and ev.index in phases else phase_times(ev, pred)
         chi, cnt = phase_chi2(r, ph.labels(ev.speed_t))
@@ -131,8 +133,9 @@ def with_input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, fitted
     quantisation of held values (:func:`.forward.torque_quantisation_variance`)."""
     veh = vehicle_with(vehicle, fitted.nuisance, ())
     inertia = rigid_inertia(vehicle)
-    return [replace(ev, var=ev.var + input_uncertainty(ev, veh, fitted.nuisance, (), model)
-                    + torque_quantisation_variance(ev, torque_step_nm, inertia)) for ev in events]
+    extra = input_uncertainty(events, veh, fitted.nuisance, (), model)
+    return [replace(ev, var=ev.var + u + torque_quantisation_variance(ev, torque_step_nm, inertia))
+            for ev, u in zip(events, extra, strict=True)]
 
 
 def _merge_start(base: FitResult, *parts: FitResult) -> FitResult:
