@@ -59,7 +59,8 @@ def test_overlapping_windows_are_one_continuous_run() -> None:
     # the cluster equals one simulation from the first event's warm start over the whole span
     grid = evs[0].t_fine[0] + FINE_DT * np.arange(round((evs[2].t_fine[-1] - evs[0].t_fine[0]) / FINE_DT) + 1)
     m = (t_tq >= evs[0].torque_t[0]) & (t_tq <= evs[2].torque_t[-1])  # the three events' torque samples
-    ref = simulate(paper(), grid, PchipInterpolator(t_tq[m], q[m])(grid), speed0_rpm=3000.0, interp="linear", output_dt=FINE_DT)
+    ref = simulate(paper(), grid, PchipInterpolator(t_tq[m], q[m])(grid), speed0_rpm=3000.0, interp="linear",
+                   output_dt=FINE_DT)
     for ev, out in zip(evs[:3], outs[:3], strict=True):
         assert out.t[0] == pytest.approx(ev.t_fine[0], abs=1e-9) and out.t[-1] == pytest.approx(ev.t_fine[-1], abs=1e-9)
         np.testing.assert_allclose(out.speed, np.interp(out.t, ref.t, ref.motor_speed_rpm), atol=1e-6)

@@ -28,6 +28,7 @@ from app.analysis.diagnosis.decide import (
     bootstrap_draws,
     decide,
     score_candidate,
+    structured,
 )
 from app.analysis.diagnosis.forward import (
     DiagEvent,
@@ -227,7 +228,9 @@ def run_diagnosis(
 
     pairs: list[CandidateScore] = []
     ranked = sorted(singles, key=lambda c: float(c.chi2.sum()))
-    if ranked and ranked[0].explained.value < rules.explained_share and len(ranked) > 1:
+    # pairs follow the remainder: tried whenever the best single effect leaves structure, whatever its share
+    if ranked and len(ranked) > 1 and (ranked[0].explained.value < rules.explained_share
+                                       or structured(ranked[0], rules)):
         first = ranked[0].id
         # partners ranked by their calibration fit, so the choice does not peek at held-out data
         partners = sorted((c for c in opts.candidates if c != first), key=lambda c: evals[c].fit.chi2)
