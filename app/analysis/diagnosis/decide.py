@@ -265,16 +265,17 @@ def _with_partner(best: CandidateScore, pairs: Sequence[CandidateScore], n: Floa
 
     It does when the held-out events prefer the pair (paired bootstrap probability at least
     ``prefer_probability``) and either it explains ``pair_gain`` more of the gap, or the single
-    effect leaves a structured remainder and the pair lowers the remainder-to-noise ratio by at
-    least ``min_separation`` -- a faint second effect explains little of a large gap but is all
-    that its remainder holds.
+    effect leaves a structured remainder and the pair removes ``pair_gain`` of *that* remainder's
+    excess over noise (and at least ``min_separation`` of its ratio) -- a faint second effect
+    explains little of a large gap but is all that the first one's remainder holds.
     """
     for pair in sorted((q for q in pairs if q.effects[0] == best.id), key=lambda c: float(c.chi2.sum())):
         p = paired_better_probability(pair.chi2, best.chi2, draws)
         gain = pair.explained.value - best.explained.value
-        lower = best.noise_ratio(n) - pair.noise_ratio(n)
-        if p >= rules.prefer_probability and (gain >= rules.pair_gain
-                                              or (structured(best, rules) and lower >= rules.min_separation)):
+        left, lower = best.noise_ratio(n), best.noise_ratio(n) - pair.noise_ratio(n)
+        of_remainder = lower / (left - 1.0) if left > 1.0 else 0.0
+        if p >= rules.prefer_probability and (gain >= rules.pair_gain or (
+                structured(best, rules) and lower >= rules.min_separation and of_remainder >= rules.pair_gain)):
             return pair, (f"; adding {pair.effects[1]} lowers the remainder from {best.noise_ratio(n):.2f}x to "
                           f"{pair.noise_ratio(n):.2f}x the noise floor (p = {p:.2f})")
         break

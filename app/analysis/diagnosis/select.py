@@ -41,6 +41,7 @@ from app.analysis.diagnosis.forward import (
     vehicle_with,
     weighted_residual,
 )
+from app.analysis.diagnosis.identify import with_identifiability
 from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2, phase_times, uniform
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.score import EventScore
@@ -246,6 +247,7 @@ def run_diagnosis(
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
 
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
+    decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
                   draws=draws, fit_order=fit_order)
