@@ -41,7 +41,7 @@ GAIN_BOUNDS = (0.85, 1.15)
 GRADE_BOUNDS_PCT = (-4.0, 4.0)
 OFFSET_PERIODS = 2.0  # time offset bounded to +-2 sample periods of the speed channel
 _PENALTY = 1e3  # residual (noise units) returned for a parameter set the simulator rejects
-TRADE_OFF_CORR = 0.95  # |correlation| of two fitted effect parameters above which the data do not separate them
+TRADE_OFF_CORR = 0.9  # |correlation| of two fitted effect parameters above which the data do not separate them
 
 
 @dataclass(frozen=True)
