@@ -88,3 +88,5 @@ def test_close_reversals_without_effect_are_no_significant_gap(signals_for: Sign
     assert after is not None and after.value < 1.5, warm.decision.reason
     assert warm.decision.status == "no_significant_gap"
     assert max(e.warm_s for e in warm.events) > 1.0  # windows were warmed up through earlier reversals
+    # windows cut short by the next reversal to 0.3-0.6 s after the crossing are kept
+    assert any(0.3 <= e.t_end - e.t_event < 0.6 for e in warm.events)

@@ -17,11 +17,17 @@ import numpy as np
 
 from app.analysis.diagnosis.forward import MARGIN_S, DiagEvent, FloatArray
 from app.analysis.diagnosis.noise import NoiseFloor, estimate_noise_floor, measured_slope, quantisation_step
-from app.analysis.events import SPEED, TORQUE, Event
+from app.analysis.events import SPEED, TORQUE, Event, EventParams
 from app.errors import InsufficientDataError, MissingSignalError
 from app.signals import SignalSet
 
 REQUIRED = (TORQUE, SPEED)
+
+# Event detection for the diagnosis: a window cut short by the next reversal is kept when 0.3 s
+# (the impact and one to two shuffle periods) remain. The ripple metrics need 0.6 s, the diagnosis
+# does not: its windows are simulated through the next reversal's torque (warm starts, clusters),
+# and with reversals 0.7-1.1 s apart the 0.6 s rule left a quarter of the events.
+DIAGNOSIS_EVENTS = EventParams(min_post_s=0.3)
 
 
 @dataclass(frozen=True)
