@@ -186,3 +186,16 @@ def test_reason_quotes_each_figure_under_its_json_name() -> None:
     assert abs(share - shrink) > 0.05  # two different figures ...
     assert f"explained share {100 * share:.0f} %" in d.reason  # ... each quoted under its own name
     assert f"held-out shrink {100 * shrink:.0f} %" in d.reason
+
+
+def test_a_pair_whose_gain_the_first_effect_reaches_alone_is_not_kept() -> None:
+    """The pair's fit with its second effect off does as well as the pair: a better fit of the first effect."""
+    single = _structured(cand("backlash", BASE, 0.04, spread=0.005), 3.0)
+    pair = cand("backlash+speed_sensor", BASE, 0.002, spread=0.001, seed=4)
+    draws = bootstrap_draws(8, RULES, 1)
+    alone = replace(pair, without_second=pair.chi2 * 1.001)
+    d = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [alone], draws, RULES, 8)
+    assert d.top == ("backlash",) and d.status == "partial"
+    needed = replace(pair, without_second=single.chi2.copy())
+    d2 = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [needed], draws, RULES, 8)
+    assert d2.top == ("backlash", "speed_sensor")

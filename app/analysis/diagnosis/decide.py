@@ -83,6 +83,8 @@ class CandidateScore:
     improved_fraction : share of held-out events whose residual went down.
     significant : passes rule 3.
     remainder : remainder-to-noise statistics of what the candidate leaves (None: not computed).
+    without_second : pairs only: (n_heldout,) chi2 of the pair's fit with its second effect off --
+        the first effect at the values the pair fit gave it.
     """
 
     id: str
@@ -93,6 +95,7 @@ class CandidateScore:
     improved_fraction: float
     significant: bool
     remainder: RemainderTest | None = None
+    without_second: FloatArray | None = None  # pairs: chi2 per event with the second effect switched off
 
     def noise_ratio(self, n: FloatArray) -> float:
         """Remaining residual-to-noise ratio ``sum(chi2) / sum(n)``."""
@@ -227,7 +230,7 @@ def decide(
                             details={"prefer_probability": round(p, 3), "separation": round(gap, 4),
                                      "remainder": remainder_field(_left_over(best, n, rules)[0], best.noise_ratio(n),
                                                                   explained=False)})
-    chosen, pair_note = _with_partner(best, pairs, n, draws, rules)
+    chosen, pair_note = _with_partner(base, best, pairs, n, draws, rules)
     share = chosen.explained
     above, left_text = _left_over(chosen, n, rules)
     if share.value >= rules.explained_share and share.lo >= rules.explained_share_lo and not above:
@@ -259,7 +262,7 @@ def structured(c: CandidateScore, rules: DecisionRules) -> bool:
     return bool(c.remainder is not None and c.remainder.above_noise(rules.min_gap_ratio, rules.min_gap_ratio_lo))
 
 
-def _with_partner(best: CandidateScore, pairs: Sequence[CandidateScore], n: FloatArray,
+def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[CandidateScore], n: FloatArray,
                   draws: npt.NDArray[np.int64], rules: DecisionRules) -> tuple[CandidateScore, str]:
     """The best single effect, or its best pair when the second effect earns its place on held-out events.
 
@@ -270,13 +273,22 @@ def _with_partner(best: CandidateScore, pairs: Sequence[CandidateScore], n: Floa
     explains little of a large gap but is all that the first one's remainder holds.
     """
     for pair in sorted((q for q in pairs if q.effects[0] == best.id), key=lambda c: float(c.chi2.sum())):
-        p = paired_better_probability(pair.chi2, best.chi2, draws)
-        gain = pair.explained.value - best.explained.value
-        left, lower = best.noise_ratio(n), best.noise_ratio(n) - pair.noise_ratio(n)
-        of_remainder = lower / (left - 1.0) if left > 1.0 else 0.0
+        # judged against the better of the single fit and the pair's own fit with the second effect off:
+        # a gain that the first effect alone reaches at the pair's values is a better fit of the first
+        # effect, not evidence for the second
+        ref = best.chi2
+        if pair.without_second is not None and float(pair.without_second.sum()) < float(ref.sum()):
+            ref = pair.without_second
+        p = paired_better_probability(pair.chi2, ref, draws)
+        excess = float(ref.sum() - n.sum())
+        base_excess = float(base.sum() - n.sum())
+        gain = float(ref.sum() - pair.chi2.sum()) / base_excess if base_excess > 0 else 0.0
+        left = float(ref.sum() / max(float(n.sum()), 1.0))
+        lower = left - pair.noise_ratio(n)
+        of_remainder = lower * float(n.sum()) / excess if excess > 0 else 0.0
         if p >= rules.prefer_probability and (gain >= rules.pair_gain or (
                 structured(best, rules) and lower >= rules.min_separation and of_remainder >= rules.pair_gain)):
-            return pair, (f"; adding {pair.effects[1]} lowers the remainder from {best.noise_ratio(n):.2f}x to "
+            return pair, (f"; adding {pair.effects[1]} lowers the remainder from {left:.2f}x to "
                           f"{pair.noise_ratio(n):.2f}x the noise floor (p = {p:.2f})")
         break
     return best, ""

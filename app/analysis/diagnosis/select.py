@@ -243,7 +243,10 @@ def run_diagnosis(
             fit_order.append(f"{pid}: {[e.index for e in cal]}")
             evals[pid] = evaluate(vehicle, f, ho, opts.model, phases, period)
             rem = remainder(ho, evals[pid].scores, evals[pid].predictions, period)
-            pairs.append(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules, rem))
+            alone = replace(f, effects=f.effects[:1], values={first: f.values[first]}, settings=f.settings[:1])
+            first_only = evaluate(vehicle, alone, ho, opts.model, phases, period).chi2(ho_idx)
+            pairs.append(replace(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules,
+                                                 rem), without_second=first_only))
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
 
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
