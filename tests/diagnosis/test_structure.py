@@ -71,16 +71,16 @@ def test_report_form_is_json_ready() -> None:
 
 
 def test_a_remainder_confined_to_one_phase_is_structure() -> None:
-    """Noise everywhere, but 2.5x the noise energy in the steady phase: diluted overall, named by phase."""
+    """Noise everywhere, but 2.5x the noise energy in the oscillation phase: diluted overall, named by phase."""
     from dataclasses import replace
 
     rng = np.random.default_rng(5)
     rem = make(rng)
-    n_ph = np.tile([20.0, 60.0, 50.0], (H, 1))  # pre-event, oscillation, steady samples per event
-    chi_ph = n_ph * np.array([1.0, 1.0, 2.5]) * rng.uniform(0.9, 1.1, size=(H, 3))
+    n_ph = np.tile([20.0, 60.0], (H, 1))  # pre-event and oscillation samples per event
+    chi_ph = n_ph * np.array([1.0, 2.5]) * rng.uniform(0.9, 1.1, size=(H, 2))
     t = remainder_test(replace(rem, phase_chi2=chi_ph, phase_n=n_ph), bootstrap_draws(H, RULES, 1))
     ratios = dict(t.phases)
-    assert ratios["steady"].value == pytest.approx(float(chi_ph[:, 2].sum() / n_ph[:, 2].sum()), rel=1e-12)
-    assert ratios["steady"].lo > 2.0 and ratios["pre_event"].value < 1.2
-    assert t.above_noise(RULES.min_gap_ratio, RULES.min_gap_ratio_lo) == ["phase:steady"]
-    assert set(t.to_dict()["phases"]) == {"pre_event", "oscillation", "steady"}  # type: ignore[arg-type]
+    assert ratios["oscillation"].value == pytest.approx(float(chi_ph[:, 1].sum() / n_ph[:, 1].sum()), rel=1e-12)
+    assert ratios["oscillation"].lo > 2.0 and ratios["pre_event"].value < 1.2
+    assert t.above_noise(RULES.min_gap_ratio, RULES.min_gap_ratio_lo) == ["phase:oscillation"]
+    assert set(t.to_dict()["phases"]) == {"pre_event", "oscillation"}  # type: ignore[arg-type]

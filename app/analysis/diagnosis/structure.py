@@ -12,7 +12,7 @@ each with an event-bootstrap interval (events are the independent units):
     filter standing in for an input lag, a wrong lash size -- leaves its remainder here, where
     a few samples carry it and the overall ratio dilutes it.
 ``phase:<name>``
-    the same ratio in each of the other phases (pre-event, oscillation, steady): a remainder above
+    the same ratio in the pre-event and oscillation phases: a remainder above
     noise in one phase is structure even when the overall ratio dilutes it.
 ``locked``
     event-locked structure: per event kind (tip-in, tip-out), the residuals are binned on the time
@@ -52,7 +52,10 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 IMPACT_PHASES = ("gap_traverse", "impact")
-OTHER_PHASES = ("pre_event", "oscillation", "steady")
+# the steady phase is left out: its remainder is the slow drift of a held torque, which the noise
+# floor's torque-quantisation term bounds only roughly, and a correct fit of a clean effect left it
+# at 1.5-2x there on the simulator's own drives
+OTHER_PHASES = ("pre_event", "oscillation")
 STATS = ("overall", "impact", "locked")
 
 
