@@ -72,7 +72,7 @@ def summary(doc: dict[str, Any]) -> str:
                      f"road load {nu['road_load_grade_pct']:+.2f} % grade"
                      + (f"  AT BOUND: {', '.join(doc['baseline']['at_bound'])}" if doc["baseline"]["at_bound"] else ""))
     if doc["candidates"]:
-        lines += ["", f"{'candidate':34s} {'held-out shrink':>22s} {'share of gap':>22s} {'improved':>9s}  params"]
+        lines += ["", f"{'candidate':34s} {'held-out shrink':>22s} {'explained share':>22s} {'improved':>9s}  params"]
         for c in doc["candidates"] + doc["pairs"]:
             h = c["heldout"]
             params = "; ".join(f"{k}={v:.4g}" for vals in c["fit"]["params"].values() for k, v in vals.items())
@@ -88,10 +88,17 @@ def summary(doc: dict[str, Any]) -> str:
         for b in loc["bands"]:
             lines.append(f"  {b['band']:8s} {100 * (b['energy_share'] or 0):5.1f} %  {b['coherence']}")
         lines += [f"  note: {n}" for n in loc["notes"]]
+    rem = d.get("remainder")
+    if rem:
+        lines.append(f"remainder: {rem['status']}, {rem['ratio_to_noise']:.2f}x the noise floor"
+                     + (f" in {', '.join(rem['where'])}; not explained by any candidate"
+                        if rem["status"] == "structured" else ""))
     val = doc.get("validation")
-    if val:
-        lines += ["", f"validation on another drive ({val['events']} events): shrink {_pct(val['shrink'])}, "
-                      f"share of gap {_pct(val['explained_share'])}"]
+    if val and "skipped" in val:
+        lines += ["", f"validation on another drive skipped: {val['skipped']}"]
+    elif val:
+        lines += ["", f"validation on another drive ({val['events']} events): held-out shrink "
+                      f"{_pct(val['shrink'])}, explained share {_pct(val['explained_share'])}"]
     lines.append(f"\n{doc['elapsed_s']:.1f} s")
     return "\n".join(lines)
 

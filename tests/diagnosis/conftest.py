@@ -23,12 +23,14 @@ def paper() -> Vehicle:
 
 @cache
 def drive_signals(effect: str | None, values: tuple[tuple[str, float], ...], seed: int,
-                  duration_s: float = 30.0, offset_s: float = 0.006) -> SignalSet:
-    """A CAN-like measurement of the paper vehicle plus ``effect`` driven by a random tip-in/out drive."""
+                  duration_s: float = 30.0, offset_s: float = 0.006,
+                 hold_s: tuple[float, float] = SHORT.hold_s) -> SignalSet:
+    """A CAN-like measurement of the paper vehicle plus ``effect`` driven by a random tip-in/out drive
+    (``hold_s``: how long each torque level is held between reversals, s)."""
     v = paper()
     truth = apply_effects(v, {effect: dict(values)}) if effect else v
     rng = np.random.default_rng(seed)
-    drive = make_drive(v, rng, DriveSpec(duration_s=duration_s))
+    drive = make_drive(v, rng, DriveSpec(duration_s=duration_s, hold_s=hold_s))
     return to_signals(measure(drive, run_truth(truth, drive), CanSampling(offset_s=offset_s), rng))
 
 

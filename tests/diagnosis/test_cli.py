@@ -16,14 +16,14 @@ DBC, MAP = REPO / "dbc" / "lashscope_ev.dbc", REPO / "dbc" / "lashscope_ev.map.t
 LAG = (("tau_s", 0.015), ("delay_s", 0.0))
 
 
-def write_log(path: Path, seed: int) -> Path:
+def write_log(path: Path, seed: int, effect: str | None = "torque_lag") -> Path:
     if not (DBC.is_file() and MAP.is_file()):
         pytest.skip("the reference DBC and signal map are not in dbc/")
     from app.demo.build import encode_blf
     from app.demo.scenario import Channel
     from app.pipeline import signal_routes
 
-    s = drive_signals("torque_lag", LAG, seed)
+    s = drive_signals(effect, LAG if effect else (), seed)
     tq, sp = s["motor_torque_nm"], s["motor_speed_rpm"]
     pedal = np.clip(30.0 + 0.3 * tq.values, 0.0, 100.0)  # a driver behind the torque request
     channels = {"motor_torque_nm": Channel(tq.t, tq.values, 0.01), "motor_speed_rpm": Channel(sp.t, sp.values, 0.01),
@@ -51,3 +51,19 @@ def test_cli_summary_and_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture
     assert "decision: EXPLAINED  top: torque_lag" in out and "held-out shrink" in out
     assert main(["diagnose", str(log), "--vehicle", "paper", "--candidates", "gremlins", "--quiet"]) == 2
     assert "gremlins" in capsys.readouterr().err
+
+
+def test_cli_validate_after_a_decision_without_an_effect(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A no-effect drive names no effect: --validate says why it skipped, in the summary and the JSON."""
+    log, other = write_log(tmp_path / "a.blf", 33, None), write_log(tmp_path / "b.blf", 34)
+    args = ["diagnose", str(log), "--vehicle", "paper", "--candidates", "drag", "--validate", str(other), "--quiet"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "decision: NO_SIGNIFICANT_GAP" in out
+    assert "validation on another drive skipped: decision no_significant_gap: no effect to validate" in out
+    assert "remainder: noise" in out
+    assert main([*args, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["decision"]["top"] == [] and doc["decision"]["remainder"]["status"] == "noise"
+    assert doc["decision"]["remainder"]["ratio_to_noise"] < 1.5
+    assert doc["validation"] == {"skipped": "decision no_significant_gap: no effect to validate"}

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from app.analysis.diagnosis.decide import CandidateScore, DecisionRules, bootstrap_draws, decide, score_candidate
+from app.analysis.diagnosis.score import Interval
 from app.analysis.diagnosis.structure import Remainder, remainder_test
 
 RULES = DecisionRules(n_boot=500)
@@ -135,3 +136,66 @@ def test_a_consistent_but_negligible_preference_is_no_separation() -> None:
     clearly = score_candidate("speed_sensor", ("speed_sensor",), BASE, a.chi2 + 30.0, N, bootstrap_draws(8, RULES, 1),
                               RULES)
     assert decide(BASE, N, [a, clearly], [], bootstrap_draws(8, RULES, 1), RULES, 8).status == "explained"
+
+
+def _structured(c: CandidateScore, bump: float) -> CandidateScore:
+    """``c`` whose remainder has an oscillation-phase ratio of ``bump`` (tight interval)."""
+    assert c.remainder is not None
+    osc = (("oscillation", Interval(bump, bump - 0.1, bump + 0.1)),)
+    return replace(c, remainder=replace(c.remainder, phases=osc))
+
+
+def test_second_effect_kept_when_it_removes_the_structured_remainder_of_a_large_gap() -> None:
+    """The best single effect removes 96 % of the excess; a faint second effect is all that is left."""
+    single = _structured(cand("backlash", BASE, 0.04, spread=0.005), 3.0)
+    pair = cand("backlash+speed_sensor", BASE, 0.002, spread=0.001, seed=4)
+    d = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [pair], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert (d.status, d.top) == ("explained", ("backlash", "speed_sensor"))
+    assert d.details["remainder"]["status"] == "noise"
+    # the same pair, but the single's remainder is noise and the gain in explained share is 4 %: not kept
+    plain = cand("backlash", BASE, 0.04, spread=0.005)
+    d2 = decide(BASE, N, [plain, cand("drag", BASE, 0.9, seed=5)], [pair], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d2.top == ("backlash",)
+
+
+def test_structured_remainder_is_never_explained_and_says_so() -> None:
+    best = _structured(cand("housing_mount", BASE, 0.03), 4.0)
+    d = decide(BASE, N, [best], [], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d.status == "partial"
+    rem = d.details["remainder"]
+    assert rem["status"] == "structured" and rem["explained_by_candidates"] is False
+    assert rem["where"] == ["phase:oscillation"]
+    assert rem["ratio_to_noise"] == pytest.approx(float(best.chi2.sum() / N.sum()), abs=1e-4)
+    assert "no candidate in the library explains it" in d.reason
+
+
+def test_remainder_field_of_the_other_statuses() -> None:
+    flat = N * np.array([1.05, 0.95, 1.1, 1.0, 0.9, 1.2, 1.0, 1.02])
+    d = decide(flat, N, [cand("drag", flat, 0.5)], [], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d.details["remainder"] == {"status": "noise", "explained_by_candidates": None, "where": [],
+                                      "ratio_to_noise": pytest.approx(1.0275, abs=1e-4)}
+    d = decide(BASE, N, [cand("drag", BASE, 0.95)], [], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d.status == "none_of_candidates" and d.details["remainder"]["status"] == "structured"
+    assert d.details["remainder"]["ratio_to_noise"] == pytest.approx(10.625, abs=1e-3)
+
+
+def test_reason_quotes_each_figure_under_its_json_name() -> None:
+    d = decide(BASE, N, [cand("torque_lag", BASE, 0.3)], [], bootstrap_draws(8, RULES, 1), RULES, 8)
+    doc = d.to_dict()
+    share, shrink = doc["explained_share"]["value"], doc["heldout_shrink"]["value"]
+    assert abs(share - shrink) > 0.05  # two different figures ...
+    assert f"explained share {100 * share:.0f} %" in d.reason  # ... each quoted under its own name
+    assert f"held-out shrink {100 * shrink:.0f} %" in d.reason
+
+
+def test_a_pair_whose_gain_the_first_effect_reaches_alone_is_not_kept() -> None:
+    """The pair's fit with its second effect off does as well as the pair: a better fit of the first effect."""
+    single = _structured(cand("backlash", BASE, 0.04, spread=0.005), 3.0)
+    pair = cand("backlash+speed_sensor", BASE, 0.002, spread=0.001, seed=4)
+    draws = bootstrap_draws(8, RULES, 1)
+    alone = replace(pair, without_second=pair.chi2 * 1.001)
+    d = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [alone], draws, RULES, 8)
+    assert d.top == ("backlash",) and d.status == "partial"
+    needed = replace(pair, without_second=single.chi2.copy())
+    d2 = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [needed], draws, RULES, 8)
+    assert d2.top == ("backlash", "speed_sensor")

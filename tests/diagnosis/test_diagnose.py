@@ -10,7 +10,7 @@ import pytest
 
 import app.analysis.diagnosis.calibrate as calibrate
 from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict, validate_on
-from app.analysis.diagnosis.forward import simulate_event
+from app.analysis.diagnosis.forward import simulate_events
 from app.errors import MissingSignalError
 from app.signals import SignalSet
 from tests.diagnosis.conftest import paper
@@ -69,11 +69,11 @@ def test_fits_never_simulate_heldout_events(signals_for: Signals, monkeypatch: p
     """Structural: record every event the fitting code simulates; none may be held out."""
     seen: list[int] = []
 
-    def spy(ev, *a, **kw):  # type: ignore[no-untyped-def]
-        seen.append(ev.index)
-        return simulate_event(ev, *a, **kw)
+    def spy(evs, *a, **kw):  # type: ignore[no-untyped-def]
+        seen.extend(ev.index for ev in evs)
+        return simulate_events(evs, *a, **kw)
 
-    monkeypatch.setattr(calibrate, "simulate_event", spy)
+    monkeypatch.setattr(calibrate, "simulate_events", spy)
     opts = DiagnosisOptions(candidates=("drag",), seed=2, max_pairs=0)
     res = diagnose_signals(signals_for("drag", (("coulomb_nm", 3.0), ("viscous_nms", 0.005)), 14), paper(), opts)
     assert seen, "the fits simulated nothing"

@@ -66,5 +66,21 @@ def test_noise_larger_than_the_floor_says_so_overall_but_not_locked() -> None:
 def test_report_form_is_json_ready() -> None:
     t = remainder_test(make(np.random.default_rng(4)), bootstrap_draws(H, RULES, 1))
     d = t.to_dict()
-    assert set(d) == {"overall", "impact", "locked"}
+    assert set(d) == {"overall", "impact", "locked", "phases"} and d["phases"] == {}
     assert set(d["locked"]) == {"value", "p_value", "null_95"}  # type: ignore[arg-type]
+
+
+def test_a_remainder_confined_to_one_phase_is_structure() -> None:
+    """Noise everywhere, but 2.5x the noise energy in the oscillation phase: diluted overall, named by phase."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(5)
+    rem = make(rng)
+    n_ph = np.tile([20.0, 60.0], (H, 1))  # pre-event and oscillation samples per event
+    chi_ph = n_ph * np.array([1.0, 2.5]) * rng.uniform(0.9, 1.1, size=(H, 2))
+    t = remainder_test(replace(rem, phase_chi2=chi_ph, phase_n=n_ph), bootstrap_draws(H, RULES, 1))
+    ratios = dict(t.phases)
+    assert ratios["oscillation"].value == pytest.approx(float(chi_ph[:, 1].sum() / n_ph[:, 1].sum()), rel=1e-12)
+    assert ratios["oscillation"].lo > 2.0 and ratios["pre_event"].value < 1.2
+    assert t.above_noise(RULES.min_gap_ratio, RULES.min_gap_ratio_lo) == ["phase:oscillation"]
+    assert set(t.to_dict()["phases"]) == {"pre_event", "oscillation"}  # type: ignore[arg-type]

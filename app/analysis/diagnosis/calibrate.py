@@ -26,7 +26,7 @@ from app.analysis.diagnosis.forward import (
     Nuisance,
     best_offset,
     prediction,
-    simulate_event,
+    simulate_events,
     vehicle_with,
     weighted_residual,
 )
@@ -41,6 +41,7 @@ GAIN_BOUNDS = (0.85, 1.15)
 GRADE_BOUNDS_PCT = (-4.0, 4.0)
 OFFSET_PERIODS = 2.0  # time offset bounded to +-2 sample periods of the speed channel
 _PENALTY = 1e3  # residual (noise units) returned for a parameter set the simulator rejects
+TRADE_OFF_CORR = 0.9  # |correlation| of two fitted effect parameters above which the data do not separate them
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,7 @@ class FitResult:
     nfev: int
     at_bound: tuple[str, ...] = ()
     message: str = ""
+    trade_offs: tuple[tuple[str, str, float], ...] = ()
     settings: tuple[EffectSetting, ...] = field(default=(), repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -97,6 +99,7 @@ class FitResult:
             "calibration_chi2_per_sample": round(self.chi2 / max(self.n, 1), 4),
             "simulator_passes": self.nfev,
             "at_bound": list(self.at_bound),
+            "trade_offs": [{"params": [a, b], "correlation": round(r, 4)} for a, b, r in self.trade_offs],
         }
 
 
@@ -153,13 +156,36 @@ class _Problem:
         nui, settings = self.decode(u)
         try:
             veh = vehicle_with(self.base, nui, settings)
-            outs = [simulate_event(ev, veh, nui.gain, settings, self.model) for ev in self.events]
+            outs = simulate_events(self.events, veh, nui.gain, settings, self.model)
         except SimError:
             return np.full(self.n_res, _PENALTY)
         self.last_offset = best_offset(self.events, outs, self.bounds.offset_s)
         r = np.concatenate([weighted_residual(ev, prediction(ev, out, self.last_offset))
                             for ev, out in zip(self.events, outs, strict=True)])
         return np.where(np.isfinite(r), r, _PENALTY)
+
+
+def trade_offs(jac: FloatArray, names: Sequence[str], owners: Sequence[str],
+               limit: float = TRADE_OFF_CORR) -> tuple[tuple[str, str, float], ...]:
+    """Pairs of effect parameters the calibration data cannot separate: ``(a, b, correlation)``.
+
+    The correlation comes from the Gauss-Newton covariance ``(J^T J)^-1`` at the solution (unit-box
+    parameters, nuisance included so that a trade-off through the road load or gain counts too).
+    Near +-1 one parameter can stand in for the other: a lash split between the reducer and the
+    half-shaft whose total is all the traverse time measures, an input lag against an output filter.
+    """
+    j = np.asarray(jac, dtype=np.float64)
+    if j.ndim != 2 or j.shape[1] < 2 or not np.all(np.isfinite(j)):
+        return ()
+    cov = np.linalg.pinv(j.T @ j)
+    d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = cov / np.outer(d, d)
+    out = []
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            if owners[a] != "nuisance" and owners[b] != "nuisance" and abs(corr[a, b]) >= limit:
+                out.append((f"{owners[a]}.{names[a]}", f"{owners[b]}.{names[b]}", float(corr[a, b])))
+    return tuple(out)
 
 
 def _chi2(r: FloatArray) -> float:
@@ -248,5 +274,6 @@ def fit(
         resting_off = owner != "nuisance" and abs(spec.off - value) <= 0.01 * (spec.hi - spec.lo)
         if near and not resting_off:
             at_bound.append(f"{owner}.{spec.name}")
+    pairs = trade_offs(sol.jac, [p.name for p in prob.specs], prob.owner) if effects else ()
     return FitResult(tuple(e.id for e in effects), nui, values, _chi2(r), prob.n_res, prob.nfev, tuple(at_bound),
-                     str(sol.message), settings)
+                     str(sol.message), pairs, settings)

@@ -83,6 +83,8 @@ class CandidateScore:
     improved_fraction : share of held-out events whose residual went down.
     significant : passes rule 3.
     remainder : remainder-to-noise statistics of what the candidate leaves (None: not computed).
+    without_second : pairs only: (n_heldout,) chi2 of the pair's fit with its second effect off --
+        the first effect at the values the pair fit gave it.
     """
 
     id: str
@@ -93,6 +95,7 @@ class CandidateScore:
     improved_fraction: float
     significant: bool
     remainder: RemainderTest | None = None
+    without_second: FloatArray | None = None  # pairs: chi2 per event with the second effect switched off
 
     def noise_ratio(self, n: FloatArray) -> float:
         """Remaining residual-to-noise ratio ``sum(chi2) / sum(n)``."""
@@ -199,7 +202,8 @@ def decide(
             f"usable events are needed on each side"))
     ratio = gap_ratio(base, n, draws, rules.level)
     if ratio.value < rules.min_gap_ratio or ratio.lo < rules.min_gap_ratio_lo:
-        return Decision("no_significant_gap", gap_ratio=ratio, reason=(
+        return Decision("no_significant_gap", gap_ratio=ratio, details={
+            "remainder": remainder_field([], ratio.value, explained=None)}, reason=(
             f"baseline residual is {ratio.value:.2f}x the noise floor (90 % interval {ratio.lo:.2f}-{ratio.hi:.2f}); "
             f"a gap needs at least {rules.min_gap_ratio:g}x with a lower bound of {rules.min_gap_ratio_lo:g}x"))
     ranked = sorted(singles, key=lambda c: float(c.chi2.sum()))
@@ -208,7 +212,9 @@ def decide(
         best_share = ranked[0].explained.value if ranked else 0.0
         return Decision("none_of_candidates", gap_ratio=ratio, best=ranked[0] if ranked else None, reason=(
             f"baseline residual is {ratio.value:.2f}x the noise floor, but no candidate removes a significant share "
-            f"of it on held-out events (best: {ranked[0].id if ranked else '-'} {100 * best_share:.0f} %)"))
+            f"of it on held-out events (best: {ranked[0].id if ranked else '-'}, explained share "
+            f"{100 * best_share:.0f} %): the remainder is structure no candidate in the library explains"),
+            details={"remainder": remainder_field(["overall"], ratio.value, explained=False)})
     best = sig[0]
     if len(sig) > 1:
         second = sig[1]
@@ -221,26 +227,80 @@ def decide(
                                     f"held-out events prefer "
                                     f"{best.id} with probability {p:.2f} (needs {rules.prefer_probability:g} and a "
                                     f"ratio gap of at least {rules.min_separation:g}): the data do not separate them"),
-                            details={"prefer_probability": round(p, 3), "separation": round(gap, 4)})
-    chosen = best
-    pair_note = ""
-    for pair in sorted((q for q in pairs if q.effects[0] == best.id), key=lambda c: float(c.chi2.sum())):
-        p = paired_better_probability(pair.chi2, best.chi2, draws)
-        if pair.explained.value - best.explained.value >= rules.pair_gain and p >= rules.prefer_probability:
-            chosen = pair
-            pair_note = f"; adding {pair.effects[1]} explains {100 * pair.explained.value:.0f} % (p = {p:.2f})"
-        break
+                            details={"prefer_probability": round(p, 3), "separation": round(gap, 4),
+                                     "remainder": remainder_field(_left_over(best, n, rules)[0], best.noise_ratio(n),
+                                                                  explained=False)})
+    chosen, pair_note = _with_partner(base, best, pairs, n, draws, rules)
     share = chosen.explained
     above, left_text = _left_over(chosen, n, rules)
     if share.value >= rules.explained_share and share.lo >= rules.explained_share_lo and not above:
         status = "explained"
     else:
         status = "partial"
-    reason = (f"{' + '.join(chosen.effects)} removes {100 * share.value:.0f} % of the residual above the noise "
-              f"floor on held-out events (90 % interval {100 * share.lo:.0f}-{100 * share.hi:.0f} %), "
-              f"{100 * chosen.improved_fraction:.0f} % of events improved{pair_note}; {left_text}")
+    reason = (f"{' + '.join(chosen.effects)}: {_figures(chosen)}, {100 * chosen.improved_fraction:.0f} % of events "
+              f"improved{pair_note}; {left_text}")
     details: dict[str, Any] = {}
     if chosen.remainder is not None:
         details["remainder_to_noise"] = chosen.remainder.to_dict()
         details["remainder_above_noise"] = above
+    details["remainder"] = remainder_field(above, chosen.noise_ratio(n), explained=not above)
+    if above:
+        reason += (f". The remainder is structured ({', '.join(above)}) and no candidate in the library "
+                   f"explains it")
     return Decision(status, top=chosen.effects, gap_ratio=ratio, best=chosen, reason=reason, details=details)
+
+
+def _figures(c: CandidateScore) -> str:
+    """The two held-out figures of a candidate, each under its one name (see :mod:`.score`)."""
+    return (f"explained share {100 * c.explained.value:.0f} % [{100 * c.explained.lo:.0f}, "
+            f"{100 * c.explained.hi:.0f}] of the residual above the noise floor, held-out shrink "
+            f"{100 * c.shrink.value:.0f} % [{100 * c.shrink.lo:.0f}, {100 * c.shrink.hi:.0f}] of the residual energy")
+
+
+def structured(c: CandidateScore, rules: DecisionRules) -> bool:
+    """Whether what ``c`` leaves on held-out events is above noise by any remainder statistic."""
+    return bool(c.remainder is not None and c.remainder.above_noise(rules.min_gap_ratio, rules.min_gap_ratio_lo))
+
+
+def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[CandidateScore], n: FloatArray,
+                  draws: npt.NDArray[np.int64], rules: DecisionRules) -> tuple[CandidateScore, str]:
+    """The best single effect, or its best pair when the second effect earns its place on held-out events.
+
+    It does when the held-out events prefer the pair (paired bootstrap probability at least
+    ``prefer_probability``) and either it explains ``pair_gain`` more of the gap, or the single
+    effect leaves a structured remainder and the pair removes ``pair_gain`` of *that* remainder's
+    excess over noise (and at least ``min_separation`` of its ratio) -- a faint second effect
+    explains little of a large gap but is all that the first one's remainder holds.
+    """
+    for pair in sorted((q for q in pairs if q.effects[0] == best.id), key=lambda c: float(c.chi2.sum())):
+        # judged against the better of the single fit and the pair's own fit with the second effect off:
+        # a gain that the first effect alone reaches at the pair's values is a better fit of the first
+        # effect, not evidence for the second
+        ref = best.chi2
+        if pair.without_second is not None and float(pair.without_second.sum()) < float(ref.sum()):
+            ref = pair.without_second
+        p = paired_better_probability(pair.chi2, ref, draws)
+        excess = float(ref.sum() - n.sum())
+        base_excess = float(base.sum() - n.sum())
+        gain = float(ref.sum() - pair.chi2.sum()) / base_excess if base_excess > 0 else 0.0
+        left = float(ref.sum() / max(float(n.sum()), 1.0))
+        lower = left - pair.noise_ratio(n)
+        of_remainder = lower * float(n.sum()) / excess if excess > 0 else 0.0
+        if p >= rules.prefer_probability and (gain >= rules.pair_gain or (
+                structured(best, rules) and lower >= rules.min_separation and of_remainder >= rules.pair_gain)):
+            return pair, (f"; adding {pair.effects[1]} lowers the remainder from {left:.2f}x to "
+                          f"{pair.noise_ratio(n):.2f}x the noise floor (p = {p:.2f})")
+        break
+    return best, ""
+
+
+def remainder_field(above: Sequence[str], ratio_to_noise: float, explained: bool | None) -> dict[str, Any]:
+    """``decision.remainder``: is what the decision leaves noise, or structure no candidate explains.
+
+    ``explained``: whether the named candidates account for the gap (None: there was no gap).
+    """
+    if not above:
+        return {"status": "noise", "explained_by_candidates": explained, "where": [],
+                "ratio_to_noise": round(float(ratio_to_noise), 4)}
+    return {"status": "structured", "explained_by_candidates": explained, "where": list(above),
+            "ratio_to_noise": round(float(ratio_to_noise), 4)}

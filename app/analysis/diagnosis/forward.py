@@ -3,8 +3,15 @@
 Only the event windows are simulated. For one event and one parameter set the prediction is::
 
     torque_in(t)  = gain * T_can(t) + input effects                   (1 ms grid, monotone cubic)
-    speed_sim     = simulate(vehicle + vehicle effects, torque_in, speed0 = measured speed at start)
+    speed_sim     = simulate(vehicle + vehicle effects, torque_in, speed0 = measured speed at sim_t0)
     speed_pred(t) = output effects(speed_sim)(t - offset) + c_e       at the measured sample times
+
+The simulation starts at ``sim_t0``, the last *quasi-static* point before the scored window
+(see :func:`.prepare.warm_start`): where the torque had been steady long enough for the shuffle
+of any earlier reversal to have decayed, or the log start. The simulator's own initial state is
+quasi-static, so this is the only start that is not fictitious; a reversal less than a few
+seconds after the previous one is simulated through that one (the warm-up), and its window starts
+from the state the continuous run carries into it. Only the samples of the window are scored.
 
 ``offset`` (s; positive: the speed reacts later than the CAN torque timestamps say), ``gain`` and
 the road load (``body.grade_percent`` offset, a wheel-side force) are the *nuisance* parameters
@@ -51,6 +58,8 @@ class DiagEvent:
     speed_t, speed_meas : (n,) measured speed samples inside the window.
     var : (n,) noise variance of each speed sample (rpm^2).
     pre : (n,) mask of samples before the event (initial-condition anchor).
+    sim_t0 : start of the simulation (s), at or before ``t_start - MARGIN_S``; None: ``t_start - MARGIN_S``.
+    speed_init_rpm : measured speed at ``sim_t0`` (rpm); None: from the window's first samples.
     """
 
     index: int
@@ -66,11 +75,14 @@ class DiagEvent:
     speed_meas: FloatArray
     var: FloatArray
     pre: BoolArray
+    sim_t0: float | None = None
+    speed_init_rpm: float | None = None
     t_fine: FloatArray = field(init=False, repr=False)
     torque_fn: PchipInterpolator = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        t0 = max(self.t_start - MARGIN_S, float(self.torque_t[0]))
+        t0 = self.t_start - MARGIN_S if self.sim_t0 is None else min(self.sim_t0, self.t_start - MARGIN_S)
+        t0 = max(t0, float(self.torque_t[0]))
         n = round((self.t_end + MARGIN_S - t0) / FINE_DT) + 1
         object.__setattr__(self, "t_fine", t0 + FINE_DT * np.arange(n, dtype=np.float64))
         # monotone cubic: follows a smooth torque request through its samples without overshoot, where
@@ -81,8 +93,15 @@ class DiagEvent:
     def n(self) -> int:
         return int(self.speed_t.size)
 
+    @property
+    def warm_s(self) -> float:
+        """Simulated time before the scored window (s): the warm-up through earlier reversals."""
+        return max(float(self.speed_t[0] - self.t_fine[0]), 0.0)
+
     def speed0(self) -> float:
         """Measured speed at the simulation start: a line through the first 50 ms of samples."""
+        if self.speed_init_rpm is not None:
+            return float(self.speed_init_rpm)
         m = self.speed_t <= self.speed_t[0] + 0.05
         if int(m.sum()) < 3:
             return float(self.speed_meas[0])
@@ -153,15 +172,33 @@ def vehicle_with(base: Vehicle, nuisance: Nuisance, effects: Sequence[EffectSett
     return base.with_changes(changes) if changes else base
 
 
-def torque_input(ev: DiagEvent, gain: float, effects: Sequence[EffectSetting], interp: str = "pchip") -> FloatArray:
-    """Torque on the fine grid after gain and input effects (N m); ``interp``: "pchip" or "linear"."""
-    tq_t = np.clip(ev.t_fine, ev.torque_t[0], ev.torque_t[-1])
-    raw = ev.torque_fn(tq_t) if interp == "pchip" else np.interp(tq_t, ev.torque_t, ev.torque_nm)
+def _cluster_torque(events: Sequence[DiagEvent]) -> tuple[FloatArray, FloatArray]:
+    """The CAN torque samples of several events, merged (the same log sample appears once)."""
+    t = np.concatenate([ev.torque_t for ev in events])
+    v = np.concatenate([ev.torque_nm for ev in events])
+    t_u, first = np.unique(t, return_index=True)
+    return np.asarray(t_u, dtype=np.float64), np.asarray(v[first], dtype=np.float64)
+
+
+def torque_on(t_fine: FloatArray, torque_t: FloatArray, torque_nm: FloatArray, gain: float,
+              effects: Sequence[EffectSetting], interp: str = "pchip",
+              fn: PchipInterpolator | None = None) -> FloatArray:
+    """Torque on ``t_fine`` after gain and input effects (N m); ``interp``: "pchip" or "linear"."""
+    tq_t = np.clip(t_fine, torque_t[0], torque_t[-1])
+    if interp == "pchip":
+        raw = (fn if fn is not None else PchipInterpolator(torque_t, torque_nm, extrapolate=False))(tq_t)
+    else:
+        raw = np.interp(tq_t, torque_t, torque_nm)
     tq = gain * raw
     for eff, vals in effects:
         if eff.input_transform is not None:
-            tq = eff.input_transform(ev.t_fine, tq, vals)
+            tq = eff.input_transform(t_fine, tq, vals)
     return np.asarray(tq, dtype=np.float64)
+
+
+def torque_input(ev: DiagEvent, gain: float, effects: Sequence[EffectSetting], interp: str = "pchip") -> FloatArray:
+    """Torque on the event's fine grid after gain and input effects (N m); ``interp``: "pchip" or "linear"."""
+    return torque_on(ev.t_fine, ev.torque_t, ev.torque_nm, gain, effects, interp, ev.torque_fn)
 
 
 def _gap_any(res: Any, n: int) -> BoolArray | None:
@@ -174,18 +211,65 @@ def _gap_any(res: Any, n: int) -> BoolArray | None:
     return np.logical_or.reduce(masks) if masks else None
 
 
+def clusters(events: Sequence[DiagEvent]) -> list[list[int]]:
+    """Positions in ``events`` grouped into runs whose simulated spans overlap, in time order.
+
+    Each group is simulated once, continuously from its first event's start: an event whose
+    warm-up reaches back into the previous event's span gets the state that run carries, and a
+    log of close reversals costs one simulation of its length per parameter set instead of one
+    warm-up per event.
+    """
+    order = sorted(range(len(events)), key=lambda i: float(events[i].t_fine[0]))
+    groups: list[list[int]] = []
+    end = -np.inf
+    for i in order:
+        ev = events[i]
+        if groups and float(ev.t_fine[0]) <= end + 0.5 * FINE_DT:
+            groups[-1].append(i)
+        else:
+            groups.append([i])
+        end = max(end, float(ev.t_fine[-1])) if len(groups[-1]) > 1 else float(ev.t_fine[-1])
+    return groups
+
+
+def simulate_events(events: Sequence[DiagEvent], vehicle: Vehicle, gain: float,
+                    effects: Sequence[EffectSetting] = (), model: str = "multibody",
+                    interp: str = "pchip") -> list[SimOut]:
+    """Simulator output of every event, one continuous run per cluster (:func:`clusters`).
+
+    ``vehicle`` already carries the vehicle effects; input effects act on the run's torque and
+    output effects on its speed, so their own states carry through the cluster too. Each event
+    gets the run's output over its own fine-grid span.
+    """
+    outs: list[SimOut | None] = [None] * len(events)
+    for group in clusters(events):
+        first = events[group[0]]
+        if len(group) == 1:
+            grid, tq = first.t_fine, torque_input(first, gain, effects, interp)
+        else:
+            t_end = max(float(events[i].t_fine[-1]) for i in group)
+            grid = first.t_fine[0] + FINE_DT * np.arange(round((t_end - first.t_fine[0]) / FINE_DT) + 1)
+            tq_t, tq_v = _cluster_torque([events[i] for i in group])
+            tq = torque_on(grid, tq_t, tq_v, gain, effects, interp)
+        res = simulate(vehicle, grid, tq, model=model, speed0_rpm=first.speed0(), interp="linear",
+                       output_dt=FINE_DT)
+        t_out = np.asarray(res.t, dtype=np.float64)
+        sp = np.asarray(res.motor_speed_rpm, dtype=np.float64)
+        for eff, vals in effects:
+            if eff.output_transform is not None:
+                sp = eff.output_transform(t_out, sp, vals)
+        gap = _gap_any(res, t_out.size)
+        for i in group:
+            ev = events[i]
+            m = (t_out >= ev.t_fine[0] - 0.5 * FINE_DT) & (t_out <= ev.t_fine[-1] + 0.5 * FINE_DT)
+            outs[i] = SimOut(t_out[m], sp[m], None if gap is None else gap[m])
+    return [o for o in outs if o is not None]
+
+
 def simulate_event(ev: DiagEvent, vehicle: Vehicle, gain: float, effects: Sequence[EffectSetting] = (),
                    model: str = "multibody", interp: str = "pchip") -> SimOut:
     """One simulator run over the event's fine grid; ``vehicle`` already carries the vehicle effects."""
-    tq = torque_input(ev, gain, effects, interp)
-    res = simulate(vehicle, ev.t_fine, tq, model=model, speed0_rpm=ev.speed0(), interp="linear",
-                   output_dt=FINE_DT)
-    t_out = np.asarray(res.t, dtype=np.float64)
-    sp = np.asarray(res.motor_speed_rpm, dtype=np.float64)
-    for eff, vals in effects:
-        if eff.output_transform is not None:
-            sp = eff.output_transform(t_out, sp, vals)
-    return SimOut(t_out, sp, _gap_any(res, t_out.size))
+    return simulate_events([ev], vehicle, gain, effects, model, interp)[0]
 
 
 def anchored(ev: DiagEvent, raw: FloatArray) -> tuple[FloatArray, float]:
@@ -254,22 +338,26 @@ def weighted_residual(ev: DiagEvent, pred: Prediction) -> FloatArray:
     return np.asarray((ev.speed_meas - pred.speed) / np.sqrt(ev.var), dtype=np.float64)
 
 
-def input_uncertainty(ev: DiagEvent, vehicle: Vehicle, nuisance: Nuisance, effects: Sequence[EffectSetting] = (),
-                      model: str = "multibody", smooth_s: float = 0.05) -> FloatArray:
-    """(n,) variance (rpm^2) of the prediction due to not knowing the torque between CAN samples.
+def input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, nuisance: Nuisance,
+                      effects: Sequence[EffectSetting] = (), model: str = "multibody",
+                      smooth_s: float = 0.05) -> list[FloatArray]:
+    """Per event, (n,) variance (rpm^2) of the prediction due to not knowing the torque between CAN samples.
 
     The prediction is made twice, with the torque filled in by monotone cubics and by straight
     lines; their squared difference, averaged over ``smooth_s``, is the part of the residual no
     driveline model can remove at this sample rate. It uses the torque only, never the measured
     speed, so it cannot absorb a gap.
     """
-    a = simulate_event(ev, vehicle, nuisance.gain, effects, model, "pchip").at(ev.speed_t, nuisance.offset_s)
-    b = simulate_event(ev, vehicle, nuisance.gain, effects, model, "linear").at(ev.speed_t, nuisance.offset_s)
-    d = a - b
-    if ev.pre.any():
-        d = d - float(np.mean(d[ev.pre]))
-    k = max(round(smooth_s / max(float(np.median(np.diff(ev.speed_t))), 1e-4)), 1)
-    return np.asarray(np.convolve(d * d, np.ones(k) / k, mode="same"), dtype=np.float64)
+    a_all = simulate_events(events, vehicle, nuisance.gain, effects, model, "pchip")
+    b_all = simulate_events(events, vehicle, nuisance.gain, effects, model, "linear")
+    out: list[FloatArray] = []
+    for ev, a_out, b_out in zip(events, a_all, b_all, strict=True):
+        d = a_out.at(ev.speed_t, nuisance.offset_s) - b_out.at(ev.speed_t, nuisance.offset_s)
+        if ev.pre.any():
+            d = d - float(np.mean(d[ev.pre]))
+        k = max(round(smooth_s / max(float(np.median(np.diff(ev.speed_t))), 1e-4)), 1)
+        out.append(np.asarray(np.convolve(d * d, np.ones(k) / k, mode="same"), dtype=np.float64))
+    return out
 
 
 def rigid_inertia(vehicle: Vehicle) -> float:

@@ -3,7 +3,9 @@
 Checks the channels (a missing one raises :class:`~app.errors.MissingSignalError` naming it),
 estimates the model-free noise floor from the speed samples *outside* every event window, and
 cuts each included event to the window the diagnosis simulates and scores: ``pre_s`` before the
-torque crossing to ``post_s`` after it (inside the event's own window).
+torque crossing to ``post_s`` after it (inside the event's own window). Each window's simulation
+starts earlier, at its warm start (:func:`warm_start`), so that no event is scored from a
+fictitious rest state.
 """
 
 from __future__ import annotations
@@ -13,13 +15,19 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from app.analysis.diagnosis.forward import DiagEvent
+from app.analysis.diagnosis.forward import MARGIN_S, DiagEvent, FloatArray
 from app.analysis.diagnosis.noise import NoiseFloor, estimate_noise_floor, measured_slope, quantisation_step
-from app.analysis.events import SPEED, TORQUE, Event
+from app.analysis.events import SPEED, TORQUE, Event, EventParams
 from app.errors import InsufficientDataError, MissingSignalError
 from app.signals import SignalSet
 
 REQUIRED = (TORQUE, SPEED)
+
+# Event detection for the diagnosis: a window cut short by the next reversal is kept when 0.3 s
+# (the impact and one to two shuffle periods) remain. The ripple metrics need 0.6 s, the diagnosis
+# does not: its windows are simulated through the next reversal's torque (warm starts, clusters),
+# and with reversals 0.7-1.1 s apart the 0.6 s rule left a quarter of the events.
+DIAGNOSIS_EVENTS = EventParams(min_post_s=0.3)
 
 
 @dataclass(frozen=True)
@@ -29,6 +37,40 @@ class WindowParams:
     anchor_end_s: float = 0.08  # anchor on samples more than this before the crossing (gaps open near it)
     torque_margin_s: float = 0.1  # torque kept beyond the window so the time-offset fit can shift it
     min_samples: int = 20
+    settle_s: float = 2.5  # torque steady this long: the shuffle of the last change has decayed (quasi-static)
+    settle_tol_nm: float = 4.0  # "steady": torque range within the settle time at most this (N m)
+    max_warm_s: float = 4.0  # the warm-up reaches back at most this far before the window
+
+
+def warm_start(tq_t: FloatArray, tq_v: FloatArray, t_window: float, p: WindowParams) -> float:
+    """Start of the simulation for a window starting at ``t_window`` (s).
+
+    The latest time at or before ``t_window`` at which the state is quasi-static -- the torque
+    within ``settle_tol_nm`` for the ``settle_s`` before it, so whatever shuffle an earlier change
+    set off has died out (the paper vehicle's shuffle after a full 140 N m step falls from 285 rpm
+    to under 2 rpm in 2.5 s) -- searched back to ``max_warm_s`` before the window, or the log
+    start. When there is none, the run starts ``max_warm_s`` early: the state there is not
+    quasi-static, but its error has then decayed for longer than the settle time by the window.
+    """
+    lo = max(float(tq_t[0]), t_window - p.max_warm_s)
+    near = (tq_t >= lo - p.settle_s) & (tq_t <= t_window)
+    tt, vv = tq_t[near], tq_v[near]
+    first = np.searchsorted(tt, tt - p.settle_s)  # first sample of the settle time before each sample
+    for j in range(tt.size - 1, -1, -1):
+        if tt[j] < lo or tt[j] - p.settle_s < tq_t[0]:
+            break
+        if float(np.ptp(vv[first[j]:j + 1])) <= p.settle_tol_nm:
+            return t_window if j == tt.size - 1 else float(tt[j])
+    return lo
+
+
+def speed_at(sp_t: FloatArray, sp_v: FloatArray, t: float, half_s: float = 0.03) -> float:
+    """Measured speed at ``t`` (rpm): a line through the samples within ``half_s`` of it."""
+    m = np.abs(sp_t - t) <= half_s
+    if int(m.sum()) < 3:
+        return float(np.interp(t, sp_t, sp_v))
+    c = np.polyfit(sp_t[m] - t, sp_v[m], 1)
+    return float(c[1])
 
 
 def require_channels(signals: SignalSet) -> None:
@@ -70,7 +112,8 @@ def prepare(signals: SignalSet, events: Sequence[Event], params: WindowParams | 
         t0 = max(ev.t_cross_s - p.pre_s, ev.t_start_s)
         t1 = min(ev.t_cross_s + p.post_s, ev.t_end_s)
         ms = (sp_t >= t0) & (sp_t <= t1)
-        mt = (tq_t >= t0 - p.torque_margin_s) & (tq_t <= t1 + p.torque_margin_s)
+        t_sim = warm_start(tq_t, tq_v, t0 - MARGIN_S, p)
+        mt = (tq_t >= min(t_sim, t0) - p.torque_margin_s) & (tq_t <= t1 + p.torque_margin_s)
         pre = sp_t[ms] < ev.t_cross_s - p.anchor_end_s
         if int(ms.sum()) < p.min_samples or int(pre.sum()) < 2 or int(mt.sum()) < 3:
             skipped.append({"index": ev.index, "reason": (
@@ -82,5 +125,7 @@ def prepare(signals: SignalSet, events: Sequence[Event], params: WindowParams | 
             speed_rpm=float(ev.motor_speed_rpm), torque_step_nm=float(ev.torque_after_nm - ev.torque_before_nm),
             torque_t=tq_t[mt], torque_nm=tq_v[mt], speed_t=sp_t[ms], speed_meas=sp_v[ms],
             var=noise.variance(slope[ms]), pre=pre,
+            sim_t0=t_sim if t_sim < t0 - MARGIN_S else None,
+            speed_init_rpm=speed_at(sp_t, sp_v, t_sim) if t_sim < t0 - MARGIN_S else None,
         ))
     return out, noise, skipped

@@ -14,13 +14,24 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                        "top": [effect ids], "confusable": [id, id] | null, "reason": str,
                        "residual_to_noise_before": interval, "explained_share": interval,
                        "heldout_shrink": interval, "residual_to_noise_after": float,
-                       "remainder_to_noise": {"overall": interval, "impact": interval,
+                       "remainder_to_noise": {"overall": interval, "impact": interval, "phases": {phase: interval},
                                               "locked": {"value", "p_value", "null_95"}},
                        "remainder_above_noise": [names of the remainder statistics above noise],
+                       "remainder": {"status": "noise" | "structured",
+                                     "explained_by_candidates": bool | null (null: there was no gap),
+                                     "where": ["overall" | "impact" | "locked" | "phase:<name>"],
+                                     "ratio_to_noise": float},
+                       "identifiability": [{"params": [a, b], "correlation",
+                                            "identified": {"name", "unit", "value", "nominal"} | null}]
+                                          (only when the chosen fit has parameters that trade off),
                        "prefer_probability", "separation" (ambiguous only)}
+                      "explained_share" is the share of the residual *above the noise floor* removed,
+                      "heldout_shrink" the relative drop of the residual energy; the reason quotes
+                      both under these names (explained share, held-out shrink).
     baseline          fit: {"nuisance": {"offset_s", "gain", "road_load_grade_pct"}, "at_bound", ...}
     candidates        [{"id", "effects", "title", "fit": {"params": {effect: {name: value}},
-                        "nuisance": {...}, "at_bound": [...]}, "heldout": {"shrink", "explained_share",
+                        "nuisance": {...}, "at_bound": [...], "trade_offs": [{"params", "correlation"}]},
+                        "heldout": {"shrink", "explained_share",
                         "improved_fraction", "significant", "residual_to_noise", "remainder_to_noise"},
                         "phases": {phase: shrink interval}, "bands": {band: shrink interval}}]
     pairs             same shape, greedy pairs (first = best single effect)

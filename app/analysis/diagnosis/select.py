@@ -28,17 +28,20 @@ from app.analysis.diagnosis.decide import (
     bootstrap_draws,
     decide,
     score_candidate,
+    structured,
 )
 from app.analysis.diagnosis.forward import (
     DiagEvent,
     Prediction,
     input_uncertainty,
-    predict,
+    prediction,
     rigid_inertia,
+    simulate_events,
     torque_quantisation_variance,
     vehicle_with,
     weighted_residual,
 )
+from app.analysis.diagnosis.identify import with_identifiability
 from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2, phase_times, uniform
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.score import EventScore
@@ -112,8 +115,9 @@ def evaluate(base: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], mode
     veh = vehicle_with(base, fitted.nuisance, fitted.settings)
     scores: dict[int, EventScore] = {}
     preds: dict[int, Prediction] = {}
-    for ev in events:
-        pred = predict(ev, veh, fitted.nuisance, fitted.settings, model)
+    outs = simulate_events(events, veh, fitted.nuisance.gain, fitted.settings, model)
+    for ev, out in zip(events, outs, strict=True):
+        pred = prediction(ev, out, fitted.nuisance.offset_s)
         r = weighted_residual(ev, pred)
         ph = phases[ev.index] if phases and ev.index in phases else phase_times(ev, pred)
         chi, cnt = phase_chi2(r, ph.labels(ev.speed_t))
@@ -131,8 +135,9 @@ def with_input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, fitted
     quantisation of held values (:func:`.forward.torque_quantisation_variance`)."""
     veh = vehicle_with(vehicle, fitted.nuisance, ())
     inertia = rigid_inertia(vehicle)
-    return [replace(ev, var=ev.var + input_uncertainty(ev, veh, fitted.nuisance, (), model)
-                    + torque_quantisation_variance(ev, torque_step_nm, inertia)) for ev in events]
+    extra = input_uncertainty(events, veh, fitted.nuisance, (), model)
+    return [replace(ev, var=ev.var + u + torque_quantisation_variance(ev, torque_step_nm, inertia))
+            for ev, u in zip(events, extra, strict=True)]
 
 
 def _merge_start(base: FitResult, *parts: FitResult) -> FitResult:
@@ -224,7 +229,9 @@ def run_diagnosis(
 
     pairs: list[CandidateScore] = []
     ranked = sorted(singles, key=lambda c: float(c.chi2.sum()))
-    if ranked and ranked[0].explained.value < rules.explained_share and len(ranked) > 1:
+    # pairs follow the remainder: tried whenever the best single effect leaves structure, whatever its share
+    if ranked and len(ranked) > 1 and (ranked[0].explained.value < rules.explained_share
+                                       or structured(ranked[0], rules)):
         first = ranked[0].id
         # partners ranked by their calibration fit, so the choice does not peek at held-out data
         partners = sorted((c for c in opts.candidates if c != first), key=lambda c: evals[c].fit.chi2)
@@ -236,10 +243,14 @@ def run_diagnosis(
             fit_order.append(f"{pid}: {[e.index for e in cal]}")
             evals[pid] = evaluate(vehicle, f, ho, opts.model, phases, period)
             rem = remainder(ho, evals[pid].scores, evals[pid].predictions, period)
-            pairs.append(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules, rem))
+            alone = replace(f, effects=f.effects[:1], values={first: f.values[first]}, settings=f.settings[:1])
+            first_only = evaluate(vehicle, alone, ho, opts.model, phases, period).chi2(ho_idx)
+            pairs.append(replace(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules,
+                                                 rem), without_second=first_only))
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
 
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
+    decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
                   draws=draws, fit_order=fit_order)

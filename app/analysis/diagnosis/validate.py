@@ -17,7 +17,7 @@ import numpy as np
 from app.analysis.diagnosis.calibrate import Bounds, fit
 from app.analysis.diagnosis.decide import bootstrap_draws
 from app.analysis.diagnosis.forward import DiagEvent
-from app.analysis.diagnosis.prepare import WindowParams, prepare
+from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, WindowParams, prepare
 from app.analysis.diagnosis.score import Interval, explained_interval, shrink_interval
 from app.analysis.diagnosis.select import (
     DiagnosisOptions,
@@ -39,7 +39,7 @@ def diagnose_signals(signals: SignalSet, vehicle: Vehicle, options: DiagnosisOpt
                      progress: Progress | None = None, event_params: EventParams | None = None,
                      window: WindowParams | None = None) -> DiagnosisResult:
     """Detect events in decoded ``signals``, prepare them and run the diagnosis."""
-    events = detect_events(signals, event_params)
+    events = detect_events(signals, event_params or DIAGNOSIS_EVENTS)
     prepared, noise, skipped = prepare(signals, events, window)
     return run_diagnosis(prepared, noise, vehicle, options, progress, skipped)
 
@@ -116,7 +116,7 @@ def validate_effects(effects: dict[str, dict[str, float]], signals: SignalSet, v
     """
     opts = options or DiagnosisOptions()
     say = progress or (lambda f, m: None)
-    evs = detect_events(signals, event_params)
+    evs = detect_events(signals, event_params or DIAGNOSIS_EVENTS)
     events, noise, _ = prepare(signals, evs)
     if len(events) < opts.rules.min_events_per_side:
         raise InsufficientDataError(f"the validation drive has {len(events)} usable events; need at least "
