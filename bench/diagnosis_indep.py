@@ -84,7 +84,8 @@ def diagnose(case: Case, folder: Path) -> Result:
         return Result(case, "error", (), "", float("nan"), float("nan"), 0, f"{type(exc).__name__}: {exc}")
     d = res.decision
     rep = report_dict(res)
-    remainder = str((rep.get("decision") or {}).get("remainder", "") or "")
+    rem = (rep.get("decision") or {}).get("remainder") or {}
+    remainder = str(rem.get("status", "")) if isinstance(rem, dict) else str(rem)
     shrink_b = float("nan")
     if d.top and d.status in (*CONFIDENT, "ambiguous"):
         try:
