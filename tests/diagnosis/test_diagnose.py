@@ -124,3 +124,15 @@ def test_input_lag_and_output_filter_are_ambiguous_when_no_gap_separates_them() 
     assert d.status == "ambiguous", d.reason
     assert set(d.confusable) == {"torque_lag", "speed_sensor"}
     assert "do not separate" in d.reason
+
+
+def test_an_effect_the_vehicle_cannot_have_is_not_a_candidate(signals_for: Signals) -> None:
+    """Without a housing on mounts, ``housing_mount`` would fit as a no-op: it is left out and the report says why."""
+    s = signals_for("torque_lag", (("tau_s", 0.015), ("delay_s", 0.0)), 11)
+    no_housing = paper().as_stages().with_changes({"housing.enabled": False})  # a stage chain without [housing]
+    res = diagnose_signals(s, no_housing, DiagnosisOptions(candidates=("torque_lag", "housing_mount"), seed=7,
+                                                           max_pairs=1))
+    assert [c.id for c in res.singles] == ["torque_lag"]
+    assert not res.pairs
+    assert "housing" in res.not_applicable["housing_mount"]
+    assert report_dict(res)["candidates_not_applicable"] == res.not_applicable

@@ -63,6 +63,9 @@ class DecisionRules:
     prefer_probability: float = 0.95
     min_separation: float = 0.1
     pair_gain: float = 0.15
+    # a second effect kept for the structured remainder alone must remove at least half of that remainder's
+    # excess over noise: a smaller gain is what a second effect's extra freedom buys on model-form residue
+    pair_remainder_gain: float = 0.5
     n_boot: int = 2000
     level: float = 0.9
 
@@ -268,7 +271,7 @@ def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[Candid
 
     It does when the held-out events prefer the pair (paired bootstrap probability at least
     ``prefer_probability``) and either it explains ``pair_gain`` more of the gap, or the single
-    effect leaves a structured remainder and the pair removes ``pair_gain`` of *that* remainder's
+    effect leaves a structured remainder and the pair removes ``pair_remainder_gain`` of *that* remainder's
     excess over noise (and at least ``min_separation`` of its ratio) -- a faint second effect
     explains little of a large gap but is all that the first one's remainder holds.
     """
@@ -287,7 +290,7 @@ def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[Candid
         lower = left - pair.noise_ratio(n)
         of_remainder = lower * float(n.sum()) / excess if excess > 0 else 0.0
         if p >= rules.prefer_probability and (gain >= rules.pair_gain or (
-                structured(best, rules) and lower >= rules.min_separation and of_remainder >= rules.pair_gain)):
+                structured(best, rules) and lower >= rules.min_separation and of_remainder >= rules.pair_remainder_gain)):
             return pair, (f"; adding {pair.effects[1]} lowers the remainder from {left:.2f}x to "
                           f"{pair.noise_ratio(n):.2f}x the noise floor (p = {p:.2f})")
         break

@@ -42,6 +42,7 @@ BoolArray = npt.NDArray[np.bool_]
 
 FINE_DT = 0.001  # s: grid of the simulated torque input and output
 MARGIN_S = 0.03  # s: simulated beyond the window so the output can be shifted by the offset
+FORM_WINDOW_S = 0.15  # s: local window of the model-form tolerance (about one shuffle period)
 
 
 @dataclass(frozen=True)
@@ -338,25 +339,49 @@ def weighted_residual(ev: DiagEvent, pred: Prediction) -> FloatArray:
     return np.asarray((ev.speed_meas - pred.speed) / np.sqrt(ev.var), dtype=np.float64)
 
 
+def _moving_mean(x: FloatArray, k: int) -> FloatArray:
+    """Centred moving mean over ``k`` samples, the ends padded with the end values (no pull toward zero)."""
+    if k <= 1 or x.size == 0:
+        return np.asarray(x, dtype=np.float64)
+    pad = np.concatenate((np.full(k // 2, x[0]), x, np.full(k - 1 - k // 2, x[-1])))
+    return np.asarray(np.convolve(pad, np.ones(k) / k, mode="valid"), dtype=np.float64)
+
+
 def input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, nuisance: Nuisance,
                       effects: Sequence[EffectSetting] = (), model: str = "multibody",
-                      smooth_s: float = 0.05) -> list[FloatArray]:
-    """Per event, (n,) variance (rpm^2) of the prediction due to not knowing the torque between CAN samples.
+                      smooth_s: float = 0.05, form_rel: float = 0.0) -> list[FloatArray]:
+    """Per event, (n,) variance (rpm^2) of the prediction that no candidate effect should be asked to remove.
 
-    The prediction is made twice, with the torque filled in by monotone cubics and by straight
-    lines; their squared difference, averaged over ``smooth_s``, is the part of the residual no
-    driveline model can remove at this sample rate. It uses the torque only, never the measured
-    speed, so it cannot absorb a gap.
+    Two parts. **Input reconstruction**: the prediction is made twice, with the torque filled in by
+    monotone cubics and by straight lines; their squared difference, averaged over ``smooth_s``, is
+    the part of the residual no driveline model can remove at this sample rate. **Model form**
+    (``form_rel`` > 0): two sound models of the same driveline -- other contact laws, a split
+    differential, a relaxation tyre -- differ by a few per cent of the transient they predict
+    (``docs/diagnosis.md``, independent generator), so each sample also gets the variance of
+    ``form_rel`` times the local RMS (over ``FORM_WINDOW_S``) of the event's simulated oscillation (the
+    prediction less its moving mean over that window). A residual below that is no evidence of a
+    missing effect; where the model predicts a quiet stretch the full sensor-noise weight stays. Both parts use
+    the torque and the model only, never the measured speed, so they cannot absorb a gap.
     """
     a_all = simulate_events(events, vehicle, nuisance.gain, effects, model, "pchip")
     b_all = simulate_events(events, vehicle, nuisance.gain, effects, model, "linear")
     out: list[FloatArray] = []
     for ev, a_out, b_out in zip(events, a_all, b_all, strict=True):
-        d = a_out.at(ev.speed_t, nuisance.offset_s) - b_out.at(ev.speed_t, nuisance.offset_s)
+        a = a_out.at(ev.speed_t, nuisance.offset_s)
+        d = a - b_out.at(ev.speed_t, nuisance.offset_s)
         if ev.pre.any():
             d = d - float(np.mean(d[ev.pre]))
         k = max(round(smooth_s / max(float(np.median(np.diff(ev.speed_t))), 1e-4)), 1)
-        out.append(np.asarray(np.convolve(d * d, np.ones(k) / k, mode="same"), dtype=np.float64))
+        var = np.convolve(d * d, np.ones(k) / k, mode="same")
+        if form_rel > 0.0 and ev.n >= 3:
+            # the predicted oscillation: the prediction less its moving average over about one shuffle period
+            # (the rigid-body trend, however it bends at the reversal), then its local mean square: amplitude
+            # and phase errors of a sound model scale with the swing it predicts there, and a stretch where it
+            # predicts none (a quiet pre-event, a settled tail) keeps its full sensor-noise weight
+            kf = max(round(FORM_WINDOW_S / max(float(np.median(np.diff(ev.speed_t))), 1e-4)), 1)
+            dyn = a - _moving_mean(a, kf)
+            var = var + form_rel**2 * _moving_mean(dyn * dyn, kf)
+        out.append(np.asarray(var, dtype=np.float64))
     return out
 
 

@@ -187,6 +187,7 @@ def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None) 
         "pairs": [_candidate(res, s) for s in res.pairs],
         "localisation": _localisation(res) if res.baseline else None,
         "fit_log": list(res.fit_order),
+        "candidates_not_applicable": dict(res.not_applicable),
         "elapsed_s": round(res.elapsed_s, 3),
     }
     if validation is not None:

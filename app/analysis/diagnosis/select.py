@@ -61,6 +61,9 @@ class DiagnosisOptions:
     seed: int = 0
     model: str = "multibody"
     max_pairs: int = 3  # partners tried with the best single effect
+    # model-form tolerance: a residual under this fraction of each event's simulated transient (RMS) is no
+    # evidence of a missing effect (see forward.input_uncertainty); 0 judges against sensor noise alone
+    model_form_rel: float = 0.15
     rules: DecisionRules = field(default_factory=DecisionRules)
 
     def __post_init__(self) -> None:
@@ -104,6 +107,7 @@ class DiagnosisResult:
     draws: npt.NDArray[np.int64] | None
     elapsed_s: float
     fit_order: list[str] = field(default_factory=list)  # every fit, in order, with the events it used
+    not_applicable: dict[str, str] = field(default_factory=dict)  # candidate -> why the vehicle has no such effect
 
     def heldout(self) -> list[int]:
         return list(self.split.heldout)
@@ -129,13 +133,13 @@ def evaluate(base: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], mode
 
 
 def with_input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, fitted: FitResult,
-                           model: str, torque_step_nm: float = 0.0) -> list[DiagEvent]:
+                           model: str, torque_step_nm: float = 0.0, form_rel: float = 0.0) -> list[DiagEvent]:
     """Events whose sample variances include what the torque channel cannot tell: the reconstruction
-    between samples (:func:`.forward.input_uncertainty`, evaluated with the fitted baseline) and the
-    quantisation of held values (:func:`.forward.torque_quantisation_variance`)."""
+    between samples and the model-form tolerance (:func:`.forward.input_uncertainty`, evaluated with the
+    fitted baseline) and the quantisation of held values (:func:`.forward.torque_quantisation_variance`)."""
     veh = vehicle_with(vehicle, fitted.nuisance, ())
     inertia = rigid_inertia(vehicle)
-    extra = input_uncertainty(events, veh, fitted.nuisance, (), model)
+    extra = input_uncertainty(events, veh, fitted.nuisance, (), model, form_rel=form_rel)
     return [replace(ev, var=ev.var + u + torque_quantisation_variance(ev, torque_step_nm, inertia))
             for ev, u in zip(events, extra, strict=True)]
 
@@ -190,7 +194,10 @@ def run_diagnosis(
             reason += f"; {len(skipped)} events were left out (see events_skipped)"
         return result(Decision("insufficient_data", reason=reason))
 
-    n_steps = 2 + len(opts.candidates) + min(opts.max_pairs, max(len(opts.candidates) - 1, 0))
+    # an effect the vehicle cannot have (housing_mount without a housing) is not a candidate: it would fit as a no-op
+    not_applicable = {c: why for c in opts.candidates if (why := get_effect(c).inapplicable(vehicle))}
+    candidates = [c for c in opts.candidates if c not in not_applicable]
+    n_steps = 2 + len(candidates) + min(opts.max_pairs, max(len(candidates) - 1, 0))
     step = [0]
 
     def tick(msg: str) -> None:
@@ -202,7 +209,7 @@ def run_diagnosis(
     say(0.0, f"baseline calibration on {len(cal)} events (held out: {len(ho)})")
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
     # add the input-reconstruction uncertainty to every sample's variance, then recalibrate
-    events = with_input_uncertainty(events, vehicle, base_fit, opts.model, noise.torque_step_nm)
+    events = with_input_uncertainty(events, vehicle, base_fit, opts.model, noise.torque_step_nm, opts.model_form_rel)
     cal = split.calibration_events(events)
     ho = split.heldout_events(events)
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, start=base_fit, seed=opts.seed)
@@ -217,7 +224,7 @@ def run_diagnosis(
     n = np.array([base_eval.scores[i].n for i in ho_idx], dtype=np.float64)
     evals: dict[str, Evaluation] = {}
     singles: list[CandidateScore] = []
-    for cid in opts.candidates:
+    for cid in candidates:
         say(step[0] / n_steps, f"fitting {cid}")
         f = fit(vehicle, cal, split, (get_effect(cid),), bounds=bounds, model=opts.model, start=base_fit,
                 seed=opts.seed)
@@ -234,7 +241,7 @@ def run_diagnosis(
                                        or structured(ranked[0], rules)):
         first = ranked[0].id
         # partners ranked by their calibration fit, so the choice does not peek at held-out data
-        partners = sorted((c for c in opts.candidates if c != first), key=lambda c: evals[c].fit.chi2)
+        partners = sorted((c for c in candidates if c != first), key=lambda c: evals[c].fit.chi2)
         for second in partners[:opts.max_pairs]:
             say(step[0] / n_steps, f"fitting {first} + {second}")
             pid = f"{first}+{second}"
@@ -253,4 +260,4 @@ def run_diagnosis(
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
-                  draws=draws, fit_order=fit_order)
+                  draws=draws, fit_order=fit_order, not_applicable=not_applicable)

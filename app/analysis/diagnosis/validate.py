@@ -126,7 +126,7 @@ def validate_effects(effects: dict[str, dict[str, float]], signals: SignalSet, v
     model = opts.model
     say(0.1, "validation: baseline nuisance fit")
     base_fit = fit(vehicle, events, split, (), bounds=bounds, model=model)
-    events = with_input_uncertainty(events, vehicle, base_fit, model, noise.torque_step_nm)
+    events = with_input_uncertainty(events, vehicle, base_fit, model, noise.torque_step_nm, opts.model_form_rel)
     base_fit = fit(vehicle, events, split, (), bounds=bounds, model=model, start=base_fit)
     say(0.5, "validation: augmented nuisance fit")
     aug = apply_effects(vehicle, effects)
