@@ -340,10 +340,12 @@ def weighted_residual(ev: DiagEvent, pred: Prediction) -> FloatArray:
 
 
 def _moving_mean(x: FloatArray, k: int) -> FloatArray:
-    """Centred moving mean over ``k`` samples, the ends padded with the end values (no pull toward zero)."""
-    if k <= 1 or x.size == 0:
+    """Centred moving mean over ``k`` samples; the ends are padded by odd reflection, so a straight line
+    (a speed ramp under steady torque) is its own moving mean up to the ends."""
+    if k <= 1 or x.size < k:
         return np.asarray(x, dtype=np.float64)
-    pad = np.concatenate((np.full(k // 2, x[0]), x, np.full(k - 1 - k // 2, x[-1])))
+    lo, hi = k // 2, k - 1 - k // 2
+    pad = np.concatenate((2.0 * x[0] - x[lo:0:-1], x, 2.0 * x[-1] - x[-2:-2 - hi:-1]))
     return np.asarray(np.convolve(pad, np.ones(k) / k, mode="valid"), dtype=np.float64)
 
 

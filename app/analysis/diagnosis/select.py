@@ -61,12 +61,20 @@ class DiagnosisOptions:
     seed: int = 0
     model: str = "multibody"
     max_pairs: int = 3  # partners tried with the best single effect
-    # model-form tolerance: a residual under this fraction of each event's simulated transient (RMS) is no
-    # evidence of a missing effect (see forward.input_uncertainty); 0 judges against sensor noise alone
-    model_form_rel: float = 0.15
-    rules: DecisionRules = field(default_factory=DecisionRules)
+    # model-form tolerance: a residual under this fraction of the local predicted oscillation is no evidence
+    # of a missing effect (see forward.input_uncertainty). Off by default: at 0.15 it removed the false
+    # attributions on the independent generator's no-effect drives but also hid clean 15 ms torque lags
+    # (docs/diagnosis.md, "Model-form tolerance")
+    model_form_rel: float = 0.0
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.model_form_rel <= 1.0:
+            raise InputError(f"model_form_rel = {self.model_form_rel}: must be within 0..1 (a fraction of the "
+                             "predicted oscillation)")
+        self._check_candidates()
+    rules: DecisionRules = field(default_factory=DecisionRules)
+
+    def _check_candidates(self) -> None:
         unknown = [c for c in self.candidates if c not in EFFECTS]
         if unknown:
             raise InputError(f"unknown candidate effects {unknown}; known: {list(EFFECTS)}")
