@@ -289,8 +289,9 @@ def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[Candid
         left = float(ref.sum() / max(float(n.sum()), 1.0))
         lower = left - pair.noise_ratio(n)
         of_remainder = lower * float(n.sum()) / excess if excess > 0 else 0.0
-        if p >= rules.prefer_probability and (gain >= rules.pair_gain or (
-                structured(best, rules) and lower >= rules.min_separation and of_remainder >= rules.pair_remainder_gain)):
+        for_remainder = (structured(best, rules) and lower >= rules.min_separation
+                         and of_remainder >= rules.pair_remainder_gain)
+        if p >= rules.prefer_probability and (gain >= rules.pair_gain or for_remainder):
             return pair, (f"; adding {pair.effects[1]} lowers the remainder from {left:.2f}x to "
                           f"{pair.noise_ratio(n):.2f}x the noise floor (p = {p:.2f})")
         break
