@@ -31,6 +31,9 @@ def register(sub: Any) -> None:
                    help=f"comma-separated candidate effects (default: all: {','.join(EFFECTS)})")
     p.add_argument("--seed", type=int, default=0, help="seed of the calibration/held-out split")
     p.add_argument("--model", choices=["multibody", "two_inertia"], default="multibody")
+    p.add_argument("--model-form-tolerance", type=float, default=0.0, metavar="F",
+                   help="residual under F x the local predicted oscillation is no evidence of a gap (0..1; "
+                        "default 0: sensor noise alone; see docs/diagnosis.md)")
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write overlay and residual PNGs here")
     p.add_argument("--out", type=Path, default=None, help="also write the JSON report to this file")
     p.add_argument("--json", action="store_true", help="print the JSON report instead of the summary")
@@ -114,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
     thresholds = event_params(args)  # refused before anything is decoded
     inputs = vehicle_inputs(args)
     vehicle, dbc, smap = inputs.vehicle, inputs.database, inputs.signal_map
-    options = DiagnosisOptions(candidates=candidates, seed=args.seed, model=args.model)
+    options = DiagnosisOptions(candidates=candidates, seed=args.seed, model=args.model,
+                               model_form_rel=args.model_form_tolerance)
     say = _progress(args.quiet)
     say(0.0, f"decoding {args.log}")
     signals, _ = decode_log(args.log, dbc, smap)

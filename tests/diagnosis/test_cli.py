@@ -51,6 +51,9 @@ def test_cli_summary_and_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture
     assert "decision: EXPLAINED  top: torque_lag" in out and "held-out shrink" in out
     assert main(["diagnose", str(log), "--vehicle", "paper", "--candidates", "gremlins", "--quiet"]) == 2
     assert "gremlins" in capsys.readouterr().err
+    assert main(["diagnose", str(log), "--vehicle", "paper", "--model-form-tolerance", "2", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "model_form_rel = 2.0: must be within 0..1" in err and "Traceback" not in err
 
 
 def test_cli_validate_after_a_decision_without_an_effect(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

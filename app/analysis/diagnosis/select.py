@@ -66,15 +66,12 @@ class DiagnosisOptions:
     # attributions on the independent generator's no-effect drives but also hid clean 15 ms torque lags
     # (docs/diagnosis.md, "Model-form tolerance")
     model_form_rel: float = 0.0
+    rules: DecisionRules = field(default_factory=DecisionRules)
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.model_form_rel <= 1.0:
             raise InputError(f"model_form_rel = {self.model_form_rel}: must be within 0..1 (a fraction of the "
                              "predicted oscillation)")
-        self._check_candidates()
-    rules: DecisionRules = field(default_factory=DecisionRules)
-
-    def _check_candidates(self) -> None:
         unknown = [c for c in self.candidates if c not in EFFECTS]
         if unknown:
             raise InputError(f"unknown candidate effects {unknown}; known: {list(EFFECTS)}")
