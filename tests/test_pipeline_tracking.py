@@ -139,3 +139,20 @@ def test_the_command_line_defaults_are_the_event_defaults() -> None:
     defaults = EventParams()
     assert {name: default for _, name, _, default, _ in EVENT_OPTIONS} == {
         name: getattr(defaults, name) for _, name, _, _, _ in EVENT_OPTIONS}
+
+
+def test_command_line_thresholds_go_over_the_command_s_own_defaults() -> None:
+    """``diagnose`` keeps its 0.3 s post-window under thresholds given on the command line; ``analyze`` keeps 0.6 s."""
+    import argparse
+
+    from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
+    from app.analysis.events import EventParams
+    from app.cli.vehicle_args import add_log_and_vehicle, event_params
+
+    p = argparse.ArgumentParser()
+    add_log_and_vehicle(p)
+    args = p.parse_args(["drive.blf", "--vehicle", "paper", "--min-dwell", "0.1"])
+    diag = event_params(args, DIAGNOSIS_EVENTS)
+    assert diag.min_post_s == 0.3 and diag.min_dwell_s == 0.1
+    plain = event_params(args)
+    assert plain.min_post_s == EventParams().min_post_s == 0.6 and plain.min_dwell_s == 0.1

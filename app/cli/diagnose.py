@@ -108,13 +108,14 @@ def summary(doc: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict, validate_on
+    from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
     from app.errors import InputError
     from app.pipeline import decode_log
 
     candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
     if not candidates:
         raise InputError("--candidates is empty")
-    thresholds = event_params(args)  # refused before anything is decoded
+    thresholds = event_params(args, DIAGNOSIS_EVENTS)  # refused before anything is decoded
     inputs = vehicle_inputs(args)
     vehicle, dbc, smap = inputs.vehicle, inputs.database, inputs.signal_map
     options = DiagnosisOptions(candidates=candidates, seed=args.seed, model=args.model,

@@ -36,8 +36,9 @@ def add_log_and_vehicle(p: argparse.ArgumentParser) -> None:
                        help=f"{text} (default {default:g})")
 
 
-def event_params(args: argparse.Namespace) -> EventParams:
-    """The event thresholds given on the command line over the defaults; InputError when out of range."""
+def event_params(args: argparse.Namespace, base: EventParams | None = None) -> EventParams:
+    """The event thresholds given on the command line over ``base`` (the command's own defaults, e.g. the
+    diagnosis' shorter post-window; ``EventParams()`` when None); InputError when out of range."""
     from dataclasses import replace
 
     from app.analysis.events import EventParams
@@ -46,7 +47,7 @@ def event_params(args: argparse.Namespace) -> EventParams:
     given = {name: getattr(args, f"ev_{name}") for _, name, _, _, _ in EVENT_OPTIONS
              if getattr(args, f"ev_{name}", None) is not None}
     try:
-        return replace(EventParams(), **given)
+        return replace(base if base is not None else EventParams(), **given)
     except ValueError as exc:
         opt = {name: o for o, name, _, _, _ in EVENT_OPTIONS}
         text = str(exc)
