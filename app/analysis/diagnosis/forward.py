@@ -373,14 +373,15 @@ def input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, nuisance: N
         d = a - b_out.at(ev.speed_t, nuisance.offset_s)
         if ev.pre.any():
             d = d - float(np.mean(d[ev.pre]))
-        k = max(round(smooth_s / max(float(np.median(np.diff(ev.speed_t))), 1e-4)), 1)
+        dt = max(float(np.median(np.diff(ev.speed_t))), 1e-4)
+        k = max(round(smooth_s / dt), 1)
         var = np.convolve(d * d, np.ones(k) / k, mode="same")
         if form_rel > 0.0 and ev.n >= 3:
             # the predicted oscillation: the prediction less its moving average over about one shuffle period
             # (the rigid-body trend, however it bends at the reversal), then its local mean square: amplitude
             # and phase errors of a sound model scale with the swing it predicts there, and a stretch where it
             # predicts none (a quiet pre-event, a settled tail) keeps its full sensor-noise weight
-            kf = max(round(FORM_WINDOW_S / max(float(np.median(np.diff(ev.speed_t))), 1e-4)), 1)
+            kf = max(round(FORM_WINDOW_S / dt), 1)
             dyn = a - _moving_mean(a, kf)
             var = var + form_rel**2 * _moving_mean(dyn * dyn, kf)
         out.append(np.asarray(var, dtype=np.float64))
