@@ -53,7 +53,7 @@ EFFECT_DRAWS: dict[str, Draw] = {
 OFF = {"backlash": {"diff_scale": 1.0, "shaft_scale": 1.0, "mesh_scale": 1.0},
        "housing_mount": {"k_scale": 1.0, "c_scale": 1.0}, "torque_lag": {"tau_s": 0.0, "dead_s": 0.0},
        "speed_sensor": {"window_s": 0.002, "delay_s": 0.0}, "drag": {"coulomb_nm": 0.0, "viscous_nms": 0.0},
-       "progressive_stiffness": {"shaft_rel": 0.0, "mount_rel": 0.0}, "tyre_slip": {"c_n": 2.0e6, "sigma_m": 0.05}}
+       "progressive_stiffness": {"shaft_rel": 0.0, "mount_rel": 0.0}, "tyre_slip": {"c_n": 2.0e7, "sigma_m": 0.05}}
 OUT_OF_LIBRARY: dict[str, Draw] = {
     "unequal_shafts": lambda r: {"left_scale": _u(r, 0.4, 0.65), "right_scale": _u(r, 1.0, 1.3)},
     "torque_ripple": lambda r: {"amplitude_nm": _u(r, 4.0, 12.0)},

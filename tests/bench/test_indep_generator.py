@@ -205,3 +205,39 @@ def test_signal_size_and_manifest_round_trip(tmp_path):
     assert read_manifest(tmp_path / "m.json") == cases
     (tmp_path / "old.json").write_text('{"generator": "0", "cases": []}', encoding="utf-8")
     assert read_manifest(tmp_path / "old.json") == []  # made by another generator version: not reused
+
+
+def _paper_speed(t: np.ndarray, tq: np.ndarray, speed0_rpm: float, t_out: np.ndarray) -> np.ndarray:
+    from sim import load_vehicle
+    from sim import simulate as sim_simulate
+
+    res = sim_simulate(load_vehicle("paper"), t[::10], tq[::10], model="multibody", speed0_rpm=speed0_rpm,
+                       interp="linear", output_dt=0.0005)
+    return np.asarray(np.interp(t_out, np.asarray(res.t), np.asarray(res.motor_speed_rpm)))
+
+
+def test_nominal_car_lies_in_the_paper_models_family():
+    """A "no effect" case must be one: on a sharp tip-in (-30 -> 100 N m, 1200 N m/s, 200 N m/s through the
+    lash) the nominal car and the paper preset differ by well under a rpm once a line is removed, while a real
+    tyre (the ``tyre_slip`` case) differs by tens of rpm. The first nominal tyre (2 MN per unit slip) left
+    3 rpm RMS, 5x the benchmark's noise: a faint tyre effect on every "no effect" drive."""
+    def tq(t: np.ndarray) -> np.ndarray:
+        ramp = np.clip(-30 + 1200 * (t - 1.0), -30, 100)
+        t_lash = 1.0 + 20 / 1200
+        slow = np.clip(-10 + 200 * (t - t_lash), -10, 10)
+        out = np.where((ramp > -10) & (ramp < 10) & (t > 1.0), slow, ramp)
+        return np.where(t > t_lash + 0.1, np.minimum(10 + 1200 * (t - t_lash - 0.1), 100), out)
+
+    def gap(car) -> float:
+        t, torque, out = _run(car, tq, duration=3.0)
+        rpm = out["speed_rel"] * RPM
+        ours = _paper_speed(t, torque, float(rpm[0]), out["t"])
+        m = out["t"] > 0.9
+        d = rpm[m] - ours[m]
+        d = d - np.polyval(np.polyfit(out["t"][m], d, 1), out["t"][m])
+        return float(np.sqrt(np.mean(d * d)))
+
+    nominal = gap(CAR)
+    real_tyre = gap(with_effect(CAR, "tyre_slip", {"c_n": 8.0e4, "sigma_m": 0.3}))
+    assert nominal < 1.2  # rpm; 0.8 measured
+    assert real_tyre > 10 * nominal

@@ -10,8 +10,9 @@ import pytest
 from scipy.interpolate import PchipInterpolator
 
 from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict
-from app.analysis.diagnosis.forward import FINE_DT, DiagEvent, Nuisance, clusters, input_uncertainty, simulate_events
+from app.analysis.diagnosis.forward import FINE_DT, DiagEvent, Nuisance, clusters, simulate_events
 from app.analysis.diagnosis.prepare import WindowParams, warm_start
+from app.analysis.diagnosis.uncertainty import input_uncertainty
 from app.errors import InputError
 from app.signals import SignalSet
 from sim import simulate

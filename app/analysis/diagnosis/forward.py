@@ -35,14 +35,12 @@ from scipy.interpolate import PchipInterpolator
 
 from sim import Vehicle, simulate
 from sim.effects.base import Effect
-from sim.model import build_chain
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 FINE_DT = 0.001  # s: grid of the simulated torque input and output
 MARGIN_S = 0.03  # s: simulated beyond the window so the output can be shifted by the offset
-FORM_WINDOW_S = 0.15  # s: local window of the model-form tolerance (about one shuffle period)
 
 
 @dataclass(frozen=True)
@@ -337,87 +335,3 @@ def predict(ev: DiagEvent, vehicle: Vehicle, nuisance: Nuisance, effects: Sequen
 def weighted_residual(ev: DiagEvent, pred: Prediction) -> FloatArray:
     """(n,) residual in noise units: ``(measured - predicted) / sqrt(var)``."""
     return np.asarray((ev.speed_meas - pred.speed) / np.sqrt(ev.var), dtype=np.float64)
-
-
-def _moving_mean(x: FloatArray, k: int) -> FloatArray:
-    """Centred moving mean over ``k`` samples; the ends are padded by odd reflection, so a straight line
-    (a speed ramp under steady torque) is its own moving mean up to the ends."""
-    if k <= 1 or x.size < k:
-        return np.asarray(x, dtype=np.float64)
-    lo, hi = k // 2, k - 1 - k // 2
-    pad = np.concatenate((2.0 * x[0] - x[lo:0:-1], x, 2.0 * x[-1] - x[-2:-2 - hi:-1]))
-    return np.asarray(np.convolve(pad, np.ones(k) / k, mode="valid"), dtype=np.float64)
-
-
-def input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, nuisance: Nuisance,
-                      effects: Sequence[EffectSetting] = (), model: str = "multibody",
-                      smooth_s: float = 0.05, form_rel: float = 0.0) -> list[FloatArray]:
-    """Per event, (n,) variance (rpm^2) of the prediction that no candidate effect should be asked to remove.
-
-    Two parts. **Input reconstruction**: the prediction is made twice, with the torque filled in by
-    monotone cubics and by straight lines; their squared difference, averaged over ``smooth_s``, is
-    the part of the residual no driveline model can remove at this sample rate. **Model form**
-    (``form_rel`` > 0): two sound models of the same driveline -- other contact laws, a split
-    differential, a relaxation tyre -- differ by a few per cent of the transient they predict
-    (``docs/diagnosis.md``, independent generator), so each sample also gets the variance of
-    ``form_rel`` times the local RMS (over ``FORM_WINDOW_S``) of the event's simulated oscillation (the
-    prediction less its moving mean over that window). A residual below that is no evidence of a
-    missing effect; where the model predicts a quiet stretch the full sensor-noise weight stays. Both parts use
-    the torque and the model only, never the measured speed, so they cannot absorb a gap.
-    """
-    a_all = simulate_events(events, vehicle, nuisance.gain, effects, model, "pchip")
-    b_all = simulate_events(events, vehicle, nuisance.gain, effects, model, "linear")
-    out: list[FloatArray] = []
-    for ev, a_out, b_out in zip(events, a_all, b_all, strict=True):
-        a = a_out.at(ev.speed_t, nuisance.offset_s)
-        d = a - b_out.at(ev.speed_t, nuisance.offset_s)
-        if ev.pre.any():
-            d = d - float(np.mean(d[ev.pre]))
-        dt = max(float(np.median(np.diff(ev.speed_t))), 1e-4)
-        k = max(round(smooth_s / dt), 1)
-        var = np.convolve(d * d, np.ones(k) / k, mode="same")
-        if form_rel > 0.0 and ev.n >= 3:
-            # the predicted oscillation: the prediction less its moving average over about one shuffle period
-            # (the rigid-body trend, however it bends at the reversal), then its local mean square: amplitude
-            # and phase errors of a sound model scale with the swing it predicts there, and a stretch where it
-            # predicts none (a quiet pre-event, a settled tail) keeps its full sensor-noise weight
-            kf = max(round(FORM_WINDOW_S / dt), 1)
-            dyn = a - _moving_mean(a, kf)
-            var = var + form_rel**2 * _moving_mean(dyn * dyn, kf)
-        out.append(np.asarray(var, dtype=np.float64))
-    return out
-
-
-def rigid_inertia(vehicle: Vehicle) -> float:
-    """Inertia of the whole driveline and vehicle as one rigid body, referred to the rotor (kg m^2)."""
-    m = build_chain(vehicle)
-    return float(np.sum(m.inertia * m.speed_ratio**2))
-
-
-def torque_quantisation_variance(ev: DiagEvent, step_nm: float, inertia: float) -> FloatArray:
-    """(n,) speed variance (rpm^2) from the quantisation of the CAN torque.
-
-    While the torque is held, consecutive CAN values are equal and all carry the *same* rounding
-    error ``d`` (uniform, variance ``step^2 / 12``); the vehicle inertia integrates it into a speed
-    drift ``d (t - t_0) / J`` that grows through the window. Samples are grouped into runs of equal
-    values, each run with its own independent error acting over the run's time (half-way to the
-    neighbouring samples); the drift is taken relative to its mean on the anchor samples, which the
-    per-event speed anchor removes. A torque that moves (ramps, or dithered by noise) makes short
-    runs, and the term stays small. It uses the torque samples and the vehicle only.
-    """
-    n = ev.n
-    if step_nm <= 0 or ev.torque_t.size < 2 or inertia <= 0:
-        return np.zeros(n)
-    tt, vv = ev.torque_t, ev.torque_nm
-    edges = np.concatenate([[tt[0] - 0.5 * (tt[1] - tt[0])], 0.5 * (tt[1:] + tt[:-1]),
-                            [tt[-1] + 0.5 * (tt[-1] - tt[-2])]])
-    run = np.concatenate([[0], np.cumsum(np.diff(vv) != 0)])
-    lo = np.maximum(edges[:-1], ev.t_fine[0])
-    # time each torque sample has acted between the simulation start and each speed sample: (n, m)
-    acted = np.clip(np.minimum(edges[1:][None, :], ev.speed_t[:, None]) - lo[None, :], 0.0, None)
-    per_run = np.zeros((n, int(run[-1]) + 1))
-    np.add.at(per_run.T, run, acted.T)
-    if ev.pre.any():
-        per_run -= per_run[ev.pre].mean(axis=0)
-    rpm_per_nm_s = 30.0 / np.pi / inertia
-    return np.asarray(step_nm**2 / 12.0 * rpm_per_nm_s**2 * np.sum(per_run**2, axis=1), dtype=np.float64)

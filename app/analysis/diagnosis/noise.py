@@ -17,9 +17,11 @@ A timestamp error ``e`` on a sample of a signal changing at ``v'`` rpm/s looks l
 ``v' e``; :meth:`NoiseFloor.variance` turns the jitter into a per-sample variance from the measured
 slope (again model-free).
 
-The *torque* channel's quantisation step is estimated the same way (``torque_step_nm``): while the
-torque is held, its CAN value is off by one fixed amount up to half a step, which the vehicle
-inertia integrates into a speed drift (see :func:`.forward.torque_quantisation_variance`).
+The *torque* channel's quantisation step and white noise are estimated the same way
+(``torque_step_nm``, ``torque_sigma_nm``): while the torque is held, its CAN value is off by one
+fixed amount up to half a step, which the vehicle inertia integrates into a speed drift; and noise
+on the samples makes the simulated driveline ring where the real one does not (see
+:mod:`.uncertainty`).
 """
 
 from __future__ import annotations
@@ -48,6 +50,9 @@ class NoiseFloor:
     period_s : nominal sample period (s).
     n_samples : number of second differences the white-noise estimate used.
     torque_step_nm : quantisation step of the torque channel (N m); 0 when not quantised or unknown.
+    torque_sigma_nm : white noise standard deviation of the torque channel (N m), from its second
+        differences like the speed's (without the quantisation floor: held values are
+        ``torque_step_nm``'s part); 0 when the torque is clean or unknown.
     """
 
     sigma_rpm: float
@@ -56,6 +61,7 @@ class NoiseFloor:
     period_s: float
     n_samples: int
     torque_step_nm: float = 0.0
+    torque_sigma_nm: float = 0.0
 
     def variance(self, slope_rpm_s: npt.ArrayLike) -> FloatArray:
         """Per-sample residual variance (rpm^2) no model can remove, for samples with slope ``slope_rpm_s``."""
@@ -129,26 +135,49 @@ def estimate_noise_floor(t: FloatArray, values: FloatArray, quiet: npt.NDArray[n
     period = sample_period(t)
     jitter = timestamp_jitter(t, period)
     q = quantisation_step(v)
+    sigma, n_used, held = _second_difference_sigma(t, v, None if quiet is None else np.asarray(quiet, bool)[ok], period)
+    if held:
+        # the quantiser was not dithered: the MAD is zero, fall back to the RMS, which sees the rare steps
+        sigma = held
+    sigma = max(sigma, q / np.sqrt(12.0), 1e-6)
+    return NoiseFloor(float(sigma), q, jitter, period, n_used)
+
+
+def _second_difference_sigma(t: FloatArray, v: FloatArray, quiet: npt.NDArray[np.bool_] | None,
+                             period: float) -> tuple[float, int, float]:
+    """White-noise sigma from second differences of regularly spaced (quiet) samples.
+
+    Returns ``(sigma from the MAD, number of second differences used, sigma from the RMS when the MAD is
+    zero else 0)``. ``quiet``: see :func:`estimate_noise_floor`.
+    """
     d = np.diff(t)
     regular = (d > 0.5 * period) & (d < 1.5 * period)
     triple = regular[:-1] & regular[1:]
     if quiet is not None:
-        qm = np.asarray(quiet, dtype=bool)[ok]
-        triple_q = triple & qm[:-2] & qm[1:-1] & qm[2:]
+        triple_q = triple & quiet[:-2] & quiet[1:-1] & quiet[2:]
         if int(triple_q.sum()) >= 20:
             triple = triple_q
-    d2 = v[2:] - 2.0 * v[1:-1] + v[:-2]
-    d2 = d2[triple]
+    d2 = (v[2:] - 2.0 * v[1:-1] + v[:-2])[triple]
     if d2.size < 3:
-        sigma = 0.0
-    else:
-        mad = float(np.median(np.abs(d2 - np.median(d2))))
-        sigma = _MAD_TO_SIGMA * mad / np.sqrt(6.0)
-        if mad == 0.0:
-            # the quantiser was not dithered: fall back to the RMS, which sees the rare steps
-            sigma = float(np.sqrt(np.mean(d2**2) / 6.0))
-    sigma = max(sigma, q / np.sqrt(12.0), 1e-6)
-    return NoiseFloor(float(sigma), q, jitter, period, int(d2.size))
+        return 0.0, int(d2.size), 0.0
+    mad = float(np.median(np.abs(d2 - np.median(d2))))
+    if mad == 0.0:
+        return 0.0, int(d2.size), float(np.sqrt(np.mean(d2**2) / 6.0))
+    return _MAD_TO_SIGMA * mad / np.sqrt(6.0), int(d2.size), 0.0
+
+
+def white_noise_sigma(t: FloatArray, values: FloatArray, quiet: npt.NDArray[np.bool_] | None = None) -> float:
+    """White-noise sigma of a channel (its unit) from the MAD of second differences on quiet samples, without
+    a quantisation floor; 0 when the samples are held or too few (used for the torque channel)."""
+    t = np.asarray(t, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    ok = np.isfinite(v)
+    if int(ok.sum()) < 5:
+        return 0.0
+    t, v = t[ok], v[ok]
+    sigma, _, _ = _second_difference_sigma(t, v, None if quiet is None else np.asarray(quiet, bool)[ok],
+                                           sample_period(t))
+    return float(sigma)
 
 
 def measured_slope(t: FloatArray, values: FloatArray) -> FloatArray:

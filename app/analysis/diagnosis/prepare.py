@@ -16,7 +16,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from app.analysis.diagnosis.forward import MARGIN_S, DiagEvent, FloatArray
-from app.analysis.diagnosis.noise import NoiseFloor, estimate_noise_floor, measured_slope, quantisation_step
+from app.analysis.diagnosis.noise import (
+    NoiseFloor,
+    estimate_noise_floor,
+    measured_slope,
+    quantisation_step,
+    white_noise_sigma,
+)
 from app.analysis.events import SPEED, TORQUE, Event, EventParams
 from app.errors import InsufficientDataError, MissingSignalError
 from app.signals import SignalSet
@@ -99,9 +105,12 @@ def prepare(signals: SignalSet, events: Sequence[Event], params: WindowParams | 
     if sp_t.size < 5 or tq_t.size < 5:
         raise InsufficientDataError(f"{TORQUE} has {tq_t.size} and {SPEED} {sp_t.size} finite samples")
     quiet = np.ones(sp_t.size, dtype=bool)
+    quiet_tq = np.ones(tq_t.size, dtype=bool)
     for ev in events:
         quiet &= ~((sp_t >= ev.t_start_s) & (sp_t <= ev.t_end_s))
-    noise = replace(estimate_noise_floor(sp_t, sp_v, quiet), torque_step_nm=quantisation_step(tq_v))
+        quiet_tq &= ~((tq_t >= ev.t_start_s) & (tq_t <= ev.t_end_s))
+    noise = replace(estimate_noise_floor(sp_t, sp_v, quiet), torque_step_nm=quantisation_step(tq_v),
+                    torque_sigma_nm=white_noise_sigma(tq_t, tq_v, quiet_tq))
     slope = measured_slope(sp_t, sp_v)
     out: list[DiagEvent] = []
     skipped: list[dict[str, object]] = []

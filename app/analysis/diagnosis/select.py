@@ -33,11 +33,8 @@ from app.analysis.diagnosis.decide import (
 from app.analysis.diagnosis.forward import (
     DiagEvent,
     Prediction,
-    input_uncertainty,
     prediction,
-    rigid_inertia,
     simulate_events,
-    torque_quantisation_variance,
     vehicle_with,
     weighted_residual,
 )
@@ -47,6 +44,7 @@ from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.score import EventScore
 from app.analysis.diagnosis.split import Split, make_split
 from app.analysis.diagnosis.structure import remainder
+from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.errors import InputError
 from sim import Vehicle
 from sim.effects import EFFECTS, get_effect
@@ -62,7 +60,7 @@ class DiagnosisOptions:
     model: str = "multibody"
     max_pairs: int = 3  # partners tried with the best single effect
     # model-form tolerance: a residual under this fraction of the local predicted oscillation is no evidence
-    # of a missing effect (see forward.input_uncertainty). Off by default: at 0.15 it removed the false
+    # of a missing effect (see uncertainty.input_uncertainty). Off by default: at 0.15 it removed the false
     # attributions on the independent generator's no-effect drives but also hid clean 15 ms torque lags
     # (docs/diagnosis.md, "Model-form tolerance")
     model_form_rel: float = 0.0
@@ -137,18 +135,6 @@ def evaluate(base: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], mode
     return Evaluation(fitted, scores, preds)
 
 
-def with_input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, fitted: FitResult,
-                           model: str, torque_step_nm: float = 0.0, form_rel: float = 0.0) -> list[DiagEvent]:
-    """Events whose sample variances include what the torque channel cannot tell: the reconstruction
-    between samples and the model-form tolerance (:func:`.forward.input_uncertainty`, evaluated with the
-    fitted baseline) and the quantisation of held values (:func:`.forward.torque_quantisation_variance`)."""
-    veh = vehicle_with(vehicle, fitted.nuisance, ())
-    inertia = rigid_inertia(vehicle)
-    extra = input_uncertainty(events, veh, fitted.nuisance, (), model, form_rel=form_rel)
-    return [replace(ev, var=ev.var + u + torque_quantisation_variance(ev, torque_step_nm, inertia))
-            for ev, u in zip(events, extra, strict=True)]
-
-
 def _merge_start(base: FitResult, *parts: FitResult) -> FitResult:
     values: dict[str, dict[str, float]] = {}
     for p in parts:
@@ -214,7 +200,7 @@ def run_diagnosis(
     say(0.0, f"baseline calibration on {len(cal)} events (held out: {len(ho)})")
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
     # add the input-reconstruction uncertainty to every sample's variance, then recalibrate
-    events = with_input_uncertainty(events, vehicle, base_fit, opts.model, noise.torque_step_nm, opts.model_form_rel)
+    events = with_input_uncertainty(events, vehicle, base_fit, opts.model, noise, opts.model_form_rel, opts.seed)
     cal = split.calibration_events(events)
     ho = split.heldout_events(events)
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, start=base_fit, seed=opts.seed)

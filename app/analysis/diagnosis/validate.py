@@ -25,9 +25,9 @@ from app.analysis.diagnosis.select import (
     Progress,
     evaluate,
     run_diagnosis,
-    with_input_uncertainty,
 )
 from app.analysis.diagnosis.split import Split
+from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.analysis.events import EventParams, detect_events
 from app.errors import AnalysisError, InsufficientDataError
 from app.signals import SignalSet
@@ -126,7 +126,7 @@ def validate_effects(effects: dict[str, dict[str, float]], signals: SignalSet, v
     model = opts.model
     say(0.1, "validation: baseline nuisance fit")
     base_fit = fit(vehicle, events, split, (), bounds=bounds, model=model)
-    events = with_input_uncertainty(events, vehicle, base_fit, model, noise.torque_step_nm, opts.model_form_rel)
+    events = with_input_uncertainty(events, vehicle, base_fit, model, noise, opts.model_form_rel, opts.seed)
     base_fit = fit(vehicle, events, split, (), bounds=bounds, model=model, start=base_fit)
     say(0.5, "validation: augmented nuisance fit")
     aug = apply_effects(vehicle, effects)
