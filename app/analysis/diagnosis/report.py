@@ -7,7 +7,8 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
     vehicle, model    diagnosed vehicle name and simulator model
     options           {"candidates": [...], "seed": int, "rules": {...decision thresholds}}
     split             {"seed", "calibration": [event], "heldout": [event], "sha256", "strata"}
-    noise_floor       {"sigma_rpm", "quant_step_rpm", "jitter_s", "period_s", "n_samples", "torque_step_nm"}
+    noise_floor       {"sigma_rpm", "quant_step_rpm", "jitter_s", "period_s", "n_samples", "torque_step_nm",
+                      "torque_sigma_nm"}
     events_skipped    [{"index", "reason"}]
     decision          {"status": one of explained|partial|ambiguous|none_of_candidates|
                                  no_significant_gap|insufficient_data,

@@ -6,7 +6,8 @@ the simulator run on the fine torque trace with the *truth* vehicle (the diagnos
 the withheld effect); the "measurement" samples it like an inverter on CAN:
 
 - frames every ``period_s`` with a random phase, Gaussian timestamp jitter, random drop-outs;
-- torque and speed values quantised to the DBC resolution, speed with Gaussian sensor noise;
+- torque and speed values quantised to the DBC resolution, speed with Gaussian sensor noise (torque
+  optionally too, ``CanSampling.torque_noise_nm``);
 - a constant time offset between the torque and speed timestamps (the nuisance the diagnosis
   must fit, not attribute).
 
@@ -53,6 +54,7 @@ class CanSampling:
     speed_noise_rpm: float = 0.5
     speed_res_rpm: float = 1.0
     torque_res_nm: float = 0.5
+    torque_noise_nm: float = 0.0  # white noise on the logged torque (an inverter's estimate), before quantisation
     jitter_s: float = 0.0002
     drop_fraction: float = 0.01
     offset_s: float = 0.0  # torque timestamps minus the time the value was valid
@@ -151,6 +153,8 @@ def measure_frames(drive: Drive, truth: SimResult, s: CanSampling, rng: np.rando
         q = np.interp(tv, drive.t, drive.torque_nm)
         tq_log = tl + s.offset_s
         tv2, tl2, seq2 = _frame_times(dur, s, rng)
+    if s.torque_noise_nm > 0:
+        q = q + rng.normal(0.0, s.torque_noise_nm, q.size)
     if s.torque_res_nm > 0:
         q = np.round(q / s.torque_res_nm) * s.torque_res_nm
     sp = np.interp(tv2, truth.t, truth.motor_speed_rpm) + rng.normal(0.0, s.speed_noise_rpm, tv2.size)
