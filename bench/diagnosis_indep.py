@@ -13,6 +13,7 @@ Printed: one line per case, a confusion matrix, and the issue's targets as PASS/
     .venv/bin/python bench/diagnosis_indep.py --set dev --quick     # 15 cases, 40 s drives
     .venv/bin/python bench/diagnosis_indep.py --set dev --jobs 2    # 44 cases, 60 s drives
     .venv/bin/python bench/diagnosis_indep.py --set final           # the held-back seed set
+    .venv/bin/python bench/diagnosis_indep.py --set holdout         # a second one, for the rule as fixed last
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, validate_
 from app.analysis.diagnosis.report import report_dict  # noqa: E402
 from app.analysis.diagnosis.truthlog import read_log  # noqa: E402
 from bench.diagnosis_report import CONFIDENT, pct  # noqa: E402
-from bench.indep.cases import LIBRARY, Case, build, plan, read_manifest, write_manifest  # noqa: E402
+from bench.indep.cases import FAINT_SIGMA, LIBRARY, Case, build, plan, read_manifest, write_manifest  # noqa: E402
 from bench.indep.record import DBC, MAP  # noqa: E402
 from sim import load_vehicle  # noqa: E402
 
@@ -124,7 +125,10 @@ def targets(results: list[Result]) -> None:
     def check(name: str, ok: bool, value: str) -> None:
         print(f"  [{'PASS' if ok else 'FAIL'}] {name}: {value}")
 
-    single = [r for r in results if r.case.kind in ("single", "faint")]
+    # a drawn effect the nuisances absorb (under FAINT_SIGMA[0] after level, slope and time shift: e.g. a
+    # sensor delay, which is a torque-speed offset) is not one the data can show; it is scored apart
+    hidden = [r for r in results if r.case.kind in ("single", "faint") and r.case.signal_sigma < FAINT_SIGMA[0]]
+    single = [r for r in results if r.case.kind in ("single", "faint") and r not in hidden]
     correct = [r for r in single if r.status in CONFIDENT and r.top == tuple(r.case.expected)]
     wrong = [r for r in results if r.status in CONFIDENT and r.case.kind in ("single", "faint", "pair")
              and not set(r.top) <= set(r.case.expected)]
@@ -152,6 +156,11 @@ def targets(results: list[Result]) -> None:
     faint_quiet = [r for r in faint if r.status == "no_significant_gap"]
     print(f"  [info] faint in-library effects (2-10 noise sigma): correct-confident {pct(len(faint_ok), len(faint))}, "
           f"no_significant_gap {len(faint_quiet)}")
+    if hidden:
+        quiet = [r for r in hidden if r.status == "no_significant_gap"]
+        right = [r for r in hidden if r in correct or (r.status in CONFIDENT and r.top == tuple(r.case.expected))]
+        print(f"  [info] effects below {FAINT_SIGMA[0]:g} sigma once the nuisances are removed: {len(hidden)} "
+              f"(no_significant_gap {len(quiet)}, named correctly {len(right)})")
     check("0 wrong-confident", not wrong, pct(len(wrong), len(results)))
     check("0 attributions with no effect", not none_attr, pct(len(none_attr), len(none)))
     check(">= 90 % no_significant_gap with no effect", len(none_ok) >= 0.9 * max(len(none), 1),
@@ -171,7 +180,7 @@ def targets(results: list[Result]) -> None:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--set", choices=("dev", "final"), default="dev", dest="which")
+    ap.add_argument("--set", choices=("dev", "final", "holdout"), default="dev", dest="which")
     ap.add_argument("--quick", action="store_true", help="15 cases, 40 s drives")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes for the diagnoses")
     ap.add_argument("--only", default=None, choices=("none", "single", "faint", "pair", "ool"), help="one case kind")
