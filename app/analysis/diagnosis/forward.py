@@ -78,6 +78,10 @@ class DiagEvent:
     speed_init_rpm: float | None = None
     t_fine: FloatArray = field(init=False, repr=False)
     torque_fn: PchipInterpolator = field(init=False, repr=False)
+    # the torque filled in on a run's fine grid before gain and input effects, per cluster this event starts
+    # (see simulate_events): the same for every parameter set a fit tries
+    _raw: dict[tuple[object, ...], tuple[tuple[DiagEvent, ...], FloatArray, FloatArray]] = field(
+        init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         t0 = self.t_start - MARGIN_S if self.sim_t0 is None else min(self.sim_t0, self.t_start - MARGIN_S)
@@ -179,15 +183,18 @@ def _cluster_torque(events: Sequence[DiagEvent]) -> tuple[FloatArray, FloatArray
     return np.asarray(t_u, dtype=np.float64), np.asarray(v[first], dtype=np.float64)
 
 
-def torque_on(t_fine: FloatArray, torque_t: FloatArray, torque_nm: FloatArray, gain: float,
-              effects: Sequence[EffectSetting], interp: str = "pchip",
-              fn: PchipInterpolator | None = None) -> FloatArray:
-    """Torque on ``t_fine`` after gain and input effects (N m); ``interp``: "pchip" or "linear"."""
+def _filled(t_fine: FloatArray, torque_t: FloatArray, torque_nm: FloatArray, interp: str,
+            fn: PchipInterpolator | None = None) -> FloatArray:
+    """CAN torque filled in on ``t_fine`` (N m), held beyond its first and last sample."""
     tq_t = np.clip(t_fine, torque_t[0], torque_t[-1])
     if interp == "pchip":
         raw = (fn if fn is not None else PchipInterpolator(torque_t, torque_nm, extrapolate=False))(tq_t)
     else:
         raw = np.interp(tq_t, torque_t, torque_nm)
+    return np.asarray(raw, dtype=np.float64)
+
+
+def _gained(t_fine: FloatArray, raw: FloatArray, gain: float, effects: Sequence[EffectSetting]) -> FloatArray:
     tq = gain * raw
     for eff, vals in effects:
         if eff.input_transform is not None:
@@ -195,6 +202,31 @@ def torque_on(t_fine: FloatArray, torque_t: FloatArray, torque_nm: FloatArray, g
     return np.asarray(tq, dtype=np.float64)
 
 
+def torque_on(t_fine: FloatArray, torque_t: FloatArray, torque_nm: FloatArray, gain: float,
+              effects: Sequence[EffectSetting], interp: str = "pchip",
+              fn: PchipInterpolator | None = None) -> FloatArray:
+    """Torque on ``t_fine`` after gain and input effects (N m); ``interp``: "pchip" or "linear"."""
+    return _gained(t_fine, _filled(t_fine, torque_t, torque_nm, interp, fn), gain, effects)
+
+
+def _run_torque(events: Sequence[DiagEvent], group: Sequence[int], interp: str) -> tuple[FloatArray, FloatArray]:
+    """Fine grid and filled-in torque (before gain) of one cluster's continuous run, cached on its first
+    event: a fit simulates the same events for dozens of parameter sets."""
+    members = tuple(events[i] for i in group)
+    first = members[0]
+    key = (interp, *(float(ev.t_fine[0]) for ev in members))
+    hit = first._raw.get(key)
+    if hit is not None and len(hit[0]) == len(members) and all(a is b for a, b in zip(hit[0], members, strict=True)):
+        return hit[1], hit[2]
+    if len(members) == 1:
+        grid, raw = first.t_fine, _filled(first.t_fine, first.torque_t, first.torque_nm, interp, first.torque_fn)
+    else:
+        t_end = max(float(ev.t_fine[-1]) for ev in members)
+        grid = first.t_fine[0] + FINE_DT * np.arange(round((t_end - first.t_fine[0]) / FINE_DT) + 1)
+        tq_t, tq_v = _cluster_torque(members)
+        raw = _filled(grid, tq_t, tq_v, interp)
+    first._raw[key] = (members, grid, raw)
+    return grid, raw
 def torque_input(ev: DiagEvent, gain: float, effects: Sequence[EffectSetting], interp: str = "pchip") -> FloatArray:
     """Torque on the event's fine grid after gain and input effects (N m); ``interp``: "pchip" or "linear"."""
     return torque_on(ev.t_fine, ev.torque_t, ev.torque_nm, gain, effects, interp, ev.torque_fn)
@@ -243,13 +275,8 @@ def simulate_events(events: Sequence[DiagEvent], vehicle: Vehicle, gain: float,
     outs: list[SimOut | None] = [None] * len(events)
     for group in clusters(events):
         first = events[group[0]]
-        if len(group) == 1:
-            grid, tq = first.t_fine, torque_input(first, gain, effects, interp)
-        else:
-            t_end = max(float(events[i].t_fine[-1]) for i in group)
-            grid = first.t_fine[0] + FINE_DT * np.arange(round((t_end - first.t_fine[0]) / FINE_DT) + 1)
-            tq_t, tq_v = _cluster_torque([events[i] for i in group])
-            tq = torque_on(grid, tq_t, tq_v, gain, effects, interp)
+        grid, raw = _run_torque(events, group, interp)
+        tq = _gained(grid, raw, gain, effects)
         res = simulate(vehicle, grid, tq, model=model, speed0_rpm=first.speed0(), interp="linear",
                        output_dt=FINE_DT)
         t_out = np.asarray(res.t, dtype=np.float64)
