@@ -91,7 +91,8 @@ def decode_log(log: Path, loaded: LoadedDatabase, *, strict: bool = False, table
                 if tables is not None:
                     tables.add(decoded)
             report = DecodeReport(source=str(log), format=reader.meta.format, database=loaded.name,
-                                  database_repairs=list(loaded.repairs), reader_issues=list(reader.report.issues))
+                                  database_repairs=list(loaded.repairs), database_notes=list(loaded.notes),
+                                  reader_issues=list(reader.report.issues))
     finally:
         if tables is not None:
             tables.close()
@@ -120,17 +121,20 @@ def _write(table: Any, base: Path, formats: Iterable[str]) -> list[Path]:
 def write_signals(signals: SignalSet, out: Path, formats: Iterable[str]) -> list[Path]:
     """Canonical channels as one long table ``signals.<fmt>`` (channel, t_s, value, unit)."""
     import numpy as np
-    import pyarrow as pa
+
+    from app.ingest import arrow
 
     names = list(signals)
     lengths = [len(signals[n]) for n in names]
-    table = pa.table({
-        "channel": pa.array(np.repeat(np.array(names, dtype=object), lengths).tolist() if names else [],
-                            pa.string()).dictionary_encode(),
-        "t_s": pa.array(np.concatenate([signals[n].t for n in names]) if names else np.empty(0)),
-        "value": pa.array(np.concatenate([signals[n].values for n in names]) if names else np.empty(0)),
-        "unit": pa.array(np.repeat(np.array([signals[n].unit for n in names], dtype=object), lengths).tolist()
-                         if names else [], pa.string()).dictionary_encode(),
+    units = sorted({signals[n].unit for n in names})
+    # dictionary columns built from per-sample indices: no Python string per sample
+    rows = np.repeat(np.arange(len(names), dtype=np.int32), lengths)
+    unit_of = np.array([units.index(signals[n].unit) for n in names], np.int32)
+    table = arrow.table({
+        "channel": arrow.categories(rows, names),
+        "t_s": np.concatenate([signals[n].t for n in names]) if names else np.empty(0),
+        "value": np.concatenate([signals[n].values for n in names]) if names else np.empty(0),
+        "unit": arrow.categories(unit_of[rows], units),
     })
     return _write(table, out / "signals", formats)
 
@@ -144,8 +148,11 @@ def format_report(r: DecodeReport) -> str:
     lines = [f"log {r.source} ({r.format}), database {r.database}",
              f"frames read {r.frames_read}, decoded {r.frames_decoded}, unknown ID {r.frames_unknown_id}, "
              f"error frames {r.error_frames}, remote frames {r.remote_frames}, duration {r.duration_s:.3f} s"]
+    if r.unknown_hint:
+        lines.append(f"  why unknown: {r.unknown_hint}")
     for rep in r.database_repairs:
         lines.append(f"  database repair line {rep.line if rep.line is not None else '?'}: {rep.kind}: {rep.message}")
+    lines += [f"  database note: {note.kind}: {note.message}" for note in r.database_notes]
     lines += ["", "per ID (bus, ID, message): count, period ms (mean), jitter ms (std), min/max gap ms, "
               "median/p95 gap ms, DBC cycle ms; * = bursty"]
     for s in r.ids:
@@ -173,6 +180,7 @@ def format_report(r: DecodeReport) -> str:
     for i in regions:
         where = f"byte {i.offset}" if i.offset is not None else (f"line {i.line}" if i.line is not None else "-")
         lost = f", {i.frames_lost} frames lost" if i.frames_lost else ""
+        lost += f", {i.bytes_lost} bytes" if i.bytes_lost else ""
         times = f" (x{i.count})" if i.count > 1 else ""
         lines.append(f"  {where}: {i.kind}{times}: {i.message}{lost}")
     return "\n".join(lines)

@@ -18,8 +18,6 @@ from app.cli.vehicle_args import add_log_and_vehicle, event_params, vehicle_inpu
 
 
 def register(sub: Any) -> None:
-    from sim.effects import EFFECTS
-
     p: argparse.ArgumentParser = sub.add_parser(
         "diagnose", help="diagnose the sim-to-real gap: where it lies, which effect explains it",
         description="Fit candidate unmodelled effects on calibration events of LOG, score them on held-out events "
@@ -27,8 +25,10 @@ def register(sub: Any) -> None:
     add_log_and_vehicle(p)
     p.add_argument("--validate", type=Path, default=None, metavar="OTHER_LOG",
                    help="another drive: report the shrink of the diagnosed effect there")
-    p.add_argument("--candidates", default=",".join(EFFECTS),
-                   help=f"comma-separated candidate effects (default: all: {','.join(EFFECTS)})")
+    # the ids are not listed here: importing the simulator (numba) would slow every command's start-up
+    p.add_argument("--candidates", default=None,
+                   help="comma-separated candidate effects (default: all; ids in docs/diagnosis.md, e.g. "
+                        "backlash,torque_lag,drag)")
     p.add_argument("--seed", type=int, default=0, help="seed of the calibration/held-out split")
     p.add_argument("--model", choices=["multibody", "two_inertia"], default="multibody")
     p.add_argument("--model-form-tolerance", type=float, default=0.0, metavar="F",
@@ -111,8 +111,10 @@ def run(args: argparse.Namespace) -> int:
     from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
     from app.errors import InputError
     from app.pipeline import decode_log
+    from sim.effects import EFFECTS
 
-    candidates = tuple(c.strip() for c in args.candidates.split(",") if c.strip())
+    given = ",".join(EFFECTS) if args.candidates is None else args.candidates
+    candidates = tuple(c.strip() for c in given.split(",") if c.strip())
     if not candidates:
         raise InputError("--candidates is empty")
     thresholds = event_params(args, DIAGNOSIS_EVENTS)  # refused before anything is decoded

@@ -1,1 +1,5 @@
-"""Ingest: log readers (chosen by content), database loading, vectorized decoding, signal maps."""
+"""CAN log ingest: readers, DBC loading, vectorised decoding, bus statistics, signal maps."""
+
+from app.ingest._lazy_cantools import defer_cantools_tester
+
+defer_cantools_tester()

@@ -164,7 +164,15 @@ def candidates(seq: I64, width: int, hint: int, previous: Pattern | None = None)
 
 
 def best_pattern(seq: I64, width: int, hint: int, previous: Pattern | None = None) -> tuple[Pattern, Steps]:
-    """The candidate explaining most steps of ``seq`` (ties go to the earlier candidate)."""
+    """The candidate explaining most steps of ``seq`` (ties go to the earlier candidate).
+
+    A previous pattern that explains every step cannot be beaten (ties go to it), so the
+    other candidates are not even built: the common case costs one table lookup per value.
+    """
+    if previous is not None:
+        steps = Steps.of(seq, previous)
+        if steps.normal.all():
+            return previous, steps
     best: tuple[Pattern, Steps] | None = None
     for p in candidates(seq, width, hint, previous):
         steps = Steps.of(seq, p)
@@ -226,7 +234,38 @@ class CounterTrack:
         self._n += values.size
         self.result.frames += int(values.size)
         while self._n >= WINDOW:
-            self._flush(WINDOW)
+            if not self._verify_in_bulk():
+                self._flush(WINDOW)
+
+    def _verify_in_bulk(self) -> bool:
+        """Count the whole windows that follow the current pattern perfectly, all at once.
+
+        Window by window, each of them would choose the current pattern (it explains every
+        step, and ties go to it) and count no gap, so counting them together gives the same
+        result. Returns False when not even the first buffered window is perfect.
+        """
+        if self._pattern is None or self._anchor is None:
+            return False
+        v = self._v[0] if len(self._v) == 1 else np.concatenate(self._v)
+        pos = self._pattern.pos
+        p = pos[v]
+        prev = np.r_[pos[self._anchor[0]], p[:-1]]
+        size = self._pattern.cycle.size
+        normal = (p >= 0) & (prev >= 0) & (np.mod(p - prev, size) == (1 if size > 1 else 0))
+        bad = np.flatnonzero(~normal)
+        perfect = int(bad[0]) if bad.size else v.size
+        done = min(perfect, v.size) // WINDOW * WINDOW
+        if not done:
+            if len(self._v) > 1:
+                self._v, self._t = [v], [np.concatenate(self._t)]
+            return False
+        t = self._t[0] if len(self._t) == 1 else np.concatenate(self._t)
+        self._normal += done  # no gaps, repeats or pattern changes in a perfect stretch
+        key = self._pattern.describe()
+        self._by_pattern[key] = (self._pattern, self._by_pattern[key][1] + done)
+        self._v, self._t, self._n = [v[done:]], [t[done:]], v.size - done
+        self._anchor = (int(v[done - 1]), int(t[done - 1]))
+        return True
 
     def finish(self) -> CounterGaps:
         """Judge what is still buffered and summarise (call once, at the end)."""

@@ -17,6 +17,12 @@ kind                repair
 ``signal_overlap``  two signals share bits: the second one cantools names is dropped
 ==================  ===========================================================================
 
+Whatever cantools logs while loading is reported in ``LoadedDatabase.notes`` (the same
+:class:`Repair` records, though nothing was changed) instead of reaching stderr:
+``duplicate_id`` (two messages share a frame ID; the later one decodes, as in cantools),
+``duplicate_name`` and ``database_note`` (any other warning). An empty file, or a DBC without messages that would
+need repairs to load, is refused (``empty_database``): nothing is invented for it.
+
 Everything else (syntax errors, bad frame IDs, KCD/SYM/ARXML problems) raises
 :class:`~app.errors.DatabaseError` naming the file, the line when known, and the reason.
 Strict mode (``tolerant=False``) applies no repairs and passes ``strict=True`` to cantools.
@@ -24,6 +30,7 @@ Strict mode (``tolerant=False``) applies no repairs and passes ``strict=True`` t
 
 from __future__ import annotations
 
+import logging
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,6 +75,7 @@ class LoadedDatabase:
     format: str
     repairs: list[Repair] = field(default_factory=list)
     encoding: str = "utf-8"
+    notes: list[Repair] = field(default_factory=list)  # what cantools warned about while loading (no change made)
 
     @property
     def name(self) -> str:
@@ -117,12 +125,56 @@ def load_database(path: str | Path, *, tolerant: bool = True) -> LoadedDatabase:
     if fmt == "dbc":
         return _load_dbc(src, raw, tolerant)
     try:
-        db = cantools.database.load_file(str(src), database_format=fmt, strict=True)
+        with _CantoolsNotes() as notes:
+            db = cantools.database.load_file(str(src), database_format=fmt, strict=True)
     except Exception as exc:  # cantools raises several unrelated types; wrap all at our boundary
         raise DatabaseError(f"{src}: cannot load {fmt.upper()} database: {_reason(exc)}") from exc
     if not isinstance(db, CanDatabase):
         raise DatabaseError(f"{src}: is a diagnostics database, not a CAN database")
-    return LoadedDatabase(db, src, fmt)
+    return LoadedDatabase(db, src, fmt, notes=notes.notes())
+
+
+class _CantoolsNotes(logging.Handler):
+    """Collects what cantools logs while loading (it would otherwise reach stderr as raw text)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+    def __enter__(self) -> _CantoolsNotes:
+        log = logging.getLogger("cantools")
+        self._propagate = log.propagate
+        log.addHandler(self)
+        log.propagate = False
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        log = logging.getLogger("cantools")
+        log.removeHandler(self)
+        log.propagate = self._propagate
+
+    def notes(self) -> list[Repair]:
+        """Duplicate frame IDs as ``duplicate_id`` notes (cantools keeps the later message); other warnings as is."""
+        out: list[Repair] = []
+        names: list[tuple[str, str]] = []
+        for r in self.records:
+            msg, args = r.getMessage(), r.args
+            if "name to message" in msg and isinstance(args, tuple) and len(args) == 2:
+                names.append((str(args[0]), str(args[1])))
+            elif "frame id to message" in msg and isinstance(args, tuple) and len(args) == 3:
+                old, new, ident = args
+                names = [n for n in names if n != (str(old), str(new))]  # the same pair: said here
+                out.append(Repair("duplicate_id", None, f"messages {old} and {new} have the same frame ID "
+                                  f"0x{int(str(ident)) & 0x1FFFFFFF:X}; its frames decode as {new} (the later one, "
+                                  "as in cantools)"))
+            else:
+                out.append(Repair("database_note", None, " ".join(msg.split())))
+        out += [Repair("duplicate_name", None, f"two messages are named {new}; looking it up by name finds the "
+                       "later one (as in cantools)") for _old, new in names]
+        return out
 
 
 def _reason(exc: BaseException) -> str:
@@ -278,13 +330,16 @@ def _drop_unused_vals(doc: _DbcText, repairs: list[Repair]) -> None:
 def _load_dbc(src: Path, raw: bytes, tolerant: bool) -> LoadedDatabase:
     repairs: list[Repair] = []
     text, encoding = _decode_text(raw)
+    if not text.strip():
+        raise DatabaseError(f"{src}: the database file is empty", code="empty_database")
     doc = _DbcText(text)
     if tolerant:
         _drop_unused_vals(doc, repairs)
     sections_checked = False
     for _ in range(_MAX_REPAIR_ROUNDS):
         try:
-            db = cantools.database.load_string(doc.text(), database_format="dbc", strict=True)
+            with _CantoolsNotes() as notes:
+                db = cantools.database.load_string(doc.text(), database_format="dbc", strict=True)
         except Exception as exc:  # wrapped or repaired below
             # cantools' grammar needs BU_ (and BS_ in some positions); add them only when parsing fails.
             if tolerant and not sections_checked and "Invalid syntax" in str(exc):
@@ -296,7 +351,10 @@ def _load_dbc(src: Path, raw: bytes, tolerant: bool) -> LoadedDatabase:
             continue
         if not isinstance(db, CanDatabase):  # pragma: no cover - load_string with dbc returns a CAN db
             raise DatabaseError(f"{src}: not a CAN database")
-        return LoadedDatabase(db, src, "dbc", repairs, encoding)
+        if repairs and not db.messages:  # repairs make a damaged database usable, never an empty one
+            raise DatabaseError(f"{src}: defines no messages (no BO_ lines) and is not valid DBC as written: "
+                                f"{'; '.join(r.message for r in repairs)}", code="empty_database")
+        return LoadedDatabase(db, src, "dbc", repairs, encoding, notes.notes())
     raise DatabaseError(f"{src}: gave up after {_MAX_REPAIR_ROUNDS} repairs; the file is too broken to load")
 
 

@@ -20,7 +20,8 @@ data, decode_choices=False)`` for every frame, as float64:
   the others are absent, as in cantools. Longer frames are decoded from their first bytes
   (cantools' ``allow_excess``).
 * error and remote frames are never decoded; frames match a message by ID *and* the
-  extended-ID flag.
+  extended-ID flag. In a J1939 database an extended frame that matches no ID exactly matches
+  by PGN (priority, source and PDU1 destination address masked; :mod:`app.ingest.j1939`).
 
 Signals absent from a frame (another multiplexer branch, beyond a truncated payload) are NaN
 and ``DecodedMessage.present`` says so. Enumerations stay numeric; values whose label means
@@ -45,6 +46,7 @@ from cantools.database.conversion import BaseConversion, IdentityConversion, Lin
 
 from app.ingest.bitfields import SignalLayout, extract_raw
 from app.ingest.frames import FrameChunk, FrameFlag
+from app.ingest.j1939 import j1939_messages, pgn
 
 F64 = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -229,6 +231,10 @@ class VectorDecoder:
                 continue
             key = msg.frame_id | (EXTENDED_KEY if msg.is_extended_frame else 0)
             self._plans[key] = self._plan(msg)  # a later message with the same ID wins, as in cantools
+        # J1939 databases: frames whose ID matches no message exactly match by PGN (app.ingest.j1939)
+        self._by_pgn = {pgn: m.frame_id | EXTENDED_KEY for pgn, m in
+                        j1939_messages(db, [p.message for p in self._plans.values()]).items()}
+        self._resolved: dict[int, int | None] = {}  # frame key -> plan key (cache of :meth:`_plan_key`)
         names = [p.message.name for p in self._plans.values()]
         for p in self._plans.values():
             dup = names.count(p.message.name) > 1
@@ -308,20 +314,42 @@ class VectorDecoder:
             rows: dict[int, list[int]] = {}
             for i, k in enumerate(key.tolist()):
                 rows.setdefault(k, []).append(i)
-            groups = [(k, np.array(r, np.intp)) for k, r in rows.items() if k in self._plans]
+            groups = [(k, np.array(r, np.intp)) for k, r in rows.items()]
         else:
             order = np.argsort(key, kind="stable")  # stable: rows of one message stay in chunk order
             sorted_keys = key[order]
             cuts = (np.flatnonzero(sorted_keys[1:] != sorted_keys[:-1]) + 1).tolist()
             starts, stops = [0, *cuts], [*cuts, key.size]
-            groups = [(k, order[a:b]) for a, b, k in zip(starts, stops, sorted_keys[starts].tolist(), strict=True)
-                      if k in self._plans]
+            groups = [(k, order[a:b]) for a, b, k in zip(starts, stops, sorted_keys[starts].tolist(), strict=True)]
+        groups = self._match(groups)
         out: dict[str, DecodedMessage] = {}
         with np.errstate(all="ignore"):  # inf/NaN float signals scale like Python floats, silently
             for k, idx in groups:
                 plan = self._plans[k]
                 out[plan.out_name] = self._decode_rows(plan, chunk, idx)
         return out
+
+    def plan_key(self, key: int) -> int | None:
+        """The message key a frame key (ID | extended bit 31 | error/remote bit 30) decodes as, or None."""
+        if key in self._plans:
+            return key
+        if not self._by_pgn or not key & EXTENDED_KEY or key & (1 << 30):
+            return None
+        got = self._resolved.get(key, -1)
+        if got == -1:
+            got = self._resolved[key] = self._by_pgn.get(pgn(key & 0x1FFF_FFFF))
+        return got
+
+    def _match(self, groups: list[tuple[int, npt.NDArray[np.intp]]]) -> list[tuple[int, npt.NDArray[np.intp]]]:
+        """Frame groups by ID -> row groups by message (J1939: several IDs share one message, rows in order)."""
+        if not self._by_pgn:
+            return [(k, idx) for k, idx in groups if k in self._plans]
+        merged: dict[int, list[npt.NDArray[np.intp]]] = {}
+        for k, idx in groups:
+            target = self.plan_key(k)
+            if target is not None:
+                merged.setdefault(target, []).append(idx)
+        return [(k, parts[0] if len(parts) == 1 else np.sort(np.concatenate(parts))) for k, parts in merged.items()]
 
     def _decode_rows(self, plan: _MessagePlan, chunk: FrameChunk, idx: npt.NDArray[np.intp]) -> DecodedMessage:
         msg = plan.message

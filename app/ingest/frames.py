@@ -111,6 +111,7 @@ class ReadIssue:
     line: int | None = None  # 1-based line number (text formats)
     count: int = 1  # occurrences merged into this entry
     frames_lost: int | None = None  # frames known or estimated lost, None if unknown
+    bytes_lost: int | None = None  # bytes of the log skipped or unreadable (binary formats), None if unknown
 
 
 @dataclass(slots=True)

@@ -142,7 +142,8 @@ def load_signals(
             frac = _fraction(reader)
             report_progress(frac if frac is not None else 0.0, f"{stats.frames} frames read")
         report = DecodeReport(source=str(getattr(reader, "name", "")), format=reader.meta.format,
-                              database=db.name, database_repairs=list(db.repairs))
+                              database=db.name, database_repairs=list(db.repairs),
+                              database_notes=list(db.notes))
         stats.fill(report)
         report.reader_issues = list(reader.report.issues)
     finally:

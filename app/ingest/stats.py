@@ -32,6 +32,7 @@ from app.ingest.counters import CounterGaps, CounterTrack, dbc_modulus
 from app.ingest.database import Repair
 from app.ingest.decode import EXTENDED_KEY, DecodedMessage
 from app.ingest.frames import FrameChunk, FrameFlag, ReadIssue
+from app.ingest.j1939 import database_is_j1939, j1939_messages, pgn
 from app.signals.sampling import Spacing, burst_reason
 
 _COUNTER_NAME = re.compile(r"(alive|counter|cntr|cnt|rolling|rlc|seq(uence)?)(_?\d+)?$|^(alive|counter|cnt|rc)",
@@ -86,10 +87,12 @@ class DecodeReport:
     anomaly_counts: dict[str, int] = field(default_factory=dict)
     reader_issues: list[ReadIssue] = field(default_factory=list)
     database_repairs: list[Repair] = field(default_factory=list)
+    database_notes: list[Repair] = field(default_factory=list)  # cantools' loading warnings (duplicate IDs...)
     channels: dict[str, int] = field(default_factory=dict)  # canonical channel -> samples
     # frames whose ID is a database message's but with the other ID type (11 vs 29 bit): not decoded
     id_type_mismatch: dict[str, int] = field(default_factory=dict)
     sampling: dict[str, Spacing] = field(default_factory=dict)  # canonical channel -> spacing of its samples
+    unknown_hint: str = ""  # why most frames are of unknown IDs, when they are
 
 
 def counter_modulus(sig: CanSignal) -> int | None:
@@ -114,9 +117,17 @@ class GapHistogram:
     def add(self, dt_ns: np.ndarray) -> None:
         safe = np.maximum(dt_ns, 1.0)
         b = np.where(dt_ns > 0, np.floor(np.log10(safe) * BINS_PER_DECADE), -1).astype(np.int64)
-        keys, inverse = np.unique(b, return_inverse=True)
-        counts = np.bincount(inverse)
-        sums = np.bincount(inverse, weights=dt_ns)
+        lo = int(b.min())
+        span = int(b.max()) - lo + 1
+        if span <= 4 * b.size + 4096:  # a periodic message's gaps fill a narrow band: count without sorting
+            counts = np.bincount(b - lo, minlength=span)
+            sums = np.bincount(b - lo, weights=dt_ns, minlength=span)
+            keys = np.flatnonzero(counts)
+            counts, sums, keys = counts[keys], sums[keys], keys + lo
+        else:
+            keys, inverse = np.unique(b, return_inverse=True)
+            counts = np.bincount(inverse)
+            sums = np.bincount(inverse, weights=dt_ns)
         for k, c, total in zip(keys.tolist(), counts.tolist(), sums.tolist(), strict=True):
             slot = self.bins.get(k)
             if slot is None:
@@ -170,7 +181,13 @@ class StatsAccumulator:
         self._tracks: dict[tuple[str, str, int], CounterTrack] = {}
         self._decoded = 0
         self._decode_errors: dict[str, dict[str, int]] = {}  # message -> error kind -> frames
+        self._j1939 = db is not None and database_is_j1939(db)
+        self._by_pgn: dict[int, tuple[str, float | None]] = {}
+        self._pgn_anyway: dict[int, str] = {}  # PGN -> message of the extended messages, for the hint
         if db is not None:
+            cycles = {m.name: float(m.cycle_time) if m.cycle_time else None for m in db.messages}
+            self._by_pgn = {p: (m.name, cycles[m.name]) for p, m in j1939_messages(db).items()}
+            self._pgn_anyway = {pgn(m.frame_id): m.name for m in reversed(db.messages) if m.is_extended_frame}
             for msg in db.messages:
                 key = msg.frame_id | (EXTENDED_KEY if msg.is_extended_frame else 0)
                 self._names[key] = (msg.name, float(msg.cycle_time) if msg.cycle_time else None)
@@ -262,6 +279,26 @@ class StatsAccumulator:
                         track = self._tracks[key] = CounterTrack(dm.name, sig, int(ch), bits, hint)
                     track.feed(values[m], dm.t_ns[m])
 
+    def _unknown_hint(self, report: DecodeReport, unknown_ids: set[int], pgn_hits: dict[str, int]) -> str:
+        """Why most frames are of unknown IDs, when they are (empty otherwise)."""
+        unknown = report.frames_unknown_id
+        usable = report.frames_read - report.error_frames
+        if not usable or unknown * 2 <= usable:
+            return ""
+        share = f"{unknown} of {usable} frames ({100 * unknown / usable:.0f} %) have IDs the database does not define"
+        if pgn_hits and not self._j1939:
+            top = max(pgn_hits, key=lambda k: pgn_hits[k])
+            return (f"{share}; {sum(pgn_hits.values())} of them carry the J1939 PGN of a database message (e.g. "
+                    f"{top}) with another priority or source address: the database does not declare J1939 "
+                    "(BA_ \"ProtocolType\" \"J1939\"; or VFrameFormat J1939PG), so IDs must match exactly")
+        if self._j1939:
+            return (f"{share}; the database is J1939, so IDs match by PGN (priority and source address ignored), "
+                    f"and none of the {len(unknown_ids)} unknown IDs carries a PGN it defines: another vehicle or "
+                    "bus, or the wrong database")
+        if report.id_type_mismatch:
+            return f"{share}; some carry a database ID with the other ID type (11/29 bit), listed below"
+        return (f"{share} ({len(unknown_ids)} distinct IDs): another vehicle or bus, or the wrong database")
+
     def fill(self, report: DecodeReport) -> DecodeReport:
         """Write the totals into ``report`` (returned for chaining)."""
         report.frames_read = self._frames
@@ -271,10 +308,18 @@ class StatsAccumulator:
             report.duration_s = (self._t_last - self._t_first) / 1e9
         unknown = 0
         ids = []
+        pgn_hits: dict[str, int] = {}  # unknown frames whose PGN is a database message's
+        unknown_ids: set[int] = set()
         for (ch, key), run in sorted(self._runs.items()):
             name, cycle = self._names.get(key, (None, None))
+            if name is None and key & EXTENDED_KEY and self._by_pgn:
+                name, cycle = self._by_pgn.get(pgn(key & 0x1FFF_FFFF), (None, None))
             if name is None:
                 unknown += run.count
+                unknown_ids.add(key)
+                hit = self._pgn_anyway.get(pgn(key & 0x1FFF_FFFF)) if key & EXTENDED_KEY else None
+                if hit is not None:
+                    pgn_hits[hit] = pgn_hits.get(hit, 0) + run.count
                 other = self._names.get(key ^ EXTENDED_KEY)
                 if other is not None:
                     report.id_type_mismatch[other[0]] = report.id_type_mismatch.get(other[0], 0) + run.count
@@ -290,6 +335,7 @@ class StatsAccumulator:
             ids.append(stat)
         report.ids = ids
         report.frames_unknown_id = unknown
+        report.unknown_hint = self._unknown_hint(report, unknown_ids, pgn_hits)
         gaps = [track.finish() for track in self._tracks.values()]
         self._tracks = {}  # finished: the summary is final
         report.counter_gaps = sorted(gaps, key=lambda g: (-g.missed, g.message, g.signal, g.channel))

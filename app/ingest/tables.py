@@ -101,14 +101,15 @@ class MessageTables:
         return sorted(self.paths)
 
     def _write(self, name: str, buf: _Buffer) -> None:
-        import pyarrow as pa
         import pyarrow.csv as pacsv
         import pyarrow.parquet as pq
+
+        from app.ingest import arrow
 
         dm = DecodedMessage.concat(buf.parts)
         cols: dict[str, Any] = {"t_s": dm.t_ns / 1e9, "bus": dm.channel}
         cols.update({s: v for s, v in dm.signals.items() if s not in cols})
-        table = pa.table(cols)
+        table = arrow.table(cols)
         base = self.folder / safe_name(name)
         try:
             for fmt in self.formats:

@@ -30,3 +30,19 @@ def test_help_still_lists_the_interfaces() -> None:
     code = "from app.cli import main; main(['replay', '--help'])"
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and "tcp_loopback" in out.stdout
+
+
+def test_top_level_help_imports_no_heavy_library_nor_the_simulator() -> None:
+    """``lashscope --help`` builds every command's parser; none may import numba, numpy or the simulator."""
+    code = (
+        "import sys\n"
+        "from app.cli import main\n"
+        "try:\n"
+        "    main(['--help'])\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        f"print(','.join(m for m in {(*HEAVY, 'sim', 'matplotlib')!r} if m in sys.modules), file=sys.stderr)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and "diagnose" in out.stdout
+    assert out.stderr.strip() == ""

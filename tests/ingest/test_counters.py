@@ -144,3 +144,18 @@ def test_kona_capture_counters() -> None:
     vcu202 = got[("VCU_202", "Counter", 0)]
     assert vcu202.pattern_changes >= 2 and vcu202.gaps <= 3
     assert got[("UNK_471", "MaybeCounter", 0)].kind == "irregular"
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_bulk_verification_equals_window_by_window(seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Perfect stretches are counted in bulk; the summary is the one window-by-window learning gives."""
+    rng = np.random.default_rng(seed)
+    clean = np.r_[counting(WINDOW * 9 + 5, 1, 15), counting(WINDOW * 4, 15, 16, start=3), counting(700, 2, 16)]
+    values, _ = drop(clean, rng, clusters=6, max_len=3)
+    values[rng.integers(0, values.size, 3)] = 7  # values off the pattern and repeats
+    splits = int(rng.integers(1, 8))
+    bulk = run_track(values, 4, splits=splits)
+    monkeypatch.setattr(CounterTrack, "_verify_in_bulk", lambda self: False)
+    windows = run_track(values, 4, splits=splits)
+    assert bulk == windows
+    assert bulk.gaps >= 6 and bulk.pattern_changes >= 2

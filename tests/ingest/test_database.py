@@ -182,3 +182,43 @@ def test_unclosed_pseudo_message_comment_stops_at_next_statement(tmp_path: Path)
     assert [(r.kind, r.line) for r in loaded.repairs][1:] == [("unused_comment", 21), ("unused_val", 24)]
     assert loaded.db.get_message_by_name("MC_Torque_And_Timer_Info").get_signal_by_name(
         "INV_Torque_Feedback").comment == "Estimated motor torque"
+
+
+@pytest.mark.parametrize("body", ["", "\n\n   \n", "\ufeff"])
+def test_empty_file_is_refused_not_repaired(tmp_path: Path, body: str) -> None:
+    for tolerant in (True, False):
+        with pytest.raises(DatabaseError) as err:
+            load_database(_dbc(tmp_path, body), tolerant=tolerant)
+        assert err.value.code == "empty_database" and "the database file is empty" in str(err.value)
+
+
+def test_messageless_dbc_needing_repairs_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(DatabaseError) as err:
+        load_database(_dbc(tmp_path, "notes\n"))
+    assert err.value.code == "empty_database" and "defines no messages" in str(err.value)
+    assert len(load_database(_dbc(tmp_path, HEADER)).db.messages) == 0  # valid as written: loaded, nothing invented
+
+
+def test_duplicate_frame_id_is_reported_not_printed(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    second = MSG.replace("Foo", "Baz").replace("Bar", "Qux")
+    loaded = load_database(_dbc(tmp_path, HEADER + MSG + second))
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""  # cantools' own warning line never reaches the terminal
+    assert loaded.repairs == []  # nothing was changed
+    assert [(r.kind, r.message) for r in loaded.notes] == [
+        ("duplicate_id", "messages Foo and Baz have the same frame ID 0x100; its frames decode as Baz (the later "
+                         "one, as in cantools)")]
+    assert loaded.db.get_message_by_frame_id(256).name == "Baz"
+    from app.cli.decode import format_report
+    from app.ingest.stats import DecodeReport
+
+    text = format_report(DecodeReport(database_notes=loaded.notes))
+    assert "  database note: duplicate_id: messages Foo and Baz have the same frame ID 0x100" in text
+
+
+def test_duplicate_message_name_is_reported_not_printed(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    second = MSG.replace("BO_ 256", "BO_ 257").replace("Bar", "Qux")
+    loaded = load_database(_dbc(tmp_path, HEADER + MSG + second))
+    assert capfd.readouterr() == ("", "")
+    assert [(r.kind, r.message) for r in loaded.notes] == [
+        ("duplicate_name", "two messages are named Foo; looking it up by name finds the later one (as in cantools)")]

@@ -162,3 +162,13 @@ def test_vectorised_path_equals_compiled_walk(name: str, monkeypatch: pytest.Mon
     for col in ("t_ns", "channel", "arb_id", "flags", "dlc"):
         assert (getattr(fast, col) == getattr(slow, col)).all(), col
     assert (fast.data == slow.data[:, : fast.width]).all() and not slow.data[:, fast.width:].any()
+
+
+@pytest.mark.parametrize("cut", [20, 71, 100, 143])
+def test_truncated_file_header_names_one_header_size(cut: int) -> None:
+    """Cut inside the 144-byte header, before or after its fixed 72-byte part: the same wording."""
+    data = blf_file([obj(1, can_msg(1, 5, b"x"), 0)])[:cut]
+    with pytest.raises(LogFormatError) as err:
+        read(data)
+    assert "the file ends inside its 144-byte header" in str(err.value)
+    assert "72" not in str(err.value)

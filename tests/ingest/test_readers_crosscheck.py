@@ -2,8 +2,9 @@
 
 Compared per frame: time relative to the start (within 1 us), channel, arbitration ID,
 extended / FD / error / remote / BRS / ESI / direction flags, DLC and data bytes. The only
-normalisations are documented conventions: our channels are 0-based (python-can's TRC and
-MF4 readers give the 1-based bus number, its candump reader the interface name), and the
+normalisations are documented conventions: our channels are 0-based except TRC's, which
+keep the file's 1-based bus number as python-can does (python-can's MF4 reader gives the
+1-based bus number, its candump reader the interface name), and the
 extended flag of an error frame without an ID is not compared (python-can defaults it to True).
 """
 
@@ -46,7 +47,7 @@ def python_can_frames(path: Path) -> tuple[list[can.Message], float]:
 
 
 def our_channel_matches(fmt: str, meta: LogMeta, ours: int, theirs: object) -> bool:
-    if fmt in ("trc", "mf4"):
+    if fmt == "mf4":
         return ours + 1 == theirs
     if fmt == "candump":
         return meta.channels.get(ours) == theirs

@@ -97,7 +97,7 @@ def test_trc_v13_bus_column_and_rtr() -> None:
     assert log.meta.format == "trc" and log.report.ok
     assert log.meta.start_time == datetime(2021, 12, 18, 12, 0) and log.meta.start_clock == "trc_header_local"
     assert list(chunk.t_ns) == [1_000_500_000, 1_001_000_000]
-    assert list(chunk.channel) == [1, 0]
+    assert list(chunk.channel) == [2, 1]  # the bus numbers as written (1-based), like python-can
     assert list(chunk.flags) == [FrameFlag.EXTENDED, FrameFlag.TX | FrameFlag.REMOTE]
 
 
@@ -109,7 +109,14 @@ def test_trc_v2_fd_types() -> None:
     chunk, log = read_text(text)
     assert log.report.ok and list(chunk.dlc) == [12, 2]
     assert list(chunk.flags) == [FrameFlag.FD | FrameFlag.BRS | FrameFlag.EXTENDED, FrameFlag.TX]
-    assert list(chunk.channel) == [0, 1]
+    assert list(chunk.channel) == [1, 2]
+
+
+def test_trc_without_a_bus_column_is_bus_1() -> None:
+    text = (";$FILEVERSION=2.0\n;$STARTTIME=44548.5\n;$COLUMNS=N,O,T,I,d,l,D\n"
+            "      1        10.000 DT      0100 Rx 2    01 02\n")
+    chunk, log = read_text(text)
+    assert log.report.ok and list(chunk.channel) == [1] and bytes(chunk.data[0, :2]) == b"\x01\x02"
 
 
 def test_gvret_header_with_dir_column_and_epoch_clock() -> None:

@@ -162,7 +162,8 @@ class BaseReader:
         return "position unknown"
 
     def problem(self, kind: str, message: str, *, offset: int | None = None, line: int | None = None,
-                count: int = 1, frames_lost: int | None = None, truncated: bool = False) -> ReadIssue:
+                count: int = 1, frames_lost: int | None = None, bytes_lost: int | None = None,
+                truncated: bool = False) -> ReadIssue:
         """Record a problem (salvage mode) or raise it (strict mode).
 
         Returns the recorded issue so callers can extend a running entry (e.g. a count).
@@ -171,7 +172,7 @@ class BaseReader:
             exc = TruncatedLogError if truncated else LogFormatError
             raise exc(f"{self.name}: {message} ({self.where(offset, line)})")
         issue = ReadIssue(kind=kind, message=message, offset=offset, line=line, count=count,
-                          frames_lost=frames_lost)
+                          frames_lost=frames_lost, bytes_lost=bytes_lost)
         self.report.add(issue)
         return issue
 

@@ -69,6 +69,14 @@ def _starts_frame(c: bytes) -> bool:
     return 0 <= j <= 3 and len(c) >= j + 16 and struct.unpack_from("<L", c, j + 12)[0] in K.FRAME_TYPES
 
 
+def _sound_header(buf: bytes, j: int) -> bool:
+    """True when a complete, plausible inner object base header starts at ``j`` (-1: none)."""
+    if j < 0 or j + 16 > len(buf):
+        return False
+    hsize, hver, size, _otype = struct.unpack_from("<HHLL", buf, j + 4)
+    return (hver, hsize) in ((1, 32), (2, 40)) and hsize <= size <= K.MAX_OBJECT_SIZE
+
+
 def systemtime(fields: tuple[int, ...]) -> datetime | None:
     """Windows SYSTEMTIME (year, month, weekday, day, h, min, s, ms) as a naive datetime, or None."""
     year, month, _dow, day, hour, minute, second, ms = fields
@@ -88,8 +96,10 @@ class BLFReader(BaseReader):
         if head[:4] != b"LOGG":
             raise LogFormatError(f"{self.name}: not a BLF file (signature {head[:4]!r}, expected b'LOGG')")
         if len(head) < FILE_HEADER.size:
-            raise TruncatedLogError(f"{self.name}: BLF file header truncated ({len(head)} of "
-                                    f"{FILE_HEADER.size} bytes)")
+            declared = int.from_bytes(head[4:8], "little") if len(head) >= 8 else 144
+            size = declared if FILE_HEADER.size <= declared <= 4096 else 144
+            raise TruncatedLogError(f"{self.name}: the file ends inside its {size}-byte header after "
+                                    f"{len(head)} bytes")
         h = FILE_HEADER.unpack_from(head)
         self._header_size = int(h[1])
         if not FILE_HEADER.size <= self._header_size <= 4096:
@@ -115,6 +125,8 @@ class BLFReader(BaseReader):
         self._truncation_reported = False
         self._type_counts = np.zeros(256, np.int64)
         self._inner_resync: ReadIssue | None = None
+        self._inflated = 0  # container bytes walked (after inflation)
+        self._estimates: list[tuple[ReadIssue, bool]] = []  # (issue, counted in inflated bytes)
         builder = ChunkBuilder(self.chunk_frames)
         top = ContainerStream(self._stream)
         for ev in read_ahead(top.events(self._header_size)):
@@ -123,7 +135,12 @@ class BLFReader(BaseReader):
             elif isinstance(ev, Loose):
                 yield from self._loose_object(ev.off, ev.obj, builder)
             elif isinstance(ev, Problem):
-                self.problem(ev.kind, ev.message, offset=ev.offset, truncated=ev.truncated)
+                issue = self.problem(ev.kind, ev.message, offset=ev.offset, truncated=ev.truncated,
+                                     frames_lost=ev.frames_lost, bytes_lost=ev.bytes_lost)
+                if ev.frames_lost is None and ev.bytes_lost:
+                    self._estimates.append((issue, False))
+                if ev.bytes_lost:  # bytes were skipped: an object straddling them cannot be completed
+                    self._drop_carry(ev.offset)
                 self._truncation_reported |= ev.truncated
             else:
                 self.damage(ev.exc)
@@ -135,6 +152,7 @@ class BLFReader(BaseReader):
             self.problem("truncated", f"the file ends after {top.off} bytes but its header declares "
                          f"{self._declared_size}", offset=top.off, truncated=True)
         self._summarise_objects()
+        self._estimate_losses(max(1, top.off - self._header_size))
 
     def _container(self, ev: Container, builder: ChunkBuilder) -> Iterator[FrameChunk]:
         off, body, cut = ev.off, ev.body, ev.cut
@@ -149,17 +167,51 @@ class BLFReader(BaseReader):
             data, error = ev.inflated.result() if ev.inflated is not None else inflate(payload, unc_size)
             broken = broken or error is not None
             if error is not None and not cut:
-                self.problem("corrupt_zlib", f"log container at byte offset {off}: {error}; recovered "
-                             f"{len(data)} of {unc_size} bytes, reading resumes at the next container",
-                             offset=off, frames_lost=None)
+                data = self._verified_prefix(data)
+                lost = max(0, unc_size - len(data))
+                issue = self.problem("corrupt_zlib", f"log container at byte offset {off}: {error}; the objects "
+                                     f"in the first {len(data)} of {unc_size} bytes are kept, reading resumes at "
+                                     "the next container", offset=off, bytes_lost=lost)
+                self._estimates.append((issue, True))
         else:
-            self.problem("unknown_compression", f"log container at byte offset {off} uses compression method "
-                         f"{method} (known: 0 none, 2 zlib); container skipped", offset=off)
+            issue = self.problem("unknown_compression", f"log container at byte offset {off} uses compression "
+                                 f"method {method} (known: 0 none, 2 zlib); container skipped", offset=off,
+                                 bytes_lost=16 + len(body))
+            self._estimates.append((issue, False))
             self._drop_carry(off)
             return
+        if method == 0 and not cut and len(data) > unc_size:
+            data = data[:unc_size]  # a corrected container size leaves the padding in the body
+        self._inflated += len(data)
         yield from self._walk(data, off, builder)
         if broken:
             self._drop_carry(off)
+
+    def _verified_prefix(self, data: bytes) -> bytes:
+        """The part of a damaged container's bytes whose objects chain to a following sound header.
+
+        zlib detects damage some bytes after it begins, and what it inflated in between is
+        garbage that may still look like objects (a back-reference copies old ones). Only
+        objects followed by the next object's sound header where their size says are kept, and
+        the last of them is dropped too: garbage just before the detected damage can still chain
+        to a header that zlib happened to inflate right.
+        """
+        buf = self._carry + data
+        pos = buf.find(b"LOBJ") if self._resync_inner else 0
+        if pos < 0:
+            return b""
+        last = pos
+        while True:
+            j = buf.find(b"LOBJ", pos, pos + 8)
+            if j < 0 or j - pos > 3 or not _sound_header(buf, j):
+                break
+            nxt = j + struct.unpack_from("<L", buf, j + 8)[0]
+            k = buf.find(b"LOBJ", nxt, nxt + 8)
+            if k < 0 or k - nxt > 3 or not _sound_header(buf, k):
+                break
+            last, pos = pos, nxt
+        keep = last - len(self._carry)
+        return data[:max(0, keep)]
 
     def _drop_carry(self, off: int) -> None:
         """After a damaged container the bytes that straddle into the next one are meaningless."""
@@ -234,7 +286,10 @@ class BLFReader(BaseReader):
             if self._inner_resync is None:
                 kind = "bad_signature" if st == K.ST_BAD_SIG else "bad_object_size"
                 self._inner_resync = self.problem(kind, f"{reason}; skipped to the next object signature",
-                                                  offset=coff)
+                                                  offset=coff, bytes_lost=0)
+                self._estimates.append((self._inner_resync, True))
+            skipped = (j if j >= 0 else max(pos, end - 3)) - pos
+            self._inner_resync.bytes_lost = (self._inner_resync.bytes_lost or 0) + skipped
             if j < 0:
                 self._set_carry(buf, max(pos, end - 3), len(carry), off)
                 return
@@ -277,6 +332,14 @@ class BLFReader(BaseReader):
                 yield builder.take()
             elif st in (K.ST_BAD_TS, K.ST_BAD_FRAME):
                 pos += detail - 4
+
+    def _estimate_losses(self, file_bytes: int) -> None:
+        """Frames lost in regions known only by their size: bytes x the frames per byte read elsewhere."""
+        frames = self.report.frames
+        for issue, inflated in self._estimates:
+            total = self._inflated if inflated else file_bytes
+            if issue.frames_lost is None and issue.bytes_lost and frames and total:
+                issue.frames_lost = max(1, round(issue.bytes_lost * frames / total))
 
     def _summarise_objects(self) -> None:
         counts = self._type_counts

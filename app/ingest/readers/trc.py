@@ -12,7 +12,8 @@ Columns per version (``;`` starts a comment; offsets are milliseconds since the 
 ``;$STARTTIME`` is days since 1899-12-30 in the recording PC's local time
 (``start_clock = "trc_header_local"``; python-can reads it as UTC). Version 1.0 has only
 a ``Start time:`` comment (``"trc_comment_local"``). Bus numbers are 1-based in the file
-and 0-based in our frames; files without a bus column are bus 1 (channel 0).
+and stay so in our frames, as python-can's TRCReader keeps them (and PEAK tools show them);
+files without a bus column are bus 1.
 """
 
 from __future__ import annotations
@@ -36,11 +37,11 @@ Frame = tuple[int, int, int, int, int, bytes]  # t_ns, channel, arb_id, flags, d
 
 
 def _bus(tok: str) -> int:
-    """1-based bus number -> 0-based channel."""
+    """The 1-based bus number as written: the channel (python-can's TRCReader keeps it too)."""
     bus = parse_int(tok, 10, "bus")
     if not 1 <= bus <= 32767:
         raise BadLine("bad_line", f"bus number {tok} out of range")
-    return bus - 1
+    return bus
 
 
 class TRCReader(BaseReader):
@@ -100,11 +101,11 @@ class TRCReader(BaseReader):
         if self.version == "1.0":
             if len(tok) < 4:
                 raise BadLine("short_data", "fewer than 4 columns")
-            t, ch, kind, rest = tok[1], 0, "Rx", tok[2:]
+            t, ch, kind, rest = tok[1], 1, "Rx", tok[2:]
         elif self.version == "1.1":
             if len(tok) < 5:
                 raise BadLine("short_data", "fewer than 5 columns")
-            t, ch, kind, rest = tok[1], 0, tok[2], tok[3:]
+            t, ch, kind, rest = tok[1], 1, tok[2], tok[3:]
         else:
             need = 6 if self.version == "1.2" else 7
             if len(tok) < need:
@@ -136,7 +137,7 @@ class TRCReader(BaseReader):
         if kind in _V2_EVENTS:
             if kind == "ER":
                 t_ns = decimal_to_ns(tok[cols["O"]], 6, what="time offset")
-                ch = _bus(tok[cols["B"]]) if "B" in cols else 0
+                ch = _bus(tok[cols["B"]]) if "B" in cols else 1
                 return t_ns, ch, 0, ERR, 0, b""
             return None
         if kind not in _V2_FRAME_TYPES:
@@ -144,7 +145,7 @@ class TRCReader(BaseReader):
         if len(tok) < n_fixed:
             raise BadLine("short_data", f"{len(tok)} columns, {n_fixed} expected before the data")
         t_ns = decimal_to_ns(tok[cols["O"]], 6, what="time offset")
-        ch = _bus(tok[cols["B"]]) if "B" in cols else 0
+        ch = _bus(tok[cols["B"]]) if "B" in cols else 1
         id_tok = tok[cols["I"]]
         ident = parse_int(id_tok, 16, "identifier")
         fl = _V2_FRAME_TYPES[kind] | (EXT if len(id_tok) > 4 else 0)
