@@ -54,7 +54,7 @@ def main() -> int:
         v = res.vehicle.with_changes(change)
         s = sensitivities(v, paper_cases(v, res.tip_in, twin=False), per="arcmin", quantity="fluctuation")
         print(f"  {change or 'as fitted'!s:<52} " + " : ".join(f"{x:.1f}" for x in s))
-    a.out.write_text(fitted_toml(res, table), encoding="utf-8")
+    a.out.write_text(fitted_toml(res, table, base), encoding="utf-8")
     print(f"wrote {a.out}")
     return 0
 

@@ -132,6 +132,7 @@ def fit(base: Vehicle, *, seed: int = 0, popsize: int = 6, maxiter: int = 12, po
     ps = params or default_params(base)
     count = 0
     best = [math.inf]
+    best_u = [np.zeros(len(ps))]
 
     def f(u: np.ndarray) -> float:
         nonlocal count
@@ -143,7 +144,7 @@ def fit(base: Vehicle, *, seed: int = 0, popsize: int = 6, maxiter: int = 12, po
         except (ParameterError, InstabilityError):
             val = 1e6
         if val < best[0]:
-            best[0] = val
+            best[0], best_u[0] = val, np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0)
         if progress is not None and count % 50 == 0:
             progress(count, best[0])
         return val
@@ -152,11 +153,26 @@ def fit(base: Vehicle, *, seed: int = 0, popsize: int = 6, maxiter: int = 12, po
     start = _start(base, ps)
     de = differential_evolution(f, bounds, seed=seed, popsize=popsize, maxiter=maxiter, polish=False,
                                 init="latinhypercube", tol=1e-3, workers=1, updating="immediate", x0=start)
-    loc = minimize(f, de.x, method="Powell", bounds=bounds, options={"maxfev": polish_evals, "xtol": 1e-3})
-    u = loc.x if loc.fun < de.fun else de.x
+    minimize(f, de.x, method="Powell", bounds=bounds, options={"maxfev": polish_evals, "xtol": 1e-3})
+    u = best_u[0]  # the best point evaluated (DE or polish)
     x = np.array([p.value(float(np.clip(ui, 0.0, 1.0))) for p, ui in zip(ps, u, strict=True)])
     v, tip = apply(base, ps, x)
     return FitResult(ps, x, cost(v, tip), count, v, tip)
+
+
+def _with_scaled_bands(result: FitResult, base: Vehicle) -> Vehicle:
+    d = result.vehicle.to_dict()
+    for p, x in zip(result.params, result.x, strict=True):
+        if p.field.startswith("tip_in."):
+            continue
+        f = float(x) / float(base.get(p.field))
+        if p.field.startswith("gaps."):
+            g, b = d["gaps"][p.field[5:]], base.gap(p.field[5:])
+            g["min"], g["max"] = b.min * f, b.max * f
+        elif p.field in d["tolerances"]:
+            lo, hi = base.tolerances[p.field]
+            d["tolerances"][p.field] = [lo * f, hi * f]
+    return Vehicle.from_dict(d)
 
 
 def _start(base: Vehicle, ps: tuple[Param, ...]) -> np.ndarray:
@@ -167,8 +183,13 @@ def _start(base: Vehicle, ps: tuple[Param, ...]) -> np.ndarray:
     return np.clip([p.unit(v) for p, v in zip(ps, vals, strict=True)], 0.0, 1.0)
 
 
-def fitted_toml(result: FitResult, summary: str) -> str:
-    """The preset file: a header saying what was fitted to what, the vehicle, and its ``[tip_in]``."""
+def fitted_toml(result: FitResult, summary: str, base_vehicle: Vehicle) -> str:
+    """The preset file: a header saying what was fitted to what, the vehicle, and its ``[tip_in]``.
+
+    Gap bands and ``[tolerances]`` of fitted fields keep their relative width around the fitted
+    value (``base_vehicle``'s band times fitted / base), so a tolerance analysis on the fitted
+    preset samples around the fit, not around the values it replaced.
+    """
     head = [
         "# FITTED, not measured: the `paper` preset with the reference paper's unpublished inputs identified",
         "# by sim/paper_fit.py (bench/paper_fit.py) against ALL of the paper's published figures at once",
@@ -181,9 +202,9 @@ def fitted_toml(result: FitResult, summary: str) -> str:
     head += [f"# cost {result.cost:.4g} after {result.evaluations} evaluations; rows at the fit:"]
     head += [f"#   {line}" for line in summary.splitlines()]
     tip = result.tip_in
-    body = dump_toml(result.vehicle.with_changes({"name": "paper_fitted",
-                                                  "description": "Deng et al. 2022 drive unit, unpublished inputs "
-                                                                 "fitted to the paper's figures (see header)"}))
+    body = dump_toml(_with_scaled_bands(result, base_vehicle).with_changes(
+        {"name": "paper_fitted", "description": "Deng et al. 2022 drive unit, unpublished inputs fitted to the "
+                                                "paper's figures (see header)"}))
     tail = ["", "[tip_in]                     # the fitted tip-in torque (sim.paper.TipIn), read by reproduce-paper",
             f"start_nm = {tip.start_nm!r}", f"end_nm = {tip.end_nm!r}", f"ramp_s = {tip.ramp_s!r}",
             f"t0_s = {tip.t0_s!r}"]

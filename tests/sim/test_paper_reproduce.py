@@ -16,6 +16,7 @@ from sim.paper import (
     paper_cases,
     paper_rows,
     reading_errors,
+    reproduce,
     sensitivities,
     tip_in_torque,
 )
@@ -127,8 +128,36 @@ def test_fit_parameters_and_preset_writer(tmp_path) -> None:  # type: ignore[no-
     assert v.gaps.halfshaft.nominal == pytest.approx(PAPER.gaps.halfshaft.nominal * math.sqrt(0.75))
     assert tip.ramp_s == pytest.approx(math.sqrt(0.05 * 0.5))
     out = tmp_path / "fitted.toml"
-    out.write_text(fitted_toml(FitResult(ps, x, 1.0, 1, v, tip), "row table"))
+    out.write_text(fitted_toml(FitResult(ps, x, 1.0, 1, v, tip), "row table", PAPER))
     assert load_tip_in(str(out)) == tip
     back = load_vehicle(out)
     assert back.gaps.halfshaft.nominal == v.gaps.halfshaft.nominal and back.name == "paper_fitted"
     assert out.read_text().startswith("# FITTED")
+
+
+def test_fitted_preset_meets_its_targets_on_the_papers_quantities() -> None:
+    """The stored fit (sim/presets/paper_fitted.toml with its [tip_in]): every fluctuation within 15 %,
+    the rise within 15 %, gaps 4+5 removed within 15-25 %, two of three times in their bands; the
+    misses are the ones docs/simulation.md lists (half-torque time, S1..S4 per arc-minute)."""
+    v, tip = load_vehicle("paper_fitted"), load_tip_in("paper_fitted")
+    assert tip is not None and tip.end_nm > 0 > tip.start_nm
+    rows, cases = reproduce(v, tip)
+    by = {r.quantity: r for r in rows}
+    passing = [r.quantity for r in rows if r.ok]
+    for key in ("fluctuation peak-valley, nominal gaps (rpm)", "fluctuation peak-valley, all gaps halved (rpm)",
+                "fluctuation peak-valley, torque halved (rpm)", "speed rise while unloaded, nominal (rpm)",
+                "unloaded time, nominal gaps (ms)", "unloaded time, all gaps halved (ms)",
+                "gaps 4+5 eliminated: peak-valley / nominal (%)", "gaps 1+2+3 eliminated: peak-valley / nominal (%)",
+                "gap 1 eliminated: change in peak-valley (rpm)", "gap 2 eliminated: change in peak-valley (rpm)",
+                "gap 3 eliminated: change in peak-valley (rpm)",
+                "sensitivity ranking S1<..<S5 (per arc-minute of own-shaft angle)"):
+        assert key in passing, (key, by[key].ours)
+    assert len(passing) == 15
+    assert by["fluctuation peak-valley, nominal gaps (rpm)"].ours == pytest.approx(232, abs=3)
+    assert by["unloaded time, torque halved (ms)"].ours == pytest.approx(30.2, abs=0.5)  # the documented miss
+    # the fitted gap-free response is small: that is what lets gaps 4+5 removed reach ~20 %
+    assert cases["zero_gaps"].fluct_rpm < 0.3 * cases["nominal"].fluct_rpm
+    # the arc-minute reading keeps S1 < S2 < S3; per mm the spline's radius still ranks S1 above S2
+    am = sensitivities(v, cases, per="arcmin", quantity="fluctuation")
+    mm = sensitivities(v, cases, per="mm", quantity="fluctuation")
+    assert am[0] < am[1] < am[2] and mm[0] > mm[1]
