@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from sim.integrate import STATUS_DIVERGED, STATUS_NONFINITE, STATUS_OK, input_at, road_torque
+from sim.linear import coupling_rows
 from sim.model import ChainModel, build_chain
 from sim.params import Vehicle
 
@@ -37,8 +38,8 @@ class TwoInertiaParams:
     jm: float  # kg m^2, motor plus reducer referred to the motor
     bm: float  # N m s/rad
     ratio: float  # i, motor / wheel speed
-    khs: float  # N m/rad per half-shaft (whole-driveline compliance in series)
-    chs: float  # N m s/rad per half-shaft, > 0 (the gap law divides by it)
+    khs: float  # N m/rad per half-shaft (whole driveline in series, real part of its impedance)
+    chs: float  # N m s/rad per half-shaft, > 0 (the gap law divides by it; imaginary part / omega)
     alpha: float  # rad, half of the total clearance 2 alpha, in half-shaft angle
     jw: float  # kg m^2 per wheel, I_w + M R^2 / 2
     bw: float = 0.0  # N m s/rad per wheel
@@ -56,11 +57,15 @@ def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaPara
     """Reduce the multibody vehicle to eqs. 1-6.
 
     Reducer inertias are referred to the motor (paper: "equivalent to the motor inertia"), half
-    of the half-shaft inertia to each end, all coupling compliances added in series and
-    referred to the half-shaft, and all five clearances summed in half-shaft angle. The
-    paper's model has no tyre compliance, linear springs and only viscous drag: tyre slip,
+    of the half-shaft inertia to each end, and all five clearances summed in half-shaft angle.
+    Each coupling is a spring and a damper *in parallel*, and these pairs sit in series, so
+    ``khs`` and ``chs`` come from the series sum of the couplings' complex impedances at the
+    shuffle frequency (:func:`series_impedance`), with the housing on its mounts as one more
+    series element. Adding compliances and "damper compliances" ``1/c`` separately would let
+    the stiffest, least damped coupling (the motor spline) set the damping of the whole chain.
+    The paper's model has no tyre compliance, linear springs and only viscous drag: tyre slip,
     progressive stiffness and Coulomb drag are left out of the projection. Unequal half-shafts
-    enter as the parallel pair (stiffness and damping summed, mean lash).
+    enter as the parallel pair (impedances summed, mean lash).
     """
     if vehicle.effects.tyre_slip.enabled:
         vehicle = vehicle.with_changes({"effects.tyre_slip.enabled": False})
@@ -74,8 +79,8 @@ def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaPara
                    if b not in (*m.wheels, m.housing)))
     # half-shaft interior nodes count half to each side in this reduction
     extra = jw_total - wheel_own
-    compliance = 0.0
-    damp_compliance = 0.0
+    jw = (wheel_own + extra) / n
+    k_w, c_w = [], []  # each coupling (parallel pairs summed) referred to the wheel angle, all shafts
     alpha_w = 0.0
     right = _right_partners(vehicle, m)  # unequal shafts: the right piece in parallel with the left
     for j in range(m.n_couplings):
@@ -85,15 +90,67 @@ def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaPara
         k, c = (m.ck[j] + m.ck[p], m.cc[j] + m.cc[p]) if p != j else (m.ck[j], m.cc[j])
         half = 0.5 * (m.chalf[j] + m.chalf[p])
         to_wheel = i * m.speed_ratio[m.ca[j]]  # a-angle per wheel angle
-        compliance += 1.0 / (k * to_wheel**2)
-        damp_compliance += 1.0 / max(c * to_wheel**2, 1e-12)
+        k_w.append(float(k) * to_wheel**2)
+        c_w.append(float(c) * to_wheel**2)
         alpha_w += half / to_wheel
+    mount = _housing_element(m)
+    k_eq, c_eq, _ = series_impedance(np.array(k_w), np.array(c_w), 1.0 / (i * i * jm) + 1.0 / (n * jw), mount)
     return TwoInertiaParams(
         jm=jm, bm=float(m.rotor_drag[0]), ratio=i,
-        khs=1.0 / compliance / n, chs=1.0 / damp_compliance / n, alpha=alpha_w,
-        jw=(wheel_own + extra) / n, bw=float(m.wheel_drag[0]) * len(m.wheels) / n, n_shafts=n,
+        khs=k_eq / n, chs=max(c_eq / n, 1e-12), alpha=alpha_w,
+        jw=jw, bw=float(m.wheel_drag[0]) * len(m.wheels) / n, n_shafts=n,
         road=tuple(float(x) for x in m.road),
     )
+
+
+def series_impedance(k: np.ndarray, c: np.ndarray, inv_inertia: float,
+                     housing: tuple[float, float, float, float] | None = None,
+                     iterations: int = 30) -> tuple[float, float, float]:
+    """Equivalent ``(k, c, omega)`` of spring-damper pairs in series, at the mode they carry.
+
+    ``k`` (N m/rad) and ``c`` (N m s/rad) are the pairs referred to one angle; each pair's
+    impedance is ``k_j + i omega c_j`` and the chain's is ``1 / sum(1 / (k_j + i omega c_j))``
+    (plus ``beta^2 / (k_h + i omega c_h - omega^2 J_h)`` for the housing, ``housing = (beta,
+    k_h, c_h, J_h)``: the housing angle moves that angle by ``beta`` per rad, and the housing is
+    a grounded mass on its mounts). The equivalent is ``k = Re Z``, ``c = Im Z / omega`` at the
+    two-inertia mode ``omega^2 = k * inv_inertia`` (``inv_inertia = 1/J_1 + 1/J_2`` of the two
+    ends in the same angle), found by fixed-point iteration (it converges in a few steps:
+    ``Z`` varies slowly with ``omega`` below the couplings' own corner frequencies ``k_j/c_j``).
+    """
+    def impedance(w: float) -> complex:
+        y = complex(np.sum(1.0 / (k + 1j * w * c)))
+        if housing is not None:
+            beta, k_h, c_h, j_h = housing
+            y += beta * beta / (k_h + 1j * w * c_h - w * w * j_h)
+        return 1.0 / y
+
+    w = math.sqrt(float(1.0 / np.sum(1.0 / k)) * inv_inertia)
+    for _ in range(iterations):
+        z = impedance(w)
+        w_new = math.sqrt(max(z.real, 1e-12) * inv_inertia)
+        if abs(w_new - w) <= 1e-12 * w:
+            break
+        w = w_new
+    z = impedance(w)
+    return float(z.real), float(z.imag / w), w
+
+
+def _housing_element(m: ChainModel) -> tuple[float, float, float, float] | None:
+    """``(beta, k_h, c_h, J_h)`` of the housing on its mounts as a series element in wheel angle.
+
+    ``beta`` is how far the wheels turn per radian of housing roll with the rotor held and every
+    coupling rigid (the gears roll on the housing): found from the chain's deflection rows.
+    """
+    mounts = [j for j in range(m.n_couplings) if m.ca[j] == m.housing]
+    if m.housing < 0 or not mounts:
+        return None
+    g = coupling_rows(m)
+    chain = [j for j in range(m.n_couplings) if j not in mounts]
+    free = [b for b in range(m.n_bodies) if b not in (m.rotor, m.housing)]
+    x = np.linalg.lstsq(g[np.ix_(chain, free)], -g[chain, m.housing], rcond=None)[0]
+    beta = float(np.mean([x[free.index(w)] for w in m.wheels]))
+    j = mounts[0]
+    return beta, float(m.ck[j]), float(m.cc[j]), float(m.inertia[m.housing])
 
 
 def _right_partners(vehicle: Vehicle, m: ChainModel) -> dict[int, int]:
@@ -165,7 +222,7 @@ def run_two_inertia(
                 return STATUS_DIVERGED, t, n_ev
         out[k, 0] = w_m
         out[k, 1] = w_w
-        out[k, 2] = ths
+        out[k, 2] = 0.0 if was_open else ths  # ths is from the step's start; open at its end means 0
         out[k, 3] = 1.0 if was_open else 0.0
         out[k, 4] = tm
     return STATUS_OK, t, n_ev
@@ -188,4 +245,5 @@ def quasi_static(p: TwoInertiaParams, torque: float, omega_m: float) -> np.ndarr
     return np.array([th_d * p.ratio, omega_m, 0.0, w_w, th_b])
 
 
-__all__ = ["STATUS_DIVERGED", "STATUS_NONFINITE", "STATUS_OK", "TwoInertiaParams", "project", "run_two_inertia"]
+__all__ = ["STATUS_DIVERGED", "STATUS_NONFINITE", "STATUS_OK", "TwoInertiaParams", "project", "run_two_inertia",
+           "series_impedance"]

@@ -71,6 +71,8 @@ def load_vehicle_text(text: str, *, source: str = "<text>") -> Vehicle:
         data = json.loads(text) if text.lstrip().startswith("{") else tomllib.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
         raise ParameterError("vehicle", source, f"not valid TOML/JSON: {exc}") from exc
+    if isinstance(data, dict):
+        data.pop("tip_in", None)  # the torque input a fitted file was identified with (sim.paper.load_tip_in)
     return Vehicle.from_dict(data)
 
 

@@ -53,36 +53,37 @@ def test_antijerk_whatif_reduces_ripple() -> None:
 
 
 def test_reproduce_paper_targets() -> None:
-    """The targets the preset is documented to meet (docs/simulation.md lists the misses)."""
+    """The paper preset with its own ramp: the gap-traverse times it was built for; the impact-induced
+    sensitivity that app.pipeline reports (a lashscope quantity, not a paper row) follows the geometry."""
     rows, cases = reproduce(PAPER)
     by = {r.quantity: r for r in rows}
     for key in ("unloaded time, nominal gaps (ms)", "unloaded time, all gaps halved (ms)",
-                "unloaded time, torque halved (ms)", "fluctuation ratio half_gaps/nominal",
-                "fluctuation ratio half_torque/nominal", "gaps 4+5 eliminated: impact-induced / nominal (%)",
-                "gap 1 eliminated: change in peak-valley (rpm)", "gap 3 eliminated: change in peak-valley (rpm)"):
+                "unloaded time, torque halved (ms)", "gap 1 eliminated: change in peak-valley (rpm)",
+                "gap 3 eliminated: change in peak-valley (rpm)"):
         assert by[key].ok, (key, by[key].ours)
     assert cases["zero_gaps"].unloaded_ms == 0.0
-    # sensitivities: per mm of circumferential clearance (the paper's measure) and per own-shaft radian
     assert sensitivity_unit(PAPER) == "mm"
     per_mm, per_rad = sensitivities(PAPER, cases), sensitivities(PAPER, cases, per="rad")
     radii = np.array(PAPER.gap_radii_mm)
     assert np.allclose(per_mm, per_rad * radii[-1] / radii)
-    assert by["sensitivity ranking per rad of own-shaft angle"].ours == 1.0
     # a lumped chain: a gap's effect follows the motor angle it costs, k_i / r_i per mm
     cost = np.array(PAPER.motor_angle_per_mm)
     assert np.allclose(per_mm, 100 * cost / cost[-1], rtol=0.15)
     detail = sensitivity_table(PAPER, cases)
-    assert "r for paper S" in detail and len(detail.splitlines()) == 7
+    assert "fits better" in detail and len(detail.splitlines()) == 10
 
 
 def test_cli_reproduce_and_simulate(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
     assert main(["reproduce-paper"]) == 0
     printed = capsys.readouterr().out
-    assert "targets met" in printed and "S/rad" in printed
-    assert main(["reproduce-paper", "--json"]) == 0
+    assert "targets met" in printed and "S/arcmin" in printed
+    assert "tip-in" in printed and "paper_fitted" in printed
+    assert main(["reproduce-paper", "--json", "--vehicle", "paper"]) == 0
     rows = json.loads(capsys.readouterr().out)
-    assert {r["quantity"] for r in rows} >= {"unloaded time, nominal gaps (ms)"} and all(
-        r["ok"] in (True, False, None) for r in rows)
+    assert {r["quantity"] for r in rows} >= {"unloaded time, nominal gaps (ms)"}
+    assert all(set(r) == {"quantity", "ours", "paper", "target", "ok"} and r["ok"] in (True, False) for r in rows)
+    expected, _ = reproduce(PAPER)  # --vehicle paper: no [tip_in], the default ramp
+    assert [r["ours"] for r in rows] == pytest.approx([r.ours for r in expected])
     csv_in = tmp_path / "torque.csv"
     t, q = tip_in_torque(duration_s=0.4)
     csv_in.write_text("t_s,torque_nm\n" + "".join(f"{a},{b}\n" for a, b in zip(t, q, strict=True)))
