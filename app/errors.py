@@ -19,6 +19,9 @@ subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
      |    +-- InsufficientDataError       (422)
      +-- InputError (ValueError)          (400)  absurd parameters, bad request values
      +-- UploadTooLargeError              (413)
+     +-- UploadTimeoutError (TimeoutError)(408)  an upload stalled longer than the idle limit
+     +-- QueueFullError                   (429)  too many jobs waiting
+     +-- ForbiddenError (PermissionError) (403)  the operator has not allowed this (e.g. a live bus)
      +-- NotFoundError (LookupError)      (404)
      +-- ConflictError                    (409)
      +-- StorageError (OSError)           (500)
@@ -112,6 +115,21 @@ class InputError(AppError, ValueError):
 class UploadTooLargeError(AppError):
     code = "upload_too_large"
     status = 413
+
+
+class UploadTimeoutError(AppError, TimeoutError):
+    code = "upload_timeout"
+    status = 408
+
+
+class QueueFullError(AppError):
+    code = "queue_full"
+    status = 429
+
+
+class ForbiddenError(AppError, PermissionError):
+    code = "forbidden"
+    status = 403
 
 
 class NotFoundError(AppError, LookupError):

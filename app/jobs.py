@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import logging
 import multiprocessing
+import os
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -58,6 +59,7 @@ class JobRunner:
         self._procs: dict[str, BaseProcess] = {}
         self._lock = threading.Lock()
         self._closed = False
+        self._cancelled: set[str] = set()
 
     def start(self) -> list[JobRecord]:
         """Recover interrupted jobs and submit every queued one; returns what was submitted."""
@@ -78,6 +80,21 @@ class JobRunner:
         if fut is not None:
             fut.result(timeout)
 
+    def cancel(self, job_id: str, reason: str) -> None:
+        """Stop a job for good: a queued one never starts, a running one's worker is killed.
+
+        The job fails with code ``cancelled`` before the worker is killed, so the runner thread that
+        waits on it sees a verdict and records no ``worker_died``.
+        """
+        with self._lock:
+            self._cancelled.add(job_id)
+            fut, proc = self._futures.get(job_id), self._procs.get(job_id)
+        self.store.fail_job(job_id, "cancelled", reason)
+        if fut is not None:
+            fut.cancel()
+        if proc is not None:
+            proc.kill()
+
     def shutdown(self, wait: bool = False) -> None:
         """Take no new work; kill running workers (their jobs stay 'running' and are resumed at the next start)."""
         with self._lock:
@@ -92,6 +109,8 @@ class JobRunner:
     def _run(self, job_id: str) -> None:
         try:
             job = self.store.start_job(job_id)
+            if job.status is not JobStatus.RUNNING or job_id in self._cancelled:
+                return  # cancelled (or taken) while it waited
             if job.kind not in KINDS:
                 self.store.fail_job(job_id, "unknown_job", f"unknown job kind {job.kind!r}")
             elif self.in_process:
@@ -107,7 +126,7 @@ class JobRunner:
                 self._procs.pop(job_id, None)
 
     def _in_worker(self, job: JobRecord) -> None:
-        proc = _SPAWN.Process(target=worker_main, args=(str(self.store.root), job.id), daemon=True,
+        proc = _SPAWN.Process(target=worker_main, args=(self.store.url, job.id, os.getpid()), daemon=True,
                               name=f"lashscope-{job.kind}-{job.id}")
         with self._lock:
             if self._closed:
@@ -130,11 +149,14 @@ class JobRunner:
             self.store.fail_job(job.id, "worker_died", f"the worker process ended without a result ({reason})")
 
 
-def worker_main(root: str, job_id: str) -> None:
-    """Entry point of a worker process: run one job against the store at ``root``."""
-    from app.storage.sqlite import SQLiteStore
+def worker_main(url: str, job_id: str, parent: int | None = None) -> None:
+    """Entry point of a worker process: run one job against the store at ``url``; dies with ``parent``."""
+    from app.storage.url import open_store
+    from app.worker import die_with_parent
 
-    store = SQLiteStore(Path(root))
+    if parent is not None:
+        die_with_parent(parent)
+    store = open_store(url)
     try:
         execute(store, store.get_job(job_id))
     finally:

@@ -12,6 +12,13 @@
                                  and it fails (default 1800)
 ``LASHSCOPE_DBC_DIR``           the project's DBC files and signal maps (default: ``dbc/`` in the source tree)
 ``LASHSCOPE_SHUTDOWN_GRACE_S``  on stop, open requests (e.g. live streams) get this long before they are cut
+``LASHSCOPE_STORE_URL``         the store as a URL (``sqlite:////srv/ls/db.sqlite3``); default: the data directory's
+``LASHSCOPE_ALLOWED_HOSTS``     Host header names accepted besides the loopback names (comma-separated; ``*``: any)
+``LASHSCOPE_INSECURE``          serve on a non-loopback address without API keys (default off: refused)
+``LASHSCOPE_MAX_JSON_KB``       body cap of every request but the uploads, in KiB (default 1024); past it 413
+``LASHSCOPE_UPLOAD_IDLE_S``     an upload that sends nothing for this long is dropped (408, partial file removed)
+``LASHSCOPE_MAX_QUEUED_JOBS``   new jobs are refused (429 ``queue_full``) while this many wait (default 32)
+``LASHSCOPE_LIVE_CHANNELS``     live buses a client may open, ``interface:channel`` or ``interface:*`` (comma-separated)
 """
 
 from __future__ import annotations
@@ -51,8 +58,16 @@ class Settings(BaseSettings):
     shutdown_grace_s: int = Field(default=5, ge=0)  # a live event stream never ends by itself
     host: str = "127.0.0.1"
     port: int = Field(default=8000, ge=0, le=65535)
+    store_url: str | None = None
+    allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
+    insecure: bool = False
+    max_json_kb: float = Field(default=1024.0, gt=0)
+    upload_idle_s: float = Field(default=60.0, gt=0)
+    max_queued_jobs: int = Field(default=32, ge=1)
+    live_channels: Annotated[list[str], NoDecode] = Field(
+        default_factory=lambda: ["virtual:*", "tcp_loopback:*", "socketcan:*"])
 
-    @field_validator("cors_origins", mode="before")
+    @field_validator("cors_origins", "allowed_hosts", "live_channels", mode="before")
     @classmethod
     def _split_origins(cls, v: object) -> object:
         if isinstance(v, str):
@@ -62,6 +77,15 @@ class Settings(BaseSettings):
     @property
     def max_upload_bytes(self) -> int:
         return int(self.max_upload_mb * 1024 * 1024)
+
+    @property
+    def max_json_bytes(self) -> int:
+        return int(self.max_json_kb * 1024)
+
+    @property
+    def store_location(self) -> str:
+        """What :func:`app.storage.url.open_store` opens: the URL if one is set, else the data directory."""
+        return self.store_url or str(self.data_dir)
 
 
 @lru_cache(maxsize=1)

@@ -8,6 +8,7 @@ touches only the pages it needs.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -52,7 +53,8 @@ def write_result(directory: Path, doc: Mapping[str, Any], arrays: Mapping[str, n
         os.replace(tmp, directory)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise StorageError(f"cannot write results to {directory}: {exc.strerror}") from exc
+        raise StorageError(f"cannot write results ({directory.name}): {exc.strerror}",
+                           code="storage_full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else None) from exc
 
 
 class ResultFiles:

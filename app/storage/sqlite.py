@@ -30,10 +30,12 @@ from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 from app.errors import ConflictError, InputError, NotFoundError, StorageError
+from app.storage.keys import KeyTable
+from app.storage.migrations import upgrade
 from app.storage.records import AnalysisRecord, JobRecord, JobStatus, LogRecord, VehicleRecord
-from app.storage.schema import SCHEMA
 
 VEHICLE_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789-_")
 
@@ -65,30 +67,40 @@ def file_sha256(*paths: Path) -> str:
     return h.hexdigest()
 
 
-class SQLiteStore:
-    """SQLite + files under ``root``; safe to share between threads of one process and between processes."""
+class SQLiteStore(KeyTable):
+    """SQLite + files under ``root``; safe to share between threads of one process and between processes.
 
-    def __init__(self, root: Path) -> None:
+    ``database`` is the SQLite file (default ``<root>/lashscope.sqlite3``); opening upgrades its
+    schema to the latest version (:mod:`app.storage.migrations`).
+    """
+
+    def __init__(self, root: Path, database: Path | None = None) -> None:
         self.root = Path(root).resolve()
+        self.database = Path(database).resolve() if database is not None else self.root / "lashscope.sqlite3"
         try:
             for sub in ("tmp", "logs", "vehicles", "analyses", "jobs"):
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise StorageError(f"cannot create data directory {self.root}: {exc.strerror}") from exc
+            raise StorageError(f"cannot create the data directory {self.root.name!r}: {exc.strerror}") from exc
         self._local = threading.local()
         self._all: list[sqlite3.Connection] = []
         self._lock = threading.Lock()
-        self._conn().executescript(SCHEMA)  # idempotent; executescript manages its own transaction
+        upgrade(self._conn())
+
+    @property
+    def url(self) -> str:
+        """Where to open this store again (``app.storage.url.open_store``), e.g. from a job worker."""
+        return f"sqlite:///{self.database}" + ("" if self.database.parent == self.root else f"?files={quote(str(self.root))}")
 
     # -- connections -------------------------------------------------------------------
     def _conn(self) -> sqlite3.Connection:
         conn: sqlite3.Connection | None = getattr(self._local, "conn", None)
         if conn is None:
             try:
-                conn = sqlite3.connect(self.root / "lashscope.sqlite3", timeout=30.0, isolation_level=None,
+                conn = sqlite3.connect(self.database, timeout=30.0, isolation_level=None,
                                        check_same_thread=False)
             except sqlite3.Error as exc:
-                raise StorageError(f"cannot open {self.root / 'lashscope.sqlite3'}: {exc}") from exc
+                raise StorageError(f"cannot open the store's database {self.database.name}: {exc}") from exc
             conn.row_factory = sqlite3.Row
             conn.execute("PRAGMA journal_mode=WAL")
             conn.execute("PRAGMA synchronous=NORMAL")
@@ -179,7 +191,8 @@ class SQLiteStore:
         rows = self._conn().execute("SELECT * FROM logs ORDER BY created_at DESC LIMIT ? OFFSET ?", (limit, offset))
         return [self._log(r) for r in rows]
 
-    def delete_log(self, log_id: str) -> None:
+    def delete_log(self, log_id: str) -> list[str]:
+        """Delete a log and its finished analyses; returns the ids of the analyses deleted with it."""
         log = self.get_log(log_id)
         with self._tx() as db:
             busy = db.execute(
@@ -194,6 +207,7 @@ class SQLiteStore:
         for aid in ids:
             shutil.rmtree(self.analysis_dir(aid), ignore_errors=True)
         log.path.unlink(missing_ok=True)
+        return ids
 
     # -- vehicles ----------------------------------------------------------------------
     def _vehicle(self, row: sqlite3.Row) -> VehicleRecord:
@@ -285,10 +299,11 @@ class SQLiteStore:
         return self._job(row) if row else None
 
     def start_job(self, job_id: str) -> JobRecord:
+        """Mark a queued job running; a job no longer queued (cancelled, taken) is returned unchanged."""
         with self._tx() as db:
             db.execute("UPDATE jobs SET status = 'running', attempts = attempts + 1, started_at = ?, updated_at = ?,"
                        " owner_pid = ?, progress = 0, stage = 'starting', error_code = NULL, error_detail = NULL"
-                       " WHERE id = ?", (now(), now(), os.getpid(), job_id))
+                       " WHERE id = ? AND status = 'queued'", (now(), now(), os.getpid(), job_id))
         return self.get_job(job_id)
 
     def update_job(self, job_id: str, progress: float, stage: str) -> None:
@@ -323,6 +338,13 @@ class SQLiteStore:
                         (f"interrupted: the server stopped while this job was running, {row['attempts']} of "
                          f"{max_attempts} attempts used", now(), now(), row["id"]))
         return self.pending_jobs()
+
+    def active_jobs(self, analysis_id: str) -> list[JobRecord]:
+        """Queued or running jobs of an analysis: its own and its tolerance bands (``<id>/n=../seed=..``)."""
+        rows = self._conn().execute(
+            "SELECT * FROM jobs WHERE status IN ('queued', 'running') AND (subject = ? OR substr(subject, 1, ?) = ?)",
+            (analysis_id, len(analysis_id) + 1, analysis_id + "/")).fetchall()
+        return [self._job(r) for r in rows]
 
     def pending_jobs(self) -> list[JobRecord]:
         rows = self._conn().execute("SELECT * FROM jobs WHERE status = 'queued' ORDER BY created_at")
