@@ -25,6 +25,7 @@ subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
      +-- NotFoundError (LookupError)      (404)
      +-- ConflictError                    (409)
      +-- StorageError (OSError)           (500)
+     |    +-- StorageFullError            (507)  the data volume is full (ENOSPC, EDQUOT)
      +-- LiveBusError (ConnectionError)   (503)
 
 Simulator errors (``sim.errors.SimError``) are mapped by the API as well.
@@ -145,6 +146,11 @@ class ConflictError(AppError):
 class StorageError(AppError, OSError):
     code = "storage_error"
     status = 500
+
+
+class StorageFullError(StorageError):
+    code = "storage_full"
+    status = 507
 
 
 class LiveBusError(AppError, ConnectionError):

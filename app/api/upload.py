@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import hashlib
 import tomllib
 from collections.abc import AsyncIterator, Iterator, Mapping
@@ -32,7 +33,8 @@ from python_multipart.exceptions import FormParserError
 from python_multipart.multipart import MultipartParser, MultipartState, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
-from app.errors import AppError, InputError, UploadTimeoutError, UploadTooLargeError
+from app.errors import (AppError, InputError, StorageError, StorageFullError, UploadTimeoutError,
+                        UploadTooLargeError)
 
 MAX_FIELD_BYTES = 64 * 1024
 MAX_HEADER_BYTES = 16 * 1024  # all header lines of one part together
@@ -64,7 +66,8 @@ class _Sink:
         self.size = 0
         self.hash = hashlib.sha256()
         self.head = b""
-        self.fh: IO[bytes] | None = path.open("wb")
+        with _storage_errors():
+            self.fh: IO[bytes] | None = path.open("wb")
 
     def write(self, data: bytes) -> None:
         self.size += len(data)
@@ -75,19 +78,33 @@ class _Sink:
             self.head += data[: 4096 - len(self.head)]
         self.hash.update(data)
         assert self.fh is not None
-        self.fh.write(data)
+        with _storage_errors():
+            self.fh.write(data)
 
     def close(self) -> UploadedFile:
         if self.fh is not None:
-            self.fh.close()
-            self.fh = None
+            fh, self.fh = self.fh, None
+            with _storage_errors():
+                fh.close()
         return UploadedFile(self.path, self.filename, self.size, self.hash.hexdigest(), self.head, self.field_name)
 
     def discard(self) -> None:
         if self.fh is not None:
-            self.fh.close()
-            self.fh = None
+            fh, self.fh = self.fh, None
+            with contextlib.suppress(OSError):  # a full disk fails the flush; the handle is closed anyway
+                fh.close()
         self.path.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def _storage_errors() -> Iterator[None]:
+    """Writing an upload fails: 507 on a full volume, 500 ``storage_error`` otherwise -- never the path."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise StorageFullError("the server's data volume is full; the upload was not stored") from exc
+        raise StorageError(f"cannot store the upload: {exc.strerror or type(exc).__name__}") from exc
 
 
 def _safe_name(name: str) -> str:

@@ -247,6 +247,8 @@ class SQLiteStore(KeyTable):
         db = self._conn()
         if version is None:
             row = db.execute("SELECT * FROM vehicles WHERE name = ? ORDER BY version DESC LIMIT 1", (name,)).fetchone()
+        elif not 0 < version < 2**62:  # also keeps numbers SQLite cannot bind out of the query
+            row = None
         else:
             row = db.execute("SELECT * FROM vehicles WHERE name = ? AND version = ?", (name, version)).fetchone()
         if row is None:

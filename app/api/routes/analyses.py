@@ -72,7 +72,7 @@ def create_analysis(body: AnalysisCreate, store: StoreDep, runner: RunnerDep, se
 
 @router.get("", response_model=list[AnalysisOut], summary="List analyses, newest first")
 def list_analyses(store: StoreDep, log_id: str | None = None, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-                  offset: Annotated[int, Query(ge=0)] = 0) -> list[AnalysisOut]:
+                  offset: Annotated[int, Query(ge=0, le=2**62)] = 0) -> list[AnalysisOut]:
     return [AnalysisOut.of(a) for a in store.list_analyses(log_id, limit, offset)]
 
 

@@ -76,7 +76,7 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
 
 @router.get("", response_model=list[LogOut], summary="List logs, newest first")
 def list_logs(store: StoreDep, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-              offset: Annotated[int, Query(ge=0)] = 0) -> list[LogOut]:
+              offset: Annotated[int, Query(ge=0, le=2**62)] = 0) -> list[LogOut]:
     return [LogOut.of(r) for r in store.list_logs(limit, offset)]
 
 
