@@ -79,9 +79,9 @@ def test_hostile_toml_and_bodies(client: TestClient) -> None:
     detail = _error(client.post("/analyses", content=b"x" * 70_000, headers={"content-type": "application/json"}),
                     413, "body_too_large")
     assert "65536 byte cap" in detail
-    for body, status, code in ((b"{" * 60_000, 422, "validation_error"), (b"\xff\xfe", 422, "validation_error"),
-                               (b"[" * 60_000, 400, "bad_request"),  # nested past the recursion limit
-                               (b'{"log_id": ' + b"[" * 60_000 + b"]" * 60_000 + b"}", 400, "bad_request")):
+    for body, status, code in ((b"{" * 30_000, 422, "validation_error"), (b"\xff\xfe", 422, "validation_error"),
+                               (b"[" * 30_000, 400, "bad_request"),  # nested past the recursion limit
+                               (b'{"log_id": ' + b"[" * 20_000 + b"]" * 20_000 + b"}", 400, "bad_request")):
         _error(client.post("/analyses", content=body, headers={"content-type": "application/json"}), status, code)
     # a body cap applies with chunked bodies too (no Content-Length to check up front)
     _error(client.post("/analyses", content=iter([b"{" + b" " * 40_000, b" " * 40_000]),
