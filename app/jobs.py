@@ -1,7 +1,8 @@
 """Background jobs (analyses, tolerance bands): each run in its own worker process with a wall-time limit.
 
 The store is the source of truth: a job is queued in SQLite before it is submitted here,
-marked running (with the server's process id) when a runner thread picks it up, and finished
+marked running under this runner's lease (renewed while the worker runs, see
+:mod:`app.storage.jobtable`) when a runner thread picks it up, and finished
 or failed with a typed ``{code, detail}`` when it ends. At startup :meth:`JobRunner.start`
 asks the store to re-queue (or fail, after ``max_attempts``) jobs cut off by a crash and runs
 every queued job, so nothing is lost across restarts.
@@ -21,8 +22,10 @@ import json
 import logging
 import multiprocessing
 import os
+import socket
 import threading
 import time
+import uuid
 from concurrent.futures import Future, ThreadPoolExecutor
 from multiprocessing.process import BaseProcess
 from pathlib import Path
@@ -48,25 +51,52 @@ def tolerance_path(result_dir: Path, n: int, seed: int) -> Path:
 
 
 class JobRunner:
+    """Runs queued jobs, ``workers`` at a time, each in a spawned worker process under a lease.
+
+    ``lease_s``: how long a job stays this runner's without a heartbeat (renewed every third of it);
+    after a crash of the whole server the job is resumed once that has run out. A background loop
+    re-checks the store every half lease: it resumes jobs whose runner is gone and runs jobs queued
+    by other processes.
+    """
+
     def __init__(self, store: Store, workers: int = 1, max_attempts: int = 2, timeout_s: float | None = 600.0,
-                 in_process: bool = False) -> None:
+                 in_process: bool = False, lease_s: float = 10.0) -> None:
         self.store = store
         self.max_attempts = max_attempts
         self.timeout_s = timeout_s
         self.in_process = in_process
+        self.lease_s = lease_s
+        self.owner = f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lashscope-job")
         self._futures: dict[str, Future[None]] = {}
         self._procs: dict[str, BaseProcess] = {}
         self._lock = threading.Lock()
         self._closed = False
+        self._stop = threading.Event()
         self._cancelled: set[str] = set()
 
     def start(self) -> list[JobRecord]:
-        """Recover interrupted jobs and submit every queued one; returns what was submitted."""
+        """Recover interrupted jobs and submit every queued one; returns what was submitted.
+
+        Then keeps doing so every half lease in a daemon thread (jobs of a crashed runner come back
+        once their lease has run out)."""
+        pending = self.recover()
+        if not self.in_process:
+            threading.Thread(target=self._watch, name="lashscope-job-watch", daemon=True).start()
+        return pending
+
+    def recover(self) -> list[JobRecord]:
         pending = self.store.recover_jobs(self.max_attempts)
         for job in pending:
             self.submit(job.id)
         return pending
+
+    def _watch(self) -> None:
+        while not self._stop.wait(self.lease_s / 2):
+            try:
+                self.recover()
+            except Exception:  # a locked or vanished store must not end the loop
+                log.exception("job recovery pass failed")
 
     def submit(self, job_id: str) -> None:
         with self._lock:
@@ -96,21 +126,25 @@ class JobRunner:
             proc.kill()
 
     def shutdown(self, wait: bool = False) -> None:
-        """Take no new work; kill running workers (their jobs stay 'running' and are resumed at the next start)."""
+        """Take no new work; kill running workers (their jobs stay 'running' with the lease let go, so the
+        next start resumes them at once)."""
+        self._stop.set()
         with self._lock:
             self._closed = True
-            procs = list(self._procs.values())
+            procs = dict(self._procs)
         if not wait:
-            for p in procs:
+            for job_id, p in procs.items():
                 p.kill()
+                p.join(5.0)
+                self.store.release_lease(job_id, self.owner)
         self._pool.shutdown(wait=wait, cancel_futures=True)
 
     # -- one job ---------------------------------------------------------------------------
     def _run(self, job_id: str) -> None:
         try:
-            job = self.store.start_job(job_id)
-            if job.status is not JobStatus.RUNNING or job_id in self._cancelled:
-                return  # cancelled (or taken) while it waited
+            job = self.store.start_job(job_id, self.owner, None if self.in_process else self.lease_s)
+            if job.status is not JobStatus.RUNNING or job.lease_owner != self.owner or job_id in self._cancelled:
+                return  # cancelled, or taken by another runner, while it waited
             if job.kind not in KINDS:
                 self.store.fail_job(job_id, "unknown_job", f"unknown job kind {job.kind!r}")
             elif self.in_process:
@@ -125,21 +159,38 @@ class JobRunner:
                 self._futures.pop(job_id, None)
                 self._procs.pop(job_id, None)
 
+    def _supervise(self, job: JobRecord, proc: BaseProcess) -> bool:
+        """Wait for the worker, renewing the lease; kill it past the wall time or when the lease is lost
+        (the job was cancelled or taken over). False: the runner has dealt with the job already."""
+        deadline = None if self.timeout_s is None else time.monotonic() + self.timeout_s
+        while True:
+            left = None if deadline is None else deadline - time.monotonic()
+            proc.join(self.lease_s / 3 if left is None else max(0.0, min(self.lease_s / 3, left)))
+            if not proc.is_alive():
+                return True
+            if deadline is not None and time.monotonic() >= deadline:
+                proc.kill()
+                proc.join()
+                self.store.fail_job(job.id, "timeout", f"timed out after {self.timeout_s:g} s "
+                                    "(LASHSCOPE_JOB_TIMEOUT_S); the worker was stopped")
+                log.warning("job %s timed out after %g s", job.id, self.timeout_s)
+                return False
+            if not self.store.renew_lease(job.id, self.owner, self.lease_s):
+                proc.kill()
+                proc.join()
+                log.warning("job %s is no longer this runner's (cancelled or taken over); worker stopped", job.id)
+                return False
+
     def _in_worker(self, job: JobRecord) -> None:
         proc = _SPAWN.Process(target=worker_main, args=(self.store.url, job.id, os.getpid()), daemon=True,
                               name=f"lashscope-{job.kind}-{job.id}")
         with self._lock:
             if self._closed:
-                return  # stays 'running' with this pid: re-queued at the next start
+                self.store.release_lease(job.id, self.owner)  # re-queued at the next start
+                return
             proc.start()
             self._procs[job.id] = proc
-        proc.join(self.timeout_s)
-        if proc.is_alive():
-            proc.kill()
-            proc.join()
-            self.store.fail_job(job.id, "timeout", f"timed out after {self.timeout_s:g} s "
-                                "(LASHSCOPE_JOB_TIMEOUT_S); the worker was stopped")
-            log.warning("job %s timed out after %g s", job.id, self.timeout_s)
+        if not self._supervise(job, proc):
             return
         with self._lock:
             closed = self._closed

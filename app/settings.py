@@ -8,6 +8,8 @@
 ``LASHSCOPE_ANALYSIS_WORKERS``  background analyses run at the same time (default 1)
 ``LASHSCOPE_JOB_MAX_ATTEMPTS``  a job cut off by a crash is re-run until it has started this often
 ``LASHSCOPE_JOB_TIMEOUT_S``     a job's worker process is killed after this wall time and the job fails (default 600)
+``LASHSCOPE_JOB_LEASE_S``       a running job's lease (default 10 s, renewed every third); after a crash its job is
+                              resumed once the lease has run out, never while its runner may still live
 ``LASHSCOPE_DIAGNOSIS_TIMEOUT_S``  a diagnosis' (or validation's) worker process is killed after this wall time
                                  and it fails (default 1800)
 ``LASHSCOPE_DBC_DIR``           the project's DBC files and signal maps (default: ``dbc/`` in the source tree)
@@ -51,6 +53,7 @@ class Settings(BaseSettings):
     analysis_workers: int = Field(default=1, ge=1, le=16)
     job_max_attempts: int = Field(default=2, ge=1)
     job_timeout_s: float = Field(default=600.0, gt=0)
+    job_lease_s: float = Field(default=10.0, ge=1)  # a crashed server's jobs are resumed this long after
     diagnosis_timeout_s: float = Field(default=1800.0, gt=0)  # a whole-library fit on a long log takes minutes
     dbc_dir: Path = Field(default_factory=default_dbc_dir)
     series_cache_entries: int = Field(default=256, ge=0)

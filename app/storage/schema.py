@@ -77,8 +77,15 @@ CREATE TABLE api_keys (
 );
 """
 
+# Jobs are owned through a lease their runner renews, not through a process id (app.storage.jobtable).
+V3_JOB_LEASES = """
+ALTER TABLE jobs ADD COLUMN lease_owner TEXT;
+ALTER TABLE jobs ADD COLUMN lease_until REAL;
+"""
+
 # (version, what it changes, SQL): applied in order, each in one transaction.
 MIGRATIONS: list[tuple[int, str, str]] = [
     (1, "logs, vehicles, jobs, analyses (first release)", V1),
     (2, "api_keys: hashed API keys with a scope", V2_API_KEYS),
+    (3, "jobs.lease_owner, jobs.lease_until: job leases with heartbeats", V3_JOB_LEASES),
 ]

@@ -33,29 +33,12 @@ from typing import Any
 from urllib.parse import quote
 
 from app.errors import ConflictError, InputError, NotFoundError, StorageError
+from app.storage.jobtable import JobTable, now
 from app.storage.keys import KeyTable
 from app.storage.migrations import upgrade
 from app.storage.records import AnalysisRecord, JobRecord, JobStatus, LogRecord, VehicleRecord
 
 VEHICLE_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789-_")
-
-
-def now() -> str:
-    return datetime.now(UTC).isoformat(timespec="milliseconds")
-
-
-def _pid_alive(pid: int | None) -> bool:
-    if pid is None or pid <= 0:
-        return False
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def file_sha256(*paths: Path) -> str:
@@ -67,7 +50,7 @@ def file_sha256(*paths: Path) -> str:
     return h.hexdigest()
 
 
-class SQLiteStore(KeyTable):
+class SQLiteStore(JobTable, KeyTable):
     """SQLite + files under ``root``; safe to share between threads of one process and between processes.
 
     ``database`` is the SQLite file (default ``<root>/lashscope.sqlite3``); opening upgrades its
@@ -267,96 +250,6 @@ class SQLiteStore(KeyTable):
         if not rows:
             raise NotFoundError(f"vehicle {name!r} not found")
         return [self._vehicle(r) for r in rows]
-
-    # -- jobs --------------------------------------------------------------------------
-    def _job(self, row: sqlite3.Row) -> JobRecord:
-        return JobRecord(
-            id=row["id"], kind=row["kind"], subject=row["subject"], status=JobStatus(row["status"]),
-            progress=row["progress"], stage=row["stage"], attempts=row["attempts"], created_at=row["created_at"],
-            updated_at=row["updated_at"], started_at=row["started_at"], finished_at=row["finished_at"],
-            error_code=row["error_code"], error_detail=row["error_detail"], owner_pid=row["owner_pid"],
-        )
-
-    def _insert_job(self, db: sqlite3.Connection, kind: str, subject: str) -> str:
-        job_id = f"job_{uuid.uuid4().hex[:16]}"
-        ts = now()
-        db.execute("INSERT INTO jobs (id, kind, subject, status, progress, stage, attempts, created_at, updated_at)"
-                   " VALUES (?,?,?,?,0,'queued',0,?,?)", (job_id, kind, subject, JobStatus.QUEUED.value, ts, ts))
-        return job_id
-
-    def create_job(self, kind: str, subject: str) -> JobRecord:
-        with self._tx() as db:
-            job_id = self._insert_job(db, kind, subject)
-        return self.get_job(job_id)
-
-    def get_job(self, job_id: str) -> JobRecord:
-        row = self._conn().execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
-        if row is None:
-            raise NotFoundError(f"job {job_id!r} not found")
-        return self._job(row)
-
-    def find_job(self, kind: str, subject: str) -> JobRecord | None:
-        row = self._conn().execute("SELECT * FROM jobs WHERE kind = ? AND subject = ? ORDER BY created_at DESC"
-                                   " LIMIT 1", (kind, subject)).fetchone()
-        return self._job(row) if row else None
-
-    def start_job(self, job_id: str) -> JobRecord:
-        """Mark a queued job running; a job no longer queued (cancelled, taken) is returned unchanged."""
-        with self._tx() as db:
-            db.execute("UPDATE jobs SET status = 'running', attempts = attempts + 1, started_at = ?, updated_at = ?,"
-                       " owner_pid = ?, progress = 0, stage = 'starting', error_code = NULL, error_detail = NULL"
-                       " WHERE id = ? AND status = 'queued'", (now(), now(), os.getpid(), job_id))
-        return self.get_job(job_id)
-
-    def update_job(self, job_id: str, progress: float, stage: str) -> None:
-        with self._tx() as db:
-            db.execute("UPDATE jobs SET progress = ?, stage = ?, updated_at = ? WHERE id = ? AND status = 'running'",
-                       (float(min(max(progress, 0.0), 1.0)), stage, now(), job_id))
-
-    def finish_job(self, job_id: str) -> None:
-        with self._tx() as db:
-            db.execute("UPDATE jobs SET status = 'done', progress = 1, stage = 'done', finished_at = ?,"
-                       " updated_at = ? WHERE id = ?", (now(), now(), job_id))
-
-    def fail_job(self, job_id: str, code: str, detail: str) -> None:
-        with self._tx() as db:
-            db.execute("UPDATE jobs SET status = 'failed', stage = 'failed', error_code = ?, error_detail = ?,"
-                       " finished_at = ?, updated_at = ? WHERE id = ?", (code, detail, now(), now(), job_id))
-
-    def recover_jobs(self, max_attempts: int) -> list[JobRecord]:
-        """Re-queue or fail jobs whose process died; returns every job that should run now."""
-        with self._tx() as db:
-            for row in db.execute("SELECT * FROM jobs WHERE status = 'running'").fetchall():
-                if _pid_alive(row["owner_pid"]) and row["owner_pid"] != os.getpid():
-                    continue  # another live process is running it
-                if row["attempts"] < max_attempts:
-                    db.execute("UPDATE jobs SET status = 'queued', stage = ?, updated_at = ? WHERE id = ?",
-                               (f"resumed after an interruption (attempt {row['attempts']} was cut off)", now(),
-                                row["id"]))
-                else:
-                    db.execute(
-                        "UPDATE jobs SET status = 'failed', stage = 'failed', error_code = 'interrupted',"
-                        " error_detail = ?, finished_at = ?, updated_at = ? WHERE id = ?",
-                        (f"interrupted: the server stopped while this job was running, {row['attempts']} of "
-                         f"{max_attempts} attempts used", now(), now(), row["id"]))
-        return self.pending_jobs()
-
-    def active_jobs(self, analysis_id: str) -> list[JobRecord]:
-        """Queued or running jobs of an analysis: its own and its tolerance bands (``<id>/n=../seed=..``)."""
-        rows = self._conn().execute(
-            "SELECT * FROM jobs WHERE status IN ('queued', 'running') AND (subject = ? OR substr(subject, 1, ?) = ?)",
-            (analysis_id, len(analysis_id) + 1, analysis_id + "/")).fetchall()
-        return [self._job(r) for r in rows]
-
-    def pending_jobs(self) -> list[JobRecord]:
-        rows = self._conn().execute("SELECT * FROM jobs WHERE status = 'queued' ORDER BY created_at")
-        return [self._job(r) for r in rows]
-
-    def job_counts(self) -> dict[str, int]:
-        rows = self._conn().execute("SELECT status, COUNT(*) AS n FROM jobs GROUP BY status")
-        counts = {s.value: 0 for s in JobStatus}
-        counts.update({r["status"]: r["n"] for r in rows})
-        return counts
 
     # -- analyses ----------------------------------------------------------------------
     _ANALYSIS_SQL = ("SELECT a.*, j.id AS j_id FROM analyses a JOIN jobs j ON j.id = a.job_id")

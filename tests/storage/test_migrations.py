@@ -40,8 +40,8 @@ def test_first_release_database_is_upgraded_with_its_rows(tmp_path: Path) -> Non
     _first_release_db(root)
     store = SQLiteStore(root)
     db = sqlite3.connect(root / "lashscope.sqlite3")
-    assert schema_version(db) == LATEST == MIGRATIONS[-1][0] == 2
-    assert [r[0] for r in db.execute("SELECT version FROM schema_version ORDER BY version")] == [1, 2]
+    assert schema_version(db) == LATEST == MIGRATIONS[-1][0] == 3
+    assert [r[0] for r in db.execute("SELECT version FROM schema_version ORDER BY version")] == [1, 2, 3]
     log = store.get_log("log_ab")
     assert (log.filename, log.frames, log.duration_s, log.meta) == ("drive.blf", 1200, 12.5, {"channels": 3})
     assert log.path.read_bytes() == b"log bytes"
