@@ -2,8 +2,8 @@
 
 ``create_app(settings)`` wires the store (embedded SQLite + files by default, or
 ``LASHSCOPE_STORE_URL``), the job runner, the request guard (Host allow-list, API keys,
-same-origin writes, body cap: :mod:`app.api.security`), CORS and the error handlers, and includes every router in :data:`ROUTERS` -- append
-a module's ``router`` there to add a resource.
+same-origin writes, body cap: :mod:`app.api.security`), CORS and the error handlers, and
+includes every router in :data:`ROUTERS` -- append a module's ``router`` there to add a resource.
 
 On stop (SIGTERM, Ctrl-C) the lifespan closes the job runner to new work (queued jobs stay
 queued in SQLite and run after the next start; a running job's worker process is killed, so the

@@ -33,8 +33,7 @@ from python_multipart.exceptions import FormParserError
 from python_multipart.multipart import MultipartParser, MultipartState, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
-from app.errors import (AppError, InputError, StorageError, StorageFullError, UploadTimeoutError,
-                        UploadTooLargeError)
+from app.errors import AppError, InputError, StorageError, StorageFullError, UploadTimeoutError, UploadTooLargeError
 
 MAX_FIELD_BYTES = 64 * 1024
 MAX_HEADER_BYTES = 16 * 1024  # all header lines of one part together
@@ -216,7 +215,8 @@ def check_toml(path: Path, shown: str) -> None:
     try:
         tomllib.loads(path.read_bytes().decode("utf-8"))
     except UnicodeDecodeError as exc:
-        raise InputError(f"{shown}: not a TOML text file (byte {exc.start} is not UTF-8)", code="invalid_toml") from None
+        raise InputError(f"{shown}: not a TOML text file (byte {exc.start} is not UTF-8)",
+                         code="invalid_toml") from None
     except RecursionError:
         raise InputError(f"{shown}: tables or arrays nested too deeply", code="invalid_toml") from None
     except tomllib.TOMLDecodeError:

@@ -27,7 +27,6 @@ import sqlite3
 import threading
 import uuid
 from collections.abc import Iterator
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote
@@ -36,7 +35,7 @@ from app.errors import ConflictError, InputError, NotFoundError, StorageError
 from app.storage.jobtable import JobTable, now
 from app.storage.keys import KeyTable
 from app.storage.migrations import upgrade
-from app.storage.records import AnalysisRecord, JobRecord, JobStatus, LogRecord, VehicleRecord
+from app.storage.records import AnalysisRecord, JobStatus, LogRecord, VehicleRecord
 
 VEHICLE_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789-_")
 
@@ -73,7 +72,8 @@ class SQLiteStore(JobTable, KeyTable):
     @property
     def url(self) -> str:
         """Where to open this store again (``app.storage.url.open_store``), e.g. from a job worker."""
-        return f"sqlite:///{self.database}" + ("" if self.database.parent == self.root else f"?files={quote(str(self.root))}")
+        files = "" if self.database.parent == self.root else f"?files={quote(str(self.root))}"
+        return f"sqlite:///{self.database}{files}"
 
     # -- connections -------------------------------------------------------------------
     def _conn(self) -> sqlite3.Connection:

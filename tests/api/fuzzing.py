@@ -102,7 +102,7 @@ def _toml(rng: random.Random, preset: str) -> bytes:
 
 
 def _query(rng: random.Random, names: list[str]) -> dict[str, str]:
-    return {n: rng.choice(NASTY + [str(rng.randrange(-5, 3000)), str(rng.uniform(-100, 1000))])
+    return {n: rng.choice([*NASTY, str(rng.randrange(-5, 3000)), str(rng.uniform(-100, 1000))])
             for n in names if rng.random() < 0.7}
 
 
@@ -144,8 +144,9 @@ def requests(seed: int, n: int, preset_toml: str, analysis_id: str = "an_0000000
                                    {"content-type": rng.choice(["application/octet-stream", "text/plain", ""])},
                                    _bytes(rng, rng.choice([0, 1, 100, 4096]))))
         elif kind == 3:  # JSON bodies
-            out.append(FuzzRequest("POST", rng.choice(["/analyses", f"/analyses/{analysis_id}/diagnoses",
-                                                       "/live/sessions"]), {},
+            # diagnoses of an unknown analysis only: a valid one would queue minutes of fitting per request
+            unknown = f"/analyses/an_{rng.randrange(16**16):016x}/diagnoses"
+            out.append(FuzzRequest("POST", rng.choice(["/analyses", unknown, "/live/sessions"]), {},
                                    {"content-type": rng.choice(["application/json", "text/plain"])},
                                    _json_body(rng, log_id)))
         else:  # query parameters

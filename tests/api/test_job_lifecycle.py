@@ -3,7 +3,6 @@ after its lease lapses), and deleting an analysis cancels its running jobs and f
 
 from __future__ import annotations
 
-import os
 import signal
 import time
 from pathlib import Path
