@@ -20,6 +20,7 @@
 ``LASHSCOPE_MAX_JSON_KB``       body cap of every request but the uploads, in KiB (default 1024); past it 413
 ``LASHSCOPE_UPLOAD_IDLE_S``     an upload that sends nothing for this long is dropped (408, partial file removed)
 ``LASHSCOPE_MAX_QUEUED_JOBS``   new jobs are refused (429 ``queue_full``) while this many wait (default 32)
+``LASHSCOPE_KEY_RATE_PER_S``    requests a second per API key (bursts of two seconds' worth); past it 429 (0: off)
 ``LASHSCOPE_LIVE_CHANNELS``     live buses a client may open, ``interface:channel`` or ``interface:*`` (comma-separated)
 """
 
@@ -67,6 +68,7 @@ class Settings(BaseSettings):
     max_json_kb: float = Field(default=1024.0, gt=0)
     upload_idle_s: float = Field(default=60.0, gt=0)
     max_queued_jobs: int = Field(default=32, ge=1)
+    key_rate_per_s: float = Field(default=100.0, ge=0)  # per API key; 0: no limit
     live_channels: Annotated[list[str], NoDecode] = Field(
         default_factory=lambda: ["virtual:*", "tcp_loopback:*", "socketcan:*"])
 

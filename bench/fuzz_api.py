@@ -86,6 +86,51 @@ def leaks(srv: Server) -> tuple[int, int]:
     return len(list(tmp.iterdir())), handles
 
 
+def guard_cost(data: Path, calls: int = 20_000) -> list[str]:
+    """Microseconds per request the request guard adds, in-process, next to calling the app bare."""
+    import asyncio
+    from types import SimpleNamespace
+
+    from app.api.security import RequestGuard
+    from app.settings import Settings
+    from app.storage.sqlite import SQLiteStore
+
+    store = SQLiteStore(data)
+
+    async def app(scope: object, receive: object, send: object) -> None:
+        return None
+
+    async def receive() -> dict[str, object]:
+        return {"type": "http.request", "body": b'{"log_id": "x"}', "more_body": False}
+
+    async def send(message: object) -> None:
+        return None
+
+    holder = SimpleNamespace(state=SimpleNamespace(store=store))
+    base = [(b"host", b"127.0.0.1:8000")]
+
+    async def timed(fn: object, scope: dict[str, object]) -> float:
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            await fn(dict(scope), receive, send)  # type: ignore[operator]
+        return (time.perf_counter() - t0) / calls * 1e6
+
+    def measure(name: str, method: str, headers: list[tuple[bytes, bytes]]) -> str:
+        guard = RequestGuard(app, Settings(data_dir=data, key_rate_per_s=0))
+        scope = {"type": "http", "method": method, "path": "/analyses", "headers": headers, "app": holder}
+        bare = asyncio.run(timed(app, scope))
+        guarded = asyncio.run(timed(guard, scope))
+        return f"request guard, {name}: {guarded:.1f} us per request (the bare app call: {bare:.2f} us)"
+
+    json_type = (b"content-type", b"application/json"), (b"content-length", b"15")
+    lines = [measure("no keys, GET", "GET", base), measure("no keys, POST JSON", "POST", [*base, *json_type])]
+    auth = (b"authorization", f"Bearer {store.create_key('write')[1]}".encode())
+    lines += [measure("with a key, GET", "GET", [*base, auth]),
+              measure("with a key, POST JSON", "POST", [*base, auth, *json_type])]
+    store.close()
+    return lines
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--n", type=int, default=10_000)
@@ -94,6 +139,8 @@ def main() -> int:
     ap.add_argument("--clients", type=int, default=30)
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="lashscope-fuzz-"))
+    for line in guard_cost(work / "guard"):
+        print(line)
     log = work / "drive.blf"
     dbc = default_dbc_dir()
     build_demo_log(log, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml", Scenario(duration_s=40.0))

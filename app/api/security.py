@@ -11,7 +11,9 @@ before any route runs:
    address without ``--insecure`` -- every request but ``/health`` and the API docs needs
    ``Authorization: Bearer <key>``: none 401 ``auth_required``, unknown or revoked 401
    ``invalid_key``, too small a scope 403 ``insufficient_scope``. Reads need ``read``; creating
-   things (POST, PUT, PATCH) ``write``; deleting ``admin``.
+   things (POST, PUT, PATCH) ``write``; deleting ``admin``. Each key gets
+   ``LASHSCOPE_KEY_RATE_PER_S`` requests a second (a token bucket holding two seconds' worth);
+   past that 429 ``rate_limited`` with ``Retry-After``.
 3. **Same origin.** Without keys (a workstation on loopback) reads stay open, but a
    state-changing request from a browser must come from the service's own origin or a
    ``--cors-origin``: a foreign ``Origin`` or ``Sec-Fetch-Site: cross-site``/``same-site`` gets 403
@@ -21,8 +23,9 @@ before any route runs:
    by ``LASHSCOPE_MAX_UPLOAD_MB``) is read here up to ``LASHSCOPE_MAX_JSON_KB``: past it 413
    ``body_too_large``; a body that stalls for ``LASHSCOPE_UPLOAD_IDLE_S`` gets 408.
 
-Which keys exist is re-read from the store at most once a second, so ``lashscope keys create`` or
-``revoke`` in another process takes effect on a running server within a second.
+Which keys exist, and what a presented key is, are re-read from the store at most once a second,
+so ``lashscope keys create`` or ``revoke`` in another process takes effect on a running server
+within a second, and a request costs no database read.
 """
 
 from __future__ import annotations
@@ -99,6 +102,8 @@ class RequestGuard:
         self.open_network = not is_loopback(settings.host) and not settings.insecure
         self._keys_at = -1e9
         self._have_keys = False
+        self._buckets: dict[str, tuple[float, float]] = {}  # key id -> (tokens, monotonic time)
+        self._verified: dict[str, tuple[Any, float]] = {}  # token -> (ApiKey or None, monotonic time)
 
     def _keys_exist(self, store: Any) -> bool:
         now = time.monotonic()
@@ -113,7 +118,8 @@ class RequestGuard:
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
         try:
             self._check(scope, headers)
-            if (scope["method"], scope["path"].rstrip("/")) not in UPLOAD_ROUTES:
+            has_body = "content-length" in headers or "transfer-encoding" in headers
+            if has_body and (scope["method"], scope["path"].rstrip("/")) not in UPLOAD_ROUTES:
                 receive = await self._buffered(receive, headers)
         except _Deny as err:
             await _respond(send, err)
@@ -145,12 +151,40 @@ class RequestGuard:
                         "'Authorization: Bearer <key>' (create one with 'lashscope keys create')", challenge)
         if kind.lower() != "bearer" or not token.strip():
             raise _Deny(401, "invalid_key", "the Authorization header must read 'Bearer <key>'", challenge)
-        key = store.verify_key(token.strip()) if store is not None else None
+        key = self._verify(store, token.strip())
         if key is None:
             raise _Deny(401, "invalid_key", "the API key is unknown or revoked", challenge)
         if not scope_allows(key.scope, need):
             raise _Deny(403, "insufficient_scope", f"this request needs scope {need!r}; key {key.id} has "
                         f"{key.scope!r}")
+        self._spend(key.id)
+
+    def _verify(self, store: Any, token: str) -> Any:
+        """``store.verify_key`` remembered for a second (a database read per request otherwise)."""
+        now = time.monotonic()
+        hit = self._verified.get(token)
+        if hit is not None and now - hit[1] <= KEYS_RECHECK_S:
+            return hit[0]
+        key = store.verify_key(token) if store is not None else None
+        if len(self._verified) >= 4096:  # unknown tokens must not grow this without bound
+            self._verified.clear()
+        self._verified[token] = (key, now)
+        return key
+
+    def _spend(self, key_id: str) -> None:
+        """Take one token from the key's bucket (refilled at the configured rate, two seconds deep)."""
+        rate = self.cfg.key_rate_per_s
+        if rate <= 0:
+            return
+        now = time.monotonic()
+        tokens, then = self._buckets.get(key_id, (2 * rate, now))
+        tokens = min(2 * rate, tokens + (now - then) * rate)
+        if tokens < 1:
+            self._buckets[key_id] = (tokens, now)
+            wait = (1 - tokens) / rate
+            raise _Deny(429, "rate_limited", f"key {key_id} is over {rate:g} requests/s "
+                        "(LASHSCOPE_KEY_RATE_PER_S)", {"Retry-After": str(max(1, round(wait + 0.5)))})
+        self._buckets[key_id] = (tokens - 1, now)
 
     def _same_origin(self, scope: Scope, headers: dict[str, str]) -> None:
         site = headers.get("sec-fetch-site")
@@ -176,7 +210,8 @@ class RequestGuard:
         size = 0
         while True:
             try:
-                msg = await asyncio.wait_for(receive(), self.cfg.upload_idle_s)
+                async with asyncio.timeout(self.cfg.upload_idle_s):  # no task per message, unlike wait_for
+                    msg = await receive()
             except TimeoutError:
                 raise _Deny(408, "body_timeout", f"no request body data for {self.cfg.upload_idle_s:g} s "
                             "(LASHSCOPE_UPLOAD_IDLE_S)") from None

@@ -237,7 +237,8 @@ async def _chunks(request: Request, idle_s: float | None) -> AsyncIterator[bytes
     stream = request.stream().__aiter__()
     while True:
         try:
-            chunk = await asyncio.wait_for(anext(stream), idle_s)
+            async with asyncio.timeout(idle_s):
+                chunk = await anext(stream)
         except StopAsyncIteration:
             return
         except TimeoutError:

@@ -84,9 +84,24 @@ def test_keys_and_scopes(client: TestClient) -> None:
     r = client.post("/vehicles", data={"name": "ev2", "preset": "paper"},
                     headers={**auth("admin"), "Origin": "http://evil.test"})
     assert r.status_code == 201, r.text
-    # revocation takes effect on the next request
+    # revocation takes effect within a second
     store.revoke_key(keys["write"][4:16])
+    time.sleep(KEYS_RECHECK_S + 0.1)
     _error(client.get("/logs", headers=auth("write")), 401, "invalid_key")
+
+
+def test_each_key_has_its_rate(tmp_path: Path) -> None:
+    with in_process(tmp_path / "data", key_rate_per_s=1) as c:
+        store = c.app.state.store  # type: ignore[attr-defined]
+        first, second = (store.create_key("read")[1] for _ in range(2))
+        time.sleep(KEYS_RECHECK_S + 0.1)
+        replies = [c.get("/logs", headers={"Authorization": f"Bearer {first}"}) for _ in range(20)]
+        codes = [r.status_code for r in replies]
+        assert codes[:2] == [200, 200]  # the bucket holds two seconds' worth
+        assert 429 in codes  # 20 requests take far less than the 18 s the rate would allow them
+        limited = replies[codes.index(429)]
+        assert limited.json()["code"] == "rate_limited" and int(limited.headers["retry-after"]) >= 1
+        assert c.get("/logs", headers={"Authorization": f"Bearer {second}"}).status_code == 200  # its own bucket
 
 
 def test_serve_refuses_a_network_address_without_keys(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
