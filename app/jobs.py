@@ -18,7 +18,6 @@ command line, where nothing else has to stay responsive).
 
 from __future__ import annotations
 
-import json
 import logging
 import multiprocessing
 import os
@@ -27,27 +26,16 @@ import threading
 import time
 import uuid
 from concurrent.futures import Future, ThreadPoolExecutor
+from importlib import import_module
 from multiprocessing.process import BaseProcess
-from pathlib import Path
-from typing import Any
 
 from app.errors import AppError
 from app.storage.base import Store
 from app.storage.records import JobRecord, JobStatus
 
 log = logging.getLogger("lashscope.jobs")
-PROGRESS_EVERY_S = 0.25
-KINDS = ("analysis", "tolerance")
+KINDS = ("analysis", "tolerance")  # one module each in app.jobkinds, with run(store, job)
 _SPAWN = multiprocessing.get_context("spawn")  # no fork of a threaded server; the child imports afresh
-
-
-def tolerance_subject(analysis_id: str, n: int, seed: int) -> str:
-    """The job subject (and result file stem) of a tolerance band: ``<analysis>/n=<n>/seed=<seed>``."""
-    return f"{analysis_id}/n={n}/seed={seed}"
-
-
-def tolerance_path(result_dir: Path, n: int, seed: int) -> Path:
-    return result_dir / f"tolerance_n{n}_seed{seed}.json"
 
 
 class JobRunner:
@@ -219,10 +207,8 @@ def execute(store: Store, job: JobRecord) -> None:
     from sim import SimError
 
     try:
-        if job.kind == "analysis":
-            _analysis(store, job)
-        else:
-            _tolerance(store, job)
+        run = import_module(f"app.jobkinds.{job.kind}").run  # KINDS only: checked before a worker starts
+        run(store, job)
         store.finish_job(job.id)
     except (AppError, SimError) as exc:
         store.fail_job(job.id, getattr(exc, "code", "error"), _user_names(store, job, str(exc)))
@@ -241,51 +227,3 @@ def _user_names(store: Store, job: JobRecord, message: str) -> str:
     except AppError:
         return message
     return message.replace(str(logrec.path), logrec.filename).replace(logrec.path.name, logrec.filename)
-
-
-def _progress(store: Store, job_id: str, scale: float = 0.98) -> Any:
-    last_time, last_stage = [0.0], [""]
-
-    def progress(stage: str, fraction: float) -> None:
-        now = time.monotonic()
-        if stage != last_stage[0] or now - last_time[0] >= PROGRESS_EVERY_S:
-            last_time[0], last_stage[0] = now, stage
-            store.update_job(job_id, scale * fraction, stage)
-
-    return progress
-
-
-def _analysis(store: Store, job: JobRecord) -> None:
-    from app.payload import result_payload
-    from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
-    from app.storage.results import write_result
-    from sim import load_vehicle
-
-    rec = store.get_analysis(job.subject)
-    logrec = store.get_log(rec.log_id)
-    veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
-    inputs = VehicleInputs(load_vehicle(veh.driveline_path), veh.database_path, veh.signal_map_path)
-    result = run_analysis(logrec.path, inputs, AnalysisOptions.from_dict(rec.options), _progress(store, job.id))
-    store.update_job(job.id, 0.99, "saving")
-    doc, arrays = result_payload(result)
-    write_result(rec.result_dir, doc, arrays)
-    store.set_analysis_summary(rec.id, doc["summary"])
-
-
-def _tolerance(store: Store, job: JobRecord) -> None:
-    from app.pipeline import tolerance_for_result
-    from app.storage.results import ResultFiles, json_safe
-    from sim import load_vehicle
-
-    analysis_id, n_part, seed_part = job.subject.split("/")
-    n, seed = int(n_part.removeprefix("n=")), int(seed_part.removeprefix("seed="))
-    rec = store.get_analysis(analysis_id)
-    veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
-    progress = _progress(store, job.id)
-    doc = tolerance_for_result(ResultFiles(rec.result_dir), load_vehicle(veh.driveline_path), n, seed,
-                               lambda f: progress("tolerance", f))
-    doc.update(analysis_id=analysis_id, vehicle=rec.vehicle_name, vehicle_version=rec.vehicle_version)
-    out = tolerance_path(rec.result_dir, n, seed)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(json_safe(doc)), encoding="utf-8")
-    tmp.replace(out)

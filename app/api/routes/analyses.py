@@ -13,7 +13,9 @@ from app.analysis.tolerance import MAX_SAMPLES
 from app.api.deps import ResultsDep, RunnerDep, SettingsDep, StoreDep
 from app.api.schemas import ERRORS, AnalysisCreate, AnalysisOut
 from app.errors import AppError, ConflictError, NotFoundError, QueueFullError
-from app.jobs import JobRunner, tolerance_path, tolerance_subject
+from app.jobkinds.tolerance import result_path as tolerance_path
+from app.jobkinds.tolerance import subject as tolerance_subject
+from app.jobs import JobRunner
 from app.pipeline import AnalysisOptions
 from app.storage.base import Store
 from app.storage.records import AnalysisRecord, JobRecord, JobStatus
