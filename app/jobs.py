@@ -43,8 +43,7 @@ class JobRunner:
 
     ``lease_s``: how long a job stays this runner's without a heartbeat (renewed every third of it);
     after a crash of the whole server the job is resumed once that has run out. A background loop
-    re-checks the store every half lease: it resumes jobs whose runner is gone and runs jobs queued
-    by other processes.
+    re-checks the store every half lease and resumes jobs whose runner is gone.
     """
 
     def __init__(self, store: Store, workers: int = 1, max_attempts: int = 2, timeout_s: float | None = 600.0,
@@ -66,8 +65,8 @@ class JobRunner:
     def start(self) -> list[JobRecord]:
         """Recover interrupted jobs and submit every queued one; returns what was submitted.
 
-        Then keeps doing so every half lease in a daemon thread (jobs of a crashed runner come back
-        once their lease has run out)."""
+        Then, every half lease in a daemon thread, resumes jobs of a crashed runner once their lease has
+        run out."""
         pending = self.recover()
         if not self.in_process:
             threading.Thread(target=self._watch, name="lashscope-job-watch", daemon=True).start()
@@ -80,9 +79,13 @@ class JobRunner:
         return pending
 
     def _watch(self) -> None:
+        """Resume jobs whose runner died (their lease ran out) -- only those: a queued job is run by
+        whoever queued it (or at the next start), so rows another part of the service keeps queued
+        for its own reasons are left alone."""
         while not self._stop.wait(self.lease_s / 2):
             try:
-                self.recover()
+                for job in self.store.requeue_orphans(self.max_attempts):
+                    self.submit(job.id)
             except Exception:  # a locked or vanished store must not end the loop
                 log.exception("job recovery pass failed")
 

@@ -135,13 +135,20 @@ class JobTable:
         return not _pid_alive(row["owner_pid"]) or row["owner_pid"] == os.getpid()
 
     def recover_jobs(self, max_attempts: int) -> list[JobRecord]:
-        """Re-queue or fail running jobs whose owner is gone (lease run out); returns every job to run now."""
+        """Re-queue or fail running jobs whose owner is gone (lease run out); returns every queued job."""
+        self.requeue_orphans(max_attempts)
+        return self.pending_jobs()
+
+    def requeue_orphans(self, max_attempts: int) -> list[JobRecord]:
+        """Re-queue (or fail, past ``max_attempts``) running jobs whose lease has run out; returns the re-queued."""
         at = time.time()
+        requeued: list[str] = []
         with self._tx() as db:
             for row in db.execute("SELECT * FROM jobs WHERE status = 'running'").fetchall():
                 if not self._orphaned(row, at):
                     continue  # its runner is alive and renewing the lease
                 if row["attempts"] < max_attempts:
+                    requeued.append(row["id"])
                     db.execute("UPDATE jobs SET status = 'queued', stage = ?, updated_at = ?, lease_owner = NULL,"
                                " lease_until = NULL WHERE id = ?",
                                (f"resumed after an interruption (attempt {row['attempts']} was cut off)", now(),
@@ -152,7 +159,7 @@ class JobTable:
                         " error_detail = ?, finished_at = ?, updated_at = ?, lease_until = NULL WHERE id = ?",
                         (f"interrupted: the server stopped while this job was running, {row['attempts']} of "
                          f"{max_attempts} attempts used", now(), now(), row["id"]))
-        return self.pending_jobs()
+        return [self.get_job(job_id) for job_id in requeued]
 
     def active_jobs(self, analysis_id: str) -> list[JobRecord]:
         """Queued or running jobs of an analysis: its own and its tolerance bands (``<id>/n=../seed=..``)."""

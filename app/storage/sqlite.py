@@ -11,9 +11,10 @@ Layout of the data directory::
 
 Every thread gets its own connection; writes run in ``BEGIN IMMEDIATE`` transactions
 with a busy timeout, so concurrent uploads and job progress updates serialise instead
-of failing. Jobs record the process that runs them; at startup, jobs left ``running``
-by a process that is gone are re-queued until they have started ``max_attempts`` times,
-then marked failed with the reason.
+of failing. Jobs are held through leases (:mod:`app.storage.jobtable`), API keys as
+hashes (:mod:`app.storage.keys`); the schema is versioned and upgraded on open
+(:mod:`app.storage.migrations`). The database may live elsewhere than the files
+(``database=``; :func:`app.storage.url.open_store` opens a store from a URL).
 """
 
 from __future__ import annotations
