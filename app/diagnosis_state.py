@@ -32,7 +32,6 @@ import logging
 import multiprocessing
 import os
 import secrets
-import signal
 import threading
 import time
 from collections.abc import Callable
@@ -42,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from app.errors import AppError
+from app.worker import die_with_parent
 from sim.errors import SimError
 
 log = logging.getLogger("lashscope.diagnoses")
@@ -52,7 +52,6 @@ ACTIVE = ("queued", "running")
 _TOKEN = secrets.token_hex(8)
 _FILE_LOCK = threading.Lock()
 _SPAWN = multiprocessing.get_context("spawn")  # no fork of a threaded server; the child imports afresh
-_PR_SET_PDEATHSIG = 1
 
 Check = Callable[[], None]
 #: A piece of work: called with a ``check`` to call at every progress report. For a worker process it must
@@ -149,21 +148,9 @@ def _requeue(path: Path) -> None:
     update(path, status="queued", stage="stopped with the server; resumes at the next start")
 
 
-def _die_with_parent(parent: int) -> None:
-    """Have the kernel kill this process when the server dies (Linux), so no orphan keeps fitting."""
-    try:
-        import ctypes
-
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
-    except (OSError, AttributeError):  # not Linux: the parent check at each progress report remains
-        pass
-    if os.getppid() != parent:  # the server died before the line above took effect
-        os._exit(1)
-
-
 def _child(path: str, work: Work, parent: int) -> None:
     """Entry point of a worker process: run one piece of work, writing its state to ``path``."""
-    _die_with_parent(parent)
+    die_with_parent(parent)
 
     def check() -> None:
         if os.getppid() != parent:

@@ -19,9 +19,13 @@ subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
      |    +-- InsufficientDataError       (422)
      +-- InputError (ValueError)          (400)  absurd parameters, bad request values
      +-- UploadTooLargeError              (413)
+     +-- UploadTimeoutError (TimeoutError)(408)  an upload stalled longer than the idle limit
+     +-- QueueFullError                   (429)  too many jobs waiting
+     +-- ForbiddenError (PermissionError) (403)  the operator has not allowed this (e.g. a live bus)
      +-- NotFoundError (LookupError)      (404)
      +-- ConflictError                    (409)
      +-- StorageError (OSError)           (500)
+     |    +-- StorageFullError            (507)  the data volume is full (ENOSPC, EDQUOT)
      +-- LiveBusError (ConnectionError)   (503)
 
 Simulator errors (``sim.errors.SimError``) are mapped by the API as well.
@@ -114,6 +118,21 @@ class UploadTooLargeError(AppError):
     status = 413
 
 
+class UploadTimeoutError(AppError, TimeoutError):
+    code = "upload_timeout"
+    status = 408
+
+
+class QueueFullError(AppError):
+    code = "queue_full"
+    status = 429
+
+
+class ForbiddenError(AppError, PermissionError):
+    code = "forbidden"
+    status = 403
+
+
 class NotFoundError(AppError, LookupError):
     code = "not_found"
     status = 404
@@ -127,6 +146,11 @@ class ConflictError(AppError):
 class StorageError(AppError, OSError):
     code = "storage_error"
     status = 500
+
+
+class StorageFullError(StorageError):
+    code = "storage_full"
+    status = 507
 
 
 class LiveBusError(AppError, ConnectionError):

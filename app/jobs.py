@@ -1,7 +1,8 @@
 """Background jobs (analyses, tolerance bands): each run in its own worker process with a wall-time limit.
 
 The store is the source of truth: a job is queued in SQLite before it is submitted here,
-marked running (with the server's process id) when a runner thread picks it up, and finished
+marked running under this runner's lease (renewed while the worker runs, see
+:mod:`app.storage.jobtable`) when a runner thread picks it up, and finished
 or failed with a typed ``{code, detail}`` when it ends. At startup :meth:`JobRunner.start`
 asks the store to re-queue (or fail, after ``max_attempts``) jobs cut off by a crash and runs
 every queued job, so nothing is lost across restarts.
@@ -17,54 +18,76 @@ command line, where nothing else has to stay responsive).
 
 from __future__ import annotations
 
-import json
 import logging
 import multiprocessing
+import os
+import socket
 import threading
 import time
+import uuid
 from concurrent.futures import Future, ThreadPoolExecutor
+from importlib import import_module
 from multiprocessing.process import BaseProcess
-from pathlib import Path
-from typing import Any
 
 from app.errors import AppError
 from app.storage.base import Store
 from app.storage.records import JobRecord, JobStatus
 
 log = logging.getLogger("lashscope.jobs")
-PROGRESS_EVERY_S = 0.25
-KINDS = ("analysis", "tolerance")
+KINDS = ("analysis", "tolerance")  # one module each in app.jobkinds, with run(store, job)
 _SPAWN = multiprocessing.get_context("spawn")  # no fork of a threaded server; the child imports afresh
 
 
-def tolerance_subject(analysis_id: str, n: int, seed: int) -> str:
-    """The job subject (and result file stem) of a tolerance band: ``<analysis>/n=<n>/seed=<seed>``."""
-    return f"{analysis_id}/n={n}/seed={seed}"
-
-
-def tolerance_path(result_dir: Path, n: int, seed: int) -> Path:
-    return result_dir / f"tolerance_n{n}_seed{seed}.json"
-
-
 class JobRunner:
+    """Runs queued jobs, ``workers`` at a time, each in a spawned worker process under a lease.
+
+    ``lease_s``: how long a job stays this runner's without a heartbeat (renewed every third of it);
+    after a crash of the whole server the job is resumed once that has run out. A background loop
+    re-checks the store every half lease and resumes jobs whose runner is gone.
+    """
+
     def __init__(self, store: Store, workers: int = 1, max_attempts: int = 2, timeout_s: float | None = 600.0,
-                 in_process: bool = False) -> None:
+                 in_process: bool = False, lease_s: float = 10.0) -> None:
         self.store = store
         self.max_attempts = max_attempts
         self.timeout_s = timeout_s
         self.in_process = in_process
+        self.lease_s = lease_s
+        self.owner = f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lashscope-job")
         self._futures: dict[str, Future[None]] = {}
         self._procs: dict[str, BaseProcess] = {}
         self._lock = threading.Lock()
         self._closed = False
+        self._stop = threading.Event()
+        self._cancelled: set[str] = set()
 
     def start(self) -> list[JobRecord]:
-        """Recover interrupted jobs and submit every queued one; returns what was submitted."""
+        """Recover interrupted jobs and submit every queued one; returns what was submitted.
+
+        Then, every half lease in a daemon thread, resumes jobs of a crashed runner once their lease has
+        run out."""
+        pending = self.recover()
+        if not self.in_process:
+            threading.Thread(target=self._watch, name="lashscope-job-watch", daemon=True).start()
+        return pending
+
+    def recover(self) -> list[JobRecord]:
         pending = self.store.recover_jobs(self.max_attempts)
         for job in pending:
             self.submit(job.id)
         return pending
+
+    def _watch(self) -> None:
+        """Resume jobs whose runner died (their lease ran out) -- only those: a queued job is run by
+        whoever queued it (or at the next start), so rows another part of the service keeps queued
+        for its own reasons are left alone."""
+        while not self._stop.wait(self.lease_s / 2):
+            try:
+                for job in self.store.requeue_orphans(self.max_attempts):
+                    self.submit(job.id)
+            except Exception:  # a locked or vanished store must not end the loop
+                log.exception("job recovery pass failed")
 
     def submit(self, job_id: str) -> None:
         with self._lock:
@@ -78,20 +101,41 @@ class JobRunner:
         if fut is not None:
             fut.result(timeout)
 
+    def cancel(self, job_id: str, reason: str) -> None:
+        """Stop a job for good: a queued one never starts, a running one's worker is killed.
+
+        The job fails with code ``cancelled`` before the worker is killed, so the runner thread that
+        waits on it sees a verdict and records no ``worker_died``.
+        """
+        with self._lock:
+            self._cancelled.add(job_id)
+            fut, proc = self._futures.get(job_id), self._procs.get(job_id)
+        self.store.fail_job(job_id, "cancelled", reason)
+        if fut is not None:
+            fut.cancel()
+        if proc is not None:
+            proc.kill()
+
     def shutdown(self, wait: bool = False) -> None:
-        """Take no new work; kill running workers (their jobs stay 'running' and are resumed at the next start)."""
+        """Take no new work; kill running workers (their jobs stay 'running' with the lease let go, so the
+        next start resumes them at once)."""
+        self._stop.set()
         with self._lock:
             self._closed = True
-            procs = list(self._procs.values())
+            procs = dict(self._procs)
         if not wait:
-            for p in procs:
+            for job_id, p in procs.items():
                 p.kill()
+                p.join(5.0)
+                self.store.release_lease(job_id, self.owner)
         self._pool.shutdown(wait=wait, cancel_futures=True)
 
     # -- one job ---------------------------------------------------------------------------
     def _run(self, job_id: str) -> None:
         try:
-            job = self.store.start_job(job_id)
+            job = self.store.start_job(job_id, self.owner, None if self.in_process else self.lease_s)
+            if job.status is not JobStatus.RUNNING or job.lease_owner != self.owner or job_id in self._cancelled:
+                return  # cancelled, or taken by another runner, while it waited
             if job.kind not in KINDS:
                 self.store.fail_job(job_id, "unknown_job", f"unknown job kind {job.kind!r}")
             elif self.in_process:
@@ -106,21 +150,38 @@ class JobRunner:
                 self._futures.pop(job_id, None)
                 self._procs.pop(job_id, None)
 
+    def _supervise(self, job: JobRecord, proc: BaseProcess) -> bool:
+        """Wait for the worker, renewing the lease; kill it past the wall time or when the lease is lost
+        (the job was cancelled or taken over). False: the runner has dealt with the job already."""
+        deadline = None if self.timeout_s is None else time.monotonic() + self.timeout_s
+        while True:
+            left = None if deadline is None else deadline - time.monotonic()
+            proc.join(self.lease_s / 3 if left is None else max(0.0, min(self.lease_s / 3, left)))
+            if not proc.is_alive():
+                return True
+            if deadline is not None and time.monotonic() >= deadline:
+                proc.kill()
+                proc.join()
+                self.store.fail_job(job.id, "timeout", f"timed out after {self.timeout_s:g} s "
+                                    "(LASHSCOPE_JOB_TIMEOUT_S); the worker was stopped")
+                log.warning("job %s timed out after %g s", job.id, self.timeout_s)
+                return False
+            if not self.store.renew_lease(job.id, self.owner, self.lease_s):
+                proc.kill()
+                proc.join()
+                log.warning("job %s is no longer this runner's (cancelled or taken over); worker stopped", job.id)
+                return False
+
     def _in_worker(self, job: JobRecord) -> None:
-        proc = _SPAWN.Process(target=worker_main, args=(str(self.store.root), job.id), daemon=True,
+        proc = _SPAWN.Process(target=worker_main, args=(self.store.url, job.id, os.getpid()), daemon=True,
                               name=f"lashscope-{job.kind}-{job.id}")
         with self._lock:
             if self._closed:
-                return  # stays 'running' with this pid: re-queued at the next start
+                self.store.release_lease(job.id, self.owner)  # re-queued at the next start
+                return
             proc.start()
             self._procs[job.id] = proc
-        proc.join(self.timeout_s)
-        if proc.is_alive():
-            proc.kill()
-            proc.join()
-            self.store.fail_job(job.id, "timeout", f"timed out after {self.timeout_s:g} s "
-                                "(LASHSCOPE_JOB_TIMEOUT_S); the worker was stopped")
-            log.warning("job %s timed out after %g s", job.id, self.timeout_s)
+        if not self._supervise(job, proc):
             return
         with self._lock:
             closed = self._closed
@@ -130,11 +191,14 @@ class JobRunner:
             self.store.fail_job(job.id, "worker_died", f"the worker process ended without a result ({reason})")
 
 
-def worker_main(root: str, job_id: str) -> None:
-    """Entry point of a worker process: run one job against the store at ``root``."""
-    from app.storage.sqlite import SQLiteStore
+def worker_main(url: str, job_id: str, parent: int | None = None) -> None:
+    """Entry point of a worker process: run one job against the store at ``url``; dies with ``parent``."""
+    from app.storage.url import open_store
+    from app.worker import die_with_parent
 
-    store = SQLiteStore(Path(root))
+    if parent is not None:
+        die_with_parent(parent)
+    store = open_store(url)
     try:
         execute(store, store.get_job(job_id))
     finally:
@@ -146,10 +210,8 @@ def execute(store: Store, job: JobRecord) -> None:
     from sim import SimError
 
     try:
-        if job.kind == "analysis":
-            _analysis(store, job)
-        else:
-            _tolerance(store, job)
+        run = import_module(f"app.jobkinds.{job.kind}").run  # KINDS only: checked before a worker starts
+        run(store, job)
         store.finish_job(job.id)
     except (AppError, SimError) as exc:
         store.fail_job(job.id, getattr(exc, "code", "error"), _user_names(store, job, str(exc)))
@@ -168,51 +230,3 @@ def _user_names(store: Store, job: JobRecord, message: str) -> str:
     except AppError:
         return message
     return message.replace(str(logrec.path), logrec.filename).replace(logrec.path.name, logrec.filename)
-
-
-def _progress(store: Store, job_id: str, scale: float = 0.98) -> Any:
-    last_time, last_stage = [0.0], [""]
-
-    def progress(stage: str, fraction: float) -> None:
-        now = time.monotonic()
-        if stage != last_stage[0] or now - last_time[0] >= PROGRESS_EVERY_S:
-            last_time[0], last_stage[0] = now, stage
-            store.update_job(job_id, scale * fraction, stage)
-
-    return progress
-
-
-def _analysis(store: Store, job: JobRecord) -> None:
-    from app.payload import result_payload
-    from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
-    from app.storage.results import write_result
-    from sim import load_vehicle
-
-    rec = store.get_analysis(job.subject)
-    logrec = store.get_log(rec.log_id)
-    veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
-    inputs = VehicleInputs(load_vehicle(veh.driveline_path), veh.database_path, veh.signal_map_path)
-    result = run_analysis(logrec.path, inputs, AnalysisOptions.from_dict(rec.options), _progress(store, job.id))
-    store.update_job(job.id, 0.99, "saving")
-    doc, arrays = result_payload(result)
-    write_result(rec.result_dir, doc, arrays)
-    store.set_analysis_summary(rec.id, doc["summary"])
-
-
-def _tolerance(store: Store, job: JobRecord) -> None:
-    from app.pipeline import tolerance_for_result
-    from app.storage.results import ResultFiles, json_safe
-    from sim import load_vehicle
-
-    analysis_id, n_part, seed_part = job.subject.split("/")
-    n, seed = int(n_part.removeprefix("n=")), int(seed_part.removeprefix("seed="))
-    rec = store.get_analysis(analysis_id)
-    veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
-    progress = _progress(store, job.id)
-    doc = tolerance_for_result(ResultFiles(rec.result_dir), load_vehicle(veh.driveline_path), n, seed,
-                               lambda f: progress("tolerance", f))
-    doc.update(analysis_id=analysis_id, vehicle=rec.vehicle_name, vehicle_version=rec.vehicle_version)
-    out = tolerance_path(rec.result_dir, n, seed)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(json_safe(doc)), encoding="utf-8")
-    tmp.replace(out)

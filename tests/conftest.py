@@ -25,3 +25,16 @@ def shared_data() -> Path:
     if not DATA.is_dir():
         pytest.skip(f"public sample data folder not found: {DATA} (set LASHSCOPE_SHARED)")
     return DATA
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Tests that start ``lashscope serve`` in a subprocess are ``slow``: ``pytest -m "not slow"`` is the
+    development lane (the same code paths run in-process in ``tests/api/test_limits.py`` and
+    ``test_security.py``); CI runs everything."""
+    from tests.api.conftest import Server
+
+    for item in items:
+        module = getattr(item, "module", None)
+        if getattr(module, "Server", None) is Server or {"server", "small_cap_server"} & set(
+                getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)

@@ -7,6 +7,7 @@ the whole tree; simulator errors map to 422; anything unexpected is logged and b
 
 from __future__ import annotations
 
+import errno
 import logging
 
 from fastapi import FastAPI, Request
@@ -19,7 +20,8 @@ from sim.errors import SimError
 
 log = logging.getLogger("lashscope.api")
 
-HTTP_CODES = {400: "bad_request", 404: "not_found", 405: "method_not_allowed", 413: "upload_too_large",
+FULL_DISK = frozenset({errno.ENOSPC, errno.EDQUOT})
+HTTP_CODES = {400: "bad_request", 404: "not_found", 405: "method_not_allowed", 413: "body_too_large",
               415: "unsupported_media_type", 422: "invalid_input"}
 
 
@@ -29,6 +31,8 @@ def error_response(status: int, detail: str, code: str) -> JSONResponse:
 
 async def _app_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, AppError)
+    if disk_full(exc):
+        return error_response(507, "the server's data volume is full; nothing was stored", "storage_full")
     return error_response(exc.status, exc.detail, exc.code)
 
 
@@ -50,7 +54,23 @@ async def _http(request: Request, exc: Exception) -> JSONResponse:
     return error_response(exc.status_code, str(exc.detail), HTTP_CODES.get(exc.status_code, f"http_{exc.status_code}"))
 
 
+def disk_full(exc: BaseException) -> bool:
+    """Whether ``exc`` (or what caused it) is the data volume running out of space or quota."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, OSError) and seen.errno in FULL_DISK:
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False
+
+
 async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
+    if disk_full(exc):
+        log.error("data volume full on %s %s", request.method, request.url.path)
+        return error_response(507, "the server's data volume is full; nothing was stored", "storage_full")
+    if isinstance(exc, OSError):  # never the path: strerror only
+        log.exception("storage error on %s %s", request.method, request.url.path)
+        return error_response(500, f"storage error: {exc.strerror or type(exc).__name__}", "storage_error")
     log.exception("unhandled error on %s %s", request.method, request.url.path)
     return error_response(500, f"internal error ({type(exc).__name__}); the server keeps running", "internal_error")
 

@@ -1,8 +1,9 @@
 """The application factory.
 
-``create_app(settings)`` wires the store (embedded SQLite + files by default), the job
-runner, CORS and the error handlers, and includes every router in :data:`ROUTERS` -- append
-a module's ``router`` there to add a resource.
+``create_app(settings)`` wires the store (embedded SQLite + files by default, or
+``LASHSCOPE_STORE_URL``), the job runner, the request guard (Host allow-list, API keys,
+same-origin writes, body cap: :mod:`app.api.security`), CORS and the error handlers, and
+includes every router in :data:`ROUTERS` -- append a module's ``router`` there to add a resource.
 
 On stop (SIGTERM, Ctrl-C) the lifespan closes the job runner to new work (queued jobs stay
 queued in SQLite and run after the next start; a running job's worker process is killed, so the
@@ -24,10 +25,11 @@ from fastapi.middleware.cors import CORSMiddleware
 from app import __version__
 from app.api import errors
 from app.api.routes import analyses, diagnoses, health, live, logs, series, vehicles
+from app.api.security import RequestGuard
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
 from app.storage.results import ResultCache
-from app.storage.sqlite import SQLiteStore
+from app.storage.url import open_store
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
                             live.router, diagnoses.router]
@@ -72,9 +74,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        store = SQLiteStore(cfg.data_dir)
+        store = open_store(cfg.store_location)
         store.clean_temp()  # uploads cut off by a previous stop
-        runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts, cfg.job_timeout_s)
+        runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts, cfg.job_timeout_s,
+                           lease_s=cfg.job_lease_s)
         app.state.store, app.state.runner, app.state.settings = store, runner, cfg
         app.state.results = ResultCache()
         await asyncio.to_thread(_warm_up)
@@ -93,6 +96,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan)
     if settings is not None:
         app.dependency_overrides[get_settings] = lambda: settings
+    app.add_middleware(RequestGuard, settings=cfg)  # inside CORS: preflights are answered before it
     if cfg.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],
                            allow_headers=["*"])

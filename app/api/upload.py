@@ -6,24 +6,39 @@ bytes as the body (``--data-binary @drive.blf`` with ``?filename=drive.blf``). N
 held in memory beyond one network chunk. Over the cap, the partial file is deleted, up to
 ``drain_bytes`` of the rest of the body are read and dropped (so the client gets to read
 the 413 response instead of a reset connection) and :class:`UploadTooLargeError` is raised.
+
+Every malformed body is a 400 with a code and leaves nothing behind (partial files are
+deleted, handles closed): a multipart body the parser rejects (wrong boundary, garbage:
+``multipart_error``), one that ends inside a part (no closing boundary: ``multipart_incomplete``),
+a part header over :data:`MAX_HEADER_BYTES` (``multipart_header_too_large``), more than
+:data:`MAX_PARTS` parts (``too_many_parts``), a file name over :data:`MAX_FILENAME_CHARS`
+(``filename_too_long``). A body that sends nothing for ``idle_s`` seconds is dropped with 408
+``upload_timeout``, so stalled clients cannot hold files and handles open.
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
+import errno
 import hashlib
-from collections.abc import Iterator, Mapping
+import tomllib
+from collections.abc import AsyncIterator, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 from urllib.parse import parse_qsl
 
-from python_multipart.multipart import MultipartParser, parse_options_header
+from python_multipart.exceptions import FormParserError
+from python_multipart.multipart import MultipartParser, MultipartState, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
-from app.errors import AppError, InputError, UploadTooLargeError
+from app.errors import AppError, InputError, StorageError, StorageFullError, UploadTimeoutError, UploadTooLargeError
 
 MAX_FIELD_BYTES = 64 * 1024
+MAX_HEADER_BYTES = 16 * 1024  # all header lines of one part together
+MAX_PARTS = 16
+MAX_FILENAME_CHARS = 255  # what a file system accepts for one name
 
 
 @dataclass
@@ -50,7 +65,8 @@ class _Sink:
         self.size = 0
         self.hash = hashlib.sha256()
         self.head = b""
-        self.fh: IO[bytes] | None = path.open("wb")
+        with _storage_errors():
+            self.fh: IO[bytes] | None = path.open("wb")
 
     def write(self, data: bytes) -> None:
         self.size += len(data)
@@ -61,30 +77,55 @@ class _Sink:
             self.head += data[: 4096 - len(self.head)]
         self.hash.update(data)
         assert self.fh is not None
-        self.fh.write(data)
+        with _storage_errors():
+            self.fh.write(data)
 
     def close(self) -> UploadedFile:
         if self.fh is not None:
-            self.fh.close()
-            self.fh = None
+            fh, self.fh = self.fh, None
+            with _storage_errors():
+                fh.close()
         return UploadedFile(self.path, self.filename, self.size, self.hash.hexdigest(), self.head, self.field_name)
 
     def discard(self) -> None:
         if self.fh is not None:
-            self.fh.close()
-            self.fh = None
+            fh, self.fh = self.fh, None
+            with contextlib.suppress(OSError):  # a full disk fails the flush; the handle is closed anyway
+                fh.close()
         self.path.unlink(missing_ok=True)
 
 
+@contextlib.contextmanager
+def _storage_errors() -> Iterator[None]:
+    """Writing an upload fails: 507 on a full volume, 500 ``storage_error`` otherwise -- never the path."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise StorageFullError("the server's data volume is full; the upload was not stored") from exc
+        raise StorageError(f"cannot store the upload: {exc.strerror or type(exc).__name__}") from exc
+
+
 def _safe_name(name: str) -> str:
+    if len(name) > MAX_FILENAME_CHARS:
+        raise InputError(f"file name of {len(name)} characters is longer than {MAX_FILENAME_CHARS}",
+                         code="filename_too_long")
     base = name.replace("\\", "/").rsplit("/", 1)[-1].strip() or "upload"
     return "".join(c for c in base if c.isprintable())[:200]
+
+
+def _suffix(filename: str) -> str:
+    """The extension kept on the temporary file (readers sniff content, but ``.gz`` matters): short and plain."""
+    suffix = Path(filename).suffix.lower()
+    return suffix if len(suffix) <= 12 and suffix[1:].isalnum() else ""
 
 
 class _Multipart:
     def __init__(self, boundary: bytes, new_path: object, cap: int, result: UploadResult) -> None:
         self.new_path, self.cap, self.result = new_path, cap, result
         self.sinks: list[_Sink] = []
+        self.parts = 0
+        self.open_part = False
         self._hname = b""
         self._hvalue = b""
         self._headers: dict[bytes, bytes] = {}
@@ -98,11 +139,20 @@ class _Multipart:
 
     def _begin(self) -> None:
         self._headers, self._sink, self._field = {}, None, None
+        self.open_part = True
+
+    def _header_room(self, more: int) -> None:
+        used = sum(len(k) + len(v) for k, v in self._headers.items()) + len(self._hname) + len(self._hvalue)
+        if used + more > MAX_HEADER_BYTES:
+            raise InputError(f"a multipart part's headers are longer than {MAX_HEADER_BYTES} bytes",
+                             code="multipart_header_too_large")
 
     def _hf(self, data: bytes, start: int, end: int) -> None:
+        self._header_room(end - start)
         self._hname += data[start:end]
 
     def _hv(self, data: bytes, start: int, end: int) -> None:
+        self._header_room(end - start)
         self._hvalue += data[start:end]
 
     def _hend(self) -> None:
@@ -110,11 +160,14 @@ class _Multipart:
         self._hname, self._hvalue = b"", b""
 
     def _hdone(self) -> None:
+        self.parts += 1
+        if self.parts > MAX_PARTS:
+            raise InputError(f"more than {MAX_PARTS} parts in a multipart upload", code="too_many_parts")
         _, opts = parse_options_header(self._headers.get(b"content-disposition", b""))
-        name = opts.get(b"name", b"").decode("utf-8", "replace")
+        name = opts.get(b"name", b"").decode("utf-8", "replace")[:MAX_FILENAME_CHARS]
         if b"filename" in opts:
             filename = _safe_name(opts[b"filename"].decode("utf-8", "replace"))
-            path = self.new_path(Path(filename).suffix)  # type: ignore[operator]
+            path = self.new_path(_suffix(filename))  # type: ignore[operator]
             self._sink = _Sink(path, filename, name or "file", self.cap)
             self.sinks.append(self._sink)
         else:
@@ -129,6 +182,7 @@ class _Multipart:
                 raise InputError(f"form field {self._field[0]!r} is longer than {MAX_FIELD_BYTES} bytes")
 
     def _end(self) -> None:
+        self.open_part = False
         if self._sink is not None:
             self.result.files.append(self._sink.close())
         elif self._field is not None:
@@ -155,6 +209,20 @@ def user_file_names(names: Mapping[Path, str]) -> Iterator[None]:
         raise
 
 
+def check_toml(path: Path, shown: str) -> None:
+    """400 ``invalid_toml`` for a TOML file no loader should be handed: not UTF-8 (a binary file) or
+    nested past Python's recursion limit. Syntax errors are left to the loaders, which name the line."""
+    try:
+        tomllib.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{shown}: not a TOML text file (byte {exc.start} is not UTF-8)",
+                         code="invalid_toml") from None
+    except RecursionError:
+        raise InputError(f"{shown}: tables or arrays nested too deeply", code="invalid_toml") from None
+    except tomllib.TOMLDecodeError:
+        return
+
+
 async def _drain(request: Request, limit: int) -> None:
     seen = 0
     with contextlib.suppress(ClientDisconnect):
@@ -164,8 +232,24 @@ async def _drain(request: Request, limit: int) -> None:
                 return
 
 
+async def _chunks(request: Request, idle_s: float | None) -> AsyncIterator[bytes]:
+    """The body's chunks; :class:`UploadTimeoutError` when none arrives for ``idle_s`` seconds."""
+    stream = request.stream().__aiter__()
+    while True:
+        try:
+            async with asyncio.timeout(idle_s):
+                chunk = await anext(stream)
+        except StopAsyncIteration:
+            return
+        except TimeoutError:
+            raise UploadTimeoutError(f"the upload sent nothing for {idle_s:g} s (LASHSCOPE_UPLOAD_IDLE_S); "
+                                     "it was dropped") from None
+        yield chunk
+
+
 async def receive_upload(request: Request, new_path: object, cap: int, drain_bytes: int,
-                         raw_filename: str | None = None, urlencoded_form: bool = False) -> UploadResult:
+                         raw_filename: str | None = None, urlencoded_form: bool = False,
+                         idle_s: float | None = None) -> UploadResult:
     """Stream the request body into files created by ``new_path(suffix)``; see the module docstring.
 
     With ``urlencoded_form``, an ``application/x-www-form-urlencoded`` body is read as form
@@ -176,7 +260,7 @@ async def receive_upload(request: Request, new_path: object, cap: int, drain_byt
     result = UploadResult()
     if urlencoded_form and ctype.startswith("application/x-www-form-urlencoded"):
         body = b""
-        async for chunk in request.stream():
+        async for chunk in _chunks(request, idle_s):
             body += chunk
             if len(body) > MAX_FIELD_BYTES:
                 raise InputError(f"form is longer than {MAX_FIELD_BYTES} bytes")
@@ -193,16 +277,21 @@ async def receive_upload(request: Request, new_path: object, cap: int, drain_byt
             boundary = opts.get(b"boundary")
             if not boundary:
                 raise InputError("multipart upload without a boundary in Content-Type")
+            if len(boundary) > 200:
+                raise InputError("multipart boundary longer than 200 bytes", code="multipart_error")
             mp = _Multipart(boundary, new_path, cap, result)
             sinks = mp.sinks
-            async for chunk in request.stream():
+            async for chunk in _chunks(request, idle_s):
                 mp.parser.write(chunk)
             mp.parser.finalize()
+            if mp.open_part or (mp.parts and mp.parser.state != MultipartState.END):
+                raise InputError("the multipart body ended before its closing boundary (upload cut off?)",
+                                 code="multipart_incomplete")
         else:
             name = _safe_name(raw_filename or "upload.log")
-            sink = _Sink(new_path(Path(name).suffix), name, "file", cap)  # type: ignore[operator]
+            sink = _Sink(new_path(_suffix(name)), name, "file", cap)  # type: ignore[operator]
             sinks = [sink]
-            async for chunk in request.stream():
+            async for chunk in _chunks(request, idle_s):
                 sink.write(chunk)
             result.files.append(sink.close())
     except UploadTooLargeError:
@@ -214,6 +303,10 @@ async def receive_upload(request: Request, new_path: object, cap: int, drain_byt
         for s in sinks:
             s.discard()
         raise InputError("the client disconnected before the upload was complete") from exc
+    except FormParserError as exc:
+        for s in sinks:
+            s.discard()
+        raise InputError(f"malformed multipart body: {exc}", code="multipart_error") from exc
     except BaseException:
         for s in sinks:
             s.discard()

@@ -18,8 +18,34 @@ def register(sub: Any) -> None:
                    help="analyses running at the same time (default 1)")
     p.add_argument("--cors-origin", action="append", default=None, dest="cors_origins",
                    help="allow this origin (repeatable)")
+    p.add_argument("--store", default=None, dest="store_url",
+                   help="the store as a URL, e.g. sqlite:////srv/ls/db.sqlite3 (default: the data directory)")
+    p.add_argument("--allowed-host", action="append", default=None, dest="allowed_hosts",
+                   help="accept this Host header name besides the loopback names (repeatable; '*': any)")
+    p.add_argument("--insecure", action="store_true", default=None,
+                   help="serve on a non-loopback address without API keys (refused otherwise)")
     p.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
     p.set_defaults(func=run)
+
+
+def refuse_open_network(settings: Any) -> None:
+    """A server reachable from other machines needs API keys, unless the operator says ``--insecure``."""
+    from app.api.security import is_loopback
+    from app.errors import ForbiddenError
+    from app.storage.url import open_store
+
+    if is_loopback(settings.host) or settings.insecure:
+        return
+    store = open_store(settings.store_location)
+    try:
+        keys = store.active_keys()
+    finally:
+        store.close()
+    if keys == 0:
+        raise ForbiddenError(f"refusing to serve on {settings.host} without API keys: create one with "
+                             "'lashscope keys create --scope admin' (same --data-dir), or pass --insecure "
+                             "(LASHSCOPE_INSECURE=1) if something in front of this server authenticates",
+                             code="keys_required")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -29,9 +55,11 @@ def run(args: argparse.Namespace) -> int:
     from app.settings import Settings
 
     overrides = {k: getattr(args, k) for k in ("host", "port", "data_dir", "max_upload_mb", "analysis_workers",
-                                                "cors_origins") if getattr(args, k) is not None}
+                                                "cors_origins", "store_url", "allowed_hosts", "insecure")
+                 if getattr(args, k) is not None}
     settings = Settings(**overrides)
-    print(f"lashscope: serving on http://{settings.host}:{settings.port} (data in {settings.data_dir.resolve()}; "
+    refuse_open_network(settings)
+    print(f"lashscope: serving on http://{settings.host}:{settings.port} (store {settings.store_location}; "
           f"API docs at /docs)", flush=True)
     # Without a grace limit uvicorn waits for every open response before the lifespan shutdown, and a
     # server-sent-event stream of a live session stays open until that very shutdown stops the session.

@@ -59,6 +59,8 @@ class JobRecord:
     error_code: str | None = None
     error_detail: str | None = None
     owner_pid: int | None = None
+    lease_owner: str | None = None  # the runner holding the job (app.storage.jobtable)
+    lease_until: float | None = None  # epoch seconds; past it the job is taken back
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ touches only the pages it needs.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -21,7 +22,7 @@ from typing import Any, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from app.errors import NotFoundError, StorageError
+from app.errors import NotFoundError, StorageError, StorageFullError
 
 DOC = "result.json"
 T = TypeVar("T")
@@ -52,7 +53,9 @@ def write_result(directory: Path, doc: Mapping[str, Any], arrays: Mapping[str, n
         os.replace(tmp, directory)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise StorageError(f"cannot write results to {directory}: {exc.strerror}") from exc
+        full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+        raise (StorageFullError if full else StorageError)(
+            f"cannot write results ({directory.name}): {exc.strerror}") from exc
 
 
 class ResultFiles:

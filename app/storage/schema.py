@@ -1,6 +1,13 @@
-"""SQLite schema of the embedded store (idempotent: run at every start)."""
+"""SQLite schema of the embedded store, as an ordered list of migrations.
 
-SCHEMA = """
+``V1`` is the schema of the first release exactly as it shipped (idempotent ``CREATE ... IF NOT
+EXISTS``), so a database made by that release -- which has no ``schema_version`` table -- is
+recognised as version 1 by running it again harmlessly. Every later change is a new entry in
+:data:`MIGRATIONS`, never an edit of an old one: a database is upgraded by applying, in order, the
+entries above its recorded version (see :mod:`app.storage.migrations`).
+"""
+
+V1 = """
 CREATE TABLE IF NOT EXISTS logs (
     id TEXT PRIMARY KEY,
     sha256 TEXT NOT NULL UNIQUE,
@@ -57,3 +64,28 @@ CREATE TABLE IF NOT EXISTS analyses (
 );
 CREATE INDEX IF NOT EXISTS analyses_log ON analyses (log_id);
 """
+
+# API keys: only the SHA-256 of a key is stored; the key itself is shown once, when it is created.
+V2_API_KEYS = """
+CREATE TABLE api_keys (
+    id TEXT PRIMARY KEY,
+    name TEXT NOT NULL,
+    scope TEXT NOT NULL CHECK (scope IN ('read', 'write', 'admin')),
+    sha256 TEXT NOT NULL,
+    created_at TEXT NOT NULL,
+    revoked_at TEXT
+);
+"""
+
+# Jobs are owned through a lease their runner renews, not through a process id (app.storage.jobtable).
+V3_JOB_LEASES = """
+ALTER TABLE jobs ADD COLUMN lease_owner TEXT;
+ALTER TABLE jobs ADD COLUMN lease_until REAL;
+"""
+
+# (version, what it changes, SQL): applied in order, each in one transaction.
+MIGRATIONS: list[tuple[int, str, str]] = [
+    (1, "logs, vehicles, jobs, analyses (first release)", V1),
+    (2, "api_keys: hashed API keys with a scope", V2_API_KEYS),
+    (3, "jobs.lease_owner, jobs.lease_until: job leases with heartbeats", V3_JOB_LEASES),
+]

@@ -11,9 +11,10 @@ Layout of the data directory::
 
 Every thread gets its own connection; writes run in ``BEGIN IMMEDIATE`` transactions
 with a busy timeout, so concurrent uploads and job progress updates serialise instead
-of failing. Jobs record the process that runs them; at startup, jobs left ``running``
-by a process that is gone are re-queued until they have started ``max_attempts`` times,
-then marked failed with the reason.
+of failing. Jobs are held through leases (:mod:`app.storage.jobtable`), API keys as
+hashes (:mod:`app.storage.keys`); the schema is versioned and upgraded on open
+(:mod:`app.storage.migrations`). The database may live elsewhere than the files
+(``database=``; :func:`app.storage.url.open_store` opens a store from a URL).
 """
 
 from __future__ import annotations
@@ -27,33 +28,17 @@ import sqlite3
 import threading
 import uuid
 from collections.abc import Iterator
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 from app.errors import ConflictError, InputError, NotFoundError, StorageError
-from app.storage.records import AnalysisRecord, JobRecord, JobStatus, LogRecord, VehicleRecord
-from app.storage.schema import SCHEMA
+from app.storage.jobtable import JobTable, now
+from app.storage.keys import KeyTable
+from app.storage.migrations import upgrade
+from app.storage.records import AnalysisRecord, JobStatus, LogRecord, VehicleRecord
 
 VEHICLE_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789-_")
-
-
-def now() -> str:
-    return datetime.now(UTC).isoformat(timespec="milliseconds")
-
-
-def _pid_alive(pid: int | None) -> bool:
-    if pid is None or pid <= 0:
-        return False
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def file_sha256(*paths: Path) -> str:
@@ -65,30 +50,41 @@ def file_sha256(*paths: Path) -> str:
     return h.hexdigest()
 
 
-class SQLiteStore:
-    """SQLite + files under ``root``; safe to share between threads of one process and between processes."""
+class SQLiteStore(JobTable, KeyTable):
+    """SQLite + files under ``root``; safe to share between threads of one process and between processes.
 
-    def __init__(self, root: Path) -> None:
+    ``database`` is the SQLite file (default ``<root>/lashscope.sqlite3``); opening upgrades its
+    schema to the latest version (:mod:`app.storage.migrations`).
+    """
+
+    def __init__(self, root: Path, database: Path | None = None) -> None:
         self.root = Path(root).resolve()
+        self.database = Path(database).resolve() if database is not None else self.root / "lashscope.sqlite3"
         try:
             for sub in ("tmp", "logs", "vehicles", "analyses", "jobs"):
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise StorageError(f"cannot create data directory {self.root}: {exc.strerror}") from exc
+            raise StorageError(f"cannot create the data directory {self.root.name!r}: {exc.strerror}") from exc
         self._local = threading.local()
         self._all: list[sqlite3.Connection] = []
         self._lock = threading.Lock()
-        self._conn().executescript(SCHEMA)  # idempotent; executescript manages its own transaction
+        upgrade(self._conn())
+
+    @property
+    def url(self) -> str:
+        """Where to open this store again (``app.storage.url.open_store``), e.g. from a job worker."""
+        files = "" if self.database.parent == self.root else f"?files={quote(str(self.root))}"
+        return f"sqlite:///{self.database}{files}"
 
     # -- connections -------------------------------------------------------------------
     def _conn(self) -> sqlite3.Connection:
         conn: sqlite3.Connection | None = getattr(self._local, "conn", None)
         if conn is None:
             try:
-                conn = sqlite3.connect(self.root / "lashscope.sqlite3", timeout=30.0, isolation_level=None,
+                conn = sqlite3.connect(self.database, timeout=30.0, isolation_level=None,
                                        check_same_thread=False)
             except sqlite3.Error as exc:
-                raise StorageError(f"cannot open {self.root / 'lashscope.sqlite3'}: {exc}") from exc
+                raise StorageError(f"cannot open the store's database {self.database.name}: {exc}") from exc
             conn.row_factory = sqlite3.Row
             conn.execute("PRAGMA journal_mode=WAL")
             conn.execute("PRAGMA synchronous=NORMAL")
@@ -179,7 +175,8 @@ class SQLiteStore:
         rows = self._conn().execute("SELECT * FROM logs ORDER BY created_at DESC LIMIT ? OFFSET ?", (limit, offset))
         return [self._log(r) for r in rows]
 
-    def delete_log(self, log_id: str) -> None:
+    def delete_log(self, log_id: str) -> list[str]:
+        """Delete a log and its finished analyses; returns the ids of the analyses deleted with it."""
         log = self.get_log(log_id)
         with self._tx() as db:
             busy = db.execute(
@@ -194,6 +191,7 @@ class SQLiteStore:
         for aid in ids:
             shutil.rmtree(self.analysis_dir(aid), ignore_errors=True)
         log.path.unlink(missing_ok=True)
+        return ids
 
     # -- vehicles ----------------------------------------------------------------------
     def _vehicle(self, row: sqlite3.Row) -> VehicleRecord:
@@ -233,6 +231,8 @@ class SQLiteStore:
         db = self._conn()
         if version is None:
             row = db.execute("SELECT * FROM vehicles WHERE name = ? ORDER BY version DESC LIMIT 1", (name,)).fetchone()
+        elif not 0 < version < 2**62:  # also keeps numbers SQLite cannot bind out of the query
+            row = None
         else:
             row = db.execute("SELECT * FROM vehicles WHERE name = ? AND version = ?", (name, version)).fetchone()
         if row is None:
@@ -251,88 +251,6 @@ class SQLiteStore:
         if not rows:
             raise NotFoundError(f"vehicle {name!r} not found")
         return [self._vehicle(r) for r in rows]
-
-    # -- jobs --------------------------------------------------------------------------
-    def _job(self, row: sqlite3.Row) -> JobRecord:
-        return JobRecord(
-            id=row["id"], kind=row["kind"], subject=row["subject"], status=JobStatus(row["status"]),
-            progress=row["progress"], stage=row["stage"], attempts=row["attempts"], created_at=row["created_at"],
-            updated_at=row["updated_at"], started_at=row["started_at"], finished_at=row["finished_at"],
-            error_code=row["error_code"], error_detail=row["error_detail"], owner_pid=row["owner_pid"],
-        )
-
-    def _insert_job(self, db: sqlite3.Connection, kind: str, subject: str) -> str:
-        job_id = f"job_{uuid.uuid4().hex[:16]}"
-        ts = now()
-        db.execute("INSERT INTO jobs (id, kind, subject, status, progress, stage, attempts, created_at, updated_at)"
-                   " VALUES (?,?,?,?,0,'queued',0,?,?)", (job_id, kind, subject, JobStatus.QUEUED.value, ts, ts))
-        return job_id
-
-    def create_job(self, kind: str, subject: str) -> JobRecord:
-        with self._tx() as db:
-            job_id = self._insert_job(db, kind, subject)
-        return self.get_job(job_id)
-
-    def get_job(self, job_id: str) -> JobRecord:
-        row = self._conn().execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
-        if row is None:
-            raise NotFoundError(f"job {job_id!r} not found")
-        return self._job(row)
-
-    def find_job(self, kind: str, subject: str) -> JobRecord | None:
-        row = self._conn().execute("SELECT * FROM jobs WHERE kind = ? AND subject = ? ORDER BY created_at DESC"
-                                   " LIMIT 1", (kind, subject)).fetchone()
-        return self._job(row) if row else None
-
-    def start_job(self, job_id: str) -> JobRecord:
-        with self._tx() as db:
-            db.execute("UPDATE jobs SET status = 'running', attempts = attempts + 1, started_at = ?, updated_at = ?,"
-                       " owner_pid = ?, progress = 0, stage = 'starting', error_code = NULL, error_detail = NULL"
-                       " WHERE id = ?", (now(), now(), os.getpid(), job_id))
-        return self.get_job(job_id)
-
-    def update_job(self, job_id: str, progress: float, stage: str) -> None:
-        with self._tx() as db:
-            db.execute("UPDATE jobs SET progress = ?, stage = ?, updated_at = ? WHERE id = ? AND status = 'running'",
-                       (float(min(max(progress, 0.0), 1.0)), stage, now(), job_id))
-
-    def finish_job(self, job_id: str) -> None:
-        with self._tx() as db:
-            db.execute("UPDATE jobs SET status = 'done', progress = 1, stage = 'done', finished_at = ?,"
-                       " updated_at = ? WHERE id = ?", (now(), now(), job_id))
-
-    def fail_job(self, job_id: str, code: str, detail: str) -> None:
-        with self._tx() as db:
-            db.execute("UPDATE jobs SET status = 'failed', stage = 'failed', error_code = ?, error_detail = ?,"
-                       " finished_at = ?, updated_at = ? WHERE id = ?", (code, detail, now(), now(), job_id))
-
-    def recover_jobs(self, max_attempts: int) -> list[JobRecord]:
-        """Re-queue or fail jobs whose process died; returns every job that should run now."""
-        with self._tx() as db:
-            for row in db.execute("SELECT * FROM jobs WHERE status = 'running'").fetchall():
-                if _pid_alive(row["owner_pid"]) and row["owner_pid"] != os.getpid():
-                    continue  # another live process is running it
-                if row["attempts"] < max_attempts:
-                    db.execute("UPDATE jobs SET status = 'queued', stage = ?, updated_at = ? WHERE id = ?",
-                               (f"resumed after an interruption (attempt {row['attempts']} was cut off)", now(),
-                                row["id"]))
-                else:
-                    db.execute(
-                        "UPDATE jobs SET status = 'failed', stage = 'failed', error_code = 'interrupted',"
-                        " error_detail = ?, finished_at = ?, updated_at = ? WHERE id = ?",
-                        (f"interrupted: the server stopped while this job was running, {row['attempts']} of "
-                         f"{max_attempts} attempts used", now(), now(), row["id"]))
-        return self.pending_jobs()
-
-    def pending_jobs(self) -> list[JobRecord]:
-        rows = self._conn().execute("SELECT * FROM jobs WHERE status = 'queued' ORDER BY created_at")
-        return [self._job(r) for r in rows]
-
-    def job_counts(self) -> dict[str, int]:
-        rows = self._conn().execute("SELECT status, COUNT(*) AS n FROM jobs GROUP BY status")
-        counts = {s.value: 0 for s in JobStatus}
-        counts.update({r["status"]: r["n"] for r in rows})
-        return counts
 
     # -- analyses ----------------------------------------------------------------------
     _ANALYSIS_SQL = ("SELECT a.*, j.id AS j_id FROM analyses a JOIN jobs j ON j.id = a.job_id")

@@ -1,4 +1,4 @@
-"""GET /analyses/{id}/tolerance over real HTTP: a background job with progress, then the band per event."""
+"""POST then GET /analyses/{id}/tolerance over real HTTP: a background job with progress, then the band per event."""
 
 from __future__ import annotations
 
@@ -16,13 +16,15 @@ def test_tolerance_band_job(server: Server, demo_log: Path) -> None:
         create_vehicle(c)
         log_id = upload(c, demo_log).json()["id"]
         analysis = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()
-        early = c.get(f"/analyses/{analysis['id']}/tolerance")
+        early = c.post(f"/analyses/{analysis['id']}/tolerance")
         assert early.status_code in (409, 202), early.text  # 409 while the analysis itself still runs
         assert wait_for(c, analysis["id"])["status"] == "done"
-        assert c.get(f"/analyses/{analysis['id']}/tolerance", params={"n": 0}).status_code == 422
+        assert c.post(f"/analyses/{analysis['id']}/tolerance", params={"n": 0}).status_code == 422
 
         url = f"/analyses/{analysis['id']}/tolerance"
-        first = c.get(url, params={"n": 40, "seed": 0})
+        unstarted = c.get(url, params={"n": 40, "seed": 0})
+        assert unstarted.status_code == 404 and unstarted.json()["code"] == "tolerance_not_started"
+        first = c.post(url, params={"n": 40, "seed": 0})
         assert first.status_code == 202, first.text
         job_id = first.json()["job_id"]
         deadline = time.monotonic() + 120.0
@@ -43,4 +45,5 @@ def test_tolerance_band_job(server: Server, demo_log: Path) -> None:
         # the demo's truth vehicle has a smaller half-shaft gap than the nominal one, but both are in the band
         assert any(0.0 < e["measured_percentile"] < 100.0 for e in doc["events"])
         assert c.get(url, params={"n": 40, "seed": 0}).json() == doc  # kept: read again without a job
+        assert c.post(url, params={"n": 40, "seed": 0}).json() == doc  # and not computed again
         assert c.get("/health").status_code == 200

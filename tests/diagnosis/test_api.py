@@ -36,7 +36,7 @@ def lag_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.fixture()
 def client(tmp_path: Path, lag_logs: dict[str, Path]) -> Iterator[TestClient]:
-    app = create_app(Settings(data_dir=tmp_path / "data"))
+    app = create_app(Settings(data_dir=tmp_path / "data", allowed_hosts=["testserver"]))  # the test client's Host
     with TestClient(app) as c:
         store = app.state.store
         create_vehicle(c, "paper")

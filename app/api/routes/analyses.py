@@ -3,22 +3,43 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import JSONResponse
 
 from app.analysis.tolerance import MAX_SAMPLES
-from app.api.deps import ResultsDep, RunnerDep, StoreDep
+from app.api.deps import ResultsDep, RunnerDep, SettingsDep, StoreDep
 from app.api.schemas import ERRORS, AnalysisCreate, AnalysisOut
-from app.errors import AppError, ConflictError
-from app.jobs import tolerance_path, tolerance_subject
+from app.errors import AppError, ConflictError, NotFoundError, QueueFullError
+from app.jobkinds.tolerance import result_path as tolerance_path
+from app.jobkinds.tolerance import subject as tolerance_subject
+from app.jobs import JobRunner
 from app.pipeline import AnalysisOptions
 from app.storage.base import Store
-from app.storage.records import AnalysisRecord, JobStatus
+from app.storage.records import AnalysisRecord, JobRecord, JobStatus
 from app.storage.results import ResultCache, ResultFiles
 
 router = APIRouter(prefix="/analyses", tags=["analyses"], responses=ERRORS)
+JOB_ERROR_STATUS = {"internal_error": 500, "storage_error": 500, "worker_died": 500, "storage_full": 507}
+
+#: Called with the id of every deleted analysis (e.g. the series routes drop their cached answers).
+ON_DELETE: list[Callable[[str], None]] = []
+
+
+def deleted(analysis_ids: list[str]) -> None:
+    for analysis_id in analysis_ids:
+        for forget in ON_DELETE:
+            forget(analysis_id)
+
+
+def room_for_a_job(store: Store, limit: int) -> None:
+    """429 ``queue_full`` while ``limit`` jobs wait: a burst of requests cannot bury new work for minutes."""
+    queued = store.job_counts().get(JobStatus.QUEUED.value, 0)
+    if queued >= limit:
+        raise QueueFullError(f"{queued} jobs are waiting (limit {limit}, LASHSCOPE_MAX_QUEUED_JOBS); "
+                             "try again when some have finished")
 
 
 def finished(store: Store, cache: ResultCache, analysis_id: str) -> tuple[AnalysisRecord, ResultFiles]:
@@ -31,7 +52,7 @@ def finished(store: Store, cache: ResultCache, analysis_id: str) -> tuple[Analys
     job = rec.job
     if job.status is JobStatus.FAILED:
         err = AppError(f"analysis {analysis_id} failed: {job.error_detail}", code=job.error_code or "analysis_failed")
-        err.status = 500 if job.error_code in ("internal_error", "storage_error") else 422
+        err.status = JOB_ERROR_STATUS.get(job.error_code or "", 422)
         raise err
     if job.status is not JobStatus.DONE:
         raise ConflictError(f"analysis {analysis_id} is {job.status.value} ({job.stage}, {job.progress:.0%})",
@@ -41,8 +62,9 @@ def finished(store: Store, cache: ResultCache, analysis_id: str) -> tuple[Analys
 
 @router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=AnalysisOut,
              summary="Start an analysis of a log with a vehicle (runs in the background)")
-def create_analysis(body: AnalysisCreate, store: StoreDep, runner: RunnerDep) -> AnalysisOut:
+def create_analysis(body: AnalysisCreate, store: StoreDep, runner: RunnerDep, settings: SettingsDep) -> AnalysisOut:
     opts = AnalysisOptions.from_dict(body.options)  # 400 on bad options, before anything is queued
+    room_for_a_job(store, settings.max_queued_jobs)
     store.get_log(body.log_id)
     vehicle = store.get_vehicle(body.vehicle, body.vehicle_version)
     rec = store.create_analysis(body.log_id, vehicle, opts.to_dict())
@@ -52,7 +74,7 @@ def create_analysis(body: AnalysisCreate, store: StoreDep, runner: RunnerDep) ->
 
 @router.get("", response_model=list[AnalysisOut], summary="List analyses, newest first")
 def list_analyses(store: StoreDep, log_id: str | None = None, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-                  offset: Annotated[int, Query(ge=0)] = 0) -> list[AnalysisOut]:
+                  offset: Annotated[int, Query(ge=0, le=2**62)] = 0) -> list[AnalysisOut]:
     return [AnalysisOut.of(a) for a in store.list_analyses(log_id, limit, offset)]
 
 
@@ -61,12 +83,21 @@ def get_analysis(analysis_id: str, store: StoreDep) -> AnalysisOut:
     return AnalysisOut.of(store.get_analysis(analysis_id))
 
 
-@router.delete("/{analysis_id}", status_code=status.HTTP_204_NO_CONTENT, summary="Delete a finished analysis")
-def delete_analysis(analysis_id: str, store: StoreDep, cache: ResultsDep) -> Response:
+@router.delete("/{analysis_id}", status_code=status.HTTP_204_NO_CONTENT,
+               summary="Delete an analysis; its running or queued jobs are cancelled")
+def delete_analysis(analysis_id: str, store: StoreDep, cache: ResultsDep, runner: RunnerDep) -> Response:
     rec = store.get_analysis(analysis_id)
+    cancel_jobs(store, runner, analysis_id)
     store.delete_analysis(analysis_id)
     cache.forget(rec.result_dir)
+    deleted([analysis_id])
     return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+def cancel_jobs(store: Store, runner: JobRunner, analysis_id: str) -> None:
+    """Cancel the analysis' own job and its tolerance bands, queued or running."""
+    for job in store.active_jobs(analysis_id):
+        runner.cancel(job.id, f"cancelled: analysis {analysis_id} was deleted")
 
 
 @router.get("/{analysis_id}/events", summary="Tip-in/tip-out events, excluded ones with the reason")
@@ -88,35 +119,62 @@ def get_metrics(analysis_id: str, store: StoreDep, cache: ResultsDep) -> dict[st
             "sampling": d.get("sampling")}  # absent from results stored before they existed
 
 
-@router.get("/{analysis_id}/tolerance", summary="Predicted ripple band over the vehicle's tolerances (background job)",
-            responses={202: {"description": "computing: the job's status and progress"}})
-def get_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, runner: RunnerDep,
-                  n: Annotated[int, Query(ge=1, le=MAX_SAMPLES, description="Monte Carlo variants per event")] = 200,
-                  seed: Annotated[int, Query(ge=0, description="random seed of the sampling")] = 0) -> Response:
+TolN = Annotated[int, Query(ge=1, le=MAX_SAMPLES, description="Monte Carlo variants per event")]
+TolSeed = Annotated[int, Query(ge=0, le=2**32 - 1, description="random seed of the sampling")]
+
+
+@router.get("/{analysis_id}/tolerance", summary="Predicted ripple band over the vehicle's tolerances",
+            responses={202: {"description": "computing: the job's status and progress"},
+                       404: {"description": "not computed: POST to start it"}})
+def get_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, n: TolN = 200, seed: TolSeed = 0) -> Response:
     """Per analysed event: the 5/50/95 % band of the predicted peak-to-valley fluctuation with every
     gap and ``vehicle.tolerances`` band sampled uniformly, the nominal vehicle's value, the measured
     value and its percentile in the predicted distribution.
 
-    The first request starts a background job and answers 202 with its status; ask again until 200.
-    A failed job answers with its error; a timed-out one is started again.
+    Reading never starts work: 200 with the band once computed, 202 with the job's progress while
+    it runs, 404 ``tolerance_not_started`` before ``POST`` started it, or the job's error.
     """
+    rec, _ = finished(store, cache, analysis_id)
+    out = tolerance_path(rec.result_dir, n, seed)
+    if out.exists():
+        return JSONResponse(json.loads(out.read_text(encoding="utf-8")))
+    job = store.find_job("tolerance", tolerance_subject(analysis_id, n, seed))
+    if job is None or job.status is JobStatus.DONE:  # never started, or its result was removed
+        raise NotFoundError(f"no tolerance band n={n} seed={seed} for {analysis_id}; start it with POST "
+                            f"/analyses/{analysis_id}/tolerance?n={n}&seed={seed}", code="tolerance_not_started")
+    _raise_failed(analysis_id, job)
+    return _accepted(analysis_id, n, seed, job)
+
+
+@router.post("/{analysis_id}/tolerance", status_code=status.HTTP_202_ACCEPTED,
+             summary="Start computing the tolerance band (background job)",
+             responses={200: {"description": "already computed: the band"}})
+def start_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, runner: RunnerDep, settings: SettingsDep,
+                    n: TolN = 200, seed: TolSeed = 0) -> Response:
+    """Starts the job unless the band exists (200 with it) or its job is queued or running (202 with that
+    job); a failed job is started again. Poll ``GET`` with the same ``n`` and ``seed``."""
     rec, _ = finished(store, cache, analysis_id)
     out = tolerance_path(rec.result_dir, n, seed)
     if out.exists():
         return JSONResponse(json.loads(out.read_text(encoding="utf-8")))
     subject = tolerance_subject(analysis_id, n, seed)
     job = store.find_job("tolerance", subject)
-    if job is None or (job.status is JobStatus.FAILED and job.error_code == "timeout"):
+    if job is None or job.status in (JobStatus.FAILED, JobStatus.DONE):
+        room_for_a_job(store, settings.max_queued_jobs)
         job = store.create_job("tolerance", subject)
         runner.submit(job.id)
-    elif job.status is JobStatus.FAILED:
+    return _accepted(analysis_id, n, seed, job)
+
+
+def _raise_failed(analysis_id: str, job: JobRecord) -> None:
+    if job.status is JobStatus.FAILED:
         err = AppError(f"tolerance band of {analysis_id} failed: {job.error_detail}",
                        code=job.error_code or "tolerance_failed")
-        err.status = 500 if job.error_code in ("internal_error", "storage_error", "worker_died") else 422
+        err.status = JOB_ERROR_STATUS.get(job.error_code or "", 422)
         raise err
-    elif job.status is JobStatus.DONE and not out.exists():  # result deleted behind our back: compute again
-        job = store.create_job("tolerance", subject)
-        runner.submit(job.id)
+
+
+def _accepted(analysis_id: str, n: int, seed: int, job: JobRecord) -> JSONResponse:
     return JSONResponse(status_code=status.HTTP_202_ACCEPTED, content={
         "analysis_id": analysis_id, "n": n, "seed": seed, "job_id": job.id, "status": job.status.value,
         "stage": job.stage, "progress": job.progress})

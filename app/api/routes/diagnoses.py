@@ -145,14 +145,14 @@ def _diagnosis_work(store: Store, d: Path) -> Work:
     """The diagnosis ``d/status.json`` describes (options, analysis, vehicle), as work for the worker process."""
     st = json.loads((d / STATUS).read_text(encoding="utf-8"))
     _options(st["options"], st["options"]["model"])  # unreadable options fail now, not in the worker
-    return partial(_run_diagnosis, str(store.root), str(d))
+    return partial(_run_diagnosis, store.url, str(d))
 
 
-def _in_store(root: str, run: Callable[[Store], None]) -> None:
-    """Run ``run`` against the store at ``root`` (the worker process opens its own connection)."""
-    from app.storage.sqlite import SQLiteStore
+def _in_store(url: str, run: Callable[[Store], None]) -> None:
+    """Run ``run`` against the store at ``url`` (the worker process opens its own connection)."""
+    from app.storage.url import open_store
 
-    store = SQLiteStore(Path(root))
+    store = open_store(url)
     try:
         run(store)
     finally:
@@ -299,7 +299,7 @@ def _validation_work(store: Store, d: Path) -> Work:
     _options(report["options"], report["model"])  # unreadable now, not in the worker
     if "log_id" not in json.loads((d / VALIDATION).read_text(encoding="utf-8")):
         raise KeyError(f"{d / VALIDATION} names no log_id")
-    return partial(_run_validation, str(store.root), str(d))
+    return partial(_run_validation, store.url, str(d))
 
 
 def _run_validation(root: str, dir_: str, check: Check) -> None:

@@ -13,10 +13,11 @@ router = APIRouter(tags=["health"])
 
 @router.get("/health", response_model=HealthOut, summary="Liveness, storage and job queue")
 def health(store: StoreDep) -> HealthOut:
+    """Open without a key (container health checks); names the data directory, never where it is."""
     try:
         jobs = store.job_counts()
         db = "ok"
     except sqlite3.Error as exc:
-        jobs, db = {}, f"error: {exc}"
-    return HealthOut(status="ok" if db == "ok" else "degraded", version=__version__, data_dir=str(store.root),
+        jobs, db = {}, f"error: {type(exc).__name__}"
+    return HealthOut(status="ok" if db == "ok" else "degraded", version=__version__, data_dir=store.root.name,
                      database=db, jobs=jobs)

@@ -9,7 +9,11 @@ completed so far with their metrics; ``GET /live/sessions/{id}/stream`` is a
 returns the stored log and its analysis.
 
 Interfaces that reach the network (``udp_multicast``, ``socketcand``) are off unless listed in
-``LASHSCOPE_LIVE_INTERFACES`` (comma-separated), which replaces the default set.
+``LASHSCOPE_LIVE_INTERFACES`` (comma-separated), which replaces the default set. Which bus a client
+may open is the operator's choice too: ``LASHSCOPE_LIVE_CHANNELS`` lists ``interface:channel`` pairs
+or ``interface:*`` (default ``virtual:*,tcp_loopback:*,socketcan:*``: socketcan channels are kernel
+interface names). Anything else -- e.g. a serial device path for ``slcan`` -- is 403
+``live_channel_not_allowed``, and option values that look like file paths are refused the same way.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
 from app.api.schemas import ERRORS
-from app.errors import InputError
+from app.errors import ForbiddenError, InputError
 from app.live.bus import BusConfig
 from app.live.decoding import source_for
 from app.live.manager import LiveManager, StartRequest
@@ -91,8 +95,22 @@ def _database(settings: Settings, name: str) -> Any:
     return path
 
 
+def _channel_allowed(settings: Settings, body: LiveStart) -> None:
+    """The operator's allow-list decides which bus a client may open, never the client."""
+    pair = f"{body.interface}:{body.channel or ''}"
+    if f"{body.interface}:*" not in settings.live_channels and pair not in settings.live_channels:
+        raise ForbiddenError(f"live bus {pair!r} is not allowed on this server (LASHSCOPE_LIVE_CHANNELS: "
+                             f"{', '.join(settings.live_channels) or 'none'})", code="live_channel_not_allowed")
+    for key, value in body.options.items():
+        if isinstance(value, str) and ("/" in value or "\\" in value):
+            raise ForbiddenError(f"live option {key!r}: file or device paths are not accepted from clients",
+                                 code="live_channel_not_allowed")
+
+
 @router.post("/sessions", status_code=status.HTTP_201_CREATED, summary="Start a live session on a CAN bus")
 def start_session(body: LiveStart, manager: ManagerDep, settings: SettingsDep) -> dict[str, Any]:
+    if body.interface in manager.allowed:  # otherwise the manager names the enabled interfaces
+        _channel_allowed(settings, body)
     database = _database(settings, body.database) if body.database else None
     req = StartRequest(BusConfig(body.interface, body.channel, body.bitrate, dict(body.options)),
                        vehicle=body.vehicle, vehicle_version=body.vehicle_version, database=database,

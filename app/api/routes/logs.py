@@ -8,6 +8,7 @@ from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 
 from app.api.deps import SettingsDep, StoreDep
+from app.api.routes.analyses import deleted
 from app.api.schemas import ERRORS, LogOut
 from app.api.upload import receive_upload, user_file_names
 from app.errors import InputError
@@ -37,7 +38,7 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
     Same content as an existing log: 200 with that log and ``duplicate: true``.
     """
     up = await receive_upload(request, store.temp_path, settings.max_upload_bytes,
-                              int(settings.upload_drain_mb * 2**20), filename)
+                              int(settings.upload_drain_mb * 2**20), filename, idle_s=settings.upload_idle_s)
     multipart = request.headers.get("content-type", "").startswith("multipart/form-data")
     if len(up.files) != 1:
         for f in up.files:
@@ -75,7 +76,7 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
 
 @router.get("", response_model=list[LogOut], summary="List logs, newest first")
 def list_logs(store: StoreDep, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-              offset: Annotated[int, Query(ge=0)] = 0) -> list[LogOut]:
+              offset: Annotated[int, Query(ge=0, le=2**62)] = 0) -> list[LogOut]:
     return [LogOut.of(r) for r in store.list_logs(limit, offset)]
 
 
@@ -86,5 +87,5 @@ def get_log(log_id: str, store: StoreDep) -> LogOut:
 
 @router.delete("/{log_id}", status_code=status.HTTP_204_NO_CONTENT, summary="Delete a log and its analyses")
 def delete_log(log_id: str, store: StoreDep) -> Response:
-    store.delete_log(log_id)
+    deleted(store.delete_log(log_id))
     return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -23,7 +23,7 @@ from fastapi.concurrency import run_in_threadpool
 from app.analysis.downsample import BlockExtremes, Method, downsample
 from app.api.deps import ResultsDep, StoreDep
 from app.api.numbers import json_numbers
-from app.api.routes.analyses import finished
+from app.api.routes.analyses import ON_DELETE, finished
 from app.api.schemas import ERRORS, SeriesOut
 from app.errors import InputError, NotFoundError
 from app.payload import SERIES_COLUMNS
@@ -50,6 +50,12 @@ class _Cache:
                 self._items.move_to_end(key)
             return hit
 
+    def forget(self, analysis_id: str) -> None:
+        """Drop every answer about ``analysis_id`` (deleted: its id must not be served from memory)."""
+        with self._lock:
+            for key in [k for k in self._items if k[1] == analysis_id]:
+                self._bytes -= len(self._items.pop(key)[0])
+
     def put(self, key: tuple[object, ...], value: tuple[bytes, str], entries: int, max_bytes: int) -> None:
         if len(value[0]) > max_bytes // 8:
             return
@@ -64,6 +70,7 @@ class _Cache:
 
 
 _CACHE = _Cache()
+ON_DELETE.append(_CACHE.forget)
 INLINE_MAX_POINTS = 5000  # bounded answers from at most INLINE_MAX_ROWS rows are computed on the event loop
 INLINE_MAX_ROWS = 1_000_000
 
@@ -117,13 +124,14 @@ MethodQ = Annotated[Literal["minmax", "lttb"], Query(
     description="minmax: each bucket's min and max of every column (no peak lost); "
     "lttb: largest-triangle-three-buckets, one row per bucket")]
 Fmt = Annotated[Literal["json", "csv"] | None, Query(alias="format")]
+TimeQ = Annotated[float | None, Query(allow_inf_nan=False, description="s from the log start; finite")]
 
 
 @router.get("/{analysis_id}/speed", responses=SERIES_DOC, response_class=Response,
             summary="Measured vs simulated motor speed (and torque) on a common time base")
 async def get_speed(analysis_id: str, request: Request, store: StoreDep, cache: ResultsDep,
                     event: Annotated[int | None, Query(ge=0, description="event index; omit for the whole log")] = None,
-                    max_points: MaxPoints = 2000, t0: float | None = None, t1: float | None = None,
+                    max_points: MaxPoints = 2000, t0: TimeQ = None, t1: TimeQ = None,
                     fmt: Fmt = None, method: MethodQ = "minmax") -> Response:
     # async on purpose: a cached answer costs no thread hop and no database read; a miss reads one
     # SQLite row and maps the columns here, and is downsampled here or, when large, in the thread pool
@@ -185,7 +193,7 @@ def list_signals(analysis_id: str, store: StoreDep, cache: ResultsDep) -> dict[s
 @router.get("/{analysis_id}/signals/{name}", responses=SERIES_DOC, response_class=Response,
             summary="One decoded channel (its own sample times)")
 def get_signal(analysis_id: str, name: str, request: Request, store: StoreDep, cache: ResultsDep,
-               max_points: MaxPoints = 2000, t0: float | None = None, t1: float | None = None,
+               max_points: MaxPoints = 2000, t0: TimeQ = None, t1: TimeQ = None,
                fmt: Fmt = None, method: MethodQ = "minmax") -> Response:
     _, files = finished(store, cache, analysis_id)
     info = files.doc["signals"].get(name)

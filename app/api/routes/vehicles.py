@@ -11,7 +11,7 @@ from fastapi.concurrency import run_in_threadpool
 
 from app.api.deps import SettingsDep, StoreDep
 from app.api.schemas import ERRORS, VehicleOut
-from app.api.upload import receive_upload, user_file_names
+from app.api.upload import check_toml, receive_upload, user_file_names
 from app.errors import InputError
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity
 from app.storage.results import json_safe
@@ -42,7 +42,8 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
     pass a cheap trial (one simulated second must need at most 1e6 integrator steps; otherwise 422
     naming the suspect field), the database must load, and the signal map must fit the database.
     Identical content to the latest version returns that version (200, ``unchanged: true``)."""
-    up = await receive_upload(request, store.temp_path, 64 * 2**20, 0, urlencoded_form=True)
+    up = await receive_upload(request, store.temp_path, 64 * 2**20, 0, urlencoded_form=True,
+                              idle_s=settings.upload_idle_s)
     files = {f.field_name: f.path for f in up.files}
     names = {f.path: f.filename for f in up.files}
     try:
@@ -65,6 +66,8 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
         smap = files.get("signal_map") or settings.dbc_dir / "lashscope_ev.map.toml"
         for default in {dbc, smap} - set(files.values()):  # the project's own files: named, not located
             names[default] = f"default {default.name}"
+        for toml_file in (driveline, smap):
+            check_toml(toml_file, names.get(toml_file, toml_file.name))
         with user_file_names(names):
             summary = await run_in_threadpool(check_vehicle_files, driveline, dbc, smap)
         rec, created = await run_in_threadpool(store.add_vehicle, name, driveline=driveline, database=dbc,

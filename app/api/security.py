@@ -1,0 +1,230 @@
+"""The request guard: Host allow-list, API keys with scopes, same-origin writes, body cap.
+
+One pure ASGI middleware (no per-request thread hop, streaming responses untouched) decides
+before any route runs:
+
+1. **Host.** The ``Host`` header must be a loopback name (``localhost``, ``127.0.0.1``, ``::1``),
+   the address the server is bound to, or one of ``LASHSCOPE_ALLOWED_HOSTS`` (``*``: any); otherwise
+   400 ``host_not_allowed``. A web page that rebinds its own DNS name to 127.0.0.1 sends its
+   own name and is refused (DNS rebinding).
+2. **Keys.** When the store holds an active API key -- or the server listens on a non-loopback
+   address without ``--insecure`` -- every request but ``/health`` and the API docs needs
+   ``Authorization: Bearer <key>``: none 401 ``auth_required``, unknown or revoked 401
+   ``invalid_key``, too small a scope 403 ``insufficient_scope``. Reads need ``read``; creating
+   things (POST, PUT, PATCH) ``write``; deleting ``admin``. Each key gets
+   ``LASHSCOPE_KEY_RATE_PER_S`` requests a second (a token bucket holding two seconds' worth);
+   past that 429 ``rate_limited`` with ``Retry-After``.
+3. **Same origin.** Without keys (a workstation on loopback) reads stay open, but a
+   state-changing request from a browser must come from the service's own origin or a
+   ``--cors-origin``: a foreign ``Origin`` or ``Sec-Fetch-Site: cross-site``/``same-site`` gets 403
+   ``cross_origin``, so a web page cannot post to a local server (CSRF). Tools that send no
+   ``Origin`` (curl, scripts) are not browsers and pass.
+4. **Body cap.** Every body but the streamed uploads (``POST /logs``, ``POST /vehicles``, capped
+   by ``LASHSCOPE_MAX_UPLOAD_MB``) is read here up to ``LASHSCOPE_MAX_JSON_KB``: past it 413
+   ``body_too_large``; a body that stalls for ``LASHSCOPE_UPLOAD_IDLE_S`` gets 408.
+
+Which keys exist, and what a presented key is, are re-read from the store at most once a second,
+so ``lashscope keys create`` or ``revoke`` in another process takes effect on a running server
+within a second, and a request costs no database read.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import json
+import time
+from collections.abc import Awaitable, Callable, MutableMapping
+from typing import Any
+
+from app.settings import Settings
+from app.storage.keys import scope_allows
+
+Scope = MutableMapping[str, Any]
+Message = MutableMapping[str, Any]
+Receive = Callable[[], Awaitable[Message]]
+Send = Callable[[Message], Awaitable[None]]
+ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
+
+LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1"})
+PUBLIC_PATHS = frozenset({"/health", "/docs", "/docs/oauth2-redirect", "/redoc", "/openapi.json"})
+UPLOAD_ROUTES = frozenset({("POST", "/logs"), ("POST", "/vehicles")})
+SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+KEYS_RECHECK_S = 1.0
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (a name or address, IPv6 possibly in brackets) is this machine only."""
+    name = host.strip("[]").lower()
+    if name == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(name).is_loopback
+    except ValueError:
+        return False
+
+
+def host_name(header: str) -> str:
+    """The name part of a ``Host`` header: ``[::1]:8000`` -> ``::1``, ``example.org:80`` -> ``example.org``."""
+    header = header.strip().lower()
+    if header.startswith("["):
+        return header[1:header.find("]")] if "]" in header else header
+    return header.rsplit(":", 1)[0] if header.count(":") == 1 else header
+
+
+def required_scope(method: str) -> str:
+    if method in SAFE_METHODS:
+        return "read"
+    return "admin" if method == "DELETE" else "write"
+
+
+class _Deny(Exception):
+    def __init__(self, status: int, code: str, detail: str, headers: dict[str, str] | None = None) -> None:
+        super().__init__(detail)
+        self.status, self.code, self.detail, self.headers = status, code, detail, headers or {}
+
+
+async def _respond(send: Send, err: _Deny) -> None:
+    body = json.dumps({"detail": err.detail, "code": err.code}).encode()
+    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+    headers += [(k.encode(), v.encode()) for k, v in err.headers.items()]
+    await send({"type": "http.response.start", "status": err.status, "headers": headers})
+    await send({"type": "http.response.body", "body": body})
+
+
+class RequestGuard:
+    def __init__(self, app: ASGIApp, settings: Settings) -> None:
+        self.app = app
+        self.cfg = settings
+        self.any_host = "*" in settings.allowed_hosts
+        bound = [] if settings.host in ("0.0.0.0", "::", "") else [settings.host.lower()]
+        self.hosts = LOOPBACK_NAMES | {h.lower() for h in settings.allowed_hosts} | set(bound)
+        self.open_network = not is_loopback(settings.host) and not settings.insecure
+        self._keys_at = -1e9
+        self._have_keys = False
+        self._buckets: dict[str, tuple[float, float]] = {}  # key id -> (tokens, monotonic time)
+        self._verified: dict[str, tuple[Any, float]] = {}  # token -> (ApiKey or None, monotonic time)
+
+    def _keys_exist(self, store: Any) -> bool:
+        now = time.monotonic()
+        if now - self._keys_at > KEYS_RECHECK_S:
+            self._have_keys, self._keys_at = store.active_keys() > 0, now
+        return self._have_keys
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
+        try:
+            self._check(scope, headers)
+            has_body = "content-length" in headers or "transfer-encoding" in headers
+            if has_body and (scope["method"], scope["path"].rstrip("/")) not in UPLOAD_ROUTES:
+                receive = await self._buffered(receive, headers)
+        except _Deny as err:
+            await _respond(send, err)
+            return
+        await self.app(scope, receive, send)
+
+    def _check(self, scope: Scope, headers: dict[str, str]) -> None:
+        host = host_name(headers.get("host", ""))
+        if not self.any_host and host not in self.hosts:
+            raise _Deny(400, "host_not_allowed", f"Host {host!r} is not served here; add it to "
+                        "LASHSCOPE_ALLOWED_HOSTS (or --allowed-host) to allow it")
+        method, path = scope["method"], scope["path"]
+        if method == "OPTIONS" or (method in SAFE_METHODS and path in PUBLIC_PATHS):
+            return
+        store = getattr(scope["app"].state, "store", None) if "app" in scope else None
+        auth = headers.get("authorization", "")
+        need = required_scope(method)
+        if auth or self.open_network or (store is not None and self._keys_exist(store)):
+            self._authorise(store, auth, need)
+            return
+        if method not in SAFE_METHODS:
+            self._same_origin(scope, headers)
+
+    def _authorise(self, store: Any, auth: str, need: str) -> None:
+        challenge = {"WWW-Authenticate": 'Bearer realm="lashscope"'}
+        kind, _, token = auth.partition(" ")
+        if not auth:
+            raise _Deny(401, "auth_required", f"this request needs an API key with scope {need!r}: send "
+                        "'Authorization: Bearer <key>' (create one with 'lashscope keys create')", challenge)
+        if kind.lower() != "bearer" or not token.strip():
+            raise _Deny(401, "invalid_key", "the Authorization header must read 'Bearer <key>'", challenge)
+        key = self._verify(store, token.strip())
+        if key is None:
+            raise _Deny(401, "invalid_key", "the API key is unknown or revoked", challenge)
+        if not scope_allows(key.scope, need):
+            raise _Deny(403, "insufficient_scope", f"this request needs scope {need!r}; key {key.id} has "
+                        f"{key.scope!r}")
+        self._spend(key.id)
+
+    def _verify(self, store: Any, token: str) -> Any:
+        """``store.verify_key`` remembered for a second (a database read per request otherwise)."""
+        now = time.monotonic()
+        hit = self._verified.get(token)
+        if hit is not None and now - hit[1] <= KEYS_RECHECK_S:
+            return hit[0]
+        key = store.verify_key(token) if store is not None else None
+        if len(self._verified) >= 4096:  # unknown tokens must not grow this without bound
+            self._verified.clear()
+        self._verified[token] = (key, now)
+        return key
+
+    def _spend(self, key_id: str) -> None:
+        """Take one token from the key's bucket (refilled at the configured rate, two seconds deep)."""
+        rate = self.cfg.key_rate_per_s
+        if rate <= 0:
+            return
+        now = time.monotonic()
+        tokens, then = self._buckets.get(key_id, (2 * rate, now))
+        tokens = min(2 * rate, tokens + (now - then) * rate)
+        if tokens < 1:
+            self._buckets[key_id] = (tokens, now)
+            wait = (1 - tokens) / rate
+            raise _Deny(429, "rate_limited", f"key {key_id} is over {rate:g} requests/s "
+                        "(LASHSCOPE_KEY_RATE_PER_S)", {"Retry-After": str(max(1, round(wait + 0.5)))})
+        self._buckets[key_id] = (tokens - 1, now)
+
+    def _same_origin(self, scope: Scope, headers: dict[str, str]) -> None:
+        site = headers.get("sec-fetch-site")
+        if site is not None and site not in ("same-origin", "none"):
+            raise _Deny(403, "cross_origin", f"a {site} request may not change anything here (Sec-Fetch-Site); "
+                        "send an API key or use the service's own origin")
+        origin = headers.get("origin")
+        if origin is None:
+            return
+        own = f"{scope.get('scheme', 'http')}://{headers.get('host', '')}".lower()
+        if origin.lower() != own and origin not in self.cfg.cors_origins:
+            raise _Deny(403, "cross_origin", f"requests from origin {origin!r} may not change anything here; "
+                        "allow it with --cors-origin or send an API key")
+
+    async def _buffered(self, receive: Receive, headers: dict[str, str]) -> Receive:
+        """Read the whole (small) body now, capped and timed; hand it to the app from memory."""
+        cap = self.cfg.max_json_bytes
+        declared = headers.get("content-length", "")
+        if declared.isdigit() and int(declared) > cap:
+            raise _Deny(413, "body_too_large", f"request body of {int(declared)} bytes is over the "
+                        f"{cap} byte cap (LASHSCOPE_MAX_JSON_KB)")
+        messages: list[Message] = []
+        size = 0
+        while True:
+            try:
+                async with asyncio.timeout(self.cfg.upload_idle_s):  # no task per message, unlike wait_for
+                    msg = await receive()
+            except TimeoutError:
+                raise _Deny(408, "body_timeout", f"no request body data for {self.cfg.upload_idle_s:g} s "
+                            "(LASHSCOPE_UPLOAD_IDLE_S)") from None
+            messages.append(msg)
+            if msg["type"] != "http.request":
+                break
+            size += len(msg.get("body", b""))
+            if size > cap:
+                raise _Deny(413, "body_too_large", f"request body is over the {cap} byte cap (LASHSCOPE_MAX_JSON_KB)")
+            if not msg.get("more_body", False):
+                break
+
+        async def replay() -> Message:
+            return messages.pop(0) if messages else await receive()
+
+        return replay
