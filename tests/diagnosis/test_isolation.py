@@ -64,7 +64,8 @@ def test_a_diagnosis_over_its_time_limit_fails_while_health_answers(tmp_path: Pa
             assert doc["status"] == "failed", {k: doc[k] for k in ("status", "stage", "progress")}
             assert doc["error"]["code"] == "timeout"
             assert "timed out after 8 s" in doc["error"]["detail"]
-            assert "running" in seen  # the worker's progress reached the state file the server reads
+            # whether the worker reported "running" before the limit depends on the machine's load (its imports
+            # alone took ~10 s at load average 10); progress reaching the state file is test_restart's to check
             assert "LASHSCOPE_DIAGNOSIS_TIMEOUT_S" in doc["error"]["detail"]
             assert health_checks >= 5
             assert "report" not in doc
