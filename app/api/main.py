@@ -23,14 +23,16 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from app import __version__
 from app.api import errors
-from app.api.routes import analyses, diagnoses, health, live, logs, series, vehicles
+from app.api.formats import FormatGuard
+from app.api.routes import analyses, dashboard, diagnoses, health, live, logs, series, vehicles
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
 from app.storage.results import ResultCache
 from app.storage.sqlite import SQLiteStore
+from app.web import install as install_dashboard
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
-                            live.router, diagnoses.router]
+                            live.router, diagnoses.router, dashboard.router]
 
 log = logging.getLogger("lashscope.api")
 
@@ -90,13 +92,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             await _stop_live_sessions(app)
             store.close()
 
-    app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan,
+                  docs_url=None, redoc_url=None)  # /docs is served from packaged assets (app.web)
     if settings is not None:
         app.dependency_overrides[get_settings] = lambda: settings
     if cfg.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],
                            allow_headers=["*"])
     errors.install(app)
+    app.add_middleware(FormatGuard, openapi=app.openapi)
     for router in ROUTERS:
         app.include_router(router)
+    install_dashboard(app)
     return app

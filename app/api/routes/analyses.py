@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import json
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response, status
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, PlainTextResponse
 
 from app.analysis.tolerance import MAX_SAMPLES
 from app.api.deps import ResultsDep, RunnerDep, StoreDep
-from app.api.schemas import ERRORS, AnalysisCreate, AnalysisOut
+from app.api.schemas import ERRORS, AnalysisCreate, AnalysisOut, EventsOut, MetricsOut, ToleranceOut
+from app.api.tables import events_csv, metrics_csv
 from app.errors import AppError, ConflictError
 from app.jobs import tolerance_path, tolerance_subject
 from app.pipeline import AnalysisOptions
@@ -19,6 +20,8 @@ from app.storage.records import AnalysisRecord, JobStatus
 from app.storage.results import ResultCache, ResultFiles
 
 router = APIRouter(prefix="/analyses", tags=["analyses"], responses=ERRORS)
+TableFormat = Annotated[Literal["json", "csv"] | None, Query(alias="format", description="csv: one row per event")]
+CSV_DOC: dict[int | str, dict[str, Any]] = {200: {"content": {"text/csv": {}}}}
 
 
 def finished(store: Store, cache: ResultCache, analysis_id: str) -> tuple[AnalysisRecord, ResultFiles]:
@@ -69,27 +72,34 @@ def delete_analysis(analysis_id: str, store: StoreDep, cache: ResultsDep) -> Res
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
-@router.get("/{analysis_id}/events", summary="Tip-in/tip-out events, excluded ones with the reason")
+@router.get("/{analysis_id}/events", response_model=EventsOut, responses=CSV_DOC,
+            summary="Tip-in/tip-out events, excluded ones with the reason")
 def get_events(analysis_id: str, store: StoreDep, cache: ResultsDep,
-               included: bool | None = None) -> dict[str, Any]:
+               included: bool | None = None, fmt: TableFormat = None) -> Any:
     _, files = finished(store, cache, analysis_id)
     events = files.doc["events"]
     if included is not None:
         events = [e for e in events if e["included"] is included]
+    if fmt == "csv":
+        return PlainTextResponse(events_csv(events), media_type="text/csv")
     return {"analysis_id": analysis_id, "count": len(events), "events": events}
 
 
-@router.get("/{analysis_id}/metrics", summary="Ripple metrics per event: measured, simulated, differences")
-def get_metrics(analysis_id: str, store: StoreDep, cache: ResultsDep) -> dict[str, Any]:
+@router.get("/{analysis_id}/metrics", response_model=MetricsOut, responses=CSV_DOC,
+            summary="Ripple metrics per event: measured, simulated, differences")
+def get_metrics(analysis_id: str, store: StoreDep, cache: ResultsDep, fmt: TableFormat = None) -> Any:
     _, files = finished(store, cache, analysis_id)
     d = files.doc
+    if fmt == "csv":
+        return PlainTextResponse(metrics_csv(d["metrics"]), media_type="text/csv")
     return {"analysis_id": analysis_id, "summary": d["summary"], "offset": d["offset"], "whole": d["whole"],
             "events": d["metrics"], "notes": d["notes"], "tracking": d.get("tracking"),
             "sampling": d.get("sampling")}  # absent from results stored before they existed
 
 
 @router.get("/{analysis_id}/tolerance", summary="Predicted ripple band over the vehicle's tolerances (background job)",
-            responses={202: {"description": "computing: the job's status and progress"}})
+            responses={200: {"model": ToleranceOut},
+                       202: {"description": "computing: the job's status and progress"}})
 def get_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, runner: RunnerDep,
                   n: Annotated[int, Query(ge=1, le=MAX_SAMPLES, description="Monte Carlo variants per event")] = 200,
                   seed: Annotated[int, Query(ge=0, description="random seed of the sampling")] = 0) -> Response:
