@@ -1,7 +1,7 @@
 // Analysis view: status until done, then the whole-log timeline (zoom and pan fetch finer data with
 // max_points for the window shown), the events, the metrics table and the per-event overlays.
 import { api, download, saveBlob } from "./api.js";
-import { chartPng, COLORS, holdOnto, inkedPixels, seriesData, speedChart } from "./chart.js";
+import { chartPng, COLORS, holdOnto, seriesData, speedChart } from "./chart.js";
 import { eventOverlays, eventsTable, metricsTable } from "./events.js";
 import { badge, errorBox, fmt, h, logStart, progressBar, sleep, stamp, utc } from "./util.js";
 
@@ -46,7 +46,7 @@ export async function render(main, id) {
   const whole = metrics.whole || {};
 
   async function fetchWindow(t0, t1) {
-    const q = t0 === undefined ? "" : `&t0=${t0.toFixed(6)}&t1=${t1.toFixed(6)}`;
+    const q = t0 === undefined ? "" : `&t0=${t0}&t1=${t1}`;
     const [s, p] = await Promise.all([api(`/analyses/${id}/speed?max_points=${maxPoints}${q}`),
       pedalName ? api(`/analyses/${id}/signals/${pedalName}?max_points=${maxPoints}${q}`) : null]);
     const pedal = p ? holdOnto(s.t_s, p.t_s, p[pedalName]) : undefined;
@@ -63,7 +63,6 @@ export async function render(main, id) {
     timeline.dataset.t0 = t0;
     timeline.dataset.t1 = t1;
     timeline.dataset.loads = (Number(timeline.dataset.loads) || 0) + 1;
-    timeline.dataset.inked = inkedPixels(chart);
     info.textContent = `${s.points} of ${s.source_points} rows in ${fmt(t0, 2)}-${fmt(t1, 2)} s` +
       (start ? ` · ${stamp(t0, start)}` : "");
   };

@@ -68,7 +68,7 @@ export function speedChart(el, data, { width, height, markers = () => [], pedal 
     { label: "torque N m", scale: "nm", stroke: COLORS.torque, width: 1 },
   ];
   if (pedal) series.push({ label: "pedal %", scale: "pct", stroke: COLORS.pedal, width: 1, dash: [5, 3] });
-  let quiet = false;
+  let quiet = true; // until the first draw: uPlot's own initial scale is not a user's zoom
   const opts = {
     title, width, height,
     scales: {
@@ -86,6 +86,15 @@ export function speedChart(el, data, { width, height, markers = () => [], pedal 
     cursor: { drag: { x: true, y: false } },
     plugins: [markerPlugin(markers)],
     hooks: {
+      ready: [() => {
+        quiet = false;
+      }],
+      // what was drawn, on the element: tests and people's scripts can see that lines are on the canvas
+      draw: [(u) => {
+        el.dataset.inked = inkedPixels(u);
+        el.dataset.ySpan = u.scales.rpm.max - u.scales.rpm.min;
+        el.dataset.draws = (Number(el.dataset.draws) || 0) + 1;
+      }],
       setScale: [(u, key) => {
         if (key === "x" && onZoom && !quiet) onZoom(u.scales.x.min, u.scales.x.max);
       }],
@@ -121,11 +130,21 @@ export function chartPng(u, title) {
   return new Promise((resolve) => c.toBlob(resolve, "image/png"));
 }
 
-// How many non-background pixels the plot area holds: > 0 once lines are drawn (used by the tests too).
-export function inkedPixels(u) {
+// How many pixels of the plot area carry the speed lines' colours (measured, simulated): > 0 only
+// once data is drawn -- event markers, grid and axes use other colours. Shown on the chart element.
+export function inkedPixels(u, colors = [COLORS.measured, COLORS.simulated]) {
+  const rgb = colors.map((c) => [1, 3, 5].map((k) => parseInt(c.slice(k, k + 2), 16)));
   const { left, top, width, height } = u.bbox;
   const img = u.ctx.getImageData(left, top, Math.max(1, width), Math.max(1, height)).data;
   let n = 0;
-  for (let i = 3; i < img.length; i += 16) if (img[i] > 0) n++;
+  for (let i = 0; i < img.length; i += 4) {
+    if (img[i + 3] < 200) continue;
+    for (const [r, g, b] of rgb) {
+      if (Math.abs(img[i] - r) + Math.abs(img[i + 1] - g) + Math.abs(img[i + 2] - b) < 60) {
+        n++;
+        break;
+      }
+    }
+  }
   return n;
 }

@@ -2,7 +2,7 @@
 // difference with units and the tracking verdict) and an overlay panel for every event with
 // torque, gap-open and impact markers, a page at a time, with an optional shared rpm span.
 import { api, download, saveBlob } from "./api.js";
-import { chartPng, COLORS, inkedPixels, seriesData, speedChart } from "./chart.js";
+import { chartPng, COLORS, seriesData, speedChart } from "./chart.js";
 import { badge, errorBox, fmt, h, sortableTable, stamp } from "./util.js";
 
 // name, label, unit shown, factor from the API's SI value, digits
@@ -83,11 +83,13 @@ export function eventOverlays(id, events, metrics, signal) {
     grid);
   shared.addEventListener("change", () => draw());
 
+  let drawn = 0;
   async function draw() {
+    const mine = ++drawn;
+    grid.dataset.ready = "0";
     const part = shown.slice(page * PAGE, (page + 1) * PAGE);
     pager.textContent = `events ${part.length ? part[0].index : "-"}-${part.length ? part[part.length - 1].index : "-"}, ` +
       `page ${page + 1} of ${pages}`;
-    grid.replaceChildren();
     let series;
     try {
       series = await Promise.all(part.map((e) => api(`/analyses/${id}/speed?event=${e.index}&max_points=800`, { signal })));
@@ -95,19 +97,26 @@ export function eventOverlays(id, events, metrics, signal) {
       grid.replaceChildren(errorBox(err));
       return;
     }
+    await new Promise(requestAnimationFrame); // laid out: the panels can take their width from the grid
+    if (mine !== drawn) return;
     let span = 0;
     for (const s of series) {
       const v = [...s.measured_rpm, ...s.simulated_rpm].filter((x) => x != null);
       if (v.length) span = Math.max(span, Math.max(...v) - Math.min(...v));
     }
-    part.forEach((e, i) => grid.append(panel(id, e, byIndex.get(e.index), series[i], shared.checked ? span * 1.1 : null)));
+    const cols = Math.max(1, Math.floor((grid.clientWidth + 12) / 452));
+    const width = Math.max(400, Math.floor((grid.clientWidth - 12 * (cols - 1)) / cols) - 14);
+    grid.replaceChildren();
+    part.forEach((e, i) => grid.append(panel(id, e, byIndex.get(e.index), series[i], shared.checked ? span * 1.1 : null, width)));
     grid.dataset.panels = part.length;
+    grid.dataset.shared = shared.checked;
+    grid.dataset.ready = "1";
   }
   draw();
   return card;
 }
 
-function panel(id, e, m, s, span) {
+function panel(id, e, m, s, span, width) {
   const box = h("div", { class: "chart" });
   const meas = m?.measured || {};
   const sim = m?.simulated || {};
@@ -120,12 +129,9 @@ function panel(id, e, m, s, span) {
   if (sim.t_impact_s != null) markers.push({ t: sim.t_impact_s, color: COLORS.simulated, label: "sim impact", dash: true, width: 2 });
   const yRange = span ? (lo, hi) => [(lo + hi) / 2 - span / 2, (lo + hi) / 2 + span / 2] : undefined;
   const wrap = h("div", { class: "panel", dataset: { event: e.index } }, h("h3", {}, title), h("div", { class: "sub" }, sub), box);
-  requestAnimationFrame(() => {
-    const u = speedChart(box, seriesData(s), { width: Math.max(400, wrap.clientWidth - 12), height: 230,
-      markers: () => markers, yRange, xLabel: "time since log start (s)" });
-    box.dataset.inked = inkedPixels(u);
-    wrap.append(h("button", { onclick: async () => saveBlob(await chartPng(u, `${id} ${title}`),
-      `${id}-event-${e.index}.png`) }, "PNG"));
-  });
+  const u = speedChart(box, seriesData(s), { width, height: 230, markers: () => markers, yRange,
+    xLabel: "time since log start (s)" });
+  wrap.append(h("button", { onclick: async () => saveBlob(await chartPng(u, `${id} ${title}`),
+    `${id}-event-${e.index}.png`) }, "PNG"));
   return wrap;
 }

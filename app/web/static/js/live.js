@@ -72,7 +72,8 @@ async function session(main, id, signal) {
     axes: [{ label: "time since session start (s)" }, { scale: "rpm", label: "motor speed (rpm)" },
       { scale: "nm", side: 1, label: "torque (N m)", grid: { show: false } }],
     series: [{ label: "t (s)" }, { label: "motor speed rpm", scale: "rpm", stroke: COLORS.measured, width: 1.5 },
-      { label: "torque N m", scale: "nm", stroke: COLORS.torque, width: 1 }] }, [[], [], []], chartBox);
+      { label: "torque N m", scale: "nm", stroke: COLORS.torque, width: 1 }],
+    hooks: { draw: [(chart) => { chartBox.dataset.inked = inkedPixels(chart); }] } }, [[], [], []], chartBox);
   const buf = { st: [], sv: [], tt: [], tv: [] };
   let frames = 0;
   let pending = false;
@@ -81,7 +82,6 @@ async function session(main, id, signal) {
     u.setData([buf.st, buf.sv, holdOnto(buf.st, buf.tt, buf.tv)]);
     chartBox.dataset.samples = buf.st.length;
     chartBox.dataset.updates = frames;
-    chartBox.dataset.inked = inkedPixels(u);
   };
   const trim = (t, v, now) => {
     let k = 0;
