@@ -110,6 +110,7 @@ export function eventOverlays(id, events, metrics, signal) {
     part.forEach((e, i) => grid.append(panel(id, e, byIndex.get(e.index), series[i], shared.checked ? span * 1.1 : null, width)));
     grid.dataset.panels = part.length;
     grid.dataset.shared = shared.checked;
+    grid.dataset.page = page + 1;
     grid.dataset.ready = "1";
   }
   draw();
