@@ -254,6 +254,17 @@ def test_live_page_shows_frames_arriving(page: Any, server: Server, tmp_path: Pa
             page.wait_for_function(f"Number(document.querySelector('#live-chart').dataset.updates) > {first + 5}")
             assert int(page.get_attribute("#live-chart", "data-inked") or 0) > 200
             assert "frames/s" in (page.text_content("#live-status") or "")
+            replay.join(60)
+            # events appear as they complete: the table holds what the session reports
+            page.wait_for_function("document.querySelectorAll('#live-events tbody tr').length >= 2")
+            deadline = time.monotonic() + 30
+            while True:
+                reported = api(server, f"/live/sessions/{sid}/events")["count"]
+                rows = len(page.query_selector_all("#live-events tbody tr"))
+                if rows == reported or time.monotonic() > deadline:
+                    break
+                time.sleep(0.5)
+            assert rows == reported
             screenshot(page, "live")
         finally:
             replay.join(60)

@@ -65,8 +65,8 @@ async function session(main, id, signal) {
   const card = h("section", { class: "card" }, h("h2", {}, `Session ${id}: motor speed and torque, last ${WINDOW_S} s`),
     h("div", { class: "toolbar" }, stop, status), chartBox);
   main.append(card, h("section", { class: "card" }, h("h2", {}, "Completed events"),
-    h("table", { id: "live-events" }, h("thead", {}, h("tr", {}, ["#", "kind", "t (s)", "fluctuation meas (rpm)",
-      "fluctuation sim (rpm)", "tracking"].map((c) => h("th", {}, c)))), evBody)));
+    h("table", { id: "live-events" }, h("thead", {}, h("tr", {}, ["#", "kind", "t (s)", "fluctuation peak-valley (rpm)",
+      "rise height (rpm)", "shuffle frequency (Hz)", "analysed"].map((c) => h("th", {}, c)))), evBody)));
   const width = Math.max(600, card.clientWidth - 40);
   const u = new uPlot({ width, height: 340, scales: { x: { time: false }, rpm: {}, nm: {} },
     axes: [{ label: "time since session start (s)" }, { scale: "rpm", label: "motor speed (rpm)" },
@@ -111,12 +111,15 @@ async function session(main, id, signal) {
         requestAnimationFrame(redraw);
       }
     } else if (kind === "event") {
+      // live metrics are the measured ones (no simulation until the stored log is analysed)
       const m = data.metrics || {};
-      evBody.prepend(h("tr", {}, h("td", {}, data.index), h("td", {}, String(data.kind || "").replace("_", "-")),
+      evBody.prepend(h("tr", { dataset: { event: data.index } }, h("td", {}, data.index),
+        h("td", {}, String(data.kind || "").replace("_", "-")),
         h("td", { class: "num" }, fmt(data.t_cross_s, 2)),
-        h("td", { class: "num" }, fmt(m.measured?.fluctuation_rpm ?? data.measured_fluctuation_rpm)),
-        h("td", { class: "num" }, fmt(m.simulated?.fluctuation_rpm ?? data.simulated_fluctuation_rpm)),
-        h("td", {}, data.tracking ? badge(data.tracking.verdict ?? data.tracking) : "-")));
+        h("td", { class: "num" }, fmt(m.fluctuation_rpm)),
+        h("td", { class: "num" }, fmt(m.rise_height_rpm)),
+        h("td", { class: "num" }, fmt(m.shuffle_freq_hz, 2)),
+        h("td", {}, data.exclusion ? `excluded: ${data.exclusion}` : m.error || (data.provisional ? "provisional" : "yes"))));
     } else if (kind === "status") {
       status.replaceChildren(badge(data.state), ` ${data.bus.interface} ${data.bus.channel ?? ""} · ${fmt(data.frames_per_s, 0)} frames/s · `,
         `${data.frames_received} frames · ${data.frames_dropped} dropped · ${data.events} events`);
