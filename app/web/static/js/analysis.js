@@ -24,11 +24,13 @@ export async function render(main, id) {
     return () => ctrl.abort();
   }
   head.replaceChildren(h("p", { class: "muted" }, "loading results ..."));
-  const [log, events, metrics, signals] = await Promise.all([api(`/logs/${rec.log_id}`).catch(() => null),
-    api(`/analyses/${id}/events`), api(`/analyses/${id}/metrics`), api(`/analyses/${id}/signals`)]);
-  const start = log ? logStart(log.start_time) : null;
+  // First paint first: the chart needs only the channel list and one bounded series read; the
+  // events (markers), the metrics (summary, tables) and the log record arrive beside it.
+  const logP = api(`/logs/${rec.log_id}`).catch(() => null);
+  const eventsP = api(`/analyses/${id}/events`);
+  const metricsP = api(`/analyses/${id}/metrics`);
+  const signals = await api(`/analyses/${id}/signals`);
   const pedalName = Object.keys(signals.signals).find((n) => n.startsWith("pedal")) || null;
-  head.replaceChildren(summary(rec, log, metrics, start, id, ctrl));
 
   const timeline = h("div", { id: "timeline", class: "chart" });
   const info = h("span", { class: "muted", id: "timeline-info" });
@@ -39,11 +41,10 @@ export async function render(main, id) {
       h("span", { style: `color:${COLORS.tip_out}` }, "tip-out"), ", ",
       h("span", { style: `color:${COLORS.excluded}` }, "excluded (dashed)"), "."));
   main.append(card);
-  const markers = events.events.map((e) => ({ t: e.t_cross_s, color: e.included ? COLORS[e.kind] : COLORS.excluded,
-    dash: !e.included, label: `${e.index}` }));
+  let markers = [];
+  let start = null;
   const width = Math.max(600, card.clientWidth - 40);
   const maxPoints = Math.min(MAX_POINTS_CAP, 2 * width);
-  const whole = metrics.whole || {};
 
   async function fetchWindow(t0, t1) {
     const q = t0 === undefined ? "" : `&t0=${t0}&t1=${t1}`;
@@ -57,17 +58,18 @@ export async function render(main, id) {
   let chart;
   let seq = 0;
   let timer = null;
-  const show = (s, t0, t1) => {
+  const show = (s, t0, t1, count = true) => {
     timeline.dataset.points = s.points;
     timeline.dataset.sourcePoints = s.source_points;
     timeline.dataset.t0 = t0;
     timeline.dataset.t1 = t1;
-    timeline.dataset.loads = (Number(timeline.dataset.loads) || 0) + 1;
+    if (count) timeline.dataset.loads = (Number(timeline.dataset.loads) || 0) + 1;
     info.textContent = `${s.points} of ${s.source_points} rows in ${fmt(t0, 2)}-${fmt(t1, 2)} s` +
       (start ? ` · ${stamp(t0, start)}` : "");
   };
   const zoomTo = (t0, t1) => {
     clearTimeout(timer);
+    // no delay: a drag is one zoom; several scale changes in one task (pan buttons) make one request
     timer = setTimeout(async () => {
       const mine = ++seq;
       try {
@@ -78,12 +80,13 @@ export async function render(main, id) {
       } catch (err) {
         info.replaceChildren(errorBox(err));
       }
-    }, 120);
+    }, 0);
   };
   chart = speedChart(timeline, first.data, { width, height: 380, markers: () => markers, pedal: !!pedalName,
     onZoom: zoomTo });
-  const tStart = whole.t_start_s ?? first.s.t_s[0];
-  const tEnd = whole.t_end_s ?? first.s.t_s[first.s.t_s.length - 1];
+  timeline.chart = chart; // for scripts driving the page (bench/dashboard.py)
+  const tStart = first.s.t_s[0];
+  const tEnd = first.s.t_s[first.s.t_s.length - 1];
   show(first.s, tStart, tEnd);
   const setX = (a, b) => chart.setScale("x", { min: Math.max(tStart, a), max: Math.min(tEnd, b) });
   const span = () => chart.scales.x.max - chart.scales.x.min;
@@ -102,7 +105,15 @@ export async function render(main, id) {
     h("button", { onclick: () => download(`/analyses/${id}/speed?format=csv&max_points=0` +
       `&t0=${chart.scales.x.min}&t1=${chart.scales.x.max}`, `${id}-speed.csv`, "text/csv") }, "CSV of this window"),
     info), timeline);
+  main.dataset.painted = "1";
 
+  const [log, events, metrics] = await Promise.all([logP, eventsP, metricsP]);
+  start = log ? logStart(log.start_time) : null;
+  markers = events.events.map((e) => ({ t: e.t_cross_s, color: e.included ? COLORS[e.kind] : COLORS.excluded,
+    dash: !e.included, label: `${e.index}` }));
+  chart.redraw(false, false);
+  if (seq === 0) show(first.s, tStart, tEnd, false); // now with the absolute time of the log start
+  head.replaceChildren(summary(rec, log, metrics, start, id, ctrl));
   main.append(eventsTable(events, metrics, start),
     metricsTable(id, metrics),
     eventOverlays(id, events, metrics, ctrl.signal));
