@@ -34,7 +34,7 @@ export function eventsTable(events, metrics, start) {
     { key: "tracking", label: "tracking", value: (e) => e.tracking?.verdict ?? "",
       render: (e) => (e.tracking ? badge(e.tracking.verdict) : "-") },
   ];
-  return h("section", { class: "card" }, h("h2", {}, `Events (${events.count})`),
+  return h("section", { class: "card offscreen-lazy" }, h("h2", {}, `Events (${events.count})`),
     h("div", { class: "scroll" }, sortableTable(cols, events.events, { id: "events-table" })));
 }
 
@@ -53,7 +53,7 @@ export function metricsTable(id, metrics) {
   }
   cols.push({ key: "rms_rpm", label: "aligned RMS error (rpm)", num: true, digits: 1 },
     { key: "nrmse", label: "NRMSE (-)", num: true, digits: 3 });
-  return h("section", { class: "card" }, h("h2", {}, `Metrics per event (${metrics.events.length})`),
+  return h("section", { class: "card offscreen-lazy" }, h("h2", {}, `Metrics per event (${metrics.events.length})`),
     h("div", { class: "toolbar" }, h("span", { class: "muted" }, "Click a column to sort. Definitions: docs/metrics.md."),
       h("button", { id: "metrics-csv", onclick: () => download(`/analyses/${id}/metrics?format=csv`,
         `${id}-metrics.csv`, "text/csv") }, "CSV")),
