@@ -7,10 +7,10 @@ log through the API (not timed), then in headless Chromium:
 
 * **first paint**: a fresh browser context (empty cache) opens ``/#/analysis/<id>``; the time from
   navigation start to the first frame with the whole-log chart drawn with data (the page notes
-  ``performance.now()`` in the animation frame after the chart's draw), and to the whole view ready (events, metrics table,
-  first page of overlays). The alternative timed beside it: the page fetching every whole-log
-  row (``max_points=0``) and parsing it, what a dashboard without server-side downsampling does
-  before it can draw.
+  ``performance.now()`` in the animation frame after the chart's draw), and to the whole view
+  ready (events, metrics table, first page of overlays). The alternative timed beside it: the
+  page fetching every whole-log row (``max_points=0``) and parsing it, what a dashboard without
+  server-side downsampling does before it can draw.
 * **zoom round trip**: the time from setting a new time window on the chart to the finer rows
   fetched (``max_points`` for the chart width), the chart redrawn and the next frame painted;
   random windows of 5 s to 5 min.
@@ -107,6 +107,9 @@ def main() -> int:
                 browser = p.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
                 paint, ready, every = [], [], []
                 page: Any = None
+                warm = browser.new_context()  # the browser's own start-up is not the page's first paint
+                warm.new_page().goto(f"{srv.url}/#/logs")
+                warm.close()
                 for i in range(args.loads):
                     ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
                     page = ctx.new_page()
@@ -121,7 +124,8 @@ def main() -> int:
                     every.append(ms)
                     if i < args.loads - 1:
                         ctx.close()
-                print(f"\nanalysis view of the {args.minutes:g}-minute log, cold browser context, n={args.loads}:")
+                print(f"\nanalysis view of the {args.minutes:g}-minute log, new browser context each (empty cache), "
+                      f"n={args.loads}:")
                 print(f"first paint (whole-log chart drawn)   median {statistics.median(paint):7.0f} ms   "
                       f"max {max(paint):7.0f} ms   target <= 1000 ms: {'PASS' if max(paint) <= 1000 else 'FAIL'}")
                 print(f"whole view ready (tables, overlays)   median {statistics.median(ready):7.0f} ms   "

@@ -160,7 +160,8 @@ def test_every_event_has_an_overlay_and_the_shared_span_option_holds(page: Any, 
     own = spans()
     assert max(own) > 1.2 * min(own)  # each panel on its own scale by default
     page.check("#shared-y")
-    page.wait_for_function("(g => g.dataset.shared == 'true' && g.dataset.ready == '1')(document.querySelector('#overlays'))")
+    page.wait_for_function("(g => g.dataset.shared == 'true' && g.dataset.ready == '1')"
+                           "(document.querySelector('#overlays'))")
     shared = spans()
     assert max(shared) == pytest.approx(min(shared), rel=1e-6)
     # the span is the widest speed excursion of the page's events (as the API serves them) plus 10 %
@@ -211,6 +212,17 @@ def test_diagnosis_page_shows_the_decision_in_words(page: Any, server: Server, a
     rows = page.query_selector_all("#candidates tbody tr")
     assert len(rows) == len(report["candidates"]) + len(report["pairs"])
     assert "backlash" in (page.text_content("#candidates") or "")
+    if report["decision"]["status"] in ("explained", "partial", "ambiguous"):
+        versions = len(api(server, "/vehicles/ev/versions"))
+        page.click("#apply")
+        page.wait_for_selector("#actions-result >> text=stored ev")
+        assert len(api(server, "/vehicles/ev/versions")) == versions + 1
+        assert f"stored ev v{versions + 1}" in (page.text_content("#actions-result") or "")
+        page.click("#validate")  # on the only stored log: the demo drive itself
+        page.wait_for_selector("#validation", timeout=900_000)
+        val = api(server, f"/diagnoses/{did}")["validation"]
+        assert f"{val['events']} events" in (page.text_content("#validation") or "")
+        assert f"{100 * val['shrink']['value']:.1f} %" in (page.text_content("#validation") or "")
     screenshot(page, "diagnosis", full_page=True)
 
 

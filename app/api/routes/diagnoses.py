@@ -229,7 +229,8 @@ def _read(d: Path) -> dict[str, Any]:
     return doc
 
 
-@router.get("/diagnoses/{diagnosis_id}", response_model=DiagnosisOut, summary="Status, progress and (when done) the diagnosis report")
+@router.get("/diagnoses/{diagnosis_id}", response_model=DiagnosisOut,
+            summary="Status, progress and (when done) the diagnosis report")
 def get_diagnosis(diagnosis_id: str, store: StoreDep) -> dict[str, Any]:
     return _read(_dir(store, diagnosis_id))
 

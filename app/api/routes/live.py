@@ -91,7 +91,8 @@ def _database(settings: Settings, name: str) -> Any:
     return path
 
 
-@router.post("/sessions", status_code=status.HTTP_201_CREATED, response_model=LiveSessionOut, summary="Start a live session on a CAN bus")
+@router.post("/sessions", status_code=status.HTTP_201_CREATED, response_model=LiveSessionOut,
+             summary="Start a live session on a CAN bus")
 def start_session(body: LiveStart, manager: ManagerDep, settings: SettingsDep) -> dict[str, Any]:
     database = _database(settings, body.database) if body.database else None
     req = StartRequest(BusConfig(body.interface, body.channel, body.bitrate, dict(body.options)),
@@ -100,17 +101,20 @@ def start_session(body: LiveStart, manager: ManagerDep, settings: SettingsDep) -
     return manager.start(req).status()
 
 
-@router.get("/sessions", response_model=list[LiveSessionOut], summary="Live sessions of this server, running and stopped")
+@router.get("/sessions", response_model=list[LiveSessionOut],
+            summary="Live sessions of this server, running and stopped")
 def list_sessions(manager: ManagerDep) -> list[dict[str, Any]]:
     return [s.status() for s in manager.sessions()]
 
 
-@router.get("/sessions/{session_id}", response_model=LiveSessionOut, summary="Status: frames/s, dropped frames, bus and decode errors, bus state")
+@router.get("/sessions/{session_id}", response_model=LiveSessionOut,
+            summary="Status: frames/s, dropped frames, bus and decode errors, bus state")
 def get_session(session_id: str, manager: ManagerDep) -> dict[str, Any]:
     return manager.get(session_id).status()
 
 
-@router.get("/sessions/{session_id}/events", response_model=LiveEventsOut, summary="Events completed so far, with their ripple metrics")
+@router.get("/sessions/{session_id}/events", response_model=LiveEventsOut,
+            summary="Events completed so far, with their ripple metrics")
 def get_events(session_id: str, manager: ManagerDep, since: int = 0) -> dict[str, Any]:
     s = manager.get(session_id)
     events = [e for e in list(s.events) if e["index"] >= since]

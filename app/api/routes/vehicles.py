@@ -110,7 +110,8 @@ def vehicle_driveline(name: str, version: int, store: StoreDep) -> Response:
     return Response(rec.driveline_path.read_bytes(), media_type="application/toml")
 
 
-@router.get("/{name}/gap-sensitivity", response_model=GapSensitivityOut, summary="Gap what-ifs and sensitivities S1..S5 for the vehicle")
+@router.get("/{name}/gap-sensitivity", response_model=GapSensitivityOut,
+            summary="Gap what-ifs and sensitivities S1..S5 for the vehicle")
 async def vehicle_gap_sensitivity(name: str, store: StoreDep,
                                   version: Annotated[int | None, Query(ge=1)] = None) -> dict[str, Any]:
     """Each of the five gaps removed and halved under the paper's tip-in, with the nominal and

@@ -98,6 +98,14 @@ function where(r) {
     loc.notes.length ? h("p", { class: "note" }, loc.notes.join(" ")) : null);
 }
 
+// A validation in words: how much of this other drive's gap the frozen effect removes.
+function validationText(v) {
+  return h("div", { id: "validation" }, h("p", {}, `On ${v.log_id} (${v.events} events) the effect with its fitted values `,
+    `shrinks the residual by ${interval(v.shrink)} and explains ${interval(v.explained_share)} of it above noise; `,
+    `${fmt(100 * v.improved_fraction, 0)} % of the events improve; residual / noise ${fmt(v.residual_to_noise_baseline, 2)} `,
+    `-> ${fmt(v.residual_to_noise_augmented, 2)}.`));
+}
+
 function actions(id, d, doc, ctrl) {
   const out = h("div", { id: "actions-result" });
   const card = h("section", { class: "card" }, h("h2", {}, "Apply and validate"));
@@ -106,7 +114,7 @@ function actions(id, d, doc, ctrl) {
     return card;
   }
   const applied = doc.applied ? `applied as ${doc.applied.vehicle} v${doc.applied.version}` : null;
-  const apply = h("button", { class: "primary", onclick: async () => {
+  const apply = h("button", { class: "primary", id: "apply", onclick: async () => {
     try {
       const a = await api(`/diagnoses/${id}/apply`, { method: "POST", json: {} });
       out.replaceChildren(h("p", {}, `stored ${a.vehicle} v${a.version} (from ${a.from}); `,
@@ -115,16 +123,20 @@ function actions(id, d, doc, ctrl) {
       out.replaceChildren(errorBox(err));
     }
   } }, "Apply as a new vehicle version");
-  const logs = h("select", { "aria-label": "log to validate on" });
+  const logs = h("select", { "aria-label": "log to validate on", id: "validate-log" });
   api("/logs?limit=1000").then((ls) => ls.forEach((l) => logs.append(h("option", { value: l.id }, `${l.filename} (${l.id})`))));
-  const validate = h("button", { onclick: async () => {
+  const validate = h("button", { id: "validate", onclick: async () => {
     try {
       await api(`/diagnoses/${id}/validate`, { method: "POST", json: { log_id: logs.value } });
       for (;;) {
         const v = (await api(`/diagnoses/${id}`, { signal: ctrl.signal })).validation || {};
         out.replaceChildren(h("p", {}, "validation: ", badge(v.status || "queued")));
-        if (v.status === "done" || v.status === "failed") {
-          out.append(h("pre", {}, JSON.stringify(v, null, 1).slice(0, 3000)));
+        if (v.status === "done") {
+          out.append(validationText(v));
+          return;
+        }
+        if (v.status === "failed") {
+          out.append(errorBox(new Error(v.error ? `${v.error.detail} [${v.error.code}]` : "validation failed")));
           return;
         }
         await sleep(2000);
@@ -135,5 +147,6 @@ function actions(id, d, doc, ctrl) {
   } }, "Validate on this log");
   card.append(h("div", { class: "toolbar" }, apply, applied ? h("span", { class: "muted" }, applied) : null,
     h("span", {}, " · "), logs, validate), out);
+  if (doc.validation?.status === "done") out.append(validationText(doc.validation));
   return card;
 }
