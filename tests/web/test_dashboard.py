@@ -51,8 +51,10 @@ def analysis_id(browser: Any, server: Server, demo_log: Path) -> str:
         pg.wait_for_selector("#upload-form")
         pg.set_input_files("#upload-file", str(demo_log))
         pg.click("#upload-button")
-        pg.wait_for_selector("#upload-status .progress", state="attached")  # the bar appears at once
         pg.wait_for_function("document.querySelector('#upload-status').textContent.includes('stored as')")
+        # the bar ends full, with the bytes sent
+        assert pg.get_attribute("#upload-status .progress", "aria-valuenow") == "100"
+        assert f"{demo_log.name}: " in (pg.text_content("#upload-status .progress") or "")
         status = pg.text_content("#upload-status") or ""
         log_id = re.search(r"log_[0-9a-f]{16}", status)
         assert log_id, status

@@ -26,8 +26,9 @@ export async function render(main) {
       const rec = await upload("/logs", { file: f }, (frac, done, total) => {
         status.replaceChildren(progressBar(frac, `${f.name}: ${bytes(done)} of ${bytes(total)}`));
       });
-      status.replaceChildren(h("span", {}, rec.duplicate ? `already stored as ${rec.id}` : `stored as ${rec.id}`,
-        ` (${rec.frames} frames, ${duration(rec.duration_s)})`));
+      status.replaceChildren(progressBar(1, `${f.name}: ${bytes(f.size)} sent`),
+        h("span", {}, rec.duplicate ? `already stored as ${rec.id}` : `stored as ${rec.id}`,
+          ` (${rec.frames} frames, ${duration(rec.duration_s)})`));
       await refresh();
     } catch (err) {
       status.replaceChildren(errorBox(err));
