@@ -2,7 +2,9 @@
 
 ``create_app(settings)`` wires the store (embedded SQLite + files by default), the job
 runner, CORS and the error handlers, and includes every router in :data:`ROUTERS` -- append
-a module's ``router`` there to add a resource.
+a module's ``router`` there to add a resource. ``format=csv`` on a route without a CSV form is
+refused with 406 (:mod:`app.api.formats`); the dashboard and the offline ``/docs`` are mounted
+last (:mod:`app.web`).
 
 On stop (SIGTERM, Ctrl-C) the lifespan closes the job runner to new work (queued jobs stay
 queued in SQLite and run after the next start; a running job's worker process is killed, so the
@@ -96,11 +98,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   docs_url=None, redoc_url=None)  # /docs is served from packaged assets (app.web)
     if settings is not None:
         app.dependency_overrides[get_settings] = lambda: settings
+    app.add_middleware(FormatGuard, openapi=app.openapi)  # inside CORS: a 406 carries the CORS headers too
     if cfg.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],
                            allow_headers=["*"])
     errors.install(app)
-    app.add_middleware(FormatGuard, openapi=app.openapi)
     for router in ROUTERS:
         app.include_router(router)
     install_dashboard(app)
