@@ -90,6 +90,7 @@ def test_demo_builds_analyses_plots_and_stores(tmp_path: Path, capsys: pytest.Ca
     (analysis,) = store.list_analyses()
     assert analysis.job.status.value == "done" and analysis.summary["with_metrics"] >= 20
     store.close()
+    assert f"dashboard:     http://127.0.0.1:8000/#/analysis/{analysis.id}" in text  # the page that shows it
     _check_overlay_layout(analysis.result_dir)
 
 

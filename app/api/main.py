@@ -4,6 +4,8 @@
 ``LASHSCOPE_STORE_URL``), the job runner, the request guard (Host allow-list, API keys,
 same-origin writes, body cap: :mod:`app.api.security`), CORS and the error handlers, and
 includes every router in :data:`ROUTERS` -- append a module's ``router`` there to add a resource.
+``format=csv`` on a route without a CSV form is refused with 406 (:mod:`app.api.formats`); the
+dashboard and the offline ``/docs`` are mounted last (:mod:`app.web`).
 
 On stop (SIGTERM, Ctrl-C) the lifespan closes the job runner to new work (queued jobs stay
 queued in SQLite and run after the next start; a running job's worker process is killed, so the
@@ -24,15 +26,17 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from app import __version__
 from app.api import errors
-from app.api.routes import analyses, diagnoses, health, live, logs, series, vehicles
+from app.api.formats import FormatGuard
+from app.api.routes import analyses, dashboard, diagnoses, health, live, logs, series, vehicles
 from app.api.security import RequestGuard
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
 from app.storage.results import ResultCache
 from app.storage.url import open_store
+from app.web import install as install_dashboard
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
-                            live.router, diagnoses.router]
+                            live.router, diagnoses.router, dashboard.router]
 
 log = logging.getLogger("lashscope.api")
 
@@ -93,9 +97,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             await _stop_live_sessions(app)
             store.close()
 
-    app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan,
+                  docs_url=None, redoc_url=None)  # /docs is served from packaged assets (app.web)
     if settings is not None:
         app.dependency_overrides[get_settings] = lambda: settings
+    app.add_middleware(FormatGuard, openapi=app.openapi)  # innermost: a 406 passes the guard and CORS
     app.add_middleware(RequestGuard, settings=cfg)  # inside CORS: preflights are answered before it
     if cfg.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],
@@ -103,4 +109,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     errors.install(app)
     for router in ROUTERS:
         app.include_router(router)
+    install_dashboard(app)
     return app

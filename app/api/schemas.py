@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from app.storage.records import AnalysisRecord, JobRecord, LogRecord, VehicleRecord
 
@@ -123,3 +123,114 @@ class SeriesOut(BaseModel):
     measured_rpm: list[float | None] | None = None
     simulated_rpm: list[float | None] | None = None
     torque_nm: list[float | None] | None = None
+
+
+class _Open(BaseModel):
+    """A documented shape whose nested parts are described in the docs; unknown keys pass through."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+class EventsOut(_Open):
+    """``/analyses/{id}/events``: every tip-in/tip-out (``Event`` fields, ``exclusion`` says why one is left out)."""
+
+    analysis_id: str
+    count: int
+    events: list[dict[str, Any]]
+
+
+class MetricsOut(_Open):
+    """``/analyses/{id}/metrics``: per event ``measured``, ``simulated``, ``difference`` (sim - meas), SI units."""
+
+    analysis_id: str
+    summary: dict[str, Any]
+    offset: dict[str, Any]
+    whole: dict[str, Any] | None
+    events: list[dict[str, Any]]
+    notes: list[str]
+    tracking: dict[str, Any] | None = None
+    sampling: dict[str, Any] | None = None
+
+
+class SignalsOut(BaseModel):
+    analysis_id: str
+    signals: dict[str, dict[str, Any]] = Field(description="channel -> unit, samples, interp, t_start_s, t_end_s")
+
+
+class ToleranceOut(_Open):
+    n: int
+    seed: int
+    sampled_fields: list[str] = Field(default_factory=list)
+    events: list[dict[str, Any]] = Field(default_factory=list)
+
+
+class GapSensitivityOut(_Open):
+    name: str
+    version: int
+    sensitivity_unit: str | None = None
+
+
+class LiveSessionOut(_Open):
+    """A live session's status (frames/s, dropped frames, bus and decode errors, bus state)."""
+
+    id: str
+    state: str
+    bus: dict[str, Any]
+    started_at: str | None
+    frames_received: int
+    frames_per_s: float
+    events: int
+
+
+class LiveEventsOut(BaseModel):
+    session_id: str
+    count: int
+    events: list[dict[str, Any]]
+
+
+class DiagnosisOut(_Open):
+    """Status of a diagnosis; ``report`` (schema lashscope.diagnosis/1, docs/diagnosis.md) once done."""
+
+    id: str
+    analysis_id: str
+    status: str
+    progress: float = 0.0
+    stage: str = ""
+    plots: list[str] = Field(default_factory=list)
+    report: dict[str, Any] | None = None
+    validation: dict[str, Any] | None = None
+
+
+class AppliedOut(BaseModel):
+    vehicle: str
+    version: int
+    created: bool
+    effects: dict[str, dict[str, float]]
+    from_: str = Field(alias="from")
+
+    model_config = ConfigDict(populate_by_name=True)
+
+
+class EffectOut(BaseModel):
+    id: str
+    title: str
+    model: str
+    params: list[str]
+
+
+class FieldChange(BaseModel):
+    field: str
+    a: Any
+    b: Any
+    changed: bool
+    delta: float | None = Field(description="b - a for numbers")
+    ratio: float | None = Field(description="b / a for numbers (null when a is 0)")
+
+
+class VehicleCompareOut(BaseModel):
+    name: str
+    a: int
+    b: int
+    changed: int
+    fields: list[FieldChange]
+    files_changed: list[str]

@@ -108,8 +108,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"demo log:      {log_path}")
         print(f"overlay plot:  {png}")
         print(f"results:       {analysis.result_dir}  (analysis {analysis.id}, stored in {root / 'lashscope.sqlite3'})")
-        print(f"next:          lashscope serve --data-dir {root}   then   "
-              f"curl 'http://127.0.0.1:8000/analyses/{analysis.id}/metrics'")
+        base = f"http://{settings.host}:{settings.port}"
+        print(f"next:          lashscope serve --data-dir {root}   then open the dashboard:")
+        print(f"dashboard:     {base}/#/analysis/{analysis.id}")
+        print(f"API:           curl '{base}/analyses/{analysis.id}/metrics'   (docs at {base}/docs)")
     finally:
         store.close()
     return 0

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response, status
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, PlainTextResponse
 
 from app.analysis.tolerance import MAX_SAMPLES
 from app.api.deps import ResultsDep, RunnerDep, SettingsDep, StoreDep
-from app.api.schemas import ERRORS, AnalysisCreate, AnalysisOut
+from app.api.schemas import ERRORS, AnalysisCreate, AnalysisOut, EventsOut, MetricsOut, ToleranceOut
+from app.api.tables import events_csv, metrics_csv
 from app.errors import AppError, ConflictError, NotFoundError, QueueFullError
 from app.jobkinds.tolerance import result_path as tolerance_path
 from app.jobkinds.tolerance import subject as tolerance_subject
@@ -40,6 +41,8 @@ def room_for_a_job(store: Store, limit: int) -> None:
     if queued >= limit:
         raise QueueFullError(f"{queued} jobs are waiting (limit {limit}, LASHSCOPE_MAX_QUEUED_JOBS); "
                              "try again when some have finished")
+TableFormat = Annotated[Literal["json", "csv"] | None, Query(alias="format", description="csv: one row per event")]
+CSV_DOC: dict[int | str, dict[str, Any]] = {200: {"content": {"text/csv": {}}}}
 
 
 def finished(store: Store, cache: ResultCache, analysis_id: str) -> tuple[AnalysisRecord, ResultFiles]:
@@ -100,20 +103,26 @@ def cancel_jobs(store: Store, runner: JobRunner, analysis_id: str) -> None:
         runner.cancel(job.id, f"cancelled: analysis {analysis_id} was deleted")
 
 
-@router.get("/{analysis_id}/events", summary="Tip-in/tip-out events, excluded ones with the reason")
+@router.get("/{analysis_id}/events", response_model=EventsOut, responses=CSV_DOC,
+            summary="Tip-in/tip-out events, excluded ones with the reason")
 def get_events(analysis_id: str, store: StoreDep, cache: ResultsDep,
-               included: bool | None = None) -> dict[str, Any]:
+               included: bool | None = None, fmt: TableFormat = None) -> Any:
     _, files = finished(store, cache, analysis_id)
     events = files.doc["events"]
     if included is not None:
         events = [e for e in events if e["included"] is included]
+    if fmt == "csv":
+        return PlainTextResponse(events_csv(events), media_type="text/csv")
     return {"analysis_id": analysis_id, "count": len(events), "events": events}
 
 
-@router.get("/{analysis_id}/metrics", summary="Ripple metrics per event: measured, simulated, differences")
-def get_metrics(analysis_id: str, store: StoreDep, cache: ResultsDep) -> dict[str, Any]:
+@router.get("/{analysis_id}/metrics", response_model=MetricsOut, responses=CSV_DOC,
+            summary="Ripple metrics per event: measured, simulated, differences")
+def get_metrics(analysis_id: str, store: StoreDep, cache: ResultsDep, fmt: TableFormat = None) -> Any:
     _, files = finished(store, cache, analysis_id)
     d = files.doc
+    if fmt == "csv":
+        return PlainTextResponse(metrics_csv(d["metrics"]), media_type="text/csv")
     return {"analysis_id": analysis_id, "summary": d["summary"], "offset": d["offset"], "whole": d["whole"],
             "events": d["metrics"], "notes": d["notes"], "tracking": d.get("tracking"),
             "sampling": d.get("sampling")}  # absent from results stored before they existed
@@ -124,7 +133,8 @@ TolSeed = Annotated[int, Query(ge=0, le=2**32 - 1, description="random seed of t
 
 
 @router.get("/{analysis_id}/tolerance", summary="Predicted ripple band over the vehicle's tolerances",
-            responses={202: {"description": "computing: the job's status and progress"},
+            responses={200: {"model": ToleranceOut},
+                       202: {"description": "computing: the job's status and progress"},
                        404: {"description": "not computed: POST to start it"}})
 def get_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, n: TolN = 200, seed: TolSeed = 0) -> Response:
     """Per analysed event: the 5/50/95 % band of the predicted peak-to-valley fluctuation with every

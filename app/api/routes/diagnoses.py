@@ -34,7 +34,7 @@ from fastapi.responses import FileResponse
 from pydantic import BaseModel, Field
 
 from app.api.deps import StoreDep
-from app.api.schemas import ERRORS
+from app.api.schemas import ERRORS, AppliedOut, DiagnosisOut
 from app.diagnosis_state import ACTIVE, Check, Work, Worker, log, recover, state, update, write_json
 from app.errors import AnalysisError, ConflictError, InputError, NotFoundError
 from app.storage.base import Store
@@ -192,7 +192,7 @@ def _run_diagnosis(root: str, dir_: str, check: Check) -> None:
     _in_store(root, run)
 
 
-@router.post("/analyses/{analysis_id}/diagnoses", status_code=status.HTTP_202_ACCEPTED,
+@router.post("/analyses/{analysis_id}/diagnoses", status_code=status.HTTP_202_ACCEPTED, response_model=DiagnosisOut,
              summary="Start a diagnosis of an analysis' sim-to-real gap (runs in the background)")
 def create_diagnosis(analysis_id: str, body: DiagnosisCreate, store: StoreDep, request: Request) -> dict[str, Any]:
     from app.analysis.diagnosis import DiagnosisOptions
@@ -229,7 +229,8 @@ def _read(d: Path) -> dict[str, Any]:
     return doc
 
 
-@router.get("/diagnoses/{diagnosis_id}", summary="Status, progress and (when done) the diagnosis report")
+@router.get("/diagnoses/{diagnosis_id}", response_model=DiagnosisOut,
+            summary="Status, progress and (when done) the diagnosis report")
 def get_diagnosis(diagnosis_id: str, store: StoreDep) -> dict[str, Any]:
     return _read(_dir(store, diagnosis_id))
 
@@ -267,7 +268,7 @@ def _chosen(report: dict[str, Any]) -> dict[str, dict[str, float]]:
     raise AnalysisError(f"candidate {key!r} is missing from the report", code="nothing_to_apply")
 
 
-@router.post("/diagnoses/{diagnosis_id}/apply", status_code=status.HTTP_201_CREATED,
+@router.post("/diagnoses/{diagnosis_id}/apply", status_code=status.HTTP_201_CREATED, response_model=AppliedOut,
              summary="Apply the diagnosed effect: store a new vehicle version (the augmented model)")
 def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict[str, Any]:
     from app.pipeline import check_vehicle_files
@@ -323,7 +324,7 @@ def _run_validation(root: str, dir_: str, check: Check) -> None:
     _in_store(root, run)
 
 
-@router.post("/diagnoses/{diagnosis_id}/validate", status_code=status.HTTP_202_ACCEPTED,
+@router.post("/diagnoses/{diagnosis_id}/validate", status_code=status.HTTP_202_ACCEPTED, response_model=DiagnosisOut,
              summary="Validate the diagnosed effect on another log (runs in the background)")
 def validate_diagnosis(diagnosis_id: str, body: ValidateBody, store: StoreDep, request: Request) -> dict[str, Any]:
     d = _dir(store, diagnosis_id)

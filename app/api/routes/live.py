@@ -30,7 +30,7 @@ from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 
 from app.api.deps import SettingsDep
-from app.api.schemas import ERRORS
+from app.api.schemas import ERRORS, LiveEventsOut, LiveSessionOut
 from app.errors import ForbiddenError, InputError
 from app.live.bus import BusConfig
 from app.live.decoding import source_for
@@ -107,7 +107,8 @@ def _channel_allowed(settings: Settings, body: LiveStart) -> None:
                                  code="live_channel_not_allowed")
 
 
-@router.post("/sessions", status_code=status.HTTP_201_CREATED, summary="Start a live session on a CAN bus")
+@router.post("/sessions", status_code=status.HTTP_201_CREATED, response_model=LiveSessionOut,
+             summary="Start a live session on a CAN bus")
 def start_session(body: LiveStart, manager: ManagerDep, settings: SettingsDep) -> dict[str, Any]:
     if body.interface in manager.allowed:  # otherwise the manager names the enabled interfaces
         _channel_allowed(settings, body)
@@ -118,17 +119,20 @@ def start_session(body: LiveStart, manager: ManagerDep, settings: SettingsDep) -
     return manager.start(req).status()
 
 
-@router.get("/sessions", summary="Live sessions of this server, running and stopped")
+@router.get("/sessions", response_model=list[LiveSessionOut],
+            summary="Live sessions of this server, running and stopped")
 def list_sessions(manager: ManagerDep) -> list[dict[str, Any]]:
     return [s.status() for s in manager.sessions()]
 
 
-@router.get("/sessions/{session_id}", summary="Status: frames/s, dropped frames, bus and decode errors, bus state")
+@router.get("/sessions/{session_id}", response_model=LiveSessionOut,
+            summary="Status: frames/s, dropped frames, bus and decode errors, bus state")
 def get_session(session_id: str, manager: ManagerDep) -> dict[str, Any]:
     return manager.get(session_id).status()
 
 
-@router.get("/sessions/{session_id}/events", summary="Events completed so far, with their ripple metrics")
+@router.get("/sessions/{session_id}/events", response_model=LiveEventsOut,
+            summary="Events completed so far, with their ripple metrics")
 def get_events(session_id: str, manager: ManagerDep, since: int = 0) -> dict[str, Any]:
     s = manager.get(session_id)
     events = [e for e in list(s.events) if e["index"] >= since]

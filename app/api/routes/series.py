@@ -24,7 +24,7 @@ from app.analysis.downsample import BlockExtremes, Method, downsample
 from app.api.deps import ResultsDep, StoreDep
 from app.api.numbers import json_numbers
 from app.api.routes.analyses import ON_DELETE, finished
-from app.api.schemas import ERRORS, SeriesOut
+from app.api.schemas import ERRORS, SeriesOut, SignalsOut
 from app.errors import InputError, NotFoundError
 from app.payload import SERIES_COLUMNS
 from app.storage.base import Store
@@ -184,7 +184,7 @@ async def get_event_speed(analysis_id: str, event: int, request: Request, store:
     return await get_speed(analysis_id, request, store, cache, event, max_points, None, None, fmt, method)
 
 
-@router.get("/{analysis_id}/signals", summary="Decoded channels of the analysed log")
+@router.get("/{analysis_id}/signals", response_model=SignalsOut, summary="Decoded channels of the analysed log")
 def list_signals(analysis_id: str, store: StoreDep, cache: ResultsDep) -> dict[str, object]:
     _, files = finished(store, cache, analysis_id)
     return {"analysis_id": analysis_id, "signals": files.doc["signals"]}

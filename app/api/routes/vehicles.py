@@ -10,7 +10,7 @@ from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 
 from app.api.deps import SettingsDep, StoreDep
-from app.api.schemas import ERRORS, VehicleOut
+from app.api.schemas import ERRORS, GapSensitivityOut, VehicleOut
 from app.api.upload import check_toml, receive_upload, user_file_names
 from app.errors import InputError
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity
@@ -113,7 +113,8 @@ def vehicle_driveline(name: str, version: int, store: StoreDep) -> Response:
     return Response(rec.driveline_path.read_bytes(), media_type="application/toml")
 
 
-@router.get("/{name}/gap-sensitivity", summary="Gap what-ifs and sensitivities S1..S5 for the vehicle")
+@router.get("/{name}/gap-sensitivity", response_model=GapSensitivityOut,
+            summary="Gap what-ifs and sensitivities S1..S5 for the vehicle")
 async def vehicle_gap_sensitivity(name: str, store: StoreDep,
                                   version: Annotated[int | None, Query(ge=1)] = None) -> dict[str, Any]:
     """Each of the five gaps removed and halved under the paper's tip-in, with the nominal and

@@ -1,0 +1,150 @@
+// uPlot charts of the analysis: measured vs simulated motor speed (rpm, left axis) with torque
+// (N m, right axis) and pedal (%), vertical markers (events, gap open, impact), PNG export.
+/* global uPlot */
+
+export const COLORS = {
+  measured: "#1f5fbf", simulated: "#d62728", torque: "#2a9d3a", pedal: "#8a5fbf",
+  tip_in: "#2a9d3a", tip_out: "#e07b00", excluded: "#9a9a9a", gap: "#7b2fbe", impact: "#111111",
+};
+
+// Columnar API series -> uPlot data (null stays null: uPlot leaves a gap).
+export function seriesData(s, pedal) {
+  const cols = [s.t_s, s.measured_rpm, s.simulated_rpm, s.torque_nm];
+  if (pedal !== undefined) cols.push(pedal);
+  return cols;
+}
+
+// Pedal samples (own time base) onto the speed times: the last pedal sample at or before each time.
+export function holdOnto(t, pt, pv) {
+  const out = new Array(t.length).fill(null);
+  let j = 0;
+  for (let i = 0; i < t.length; i++) {
+    while (j + 1 < pt.length && pt[j + 1] <= t[i]) j++;
+    if (pt.length && pt[j] <= t[i]) out[i] = pv[j];
+  }
+  return out;
+}
+
+function markerPlugin(getMarkers) {
+  return {
+    hooks: {
+      draw: [(u) => {
+        const ctx = u.ctx;
+        const { left, top, width, height } = u.bbox;
+        const [x0, x1] = [u.scales.x.min, u.scales.x.max];
+        ctx.save();
+        ctx.font = `${Math.round(10 * devicePixelRatio)}px sans-serif`;
+        let row = 0;
+        for (const m of getMarkers()) {
+          if (m.t < x0 || m.t > x1) continue;
+          const x = Math.round(u.valToPos(m.t, "x", true));
+          ctx.strokeStyle = m.color;
+          ctx.lineWidth = devicePixelRatio * (m.width || 1);
+          ctx.setLineDash(m.dash ? [4 * devicePixelRatio, 3 * devicePixelRatio] : []);
+          ctx.beginPath();
+          ctx.moveTo(x, top);
+          ctx.lineTo(x, top + height);
+          ctx.stroke();
+          if (m.label) {
+            ctx.fillStyle = m.color;
+            // labels on three staggered rows so close markers (gap open, impact) stay readable
+            ctx.fillText(m.label, Math.min(x + 3, left + width - 40), top + (12 + 11 * (row++ % 3)) * devicePixelRatio);
+          }
+        }
+        ctx.restore();
+      }],
+    },
+  };
+}
+
+// The chart: options.pedal adds the pedal series; options.yRange(min, max) fixes the rpm range;
+// options.onZoom(t0, t1) is called when the user zooms or pans the time axis.
+export function speedChart(el, data, { width, height, markers = () => [], pedal = false, yRange, onZoom,
+  title, xLabel = "time since log start (s)" } = {}) {
+  const series = [
+    { label: "t (s)", value: (u, v) => (v == null ? "-" : v.toFixed(3)) },
+    { label: "measured rpm", scale: "rpm", stroke: COLORS.measured, width: 1.5 },
+    { label: "simulated rpm", scale: "rpm", stroke: COLORS.simulated, width: 1.5 },
+    { label: "torque N m", scale: "nm", stroke: COLORS.torque, width: 1 },
+  ];
+  if (pedal) series.push({ label: "pedal %", scale: "pct", stroke: COLORS.pedal, width: 1, dash: [5, 3] });
+  let quiet = true; // until the first draw: uPlot's own initial scale is not a user's zoom
+  const opts = {
+    title, width, height,
+    scales: {
+      x: { time: false },
+      rpm: yRange ? { range: (u, lo, hi) => yRange(lo, hi) } : {},
+      nm: {},
+      pct: { range: [0, 100] },
+    },
+    axes: [
+      { label: xLabel },
+      { scale: "rpm", label: "motor speed (rpm)" },
+      { scale: "nm", side: 1, label: "torque (N m)", grid: { show: false } },
+    ],
+    series,
+    cursor: { drag: { x: true, y: false } },
+    plugins: [markerPlugin(markers)],
+    hooks: {
+      ready: [() => {
+        quiet = false;
+      }],
+      // what was drawn, on the element: tests and people's scripts can see that lines are on the canvas
+      draw: [(u) => {
+        el.dataset.inked = inkedPixels(u);
+        el.dataset.ySpan = u.scales.rpm.max - u.scales.rpm.min;
+        el.dataset.draws = (Number(el.dataset.draws) || 0) + 1;
+      }],
+      setScale: [(u, key) => {
+        if (key === "x" && onZoom && !quiet) onZoom(u.scales.x.min, u.scales.x.max);
+      }],
+    },
+  };
+  const u = new uPlot(opts, data, el);
+  // replace the data without reporting it as a zoom (keepX: stay in the user's window)
+  u.replace = (d, keepX) => {
+    quiet = true;
+    try {
+      u.setData(d, !keepX);
+    } finally {
+      quiet = false;
+    }
+  };
+  return u;
+}
+
+// The chart as a PNG on a white background, with a title line above it.
+export function chartPng(u, title) {
+  const src = u.ctx.canvas;
+  const pad = 28 * devicePixelRatio;
+  const c = document.createElement("canvas");
+  c.width = src.width;
+  c.height = src.height + pad;
+  const ctx = c.getContext("2d");
+  ctx.fillStyle = "#fff";
+  ctx.fillRect(0, 0, c.width, c.height);
+  ctx.fillStyle = "#111";
+  ctx.font = `${Math.round(13 * devicePixelRatio)}px sans-serif`;
+  ctx.fillText(title, 8 * devicePixelRatio, 18 * devicePixelRatio);
+  ctx.drawImage(src, 0, pad);
+  return new Promise((resolve) => c.toBlob(resolve, "image/png"));
+}
+
+// How many pixels of the plot area carry the speed lines' colours (measured, simulated): > 0 only
+// once data is drawn -- event markers, grid and axes use other colours. Shown on the chart element.
+export function inkedPixels(u, colors = [COLORS.measured, COLORS.simulated]) {
+  const rgb = colors.map((c) => [1, 3, 5].map((k) => parseInt(c.slice(k, k + 2), 16)));
+  const { left, top, width, height } = u.bbox;
+  const img = u.ctx.getImageData(left, top, Math.max(1, width), Math.max(1, height)).data;
+  let n = 0;
+  for (let i = 0; i < img.length; i += 4) {
+    if (img[i + 3] < 200) continue;
+    for (const [r, g, b] of rgb) {
+      if (Math.abs(img[i] - r) + Math.abs(img[i + 1] - g) + Math.abs(img[i + 2] - b) < 60) {
+        n++;
+        break;
+      }
+    }
+  }
+  return n;
+}

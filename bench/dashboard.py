@@ -1,0 +1,167 @@
+"""Dashboard benchmark: first paint of the analysis view and zoom round trips on a 30-minute log.
+
+Run: ``.venv/bin/python bench/dashboard.py`` (a few minutes on 2 cores; needs Debian's chromium
+and playwright, as the browser tests). Builds a 30-minute drive with the demo tools, starts
+``lashscope serve`` on a free loopback port with a fresh data directory, uploads and analyses the
+log through the API (not timed), then in headless Chromium:
+
+* **first paint**: a fresh browser context (empty cache) opens ``/#/analysis/<id>``; the time from
+  navigation start to the first frame with the whole-log chart drawn with data (the page notes
+  ``performance.now()`` in the animation frame after the chart's draw), and to the whole view
+  ready (events, metrics table, first page of overlays). The alternative timed beside it: the
+  page fetching every whole-log row (``max_points=0``) and parsing it, what a dashboard without
+  server-side downsampling does before it can draw.
+* **zoom round trip**: the time from setting a new time window on the chart to the finer rows
+  fetched (``max_points`` for the chart width), the chart redrawn and the next frame painted;
+  random windows of 5 s to 5 min.
+* **largest response** of every request the views made (analysis view, zooms, overlay pages,
+  ``/docs``).
+
+Targets (issue 13): first paint <= 1 s on loopback; zoom round trip p95 <= 200 ms; no response
+over 2 MB.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from app.demo.build import build_demo_log  # noqa: E402
+from app.demo.scenario import Scenario  # noqa: E402
+from app.settings import default_dbc_dir  # noqa: E402
+from bench.api import pct  # noqa: E402
+from tests.api.conftest import Server, create_vehicle, upload  # noqa: E402
+
+ZOOM = """async ([t0, t1]) => {
+  const el = document.querySelector('#timeline');
+  const loads = Number(el.dataset.loads);
+  const start = performance.now();
+  el.chart.setScale('x', {min: t0, max: t1});
+  while (Number(el.dataset.loads) === loads) await new Promise(r => setTimeout(r, 1));
+  await new Promise(requestAnimationFrame);
+  return performance.now() - start;
+}"""
+
+FETCH_PARSE = """async (url) => {
+  const start = performance.now();
+  const body = await (await fetch(url)).json();
+  return [performance.now() - start, body.points];
+}"""
+
+
+def analysed_log(srv: Server, log: Path) -> str:
+    with httpx.Client(base_url=srv.url, timeout=600.0) as c:
+        create_vehicle(c)
+        r = upload(c, log)
+        r.raise_for_status()
+        aid: str = c.post("/analyses", json={"log_id": r.json()["id"], "vehicle": "ev"}).json()["id"]
+        while (body := c.get(f"/analyses/{aid}").json())["status"] not in ("done", "failed"):
+            time.sleep(0.2)
+        if body["status"] != "done":
+            raise SystemExit(f"analysis failed: {body['job']['error']}")
+        s = body["summary"]
+        print(f"analysed: {s['events']} events, {s['with_metrics']} with metrics (not part of the figures)")
+        return aid
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, default=30.0)
+    ap.add_argument("--loads", type=int, default=5, help="cold first paints")
+    ap.add_argument("--zooms", type=int, default=40)
+    ap.add_argument("--log", type=Path, default=None, help="reuse (or create) the log at this path")
+    args = ap.parse_args()
+    from playwright.sync_api import sync_playwright
+
+    chromium = os.environ.get("LASHSCOPE_CHROMIUM") or shutil.which("chromium")
+    if not chromium:
+        print("chromium not found (apt-get install chromium)")
+        return 2
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} (other work shares the cores)")
+    with tempfile.TemporaryDirectory(prefix="lashscope-dash-") as tmp:
+        tmpdir = Path(tmp)
+        log = args.log or tmpdir / "drive.blf"
+        if not log.exists():
+            dbc = default_dbc_dir()
+            frames = build_demo_log(log, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml",
+                                    Scenario(duration_s=args.minutes * 60.0))
+            print(f"built {args.minutes:g}-minute log: {frames} frames (not part of the figures)")
+        srv = Server(tmpdir / "data", max_upload_mb=1024).start()
+        sizes: list[tuple[int, str]] = []
+        try:
+            aid = analysed_log(srv, log)
+            with sync_playwright() as p:
+                browser = p.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
+                paint, ready, every, bounded = [], [], [], []
+                page: Any = None
+                warm = browser.new_context()  # the browser's own start-up is not the page's first paint
+                warm.new_page().goto(f"{srv.url}/#/logs")
+                warm.close()
+                for i in range(args.loads):
+                    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
+                    page = ctx.new_page()
+                    page.on("response", lambda r: sizes.append((int(r.headers.get("content-length", 0)), r.url)))
+                    page.goto(f"{srv.url}/#/analysis/{aid}")
+                    page.wait_for_selector("#timeline[data-painted-ms]", state="attached", timeout=120_000)
+                    paint.append(float(page.get_attribute("#timeline", "data-painted-ms")))
+                    page.wait_for_selector("main[data-state='ready']", timeout=120_000)
+                    page.wait_for_function("document.querySelector('#overlays').dataset.ready == '1'")
+                    ready.append(page.evaluate("performance.now()"))
+                    # what the chart's first read costs in the page, and the same with every row (uncached)
+                    mp = page.evaluate("document.querySelector('#timeline').chart.width") * 2
+                    ms, rows_b = page.evaluate(FETCH_PARSE, f"{srv.url}/analyses/{aid}/speed?max_points={min(4000, mp)}"
+                                                            f"&t1={1e6 + i}")
+                    bounded.append(ms)
+                    ms, rows = page.evaluate(FETCH_PARSE, f"{srv.url}/analyses/{aid}/speed?max_points=0&t1={1e6 + i}")
+                    every.append(ms)
+                    if i < args.loads - 1:
+                        ctx.close()
+                print(f"\nanalysis view of the {args.minutes:g}-minute log, new browser context each (empty cache), "
+                      f"n={args.loads}:")
+                print(f"first paint (whole-log chart drawn)   median {statistics.median(paint):7.0f} ms   "
+                      f"max {max(paint):7.0f} ms   target <= 1000 ms: {'PASS' if max(paint) <= 1000 else 'FAIL'}")
+                print(f"whole view ready (tables, overlays)   median {statistics.median(ready):7.0f} ms   "
+                      f"max {max(ready):7.0f} ms")
+                print(f"whole-log read in the page (fetch + JSON parse): max_points={min(4000, mp)} "
+                      f"({rows_b} rows) median {statistics.median(bounded):5.0f} ms; alternative, every row "
+                      f"({rows} rows) median {statistics.median(every):5.0f} ms: "
+                      f"{statistics.median(every) / statistics.median(bounded):.1f}x")
+                t_end = float(page.get_attribute("#timeline", "data-t1"))
+                rnd = random.Random(0)
+                lat = []
+                for _ in range(args.zooms):
+                    w = rnd.uniform(5.0, 300.0)
+                    a = rnd.uniform(0.0, t_end - w)
+                    lat.append(page.evaluate(ZOOM, [a, a + w]))
+                print(f"\nzoom round trip (window set -> finer rows fetched, redrawn, next frame), n={args.zooms}:")
+                print(f"p50 {pct(lat, 50):6.1f} ms   p95 {pct(lat, 95):6.1f} ms   max {max(lat):6.1f} ms   "
+                      f"target p95 <= 200 ms: {'PASS' if pct(lat, 95) <= 200 else 'FAIL'}")
+                page.goto(f"{srv.url}/docs")
+                page.wait_for_selector(".swagger-ui .opblock", timeout=60_000)
+                browser.close()
+        finally:
+            srv.stop()
+    views = [(n, u) for n, u in sizes if "max_points=0" not in u]  # the every-row comparison is no view
+    print(f"\nlargest responses of {len(views)} (views, zooms, /docs):")
+    for n, url in sorted(views, reverse=True)[:3]:
+        print(f"  {n / 2**20:6.2f} MiB  {url.split('/', 3)[-1][:90]}")
+    worst = max(n for n, _ in views)
+    print(f"largest: {worst / 2**20:.2f} MiB; target <= 2 MiB: {'PASS' if worst <= 2 * 2**20 else 'FAIL'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

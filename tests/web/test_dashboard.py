@@ -1,0 +1,311 @@
+"""The dashboard in a real Chromium against a real server: what a person sees.
+
+One module-scoped flow uploads the demo drive through the Logs page (progress bar, XHR) and
+starts its analysis from the page; the tests then read the analysis view, zoom it, page
+through the per-event overlays, download the metrics CSV, diagnose, compare vehicle versions
+and watch a live session -- and compare what the page shows with what the API answers.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+import time
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qs, urlparse
+
+import httpx
+import pytest
+
+from app.demo.build import build_demo_log
+from app.demo.scenario import Scenario
+from app.ingest.readers import open_log
+from app.live.bus import BusConfig, BusLink
+from app.live.loopback import LoopbackHub
+from app.live.replay import Replayer
+from app.settings import default_dbc_dir
+from tests.api.conftest import Server
+from tests.web.conftest import screenshot
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+
+@pytest.fixture(scope="module")
+def demo_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The bundled demo drive (the one ``lashscope demo`` builds): 90 s, 16 tip-ins, 16 tip-outs."""
+    path = tmp_path_factory.mktemp("web-demo") / "lashscope-demo.blf"
+    dbc = default_dbc_dir()
+    build_demo_log(path, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml")
+    return path
+
+
+@pytest.fixture(scope="module")
+def analysis_id(browser: Any, server: Server, demo_log: Path) -> str:
+    """Upload through the Logs page, start the analysis with vehicle ``ev`` there, wait for the view."""
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    pg = context.new_page()
+    pg.set_default_timeout(60_000)
+    try:
+        pg.goto(f"{server.url}/#/logs")
+        pg.wait_for_selector("#upload-form")
+        pg.set_input_files("#upload-file", str(demo_log))
+        pg.click("#upload-button")
+        pg.wait_for_function("document.querySelector('#upload-status').textContent.includes('stored as')")
+        # the bar ends full, with the bytes sent
+        assert pg.get_attribute("#upload-status .progress", "aria-valuenow") == "100"
+        assert f"{demo_log.name}: " in (pg.text_content("#upload-status .progress") or "")
+        status = pg.text_content("#upload-status") or ""
+        log_id = re.search(r"log_[0-9a-f]{16}", status)
+        assert log_id, status
+        logs = httpx.get(f"{server.url}/logs").json()
+        assert [lg["id"] for lg in logs] == [log_id.group(0)]
+        assert f"{logs[0]['frames']} frames" in status
+        row = pg.wait_for_selector(f"tr[data-log='{log_id.group(0)}']")
+        row.query_selector("select.vehicle-select").select_option("ev")
+        row.query_selector("button.analyse").click()
+        pg.wait_for_url(re.compile(r"#/analysis/an_"))
+        aid = pg.url.rsplit("/", 1)[1]
+        pg.wait_for_selector("main[data-state='ready']", timeout=240_000)
+        screenshot(pg, "analysis-view", full_page=True)
+        return aid
+    finally:
+        context.close()
+
+
+def api(server: Server, path: str) -> Any:
+    r = httpx.get(f"{server.url}{path}", timeout=30.0)
+    assert r.status_code == 200, r.text
+    return r.json()
+
+
+def open_analysis(page: Any, server: Server, aid: str) -> None:
+    page.goto(f"{server.url}/#/analysis/{aid}")
+    page.wait_for_selector("main[data-state='ready']", timeout=120_000)
+
+
+def test_analysis_view_draws_the_log_and_lists_every_event(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    events = api(server, f"/analyses/{analysis_id}/events")
+    metrics = api(server, f"/analyses/{analysis_id}/metrics")
+    assert events["count"] == 32  # the demo drive: 16 tip-ins and 16 tip-outs
+    tl = page.query_selector("#timeline")
+    assert int(tl.get_attribute("data-inked")) > 2000  # lines drawn in the plot area, not an empty frame
+    whole = api(server, f"/analyses/{analysis_id}/speed?max_points=2000")
+    assert int(tl.get_attribute("data-source-points")) == whole["source_points"]
+    assert 500 < int(tl.get_attribute("data-points")) <= 4 * 2000
+    assert len(page.query_selector_all("#events-table tbody tr")) == events["count"]
+    assert len(page.query_selector_all("#metrics-table tbody tr")) == len(metrics["events"])
+    # the verdict a person reads is the API's
+    assert metrics["tracking"]["verdict"] in (page.text_content("#tracking") or "")
+    # excluded events say why in the table
+    excluded = [e for e in events["events"] if not e["included"]]
+    text = page.text_content("#events-table") or ""
+    for e in excluded:
+        assert f"excluded: {e['exclusion']}" in text
+
+
+def test_zoom_fetches_finer_data_for_the_window(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    tl = page.query_selector("#timeline")
+    points0, t0_0, t1_0 = (float(tl.get_attribute(k)) for k in ("data-points", "data-t0", "data-t1"))
+    box = page.query_selector("#timeline .u-over").bounding_box()
+    with page.expect_response(lambda r: "/speed?" in r.url and "t0=" in r.url) as resp:
+        y = box["y"] + box["height"] / 2
+        page.mouse.move(box["x"] + 0.40 * box["width"], y)
+        page.mouse.down()
+        page.mouse.move(box["x"] + 0.46 * box["width"], y, steps=5)
+        page.mouse.up()
+    q = parse_qs(urlparse(resp.value.url).query)
+    t0, t1 = float(q["t0"][0]), float(q["t1"][0])
+    assert 0 < t1 - t0 < 0.1 * (t1_0 - t0_0)
+    assert int(q["max_points"][0]) <= 4000
+    page.wait_for_function(f"document.querySelector('#timeline').dataset.t1 == '{t1}'")
+    body = resp.value.json()
+    assert body["t_s"][0] >= t0 and body["t_s"][-1] <= t1
+    # finer: more rows per second of log than the whole-log view, and every source row in this short window
+    assert body["points"] / (t1 - t0) > 5 * points0 / (t1_0 - t0_0)
+    assert body["points"] == api(server, f"/analyses/{analysis_id}/speed?max_points={q['max_points'][0]}"
+                                         f"&t0={q['t0'][0]}&t1={q['t1'][0]}")["points"]
+    assert int(tl.get_attribute("data-inked")) > 500
+    screenshot(page, "analysis-zoomed")
+
+
+def test_every_event_has_an_overlay_and_the_shared_span_option_holds(page: Any, server: Server,
+                                                                     analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    events = api(server, f"/analyses/{analysis_id}/events")["events"]
+    with_series = [e["index"] for e in events if e["has_series"]]
+    seen: list[int] = []
+    number = 1
+    while True:
+        page.wait_for_function(f"(g => g.dataset.ready == '1' && g.dataset.page == '{number}' && "
+                               "g.querySelectorAll('.panel .chart[data-inked]').length == Number(g.dataset.panels))"
+                               "(document.querySelector('#overlays'))")
+        panels = page.query_selector_all("#overlays .panel")
+        seen += [int(p.get_attribute("data-event")) for p in panels]
+        for p in panels:
+            assert int(p.query_selector(".chart").get_attribute("data-inked")) > 200
+        label = page.text_content("#overlay-page") or ""
+        m = re.search(r"page (\d+) of (\d+)", label)
+        assert m
+        if m.group(1) == m.group(2):
+            break
+        page.click("#overlay-next")
+        number += 1
+    assert seen == with_series  # every event with a series, in order, none sampled away
+
+    def spans() -> list[float]:
+        page.wait_for_function("[...document.querySelectorAll('#overlays .panel .chart')].every(c => c.dataset.ySpan)")
+        return [float(c.get_attribute("data-y-span")) for c in page.query_selector_all("#overlays .panel .chart")]
+
+    own = spans()
+    assert max(own) > 1.2 * min(own)  # each panel on its own scale by default
+    page.check("#shared-y")
+    page.wait_for_function("(g => g.dataset.shared == 'true' && g.dataset.ready == '1')"
+                           "(document.querySelector('#overlays'))")
+    shared = spans()
+    assert max(shared) == pytest.approx(min(shared), rel=1e-6)
+    # the span is the widest speed excursion of the page's events (as the API serves them) plus 10 %
+    page_events = [int(p.get_attribute("data-event")) for p in page.query_selector_all("#overlays .panel")]
+    widest = 0.0
+    for i in page_events:
+        s = api(server, f"/analyses/{analysis_id}/speed?event={i}&max_points=800")
+        v = [x for x in s["measured_rpm"] + s["simulated_rpm"] if x is not None]
+        widest = max(widest, max(v) - min(v))
+    assert shared[0] == pytest.approx(1.1 * widest, rel=1e-6)
+    screenshot(page, "overlays-shared-span")
+
+
+def test_metrics_table_sorts_and_exports_the_apis_csv(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    metrics = api(server, f"/analyses/{analysis_id}/metrics")["events"]
+    page.click("#metrics-table th[data-key='fluctuation_rpm.measured']")
+    cells = page.query_selector_all("#metrics-table tbody tr td:nth-child(4)")
+    shown = [float(c.text_content() or "nan") for c in cells]
+    expected = sorted(round(m["measured"]["fluctuation_rpm"], 1) for m in metrics)
+    assert shown == pytest.approx(expected, abs=0.051)
+    page.click("#metrics-table th[data-key='fluctuation_rpm.measured']")  # again: descending
+    first = float(page.text_content("#metrics-table tbody tr td:nth-child(4)") or "nan")
+    assert first == pytest.approx(expected[-1], abs=0.051)
+    with page.expect_download() as dl:
+        page.click("#metrics-csv")
+    text = Path(dl.value.path()).read_text(encoding="utf-8")
+    r = httpx.get(f"{server.url}/analyses/{analysis_id}/metrics?format=csv")
+    assert r.headers["content-type"].startswith("text/csv")
+    assert text == r.text
+    assert len(text.strip().splitlines()) == len(metrics) + 1
+    with page.expect_download() as png:
+        page.click("#png-timeline")
+    assert Path(png.value.path()).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_diagnosis_page_shows_the_decision_in_words(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    page.select_option("#diagnose-candidates", "backlash")  # one candidate keeps the fit short
+    page.click("#diagnose")
+    page.wait_for_url(re.compile(r"#/diagnosis/an_"))
+    did = page.url.rsplit("/", 1)[1]
+    page.wait_for_selector("#decision", timeout=900_000)
+    report = api(server, f"/diagnoses/{did}")["report"]
+    decision = page.text_content("#decision") or ""
+    assert report["decision"]["status"] in decision
+    assert report["decision"]["reason"] in decision
+    rows = page.query_selector_all("#candidates tbody tr")
+    assert len(rows) == len(report["candidates"]) + len(report["pairs"])
+    assert "backlash" in (page.text_content("#candidates") or "")
+    if report["decision"]["status"] in ("explained", "partial", "ambiguous"):
+        versions = len(api(server, "/vehicles/ev/versions"))
+        page.click("#apply")
+        page.wait_for_selector("#actions-result >> text=stored ev")
+        assert len(api(server, "/vehicles/ev/versions")) == versions + 1
+        assert f"stored ev v{versions + 1}" in (page.text_content("#actions-result") or "")
+        page.click("#validate")  # on the only stored log: the demo drive itself
+        page.wait_for_selector("#validation", timeout=900_000)
+        val = api(server, f"/diagnoses/{did}")["validation"]
+        assert f"{val['events']} events" in (page.text_content("#validation") or "")
+        assert f"{100 * val['shrink']['value']:.1f} %" in (page.text_content("#validation") or "")
+    screenshot(page, "diagnosis", full_page=True)
+
+
+def test_vehicles_page_compares_two_versions_field_by_field(page: Any, server: Server) -> None:
+    r = httpx.post(f"{server.url}/vehicles", data={"name": "ev", "preset": "single_reduction"})
+    assert r.status_code in (200, 201), r.text
+    latest = r.json()["version"]
+    diff = api(server, f"/vehicles/ev/compare?a={latest - 1}&b={latest}")
+    assert diff["changed"] > 0
+    page.goto(f"{server.url}/#/vehicles")
+    page.click("#vehicle-table tbody tr:has-text('ev') button")
+    page.wait_for_selector("#compare-table")
+    changed = page.query_selector_all("#compare-table tbody tr.changed")
+    assert len(changed) == diff["changed"]
+    first = next(f for f in diff["fields"] if f["changed"])
+    assert first["field"] in (changed[0].text_content() or "")
+    screenshot(page, "vehicles-compare")
+
+
+def test_live_page_shows_frames_arriving(page: Any, server: Server, tmp_path: Path) -> None:
+    drive = tmp_path / "live.blf"
+    dbc = default_dbc_dir()
+    build_demo_log(drive, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml", Scenario(duration_s=12.0))
+    with LoopbackHub() as hub:
+        r = httpx.post(f"{server.url}/live/sessions", json={"interface": "tcp_loopback", "channel": hub.channel,
+                                                            "vehicle": "ev"}, timeout=30.0)
+        assert r.status_code == 201, r.text
+        sid = r.json()["id"]
+        page.goto(f"{server.url}/#/live/{sid}")
+        page.wait_for_selector("#live-chart")
+        time.sleep(1.0)  # the page's stream is subscribed before the replay starts
+        link = BusLink(BusConfig("tcp_loopback", hub.channel))
+        link.open()
+        replay = threading.Thread(target=lambda: Replayer(link, lambda: open_log(drive).chunks(), rate=1.0).run(),
+                                  daemon=True)
+        replay.start()
+        try:
+            page.wait_for_function("Number(document.querySelector('#live-chart').dataset.samples) > 200",
+                                   timeout=60_000)
+            first = int(page.get_attribute("#live-chart", "data-updates") or 0)
+            page.wait_for_function(f"Number(document.querySelector('#live-chart').dataset.updates) > {first + 5}")
+            assert int(page.get_attribute("#live-chart", "data-inked") or 0) > 200
+            assert "frames/s" in (page.text_content("#live-status") or "")
+            replay.join(60)
+            # events appear as they complete: the table holds what the session reports
+            page.wait_for_function("document.querySelectorAll('#live-events tbody tr').length >= 2")
+            deadline = time.monotonic() + 30
+            while True:
+                reported = api(server, f"/live/sessions/{sid}/events")["count"]
+                rows = len(page.query_selector_all("#live-events tbody tr"))
+                if rows == reported or time.monotonic() > deadline:
+                    break
+                time.sleep(0.5)
+            assert rows == reported
+            screenshot(page, "live")
+        finally:
+            replay.join(60)
+            link.close()
+            httpx.post(f"{server.url}/live/sessions/{sid}/stop", timeout=60.0)
+    status = api(server, f"/live/sessions/{sid}")
+    assert status["frames_received"] == sum(len(c) for c in open_log(drive).chunks())
+
+
+def test_the_api_key_goes_with_every_request(page: Any, server: Server) -> None:
+    seen: list[tuple[str, str | None]] = []
+    page.on("request", lambda req: seen.append((req.url, req.headers.get("authorization"))))
+    page.goto(f"{server.url}/#/logs")
+    page.fill("#api-key", "k-123")
+    page.click("#key-form button")
+    page.wait_for_selector("#log-table")
+    api_calls = [(u, a) for u, a in seen if "/static/" not in u and urlparse(u).path not in ("/", "")]
+    assert api_calls and all(a == "Bearer k-123" for _, a in api_calls[-3:]), api_calls
+    page.fill("#api-key", "")
+    page.click("#key-form button")
+
+
+def test_docs_work_offline(page: Any, server: Server) -> None:
+    hosts: set[str] = set()
+    page.on("request", lambda req: hosts.add(urlparse(req.url).hostname or ""))
+    page.goto(f"{server.url}/docs")
+    page.wait_for_selector(".swagger-ui .opblock", timeout=60_000)
+    assert len(page.query_selector_all(".swagger-ui .opblock")) >= 30
+    assert hosts == {"127.0.0.1"}
+    assert httpx.get(f"{server.url}/redoc", follow_redirects=False).headers["location"] == "/docs"
