@@ -47,7 +47,8 @@ Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1"})
-PUBLIC_PATHS = frozenset({"/health", "/docs", "/docs/oauth2-redirect", "/redoc", "/openapi.json"})
+PUBLIC_PATHS = frozenset({"/", "/health", "/docs", "/docs/oauth2-redirect", "/redoc", "/openapi.json"})
+PUBLIC_PREFIXES = ("/static/",)  # the dashboard's own files: the page must load to ask for a key
 UPLOAD_ROUTES = frozenset({("POST", "/logs"), ("POST", "/vehicles")})
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 KEYS_RECHECK_S = 1.0
@@ -132,7 +133,7 @@ class RequestGuard:
             raise _Deny(400, "host_not_allowed", f"Host {host!r} is not served here; add it to "
                         "LASHSCOPE_ALLOWED_HOSTS (or --allowed-host) to allow it")
         method, path = scope["method"], scope["path"]
-        if method == "OPTIONS" or (method in SAFE_METHODS and path in PUBLIC_PATHS):
+        if method == "OPTIONS" or (method in SAFE_METHODS and (path in PUBLIC_PATHS or path.startswith(PUBLIC_PREFIXES))):
             return
         store = getattr(scope["app"].state, "store", None) if "app" in scope else None
         auth = headers.get("authorization", "")

@@ -71,6 +71,8 @@ def test_keys_and_scopes(client: TestClient) -> None:
     _error(r, 401, "auth_required")
     assert r.headers["www-authenticate"].startswith("Bearer")
     assert client.get("/health").status_code == 200 and client.get("/openapi.json").status_code == 200
+    # the dashboard page and its files load without a key (the page asks for one); its data calls do not
+    assert client.get("/").status_code == 200 and client.get("/static/js/app.js").status_code == 200
     _error(client.get("/logs", headers={"Authorization": f"Bearer {keys['read']}x"}), 401, "invalid_key")
     _error(client.get("/logs", headers={"Authorization": f"Basic {keys['read']}"}), 401, "invalid_key")
     assert client.get("/logs", headers=auth("read")).json() == []
