@@ -31,6 +31,9 @@ def run(args: argparse.Namespace) -> int:
     overrides = {k: getattr(args, k) for k in ("host", "port", "data_dir", "max_upload_mb", "analysis_workers",
                                                 "cors_origins") if getattr(args, k) is not None}
     settings = Settings(**overrides)
+    from app.fleet.hook import enable_for_service
+
+    enable_for_service(settings.data_dir)  # the analyses' events also go to <data dir>/events (Parquet)
     print(f"lashscope: serving on http://{settings.host}:{settings.port} (data in {settings.data_dir.resolve()}; "
           f"API docs at /docs)", flush=True)
     # Without a grace limit uvicorn waits for every open response before the lifespan shutdown, and a

@@ -1,0 +1,77 @@
+"""The Dask side of the batch: a local cluster, or an existing scheduler, behind one context manager.
+
+- No scheduler given: a :class:`distributed.LocalCluster` of ``workers`` processes with one
+  thread each (the analysis is CPU-bound numpy/numba; threads would share the GIL-held parts),
+  bound to 127.0.0.1, without the web dashboard.
+- ``scheduler`` given (``tcp://host:8786``): connect within ``timeout_s``; an unreachable
+  address raises :class:`SchedulerUnreachableError` (code ``scheduler_unreachable``), one line,
+  never a hang.
+
+Dask is optional (``pip install 'lashscope[fleet]'``); without it the batch says so, or runs
+in-process with ``--workers 0``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Iterator
+from typing import Any
+
+from app.errors import AppError, InputError
+
+
+class SchedulerUnreachableError(AppError, ConnectionError):
+    """No Dask scheduler answered at the given address within the connect timeout."""
+
+    code = "scheduler_unreachable"
+    status = 503
+
+
+class ClusterStartError(AppError, RuntimeError):
+    """The local cluster's worker processes did not come up (out of memory, no free port)."""
+
+    code = "cluster_start_failed"
+    status = 503
+
+
+def _distributed() -> Any:
+    try:
+        import distributed
+    except ImportError as exc:
+        raise InputError("the batch needs Dask: pip install 'lashscope[fleet]' (or run in-process with "
+                         "--workers 0)") from exc
+    return distributed
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None, workers: int, timeout_s: float = 10.0) -> Iterator[Any]:
+    """A connected ``distributed.Client``; the local cluster (if one was started) stops on exit."""
+    distributed = _distributed()
+    if scheduler:
+        try:
+            client = distributed.Client(scheduler, timeout=timeout_s, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise SchedulerUnreachableError(f"no Dask scheduler reachable at {scheduler} within {timeout_s:g} s "
+                                            f"({type(exc).__name__})") from exc
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    if workers < 1:
+        raise InputError(f"--workers {workers}: a local cluster needs at least 1 worker (0 runs in-process)")
+    try:
+        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                           host="127.0.0.1", dashboard_address=None,
+                                           silence_logs=logging.CRITICAL)
+    except (OSError, RuntimeError, TimeoutError) as exc:
+        raise ClusterStartError(f"the local Dask cluster of {workers} workers did not start: {exc}") from exc
+    try:
+        client = distributed.Client(cluster, set_as_default=False)
+        try:
+            yield client
+        finally:
+            client.close()
+    finally:
+        cluster.close()
