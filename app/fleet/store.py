@@ -51,7 +51,7 @@ def write_rows(root: str | os.PathLike[str], rows: Sequence[dict[str, Any]], *, 
     """Write one log's rows, one file per (vehicle, date) partition, atomically; returns the files.
 
     A log written before under the same ``source`` is replaced partition by partition (its files
-    are named by ``log_hash``). No rows, no file.
+    are named by ``log_hash``); the rows' ``source`` column is set to ``source``. No rows, no file.
     """
     base = Path(root)
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
@@ -62,7 +62,8 @@ def write_rows(root: str | os.PathLike[str], rows: Sequence[dict[str, Any]], *, 
         for (vehicle, date), part in sorted(groups.items()):
             folder = partition_dir(base, vehicle, date)
             folder.mkdir(parents=True, exist_ok=True)
-            table = pa.Table.from_pylist([{k: r.get(k) for k in SCHEMA.names} for r in part], schema=SCHEMA)
+            table = pa.Table.from_pylist([{k: r.get(k) for k in SCHEMA.names} | {"source": source}
+                                           for r in part], schema=SCHEMA)
             final = folder / f"{source}-{log_hash}.parquet"
             tmp = folder / f".{final.name}.{uuid.uuid4().hex}.tmp"
             pq.write_table(table, tmp)
