@@ -56,7 +56,8 @@ class BatchSummary:
     events: int = 0
     elapsed_s: float = 0.0
     failures: list[dict[str, Any]] = field(default_factory=list)
-    timings_s: dict[str, float] = field(default_factory=dict)  # warm_kernels, cluster_start, analyse
+    timings_s: dict[str, float] = field(default_factory=dict)  # warm_kernels, cluster_start, analyse, compact
+    partitions: set[Path] = field(default_factory=set)  # event-store folders written to
 
 
 def expand_sources(patterns: Sequence[str]) -> list[str]:
@@ -110,7 +111,8 @@ class _Pending:
     vehicle: str
 
 
-def _store(out: Path, job: _Pending, result: dict[str, Any], cfg: BatchConfig) -> dict[str, Any]:
+def _store(out: Path, job: _Pending, result: dict[str, Any], cfg: BatchConfig,
+           partitions: set[Path]) -> dict[str, Any]:
     """Write one task's rows and then its record (the record marks the log done)."""
     from app.fleet.rows import event_rows
     from app.fleet.store import write_rows
@@ -125,7 +127,7 @@ def _store(out: Path, job: _Pending, result: dict[str, Any], cfg: BatchConfig) -
         doc = result["doc"]
         rows = event_rows(doc, vehicle=job.vehicle, log_hash=job.key, log_name=record["log_name"],
                           source="batch", driveline=record["driveline"], diagnosis=result.get("diagnosis"))
-        write_rows(out / "events", rows, source="batch", log_hash=job.key)
+        partitions.update(f.parent for f in write_rows(out / "events", rows, source="batch", log_hash=job.key))
         record.update(events=len(rows), summary=doc["summary"], tracking=doc["tracking"],
                       start_time=doc["ingest"].get("start_time"), diagnosis=result.get("diagnosis"))
     else:
@@ -146,7 +148,7 @@ def _plan(sources: Sequence[str], cfg: BatchConfig, summary: BatchSummary,
         except AppError as exc:
             key = "name-" + hashlib.sha256(source.encode()).hexdigest()[:32]
             done(_store(cfg.out, _Pending(source, key, vehicle),
-                        {"status": "failed", "code": exc.code, "message": str(exc)}, cfg))
+                        {"status": "failed", "code": exc.code, "message": str(exc)}, cfg, summary.partitions))
             continue
         if key in seen:
             summary.skipped += 1
@@ -202,19 +204,27 @@ def run_batch(sources: Sequence[str], cfg: BatchConfig, stream: TextIO | None = 
     progress.total = progress.count + len(todo)
     if todo and cfg.workers == 0 and not cfg.scheduler:
         for job in todo:
-            done(_store(cfg.out, job, analyse_log(job.source, cfg.spec), cfg))
+            done(_store(cfg.out, job, analyse_log(job.source, cfg.spec), cfg, summary.partitions))
     elif todo:
-        _on_cluster(todo, cfg, done, summary.timings_s)
+        _on_cluster(todo, cfg, done, summary)
+    if summary.partitions:
+        from app.fleet.store import compact
+
+        clock_c = time.perf_counter()
+        compact(summary.partitions)  # one file per partition: queries pay per file
+        summary.timings_s["compact"] = time.perf_counter() - clock_c
     summary.elapsed_s = time.perf_counter() - clock
     return summary
 
 
 def _on_cluster(todo: list[_Pending], cfg: BatchConfig, done: Callable[[dict[str, Any]], None],
-                timings: dict[str, float]) -> None:
+                summary: BatchSummary) -> None:
     from distributed import as_completed
 
     from app.fleet.cluster import dask_client
     from app.fleet.work import warm_kernels
+
+    timings = summary.timings_s
 
     if not cfg.scheduler:  # the local workers then load the kernels from numba's cache instead of compiling them
         timings["warm_kernels"] = warm_kernels()
@@ -233,6 +243,6 @@ def _on_cluster(todo: list[_Pending], cfg: BatchConfig, done: Callable[[dict[str
                 result = future.result()
             except Exception as exc:  # the worker died (KilledWorker) or the task could not run there
                 result = {"status": "failed", "code": "worker_error", "message": f"{type(exc).__name__}: {exc}"}
-            done(_store(cfg.out, job, result, cfg))
+            done(_store(cfg.out, job, result, cfg, summary.partitions))
             future.release()
         timings["analyse"] = time.perf_counter() - clock - timings["cluster_start"]

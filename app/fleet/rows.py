@@ -15,8 +15,8 @@ service stores and the batch writes), so an upload and a batch run give the same
     tracking (event verdict: good | poor | unknown), log_tracking (the whole log's verdict)
     diagnosis_status, diagnosis_top ("+"-joined effects) when the log was diagnosed
 
-``vehicle`` and ``date`` (UTC day of ``time``, ``"unknown"`` without an absolute time) are the
-dataset's partition keys (:mod:`app.fleet.store`); they travel beside the rows, not in them.
+``vehicle`` and ``date`` (UTC day of ``time``, ``"unknown"`` without an absolute time) choose the
+dataset's partition (:mod:`app.fleet.store`: vehicle and month); ``date`` is also a column.
 A log's start time is taken as UTC when the format records local time without a zone (BLF).
 """
 

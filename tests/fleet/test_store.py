@@ -96,3 +96,26 @@ def test_weekly_median_ripple(tmp_path: Path) -> None:
     got = {(v, str(w)): (int(n), float(m)) for v, w, n, m in out[["vehicle", "week", "events", "median"]].to_numpy()}
     assert got == {("a", "2025-03-03"): (6, 350.0), ("a", "2025-03-10"): (2, 15.0), ("b", "2025-03-03"): (1, 50.0)}
     assert isinstance(out, pd.DataFrame) and np.isfinite(out["median"]).all()
+
+
+def test_compaction_merges_a_partition_and_later_writes_replace_rows(analysed: dict[str, Any],
+                                                                     tmp_path: Path) -> None:
+    from app.fleet.store import compact
+
+    rows = event_rows(analysed["doc"], vehicle="v", log_hash="x", log_name="a.blf", source="batch", driveline="p")
+    for h in ("h1", "h2", "h3"):
+        files = write_rows(tmp_path, [dict(r, log_hash=h) for r in rows], source="batch", log_hash=h)
+    folder = files[0].parent
+    assert folder.name == f"month={rows[0]['date'][:7]}"
+    before = read_events(tmp_path).sort_values(["log_hash", "event_index"]).reset_index(drop=True)
+    assert compact([folder]) == (3, 1)
+    merged = read_events(tmp_path).sort_values(["log_hash", "event_index"]).reset_index(drop=True)
+    pd.testing.assert_frame_equal(merged, before)
+    # h2 analysed again with other values: its rows are replaced, not added
+    write_rows(tmp_path, [dict(r, log_hash="h2", measured_fluctuation_rpm=1.0) for r in rows], source="batch",
+               log_hash="h2")
+    frame = read_events(tmp_path)
+    assert len(frame) == 3 * len(rows)
+    assert (frame.loc[frame["log_hash"] == "h2", "measured_fluctuation_rpm"] == 1.0).all()
+    assert (frame.loc[frame["log_hash"] == "h1", "measured_fluctuation_rpm"] != 1.0).any()
+    assert compact([folder]) == (2, 1) and len(read_events(tmp_path)) == 3 * len(rows)
