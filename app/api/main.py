@@ -23,14 +23,14 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from app import __version__
 from app.api import errors
-from app.api.routes import analyses, diagnoses, health, live, logs, series, vehicles
+from app.api.routes import analyses, diagnoses, fleet, health, live, logs, series, vehicles
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
 from app.storage.results import ResultCache
 from app.storage.sqlite import SQLiteStore
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
-                            live.router, diagnoses.router]
+                            live.router, diagnoses.router, fleet.router]
 
 log = logging.getLogger("lashscope.api")
 

@@ -42,7 +42,7 @@ def test_fsspec_memory_url_decodes_like_the_path(fleet_logs: dict[str, Path]) ->
         by_path, _ = decode_log(path, DBC, MAP)
         np.testing.assert_array_equal(by_url["motor_speed_rpm"].values, by_path["motor_speed_rpm"].values)
         assert content_hash(url) == hashlib.sha256(path.read_bytes()).hexdigest() == content_hash(path)
-        with pytest.raises(LogNotFoundError, match="memory://fleet-test/none.blf: no such log"):
+        with pytest.raises(LogNotFoundError, match=r"memory://fleet-test/none\.blf: no such log"):
             decode_log("memory://fleet-test/none.blf", DBC, MAP)
     finally:
         fsspec.filesystem("memory").rm("/fleet-test", recursive=True)

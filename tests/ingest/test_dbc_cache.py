@@ -63,7 +63,7 @@ def test_least_recently_used_entry_is_dropped(tmp_path: Path, monkeypatch: pytes
 
 
 def test_missing_database_is_a_typed_error_and_not_cached(tmp_path: Path) -> None:
-    with pytest.raises(DatabaseError, match="missing.dbc: cannot read database file"):
+    with pytest.raises(DatabaseError, match=r"missing\.dbc: cannot read database file"):
         dbc_cache.cached_database(tmp_path / "missing.dbc")
     bad = tmp_path / "bad.dbc"
     bad.write_text("BO_ nonsense\n", encoding="utf-8")
