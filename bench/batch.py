@@ -5,13 +5,12 @@ seed ``1000 + i``, spread over ``--vehicles`` vehicles whose half-shaft lash dif
 and over 20 weeks (one log every ~1.4 days), cached under ``bench/out/batch/logs``. Then, each
 into a fresh output directory:
 
-1. **direct**: ``run_analysis`` per log in this process (the kernels warm), per-log mean;
-2. **single process**: ``run_batch --workers 0`` over all logs (hashing, rows, records included);
-3. **cluster**: ``run_batch --workers W`` (default 2); throughput counted from the first task to the
-   last result (cluster start reported apart, it is paid once per batch);
-4. **per-log overhead**: ``run_batch --workers 1`` on ``--overhead-logs`` logs vs the direct mean
-   over the same logs (cluster path: pickling, scheduling, writing rows and the record);
-5. **query**: an event store of ``--events`` rows (the real rows of step 2, replicated over 20
+1. **throughput**: ``run_batch --workers 0`` (one process: hashing, rows, records included) and
+   ``run_batch`` on a running local cluster of ``--workers`` processes, alternating in rounds of
+   ``--chunk`` logs so both sides see the same load on a shared machine (cluster start reported apart);
+2. **per-log overhead**: ``run_analysis`` in this process vs ``run_batch`` on a 1-worker cluster
+   (hash, submit, analyse, rows, record) over ``--overhead-logs`` logs, alternating likewise;
+3. **query**: an event store of ``--events`` rows (the real rows of step 2, replicated over 20
    vehicles and 26 weeks with a fixed seed, written as logs of 100 rows) queried for the median
    ripple per vehicle per week (:func:`app.fleet.store.weekly_ripple`, pyarrow + pandas) with one
    file per log, then after :func:`app.fleet.store.compact` (what a batch does at its end);
@@ -57,13 +56,80 @@ def make_logs(n: int, duration: float, vehicles: int) -> list[str]:
     return paths
 
 
-def config(out: Path, workers: int):  # type: ignore[no-untyped-def]
+def config(out: Path, workers: int, scheduler: str | None = None):  # type: ignore[no-untyped-def]
     from app.fleet.batch import BatchConfig
     from app.fleet.work import BatchSpec
 
-    shutil.rmtree(out, ignore_errors=True)
     return BatchConfig(out=out, spec=BatchSpec(inputs()), vehicle_id="bench", vehicle_id_from_dir=True,
-                       workers=workers)
+                       workers=workers, scheduler=scheduler)
+
+
+def local_cluster(workers: int):  # type: ignore[no-untyped-def]
+    import logging
+
+    from distributed import LocalCluster
+
+    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                        dashboard_address=None, silence_logs=logging.CRITICAL)
+
+
+def throughput(paths: list[str], workers: int, chunk: int) -> None:
+    """``run_batch --workers 0`` and ``run_batch`` on a running cluster of ``workers``, alternating in
+    rounds of ``chunk`` logs so both see the same load (the machine is shared); each cluster round
+    connects anew and counts that too."""
+    from app.fleet.batch import run_batch
+
+    for d in ("single", "cluster"):
+        shutil.rmtree(OUT / d, ignore_errors=True)
+    clock = time.perf_counter()
+    cluster = local_cluster(workers)
+    start_s = time.perf_counter() - clock
+    single_s = cluster_s = 0.0
+    single_ok = cluster_ok = events = 0
+    try:
+        for k in range(0, len(paths), chunk):
+            part = paths[k:k + chunk]
+            s = run_batch(part, config(OUT / "single", 0), stream=None)
+            c = run_batch(part, config(OUT / "cluster", workers, cluster.scheduler_address), stream=None)
+            single_s, single_ok, events = single_s + s.elapsed_s, single_ok + s.ok, events + s.events
+            cluster_s, cluster_ok = cluster_s + c.elapsed_s, cluster_ok + c.ok
+    finally:
+        cluster.close()
+    print(f"single process (--workers 0): {single_ok} logs, {events} events in {single_s:.1f} s = "
+          f"{single_ok / single_s:.3f} logs/s", flush=True)
+    print(f"cluster ({workers} workers, started once in {start_s:.1f} s, warm-up included): {cluster_ok} logs in "
+          f"{cluster_s:.1f} s = {cluster_ok / cluster_s:.3f} logs/s", flush=True)
+    print(f"  throughput ratio cluster/single: {(cluster_ok / cluster_s) / (single_ok / single_s):.2f}x "
+          f"(rounds of {chunk} logs, alternating)", flush=True)
+
+
+def overhead(paths: list[str], chunk: int) -> None:
+    """Per-log wall time: ``run_analysis`` in this process vs ``run_batch`` on a 1-worker cluster
+    (hash, submit, analyse, rows, record), alternating in rounds of ``chunk`` logs."""
+    from app.fleet.batch import run_batch
+    from app.fleet.work import warm_worker
+    from app.pipeline import run_analysis
+
+    warm_worker()
+    run_analysis(paths[0], inputs())
+    shutil.rmtree(OUT / "one", ignore_errors=True)
+    cluster = local_cluster(1)
+    direct_s = cluster_s = 0.0
+    try:
+        run_batch(paths[-1:], config(OUT / "one-warm", 1, cluster.scheduler_address), stream=None)
+        for k in range(0, len(paths), chunk):
+            part = paths[k:k + chunk]
+            clock = time.perf_counter()
+            for p in part:
+                run_analysis(p, inputs())
+            direct_s += time.perf_counter() - clock
+            cluster_s += run_batch(part, config(OUT / "one", 1, cluster.scheduler_address), stream=None).elapsed_s
+    finally:
+        cluster.close()
+    n = len(paths)
+    print(f"per-log cost over {n} logs: direct run_analysis {direct_s / n:.3f} s, cluster path (1 worker) "
+          f"{cluster_s / n:.3f} s: overhead {100 * (cluster_s / direct_s - 1):+.1f} % (rounds of {chunk}, "
+          f"alternating)", flush=True)
 
 
 def inputs():  # type: ignore[no-untyped-def]
@@ -73,21 +139,6 @@ def inputs():  # type: ignore[no-untyped-def]
 
     dbc = default_dbc_dir()
     return VehicleInputs(load_vehicle("paper"), dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml")
-
-
-def direct(paths: list[str]) -> list[float]:
-    """Seconds per log of ``run_analysis`` in this process (kernels and DBC cache warm)."""
-    from app.fleet.work import warm_worker
-    from app.pipeline import run_analysis
-
-    warm_worker()
-    run_analysis(paths[0], inputs())
-    out = []
-    for p in paths:
-        clock = time.perf_counter()
-        run_analysis(p, inputs())
-        out.append(time.perf_counter() - clock)
-    return out
 
 
 def synth_store(source: Path, root: Path, events: int) -> None:
@@ -136,39 +187,21 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--overhead-logs", type=int, default=12)
     ap.add_argument("--events", type=int, default=100_000)
+    ap.add_argument("--chunk", type=int, default=10, help="logs per alternating round, single vs cluster")
+    ap.add_argument("--chunk-overhead", type=int, default=4, help="logs per alternating round, direct vs cluster")
+    ap.add_argument("--skip-batch", action="store_true")
+    ap.add_argument("--skip-query", action="store_true")
     args = ap.parse_args()
-    from app.fleet.batch import run_batch
-
     clock = time.perf_counter()
     paths = make_logs(args.n, args.duration, args.vehicles)
     print(f"logs: {len(paths)} x {args.duration:g} s over {args.vehicles} vehicles "
           f"(generated/cached in {time.perf_counter() - clock:.1f} s)", flush=True)
 
-    sub = paths[:args.overhead_logs]
-    per_log = direct(sub)
-    direct_mean = statistics.fmean(per_log)
-    print(f"direct run_analysis: {direct_mean:.3f} s/log mean over {len(sub)} logs "
-          f"(median {statistics.median(per_log):.3f} s)", flush=True)
-
-    single = run_batch(paths, config(OUT / "single", 0), stream=None)
-    single_rate = single.ok / single.elapsed_s
-    print(f"single process (--workers 0): {single.ok} logs, {single.events} events in {single.elapsed_s:.1f} s = "
-          f"{single_rate:.3f} logs/s", flush=True)
-
-    clus = run_batch(paths, config(OUT / "cluster", args.workers), stream=None)
-    t = clus.timings_s
-    clus_rate = clus.ok / t["analyse"]
-    print(f"cluster (--workers {args.workers}): {clus.ok} logs in {t['analyse']:.1f} s after a "
-          f"{t['cluster_start']:.1f} s cluster start (+{t.get('warm_kernels', 0):.1f} s kernel warm-up in the client) "
-          f"= {clus_rate:.3f} logs/s; {clus.ok / clus.elapsed_s:.3f} logs/s including start", flush=True)
-    print(f"  throughput ratio cluster/single: {clus_rate / single_rate:.2f}x "
-          f"({clus.ok / clus.elapsed_s / single_rate:.2f}x including the cluster start)", flush=True)
-
-    one = run_batch(sub, config(OUT / "one", 1), stream=None)
-    cluster_per_log = one.timings_s["analyse"] / max(one.ok, 1)
-    print(f"per-log cost, cluster path (--workers 1): {cluster_per_log:.3f} s vs direct {direct_mean:.3f} s: "
-          f"overhead {100 * (cluster_per_log / direct_mean - 1):+.1f} %", flush=True)
-
+    if not args.skip_batch:
+        throughput(paths, args.workers, args.chunk)
+        overhead(paths[:args.overhead_logs], args.chunk_overhead)
+    if args.skip_query:
+        return
     store = OUT / "query-store"
     clock = time.perf_counter()
     synth_store(OUT / "single" / "events", store, args.events)
