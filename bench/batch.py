@@ -65,12 +65,9 @@ def config(out: Path, workers: int, scheduler: str | None = None):  # type: igno
 
 
 def local_cluster(workers: int):  # type: ignore[no-untyped-def]
-    import logging
+    from app.fleet.cluster import local_cluster as start
 
-    from distributed import LocalCluster
-
-    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                        dashboard_address=None, silence_logs=logging.CRITICAL)
+    return start(workers)
 
 
 def throughput(paths: list[str], workers: int, chunk: int) -> None:
