@@ -2,7 +2,7 @@
 
 - No scheduler given: a :class:`distributed.LocalCluster` of ``workers`` processes with one
   thread each (the analysis is CPU-bound numpy/numba; threads would share the GIL-held parts),
-  bound to 127.0.0.1, without the web dashboard.
+  bound to 127.0.0.1 (its HTTP status port on a free loopback port, so clusters never collide).
 - ``scheduler`` given (``tcp://host:8786``): connect within ``timeout_s``; an unreachable
   address raises :class:`SchedulerUnreachableError` (code ``scheduler_unreachable``), one line,
   never a hang.
@@ -55,7 +55,7 @@ def _distributed() -> Any:
 
 
 def local_cluster(workers: int) -> Any:
-    """A started ``LocalCluster`` of ``workers`` single-threaded processes on 127.0.0.1, no dashboard."""
+    """A started ``LocalCluster`` of ``workers`` single-threaded processes on 127.0.0.1 (HTTP port: any free one)."""
     distributed = _distributed()
     if workers < 1:
         raise InputError(f"--workers {workers}: a local cluster needs at least 1 worker (0 runs in-process)")
@@ -64,7 +64,7 @@ def local_cluster(workers: int) -> Any:
     try:
         with dask.config.set(QUIET_WORKERS):  # the nannies hand this configuration to their workers
             return distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                            host="127.0.0.1", dashboard_address=None,
+                                            host="127.0.0.1", dashboard_address=":0",
                                             silence_logs=logging.CRITICAL)
     except (OSError, RuntimeError, TimeoutError) as exc:
         raise ClusterStartError(f"the local Dask cluster of {workers} workers did not start: {exc}") from exc

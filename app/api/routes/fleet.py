@@ -19,11 +19,10 @@ router = APIRouter(tags=["fleet"], responses=ERRORS)
 
 @router.get("/fleet", summary="Per-vehicle lash estimate and ripple over time from the event store; outliers flagged")
 def fleet(settings: SettingsDep, band_k: Annotated[float, Query(gt=0, le=20)] = 3.0) -> dict[str, Any]:
+    from app.errors import NotFoundError
     from app.fleet.hook import store_dir
     from app.fleet.report import fleet_report
     from app.storage.results import json_safe
-
-    from app.errors import NotFoundError
 
     root = store_dir() or settings.data_dir / "events"
     try:
