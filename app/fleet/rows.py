@@ -65,7 +65,7 @@ def event_rows(doc: dict[str, Any], *, vehicle: str, log_hash: str, log_name: st
     metrics = {m["event_index"]: m for m in doc.get("metrics", [])}
     log_verdict = (doc.get("tracking") or {}).get("verdict")
     diag_status = diagnosis.get("status") if diagnosis else None
-    diag_top = "+".join(diagnosis.get("top") or []) if diagnosis else None
+    diag_top = ("+".join(diagnosis.get("top") or []) or None) if diagnosis else None
     rows: list[dict[str, Any]] = []
     for ev in doc.get("events", []):
         t_abs = start + timedelta(seconds=float(ev["t_cross_s"])) if start is not None else None
