@@ -35,6 +35,7 @@ from app.analysis.series import FloatArray, finite_signal
 from app.analysis.slip import Drive, log_ratio_scale
 from app.analysis.tracking import TrackingParams, Verdict, event_verdict, log_verdict
 from app.errors import InputError, InsufficientDataError, MissingSignalError
+from app.log_source import LogSource
 from app.signals import Signal, SignalSet
 from sim import SimError, SimResult, Vehicle, simulate
 from sim.metrics import unloaded_time
@@ -127,17 +128,23 @@ class AnalysisResult:
     tracking: Verdict = field(default_factory=lambda: Verdict("unknown", ["no analysed event to judge"]))
 
 
-def decode_log(log_path: Path, database: Path, signal_map: Path,
+def decode_log(log: LogSource, database: Path, signal_map: Path,
                progress: ProgressFn = _no_progress) -> tuple[SignalSet, dict[str, Any]]:
-    """Read and decode a log into canonical signals; returns the signals and an ingest summary."""
-    from app.ingest.database import load_database
+    """Read and decode a log into canonical signals; returns the signals and an ingest summary.
+
+    ``log`` is a path, a binary file object, or an fsspec URL (:mod:`app.log_source`). The DBC is
+    parsed once per content per process (:mod:`app.ingest.dbc_cache`). ``ingest["start_time"]`` is
+    the log's absolute start (ISO 8601) when the format records it, else None.
+    """
+    from app.ingest.dbc_cache import cached_database
     from app.ingest.pipeline_signals import load_signals
     from app.ingest.readers import open_log
     from app.ingest.signalmap import load_signal_map
+    from app.log_source import opened
 
-    loaded = load_database(database)
+    loaded = cached_database(database)
     smap = load_signal_map(signal_map)
-    with open_log(log_path) as reader:
+    with opened(log) as src, open_log(src) as reader:
         signals, report = load_signals(reader, loaded, smap, progress=lambda f: progress("decode", f),
                                        require=REQUIRED)
         meta, read_report = reader.meta, reader.report
@@ -145,6 +152,7 @@ def decode_log(log_path: Path, database: Path, signal_map: Path,
         "format": meta.format, "frames": read_report.frames, "read_issues": len(read_report.issues),
         "database": loaded.name, "database_repairs": [asdict(r) for r in loaded.repairs],
         "decode": _plain(report), "channels": sorted(signals),
+        "start_time": meta.start_time.isoformat() if meta.start_time else None, "start_clock": meta.start_clock,
     }
     return signals, ingest
 
@@ -357,15 +365,20 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
                           tracking=verdict)
 
 
-def run_analysis(log_path: Path, vehicle: VehicleInputs, options: AnalysisOptions | None = None,
+def run_analysis(log_path: LogSource, vehicle: VehicleInputs, options: AnalysisOptions | None = None,
                  progress: ProgressFn = _no_progress) -> AnalysisResult:
-    """Decode ``log_path`` with the vehicle's DBC and signal map, then :func:`analyze_signals`."""
+    """Decode ``log_path`` (a path, file object or URL) with the vehicle's DBC and signal map, then
+    :func:`analyze_signals`; then the event-store hook (:func:`app.fleet.hook.after_analysis`)."""
     clock = time.perf_counter()
     signals, ingest = decode_log(log_path, vehicle.database, vehicle.signal_map,
                                  lambda s, f: progress(s, 0.4 * f))
     decode_s = time.perf_counter() - clock
     result = analyze_signals(signals, vehicle.vehicle, options, progress, start=0.4)
-    return replace(result, ingest=ingest, timings_s={"decode": decode_s, **result.timings_s})
+    result = replace(result, ingest=ingest, timings_s={"decode": decode_s, **result.timings_s})
+    from app.fleet.hook import after_analysis
+
+    after_analysis(log_path, vehicle, result)
+    return result
 
 
 def inspect_log(path: Path, progress: ProgressFn = _no_progress) -> dict[str, Any]:

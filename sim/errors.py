@@ -47,6 +47,11 @@ class ParameterError(SimError, ValueError):
         self.value = value
         self.reason = reason
 
+    def __reduce__(self) -> tuple[type[ParameterError], tuple[str, object, str], dict[str, Any]]:
+        """Rebuild from the three constructor arguments, so the error crosses a process or cluster boundary
+        (pickle's default replays ``args``, which hold only the formatted message)."""
+        return type(self), (self.field, self.value, self.reason), dict(self.__dict__)
+
 
 class InputSignalError(SimError, ValueError):
     code = "invalid_sim_input"

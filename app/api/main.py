@@ -27,7 +27,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from app import __version__
 from app.api import errors
 from app.api.formats import FormatGuard
-from app.api.routes import analyses, dashboard, diagnoses, health, live, logs, series, vehicles
+from app.api.routes import analyses, dashboard, diagnoses, fleet, health, live, logs, series, vehicles
 from app.api.security import RequestGuard
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
@@ -36,7 +36,7 @@ from app.storage.url import open_store
 from app.web import install as install_dashboard
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
-                            live.router, diagnoses.router, dashboard.router]
+                            live.router, diagnoses.router, fleet.router, dashboard.router]
 
 log = logging.getLogger("lashscope.api")
 

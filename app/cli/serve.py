@@ -59,6 +59,9 @@ def run(args: argparse.Namespace) -> int:
                  if getattr(args, k) is not None}
     settings = Settings(**overrides)
     refuse_open_network(settings)
+    from app.fleet.hook import enable_for_service
+
+    enable_for_service(settings.data_dir)  # the analyses' events also go to <data dir>/events (Parquet)
     print(f"lashscope: serving on http://{settings.host}:{settings.port} (store {settings.store_location}; "
           f"API docs at /docs)", flush=True)
     # Without a grace limit uvicorn waits for every open response before the lifespan shutdown, and a

@@ -27,6 +27,11 @@ EVENT_OPTIONS = (
 def add_log_and_vehicle(p: argparse.ArgumentParser) -> None:
     """``LOG --vehicle V [--dbc F] [--signal-map F]``."""
     p.add_argument("log", type=Path, help="CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4; gzip accepted)")
+    add_vehicle(p)
+
+
+def add_vehicle(p: argparse.ArgumentParser) -> None:
+    """``--vehicle V [--dbc F] [--signal-map F]`` and the event thresholds."""
     p.add_argument("--vehicle", required=True, help="driveline preset name (e.g. paper) or TOML file")
     p.add_argument("--dbc", type=Path, default=None, help="database (default: dbc/lashscope_ev.dbc)")
     p.add_argument("--signal-map", type=Path, default=None, help="signal map (default: dbc/lashscope_ev.map.toml)")

@@ -26,10 +26,11 @@ DEMO_START_EPOCH_S = 1_718_000_000.0  # fixed absolute start so the same content
 
 
 def encode_blf(path: Path, channels: Mapping[str, Channel], routes: Mapping[str, tuple[str, str]],
-               database: object, drops: int = 0) -> int:
+               database: object, drops: int = 0, start_epoch_s: float = DEMO_START_EPOCH_S) -> int:
     """Encode ``channels`` into ``path`` (BLF); ``routes`` maps channel -> (message name, signal name).
 
-    Returns the number of frames written (``drops`` per message fewer than were sent).
+    Returns the number of frames written (``drops`` per message fewer than were sent). The log starts
+    at ``start_epoch_s`` (s since the epoch; fixed by default so the same content gives the same file).
     """
     from app.ingest.stats import counter_modulus
 
@@ -71,16 +72,18 @@ def encode_blf(path: Path, channels: Mapping[str, Channel], routes: Mapping[str,
     tmp = path.with_suffix(path.suffix + ".tmp")
     with can.BLFWriter(str(tmp)) as writer:
         for ts, arb, ext, data in frames:
-            writer.on_message_received(can.Message(timestamp=DEMO_START_EPOCH_S + ts, arbitration_id=arb,
+            writer.on_message_received(can.Message(timestamp=start_epoch_s + ts, arbitration_id=arb,
                                                    is_extended_id=ext, data=data, channel=0))
     tmp.replace(path)
     return len(frames)
 
 
-def build_demo_log(path: Path, dbc: Path, signal_map: Path, scenario: Scenario | None = None) -> int:
+def build_demo_log(path: Path, dbc: Path, signal_map: Path, scenario: Scenario | None = None,
+                   start_epoch_s: float = DEMO_START_EPOCH_S) -> int:
     """Simulate the scripted drive (paper preset truth) and write it to ``path``; returns the frame count."""
     from app.pipeline import signal_routes
 
     loaded, routes = signal_routes(dbc, signal_map)
     channels = measured_channels(load_vehicle("paper"), scenario)
-    return encode_blf(path, channels, routes, loaded.db, drops=(scenario or Scenario()).dropped_frames)
+    return encode_blf(path, channels, routes, loaded.db, drops=(scenario or Scenario()).dropped_frames,
+                      start_epoch_s=start_epoch_s)

@@ -1,0 +1,34 @@
+"""``GET /fleet``: the fleet report (docs/fleet.md) over the service's own event store.
+
+The store is the one the analyses write to (``LASHSCOPE_EVENT_STORE``, by default
+``<data dir>/events``); no path comes from the request, so the API reads nothing outside its
+data. The plot is the CLI's (``lashscope fleet``); this answers with the numbers.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query
+
+from app.api.deps import SettingsDep
+from app.api.schemas import ERRORS
+
+router = APIRouter(tags=["fleet"], responses=ERRORS)
+
+
+@router.get("/fleet", summary="Per-vehicle lash estimate and ripple over time from the event store; outliers flagged")
+def fleet(settings: SettingsDep, band_k: Annotated[float, Query(gt=0, le=20)] = 3.0) -> dict[str, Any]:
+    from app.errors import NotFoundError
+    from app.fleet.hook import store_dir
+    from app.fleet.report import fleet_report
+    from app.storage.results import json_safe
+
+    root = store_dir() or settings.data_dir / "events"
+    try:
+        report = fleet_report(root, k=band_k)
+    except NotFoundError as exc:  # its message names the server path
+        raise NotFoundError("no events stored yet: each finished analysis adds its events",
+                            code="no_event_store") from exc
+    report["store"] = "events"  # the data dir's layout, not a server path
+    return dict(json_safe(report))

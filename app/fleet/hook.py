@@ -1,0 +1,63 @@
+"""The event-store hook: the service's analyses write the same Parquet rows as the batch.
+
+:func:`app.pipeline.run_analysis` calls :func:`after_analysis` when it has a result. When the
+environment names an event store (``LASHSCOPE_EVENT_STORE=DIR``) the analysis' events are
+written there (:mod:`app.fleet.store`, ``source = "service"``), so one query covers uploads and
+batches. ``lashscope serve`` sets it to ``<data dir>/events`` unless it is set already (``off``
+disables it); the job workers it spawns inherit it. Elsewhere (``lashscope analyze``, library
+calls, tests) it is unset and nothing is written.
+
+The hook never fails an analysis: a store that cannot be written is logged as a warning.
+The vehicle of the rows is the driveline description's name.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from app.log_source import LogSource
+    from app.pipeline import AnalysisResult, VehicleInputs
+
+ENV = "LASHSCOPE_EVENT_STORE"
+OFF = ("", "0", "off", "none", "false")
+log = logging.getLogger(__name__)
+
+
+def store_dir() -> Path | None:
+    """The event store the hook writes to, or None when it is off."""
+    value = os.environ.get(ENV, "").strip()
+    return None if value.lower() in OFF else Path(value)
+
+
+def enable_for_service(data_dir: Path) -> None:
+    """``lashscope serve``: write under ``<data_dir>/events`` unless the environment says otherwise."""
+    os.environ.setdefault(ENV, str(data_dir / "events"))
+
+
+def after_analysis(log_source: LogSource, inputs: VehicleInputs, result: AnalysisResult) -> None:
+    """Write ``result``'s events to the event store when one is configured; never raises."""
+    root = store_dir()
+    if root is None:
+        return
+    try:
+        from app.fleet.rows import event_rows
+        from app.fleet.store import write_rows
+        from app.log_source import content_hash, source_name
+        from app.payload import result_payload
+        from app.storage.results import json_safe
+
+        seek = getattr(log_source, "seek", None)
+        if callable(seek):  # a file object the decoder read to its end
+            seek(0)
+        log_hash = content_hash(log_source)
+        doc, _ = result_payload(result)
+        name = inputs.vehicle.name
+        rows = event_rows(dict(json_safe(doc)), vehicle=name, log_hash=log_hash, log_name=source_name(log_source),
+                          source="service", driveline=name)
+        write_rows(root, rows, source="service", log_hash=log_hash)
+    except Exception as exc:  # the analysis itself succeeded; the store is a by-product
+        log.warning("event store %s: events of %s not written: %s", root, log_source, exc)

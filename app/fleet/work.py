@@ -1,0 +1,115 @@
+"""What one batch task does with one log, wherever it runs (a Dask worker or the calling process).
+
+:func:`analyse_log` decodes, analyses and (optionally) diagnoses one log and returns a plain,
+picklable dict -- never raises for a problem with the log: a typed error becomes
+``{"status": "failed", "code": ..., "message": ...}`` so one bad log cannot stop a batch, and the
+error code crosses the process boundary as data. The caller (:mod:`app.fleet.batch`) writes the
+results; the task touches no output, so a task re-run after a worker died is harmless.
+
+The pipeline is called as :func:`app.pipeline.decode_log` + :func:`app.pipeline.analyze_signals`
+(not ``run_analysis``): the batch writes its own event rows, and the service's event-store hook
+must not write them a second time.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from app.errors import AppError
+from app.log_source import LogSource, source_name
+
+
+@dataclass(frozen=True)
+class BatchSpec:
+    """Everything a task needs besides the log: the vehicle inputs (paths must be readable where the
+    task runs: a shared file system on a real cluster), the analysis options, whether to diagnose."""
+
+    inputs: Any  # app.pipeline.VehicleInputs
+    options: dict[str, Any] = field(default_factory=dict)  # AnalysisOptions.to_dict()
+    diagnose: bool = False
+
+
+def _failure(exc: BaseException, name: str) -> dict[str, Any]:
+    if isinstance(exc, AppError) or hasattr(exc, "code"):
+        code, message = str(getattr(exc, "code", "error")), str(exc)
+    elif isinstance(exc, MemoryError):
+        code, message = "out_of_memory", f"{name}: the analysis ran out of memory"
+    else:  # a bug: keep the batch going and say what it was
+        code, message = "internal_error", f"{type(exc).__name__}: {exc}"
+    return {"status": "failed", "code": code, "message": message}
+
+
+def _diagnosis(signals: Any, spec: BatchSpec) -> dict[str, Any]:
+    from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals
+
+    model = spec.options.get("model", "multibody")
+    result = diagnose_signals(signals, spec.inputs.vehicle, DiagnosisOptions(model=model))
+    return {"status": result.decision.status, "top": list(result.decision.top)}
+
+
+def analyse_log(source: LogSource, spec: BatchSpec) -> dict[str, Any]:
+    """Analyse one log; ``{"status": "ok", "doc": {...}, "diagnosis": ..., "elapsed_s": ...}`` or a failure.
+
+    ``doc`` holds the parts of the analysis document the event rows and the per-log record need
+    (events, metrics, summary, tracking, ingest, notes), JSON-safe.
+    """
+    from sim import SimError
+
+    clock = time.perf_counter()
+    name = source_name(source)
+    try:
+        from app.payload import result_payload
+        from app.pipeline import AnalysisOptions, analyze_signals, decode_log
+        from app.storage.results import json_safe
+
+        signals, ingest = decode_log(source, spec.inputs.database, spec.inputs.signal_map)
+        result = analyze_signals(signals, spec.inputs.vehicle, AnalysisOptions.from_dict(spec.options))
+        full, _ = result_payload(result)
+        full["ingest"] = ingest
+        doc = {k: full[k] for k in ("summary", "events", "metrics", "tracking", "ingest", "notes")}
+        diagnosis = None
+        if spec.diagnose:
+            try:
+                diagnosis = _diagnosis(signals, spec)
+            except (AppError, SimError) as exc:  # an undiagnosable log keeps its analysis
+                diagnosis = {"status": "failed", "top": [], "code": getattr(exc, "code", "error"),
+                             "message": str(exc)}
+        out: dict[str, Any] = {"status": "ok", "doc": json_safe(doc), "diagnosis": diagnosis}
+    except Exception as exc:
+        out = _failure(exc, name)
+    out["elapsed_s"] = time.perf_counter() - clock
+    return out
+
+
+def warm_kernels() -> float:
+    """Compile (or load from numba's on-disk cache) the simulator kernels in this process; seconds taken.
+
+    The kernels are compiled with ``cache=True``: the first process ever pays ~30 s, every later
+    one loads the cache in ~1.5 s. Called before the workers start, so parallel workers load a
+    ready cache instead of each compiling the same kernels at once.
+    """
+    import numpy as np
+
+    from sim import load_vehicle, simulate
+
+    clock = time.perf_counter()
+    vehicle = load_vehicle("paper")
+    t = np.arange(0.0, 0.2, 0.001)
+    torque = np.where(t > 0.05, 100.0, -30.0)
+    for model in ("multibody", "two_inertia"):
+        simulate(vehicle, t, torque, model=model, output_dt=0.001)
+    return time.perf_counter() - clock
+
+
+def warm_worker() -> float:
+    """Import what an analysis imports and load the kernels (:func:`warm_kernels`); seconds taken."""
+    clock = time.perf_counter()
+    import app.ingest.pipeline_signals
+    import app.ingest.readers
+    import app.payload
+    import app.pipeline  # noqa: F401
+
+    warm_kernels()
+    return time.perf_counter() - clock

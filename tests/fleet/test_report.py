@@ -1,0 +1,90 @@
+"""The fleet report: per-vehicle lash and ripple with intervals, the fleet band, flags, the plot; the hook."""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from app.fleet.report import fleet_report, report_png
+from app.fleet.store import read_events, write_rows
+
+
+def _vehicle_rows(name: str, gap_ms: float, rise_rpm: float, ripple_rpm: float, seed: int) -> list[dict[str, Any]]:
+    rng = np.random.default_rng(seed)
+    start = datetime(2025, 5, 5, 8, tzinfo=UTC)  # Monday
+    rows = []
+    for k in range(20):  # 10 days, two events a day
+        t = start + timedelta(hours=12 * k)
+        rows.append({"vehicle": name, "date": t.date().isoformat(), "log_hash": f"{name}-{k // 2}", "time": t,
+                     "event_index": k % 2, "kind": "tip_in", "included": True, "time_is_absolute": True,
+                     "measured_gap_open_time_s": (gap_ms + rng.normal(0, 0.5)) / 1e3,
+                     "measured_rise_height_rpm": rise_rpm + rng.normal(0, 5),
+                     "measured_fluctuation_rpm": ripple_rpm + rng.normal(0, 10)})
+    return rows
+
+
+@pytest.fixture()
+def store(tmp_path: Path) -> Path:
+    root = tmp_path / "events"
+    specs = {"ev-01": (18.0, 250.0, 420.0), "ev-02": (18.5, 255.0, 430.0), "ev-03": (17.5, 245.0, 410.0),
+             "ev-04": (18.2, 250.0, 425.0), "ev-05": (30.0, 330.0, 600.0)}  # ev-05: a worn driveline
+    for seed, (name, spec) in enumerate(specs.items()):
+        rows = _vehicle_rows(name, *spec, seed=seed)
+        for h in sorted({r["log_hash"] for r in rows}):
+            write_rows(root, [r for r in rows if r["log_hash"] == h], source="batch", log_hash=h)
+    return root
+
+
+def test_outlier_vehicle_is_flagged_with_its_estimates(store: Path, tmp_path: Path) -> None:
+    report = fleet_report(store)
+    by = {v["vehicle"]: v for v in report["vehicles"]}
+    assert list(by) == ["ev-01", "ev-02", "ev-03", "ev-04", "ev-05"] and report["flagged"] == ["ev-05"]
+    assert len(by["ev-05"]["flags"]) == 3 and "above the fleet band" in by["ev-05"]["flags"][0]
+    frame = read_events(store, vehicle="ev-01")
+    gap = frame["measured_gap_open_time_s"].to_numpy() * 1e3
+    lash = np.degrees(0.5 * frame["measured_rise_height_rpm"].to_numpy() * math.pi / 30 * gap / 1e3)
+    v1 = by["ev-01"]
+    assert v1["gap_open_time_ms"]["median"] == pytest.approx(np.median(gap))
+    assert v1["total_lash_deg"]["median"] == pytest.approx(np.median(lash))
+    assert v1["total_lash_deg"]["median"] == pytest.approx(13.5, abs=0.5)  # 1/2 * 250 rpm * 18 ms, in degrees
+    for q in ("gap_open_time_ms", "total_lash_deg", "ripple_rpm"):
+        iv = v1[q]
+        assert iv["lo"] <= iv["median"] <= iv["hi"] and iv["lo"] < iv["hi"]
+    assert (v1["logs"], v1["events"]) == (10, 20)
+    assert [w["week"] for w in v1["weekly_ripple_rpm"]] == ["2025-05-05", "2025-05-12"]
+    assert [w["events"] for w in v1["weekly_ripple_rpm"]] == [14, 6]
+    band = report["bands"]["gap_open_time_ms"]
+    assert band["lo"] < 18.0 < band["hi"] < 30.0
+    png = report_png(report, tmp_path / "fleet.png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_hook_writes_service_rows_only_when_enabled(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                    fleet_logs: dict[str, Path]) -> None:
+    from app.fleet.hook import ENV
+    from app.log_source import content_hash
+    from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
+    from sim import load_vehicle
+    from tests.fleet.conftest import DBC, MAP
+
+    inputs = VehicleInputs(load_vehicle("paper"), DBC, MAP)
+    opts = AnalysisOptions(whole_log=False)
+    monkeypatch.delenv(ENV, raising=False)
+    run_analysis(fleet_logs["log2"], inputs, opts)
+    assert not (tmp_path / "events").exists()
+    monkeypatch.setenv(ENV, str(tmp_path / "events"))
+    result = run_analysis(fleet_logs["log2"], inputs, opts)
+    frame = read_events(tmp_path / "events")
+    assert len(frame) == len(result.events) and set(frame["source"]) == {"service"}
+    assert set(frame["log_hash"]) == {content_hash(fleet_logs["log2"])} and set(frame["vehicle"]) == {"paper"}
+    measured = {er.event.index: er.comparison.measured.fluctuation_rpm for er in result.event_results
+                if er.comparison is not None}
+    got = dict(zip(frame["event_index"], frame["measured_fluctuation_rpm"], strict=True))
+    assert measured and all(got[i] == pytest.approx(v) for i, v in measured.items())
+    monkeypatch.setenv(ENV, str(fleet_logs["log2"]))  # a file, not a folder: logged, the analysis still succeeds
+    assert run_analysis(fleet_logs["log2"], inputs, opts).events == result.events
