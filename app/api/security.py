@@ -133,7 +133,8 @@ class RequestGuard:
             raise _Deny(400, "host_not_allowed", f"Host {host!r} is not served here; add it to "
                         "LASHSCOPE_ALLOWED_HOSTS (or --allowed-host) to allow it")
         method, path = scope["method"], scope["path"]
-        if method == "OPTIONS" or (method in SAFE_METHODS and (path in PUBLIC_PATHS or path.startswith(PUBLIC_PREFIXES))):
+        public = path in PUBLIC_PATHS or path.startswith(PUBLIC_PREFIXES)
+        if method == "OPTIONS" or (method in SAFE_METHODS and public):
             return
         store = getattr(scope["app"].state, "store", None) if "app" in scope else None
         auth = headers.get("authorization", "")
