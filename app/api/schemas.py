@@ -164,6 +164,19 @@ class ToleranceOut(_Open):
     events: list[dict[str, Any]] = Field(default_factory=list)
 
 
+class FleetOut(_Open):
+    """The fleet report (docs/fleet.md): per vehicle the lash and ripple estimates with intervals, the
+    fleet's bands and the vehicles outside them."""
+
+    store: str
+    vehicles: list[dict[str, Any]] = Field(default_factory=list)
+    bands: dict[str, Any] = Field(default_factory=dict)
+    band_k: float
+    interval_level: float
+    units: dict[str, str] = Field(default_factory=dict)
+    flagged: list[str] = Field(default_factory=list)
+
+
 class GapSensitivityOut(_Open):
     name: str
     version: int

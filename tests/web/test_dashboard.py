@@ -9,6 +9,8 @@ and watch a live session -- and compare what the page shows with what the API an
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -288,17 +290,33 @@ def test_live_page_shows_frames_arriving(page: Any, server: Server, tmp_path: Pa
     assert status["frames_received"] == sum(len(c) for c in open_log(drive).chunks())
 
 
+def _keys(server: Server, *args: str) -> str:
+    out = subprocess.run([sys.executable, "-m", "app", "keys", *args, "--data-dir", str(server.data_dir)],
+                         capture_output=True, text=True, timeout=120, check=True)
+    return out.stdout
+
+
 def test_the_api_key_goes_with_every_request(page: Any, server: Server) -> None:
-    seen: list[tuple[str, str | None]] = []
-    page.on("request", lambda req: seen.append((req.url, req.headers.get("authorization"))))
-    page.goto(f"{server.url}/#/logs")
-    page.fill("#api-key", "k-123")
-    page.click("#key-form button")
-    page.wait_for_selector("#log-table")
-    api_calls = [(u, a) for u, a in seen if "/static/" not in u and urlparse(u).path not in ("/", "")]
-    assert api_calls and all(a == "Bearer k-123" for _, a in api_calls[-3:]), api_calls
-    page.fill("#api-key", "")
-    page.click("#key-form button")
+    """A real key in the server's store: without it the API answers 401, with it the page works."""
+    printed = _keys(server, "create", "--scope", "admin", "--name", "browser test")
+    token = printed.splitlines()[0].strip()
+    key_id = re.search(r"created key (\S+)", printed).group(1)  # type: ignore[union-attr]
+    try:
+        time.sleep(1.2)  # the server re-reads its keys within a second
+        assert httpx.get(f"{server.url}/logs").status_code == 401
+        seen: list[tuple[str, str | None]] = []
+        page.on("request", lambda req: seen.append((req.url, req.headers.get("authorization"))))
+        page.goto(f"{server.url}/#/logs")  # the page itself loads without a key
+        page.fill("#api-key", token)
+        page.click("#key-form button")
+        page.wait_for_selector("#log-table, #no-logs")  # the list answered (it may be empty: tests run alone)
+        api_calls = [(u, a) for u, a in seen if "/static/" not in u and urlparse(u).path not in ("/", "")]
+        assert api_calls and all(a == f"Bearer {token}" for _, a in api_calls[-3:]), api_calls
+        page.fill("#api-key", "")
+        page.click("#key-form button")
+    finally:
+        _keys(server, "revoke", key_id)
+        time.sleep(1.2)  # open again for the other tests (no key left)
 
 
 def test_docs_work_offline(page: Any, server: Server) -> None:

@@ -158,7 +158,7 @@ def get_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, n: TolN 
 
 @router.post("/{analysis_id}/tolerance", status_code=status.HTTP_202_ACCEPTED,
              summary="Start computing the tolerance band (background job)",
-             responses={200: {"description": "already computed: the band"}})
+             responses={200: {"model": ToleranceOut, "description": "already computed: the band"}})
 def start_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, runner: RunnerDep, settings: SettingsDep,
                     n: TolN = 200, seed: TolSeed = 0) -> Response:
     """Starts the job unless the band exists (200 with it) or its job is queued or running (202 with that

@@ -12,12 +12,13 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query
 
 from app.api.deps import SettingsDep
-from app.api.schemas import ERRORS
+from app.api.schemas import ERRORS, FleetOut
 
 router = APIRouter(tags=["fleet"], responses=ERRORS)
 
 
-@router.get("/fleet", summary="Per-vehicle lash estimate and ripple over time from the event store; outliers flagged")
+@router.get("/fleet", response_model=FleetOut,
+            summary="Per-vehicle lash estimate and ripple over time from the event store; outliers flagged")
 def fleet(settings: SettingsDep, band_k: Annotated[float, Query(gt=0, le=20)] = 3.0) -> dict[str, Any]:
     from app.errors import NotFoundError
     from app.fleet.hook import store_dir

@@ -49,7 +49,7 @@ export async function render(main) {
   }
 
   function logTable(logs, byLog, again) {
-    if (!logs.length) return h("p", { class: "muted" }, "No logs yet: upload one above.");
+    if (!logs.length) return h("p", { class: "muted", id: "no-logs" }, "No logs yet: upload one above.");
     const rows = logs.map((l) => {
       const runs = byLog.get(l.id) || [];
       const pick = h("select", { "aria-label": "vehicle", class: "vehicle-select" },
