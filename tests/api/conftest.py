@@ -114,3 +114,12 @@ def create_vehicle(client: httpx.Client, name: str = "ev") -> dict[str, object]:
 def upload(client: httpx.Client, path: Path) -> httpx.Response:
     with path.open("rb") as fh:
         return client.post("/logs", files={"file": (path.name, fh, "application/octet-stream")})
+
+
+def analysed(client: httpx.Client, log: Path, vehicle: str = "ev") -> tuple[str, str]:
+    """Register ``vehicle``, upload ``log``, analyse it and wait until done; (log id, analysis id)."""
+    create_vehicle(client, vehicle)
+    log_id = upload(client, log).json()["id"]
+    analysis_id = str(client.post("/analyses", json={"log_id": log_id, "vehicle": vehicle}).json()["id"])
+    assert wait_for(client, analysis_id)["status"] == "done"
+    return str(log_id), analysis_id

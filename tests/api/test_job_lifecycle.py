@@ -10,7 +10,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.api.conftest import Server, create_vehicle, upload, wait_for
+from tests.api.conftest import Server, analysed, create_vehicle, upload, wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -85,10 +85,7 @@ def test_delete_cancels_running_jobs_and_forgets_cached_series(tmp_path: Path, d
     srv = Server(tmp_path / "data").start()
     try:
         with httpx.Client(base_url=srv.url, timeout=60.0) as c:
-            create_vehicle(c)
-            log_id = upload(c, demo_log).json()["id"]
-            analysis_id = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
-            assert wait_for(c, analysis_id)["status"] == "done"
+            log_id, analysis_id = analysed(c, demo_log)
             speed = c.get(f"/analyses/{analysis_id}/speed", params={"max_points": 500})
             assert speed.status_code == 200 and speed.json()["points"] > 0  # now cached in memory
 

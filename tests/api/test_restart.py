@@ -13,7 +13,7 @@ from pathlib import Path
 
 import httpx
 
-from tests.api.conftest import Server, create_vehicle, upload, wait_for
+from tests.api.conftest import Server, analysed, wait_for
 
 
 def test_data_survives_a_restart_and_a_killed_server(tmp_path: Path, demo_log: Path) -> None:
@@ -21,10 +21,7 @@ def test_data_survives_a_restart_and_a_killed_server(tmp_path: Path, demo_log: P
     srv = Server(data).start()
     try:
         with httpx.Client(base_url=srv.url, timeout=60.0) as c:
-            create_vehicle(c)
-            log_id = upload(c, demo_log).json()["id"]
-            analysis_id = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
-            assert wait_for(c, analysis_id)["status"] == "done"
+            log_id, analysis_id = analysed(c, demo_log)
             before = c.get(f"/analyses/{analysis_id}/metrics").json()
     finally:
         srv.stop(signal.SIGKILL)  # no graceful shutdown: SQLite (WAL) must still have everything
