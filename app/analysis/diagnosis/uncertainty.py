@@ -9,7 +9,7 @@ variance (rpm^2) added to the speed noise of :mod:`.noise`:
   cubics and with straight lines through the samples differ by what the sample rate hides;
 - **white noise on the torque samples** (:func:`torque_noise_variance`): an inverter's torque
   estimate carries noise the air-gap torque does not have; fed to the simulator it makes the model
-  ring (a 0.3 N m noise on a 100 Hz torque gave 2 rpm RMS on the paper vehicle, 4x the speed noise,
+  ring (a 0.3 N m noise on a 100 Hz torque gave about 2 rpm RMS on the paper vehicle, over 3x the speed noise,
   on drives whose model was otherwise exact). Propagated by Monte Carlo through the fitted baseline;
 - **quantisation of held values** (:func:`torque_quantisation_variance`): one rounding error acting
   for as long as the value is held, integrated by the vehicle inertia;
