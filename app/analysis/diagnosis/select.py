@@ -199,7 +199,8 @@ def run_diagnosis(
     fit_order: list[str] = []
     say(0.0, f"baseline calibration on {len(cal)} events (held out: {len(ho)})")
     base_fit = fit(vehicle, cal, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
-    # add the input-reconstruction uncertainty to every sample's variance, then recalibrate
+    # add what the torque channel cannot tell (reconstruction, its noise, its quantisation) to every sample's
+    # variance, then recalibrate
     events = with_input_uncertainty(events, vehicle, base_fit, opts.model, noise, opts.model_form_rel, opts.seed)
     cal = split.calibration_events(events)
     ho = split.heldout_events(events)
