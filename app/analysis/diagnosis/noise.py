@@ -135,7 +135,9 @@ def estimate_noise_floor(t: FloatArray, values: FloatArray, quiet: npt.NDArray[n
     period = sample_period(t)
     jitter = timestamp_jitter(t, period)
     q = quantisation_step(v)
-    sigma, n_used, held = _second_difference_sigma(t, v, None if quiet is None else np.asarray(quiet, bool)[ok], period)
+    d2 = _second_differences(t, v, None if quiet is None else np.asarray(quiet, bool)[ok], period)
+    sigma, held = _mad_sigma(d2)
+    n_used = int(d2.size)
     if held:
         # the quantiser was not dithered: the MAD is zero, fall back to the RMS, which sees the rare steps
         sigma = held
@@ -156,20 +158,15 @@ def _second_differences(t: FloatArray, v: FloatArray, quiet: npt.NDArray[np.bool
     return np.asarray((v[2:] - 2.0 * v[1:-1] + v[:-2])[triple], dtype=np.float64)
 
 
-def _second_difference_sigma(t: FloatArray, v: FloatArray, quiet: npt.NDArray[np.bool_] | None,
-                             period: float) -> tuple[float, int, float]:
-    """White-noise sigma from second differences of regularly spaced (quiet) samples.
-
-    Returns ``(sigma from the MAD, number of second differences used, sigma from the RMS when the MAD is
-    zero else 0)``. ``quiet``: see :func:`estimate_noise_floor`.
-    """
-    d2 = _second_differences(t, v, quiet, period)
+def _mad_sigma(d2: FloatArray) -> tuple[float, float]:
+    """White-noise sigma from second differences ``d2``: ``(sigma from the MAD, sigma from the RMS when the
+    MAD is zero else 0)``; ``(0, 0)`` for fewer than three."""
     if d2.size < 3:
-        return 0.0, int(d2.size), 0.0
+        return 0.0, 0.0
     mad = float(np.median(np.abs(d2 - np.median(d2))))
     if mad == 0.0:
-        return 0.0, int(d2.size), float(np.sqrt(np.mean(d2**2) / 6.0))
-    return _MAD_TO_SIGMA * mad / np.sqrt(6.0), int(d2.size), 0.0
+        return 0.0, float(np.sqrt(np.mean(d2**2) / 6.0))
+    return _MAD_TO_SIGMA * mad / np.sqrt(6.0), 0.0
 
 
 TRIM_SIGMAS = 5.0  # second differences further than this many MAD-sigmas from their median are transients
@@ -193,10 +190,10 @@ def white_noise_sigma(t: FloatArray, values: FloatArray, quiet: npt.NDArray[np.b
     t, v = t[ok], v[ok]
     period = sample_period(t)
     q = None if quiet is None else np.asarray(quiet, bool)[ok]
-    sigma, _, _ = _second_difference_sigma(t, v, q, period)
+    d2 = _second_differences(t, v, q, period)
+    sigma, _ = _mad_sigma(d2)
     if sigma <= 0.0:
         return 0.0
-    d2 = _second_differences(t, v, q, period)
     dev = d2 - np.median(d2)
     kept = dev[np.abs(dev) <= TRIM_SIGMAS * np.sqrt(6.0) * sigma]
     return float(np.sqrt(np.mean(kept * kept) / 6.0)) if kept.size >= 3 else float(sigma)

@@ -29,6 +29,7 @@ from app.analysis.diagnosis.forward import (
     EffectSetting,
     FloatArray,
     Nuisance,
+    SimOut,
     simulate_events,
     vehicle_with,
 )
@@ -53,7 +54,8 @@ def _moving_mean(x: FloatArray, k: int) -> FloatArray:
 
 def input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, nuisance: Nuisance,
                       effects: Sequence[EffectSetting] = (), model: str = "multibody",
-                      smooth_s: float = SMOOTH_S, form_rel: float = 0.0) -> list[FloatArray]:
+                      smooth_s: float = SMOOTH_S, form_rel: float = 0.0,
+                      reference: Sequence[SimOut] | None = None) -> list[FloatArray]:
     """Per event, (n,) variance (rpm^2) of the prediction that no candidate effect should be asked to remove.
 
     Two parts. **Input reconstruction**: the prediction is made twice, with the torque filled in by
@@ -66,8 +68,10 @@ def input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, nuisance: N
     prediction less its moving mean over that window). A residual below that is no evidence of a
     missing effect; where the model predicts a quiet stretch the full sensor-noise weight stays. Both parts use
     the torque and the model only, never the measured speed, so they cannot absorb a gap.
+    ``reference``: the monotone-cubic run of these events and settings, when the caller already has it.
     """
-    a_all = simulate_events(events, vehicle, nuisance.gain, effects, model, "pchip")
+    a_all = reference if reference is not None else simulate_events(events, vehicle, nuisance.gain, effects,
+                                                                     model, "pchip")
     b_all = simulate_events(events, vehicle, nuisance.gain, effects, model, "linear")
     out: list[FloatArray] = []
     for ev, a_out, b_out in zip(events, a_all, b_all, strict=True):
@@ -133,26 +137,27 @@ def _local_mean_square(ev: DiagEvent, d: FloatArray, smooth_s: float) -> FloatAr
 
 def torque_noise_variance(events: Sequence[DiagEvent], vehicle: Vehicle, nuisance: Nuisance, sigma_nm: float,
                           model: str = "multibody", draws: int = NOISE_DRAWS, seed: int = 0,
-                          smooth_s: float = SMOOTH_S) -> list[FloatArray]:
+                          smooth_s: float = SMOOTH_S, reference: Sequence[SimOut] | None = None) -> list[FloatArray]:
     """Per event, (n,) variance (rpm^2) of the prediction caused by white noise of ``sigma_nm`` (N m) on the
     torque samples.
 
     The noise actually present in the log is one draw the simulator cannot tell from torque; its effect
     on the prediction is estimated by adding ``draws`` further independent draws of the same size to the
     samples and taking the mean square change of the prediction, averaged over ``smooth_s``. It costs
-    ``draws`` simulator passes over the events, once per diagnosis.
+    ``draws`` simulator passes over the events, once per diagnosis (one more without ``reference``, the
+    baseline's run of the events as they are).
     """
     if sigma_nm <= 0.0 or draws <= 0 or not events:
         return [np.zeros(ev.n) for ev in events]
-    ref = simulate_events(events, vehicle, nuisance.gain, (), model)
+    runs = reference if reference is not None else simulate_events(events, vehicle, nuisance.gain, (), model)
+    ref = [r.at(ev.speed_t, nuisance.offset_s) for ev, r in zip(events, runs, strict=True)]
     rng = np.random.default_rng(seed)
     acc = [np.zeros(ev.n) for ev in events]
     for _ in range(draws):
         noisy = [replace(ev, torque_nm=ev.torque_nm + rng.normal(0.0, sigma_nm, ev.torque_nm.size)) for ev in events]
         outs = simulate_events(noisy, vehicle, nuisance.gain, (), model)
         for a, ev, o, r in zip(acc, events, outs, ref, strict=True):
-            a += _local_mean_square(ev, o.at(ev.speed_t, nuisance.offset_s) - r.at(ev.speed_t, nuisance.offset_s),
-                                    smooth_s)
+            a += _local_mean_square(ev, o.at(ev.speed_t, nuisance.offset_s) - r, smooth_s)
     return [a / draws for a in acc]
 
 
@@ -164,7 +169,8 @@ def with_input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, fitted
     inertia = rigid_inertia(vehicle)
     step = noise.torque_step_nm if noise is not None else 0.0
     sigma = noise.torque_sigma_nm if noise is not None else 0.0
-    extra = input_uncertainty(events, veh, fitted.nuisance, (), model, form_rel=form_rel)
-    white = torque_noise_variance(events, veh, fitted.nuisance, sigma, model, seed=seed)
+    baseline = simulate_events(events, veh, fitted.nuisance.gain, (), model)  # one run serves both terms
+    extra = input_uncertainty(events, veh, fitted.nuisance, (), model, form_rel=form_rel, reference=baseline)
+    white = torque_noise_variance(events, veh, fitted.nuisance, sigma, model, seed=seed, reference=baseline)
     return [replace(ev, var=ev.var + u + w + torque_quantisation_variance(ev, step, inertia))
             for ev, u, w in zip(events, extra, white, strict=True)]
