@@ -130,8 +130,9 @@ def write_logs(workdir: Path, seconds: float, formats: list[str]) -> tuple[dict[
 def child_lashscope(log: Path) -> dict[str, float]:
     from app.ingest.database import load_database
     from app.ingest.decode import DecodedMessage, VectorDecoder
-    from app.ingest.readers import open_log
+    from app.ingest.readers import open_log, reader_class
 
+    reader_class(log.suffix[1:])
     t0 = time.perf_counter()
     db = load_database(DBC).db
     decoder = VectorDecoder(db, na_to_nan=False)
@@ -201,10 +202,9 @@ def child_path(path: str, log: Path, extra: str) -> dict[str, float]:
     from app.ingest.database import load_database
     from app.ingest.decode import VectorDecoder
     from app.ingest.pipeline_signals import load_signals
-    from app.ingest.readers import open_log
+    from app.ingest.readers import open_log, reader_class
 
-    if path == "mf4":
-        import asammdf  # noqa: F401  (imported before the clock starts, as on the asammdf side)
+    reader_class("mf4" if path == "mf4" else log.suffix[1:])  # the reader's module: an import, before the clock
     t0 = time.perf_counter()
     loaded = load_database(DBC if path != "mf4" else Path(extra))
     frames = 0
@@ -222,7 +222,7 @@ def child_path(path: str, log: Path, extra: str) -> dict[str, float]:
             write_signals(signals, Path(out), ["parquet"])
         frames = report.frames_read
     elif path == "mf4":
-        decoder = VectorDecoder(loaded.db)  # asammdf (our MF4 reader uses it) was imported before t0
+        decoder = VectorDecoder(loaded.db)
         with open_log(log) as reader:
             for chunk in reader.chunks():
                 frames += len(chunk)

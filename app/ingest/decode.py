@@ -45,7 +45,7 @@ from cantools.database.can import Signal as CanSignal
 from cantools.database.conversion import BaseConversion, IdentityConversion, LinearIntegerConversion
 
 from app.ingest.bitfields import SignalLayout, extract_raw
-from app.ingest.frames import FrameChunk, FrameFlag
+from app.ingest.frames import FrameChunk, FrameFlag, group_rows
 from app.ingest.j1939 import j1939_messages, pgn
 
 F64 = npt.NDArray[np.float64]
@@ -316,11 +316,7 @@ class VectorDecoder:
                 rows.setdefault(k, []).append(i)
             groups = [(k, np.array(r, np.intp)) for k, r in rows.items()]
         else:
-            order = np.argsort(key, kind="stable")  # stable: rows of one message stay in chunk order
-            sorted_keys = key[order]
-            cuts = (np.flatnonzero(sorted_keys[1:] != sorted_keys[:-1]) + 1).tolist()
-            starts, stops = [0, *cuts], [*cuts, key.size]
-            groups = [(k, order[a:b]) for a, b, k in zip(starts, stops, sorted_keys[starts].tolist(), strict=True)]
+            groups = group_rows(key)
         groups = self._match(groups)
         out: dict[str, DecodedMessage] = {}
         with np.errstate(all="ignore"):  # inf/NaN float signals scale like Python floats, silently

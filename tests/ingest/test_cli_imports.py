@@ -5,7 +5,9 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from tests.conftest import REPO
+import pytest
+
+from tests.conftest import DATA, REPO
 
 HEAVY = ("cantools", "can", "pyarrow", "scipy", "asammdf", "pandas", "fastapi", "numba", "numpy")
 
@@ -46,3 +48,22 @@ def test_top_level_help_imports_no_heavy_library_nor_the_simulator() -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and "diagnose" in out.stdout
     assert out.stderr.strip() == ""
+
+
+def test_reading_asc_and_mf4_loads_neither_numba_nor_asammdf() -> None:
+    """The ASC scanner is numpy only and the MF4 reader reads CANedge files itself."""
+    mf4 = sorted((DATA / "css-electronics-mf4").rglob("*.MF4")) if DATA.is_dir() else []
+    asc = [p for p in sorted(DATA.rglob("*.asc")) if p.stat().st_size > 8192][:1] if DATA.is_dir() else []
+    if not (mf4 and asc):
+        pytest.skip("shared data not found (set LASHSCOPE_SHARED)")
+    code = (
+        "import sys\n"
+        "from app.ingest.readers import open_log\n"
+        f"for path in {[str(mf4[0]), str(asc[0])]!r}:\n"
+        "    with open_log(path) as log:\n"
+        "        assert sum(len(c) for c in log.chunks()) > 0\n"
+        "print(','.join(m for m in ('numba', 'asammdf', 'can') if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == ""

@@ -52,7 +52,7 @@ ASC_DAMAGE = [  # (line, expected issue kind)
 ]
 
 
-@pytest.mark.parametrize("fast_path", [True, False], ids=["compiled", "line-parser"])
+@pytest.mark.parametrize("fast_path", [True, False], ids=["scanner", "line-parser"])
 def test_asc_damage_reported_with_line_numbers(fast_path: bool, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(asc_module, "FAST_PATH_MIN_BYTES", 0 if fast_path else 10**12)
     lines = _asc_lines()
@@ -75,7 +75,7 @@ def test_asc_damage_reported_with_line_numbers(fast_path: bool, monkeypatch: pyt
     assert isinstance(strict.error, LogFormatError) and f"line {min(where)}" in str(strict.error)
 
 
-@pytest.mark.parametrize("fast_path", [True, False], ids=["compiled", "line-parser"])
+@pytest.mark.parametrize("fast_path", [True, False], ids=["scanner", "line-parser"])
 @pytest.mark.parametrize(("line", "kind", "message"), [
     # a garbled byte on a short line names the byte, not the count
     (b"0.001 1 123 Rx d 8 01 02 ZZ\n", "non_hex", "data byte 3 'ZZ' is not a hex number"),

@@ -136,7 +136,7 @@ ASC_FILES = [p for p in sorted(DATA.rglob("*.asc")) if p.stat().st_size < 400_00
 
 
 @pytest.mark.parametrize("path", ASC_FILES, ids=lambda p: p.name[:40])
-def test_asc_compiled_fast_path_equals_line_parser(path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_asc_scanner_equals_line_parser(path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     def read(min_bytes: int) -> tuple[FrameChunk, list[tuple[str, int | None]]]:
         monkeypatch.setattr(asc_module, "FAST_PATH_MIN_BYTES", min_bytes)
         with open_log(path) as log:

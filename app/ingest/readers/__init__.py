@@ -21,6 +21,7 @@ line. Problems found by ``chunks()`` are raised from the iteration. See
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Iterator
 from types import TracebackType
@@ -29,16 +30,9 @@ from typing import BinaryIO, Protocol, runtime_checkable
 from app.ingest.frames import FrameChunk, IngestReport, LogMeta
 from app.ingest.readers._base import BaseReader
 from app.ingest.readers._source import open_source
-from app.ingest.readers.asc import ASCReader
-from app.ingest.readers.blf import BLFReader
-from app.ingest.readers.candump import CandumpReader
-from app.ingest.readers.gvret_csv import GvretCsvReader
-from app.ingest.readers.mf4 import MF4Reader
 from app.ingest.readers.sniff import FORMATS, sniff_format, unsupported
-from app.ingest.readers.tcu import TcuReader
-from app.ingest.readers.trc import TRCReader
 
-__all__ = ["FORMATS", "READERS", "LogReader", "open_log", "sniff_format"]
+__all__ = ["FORMATS", "READERS", "LogReader", "open_log", "reader_class", "sniff_format"]
 
 
 @runtime_checkable
@@ -65,15 +59,22 @@ class LogReader(Protocol):
                  tb: TracebackType | None) -> None: ...
 
 
-READERS: dict[str, type] = {
-    "blf": BLFReader,
-    "asc": ASCReader,
-    "candump": CandumpReader,
-    "trc": TRCReader,
-    "gvret_csv": GvretCsvReader,
-    "mf4": MF4Reader,
-    "tcu": TcuReader,
+READERS: dict[str, str] = {  # format -> "module:class"; a reader's module is imported when a log needs it
+    "blf": "blf:BLFReader",
+    "asc": "asc:ASCReader",
+    "candump": "candump:CandumpReader",
+    "trc": "trc:TRCReader",
+    "gvret_csv": "gvret_csv:GvretCsvReader",
+    "mf4": "mf4:MF4Reader",
+    "tcu": "tcu:TcuReader",
 }
+
+
+def reader_class(fmt: str) -> type[BaseReader]:
+    """The reader class of a format (a key of ``READERS``)."""
+    module, name = READERS[fmt].split(":")
+    cls: type[BaseReader] = getattr(importlib.import_module(f"app.ingest.readers.{module}"), name)
+    return cls
 
 
 def open_log(source: str | os.PathLike[str] | BinaryIO, *, fmt: str | None = None, strict: bool = False,
@@ -108,7 +109,7 @@ def open_log(source: str | os.PathLike[str] | BinaryIO, *, fmt: str | None = Non
             fmt = sniff_format(head, stream.name)
         elif fmt not in READERS:
             raise unsupported(stream.name, f"unknown format {fmt!r}")
-        cls: type[BaseReader] = READERS[fmt]
+        cls = reader_class(fmt)
         reader: LogReader = cls(stream, head, strict=strict, chunk_frames=chunk_frames, path=path)
         return reader
     except BaseException:

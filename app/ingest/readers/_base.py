@@ -23,7 +23,7 @@ from app.ingest.readers._source import ByteStream, StreamDamage
 MAX_PAYLOAD = 64
 # Issue kinds that describe the log rather than damage to it: never raised in strict mode and
 # never make a log "unreadable".
-INFO_KINDS = frozenset({"unknown_object", "time_backwards", "dlc_mismatch", "data_lost"})
+INFO_KINDS = frozenset({"unknown_object", "time_backwards", "dlc_mismatch", "data_lost", "mf4_fallback"})
 
 _FD = int(FrameFlag.FD)
 
@@ -82,9 +82,9 @@ class ChunkBuilder:
         """Append rows in bulk, yielding every chunk that fills up on the way."""
         i, total = 0, len(t_ns)
         width = data.shape[1]
-        if width > self.data.shape[1]:
-            self.widen()
         while i < total:
+            if width > self.data.shape[1]:  # again after every hand-over: a fresh builder is 8 wide
+                self.widen()
             k = min(self.cap - self.n, total - i)
             rows = slice(self.n, self.n + k)
             self.t_ns[rows] = t_ns[i:i + k]

@@ -13,8 +13,8 @@ event when the header says ``timestamps relative``)::
     <ts> CANFD 5 Tx ErrorFrame ...                    CAN FD error frame
     <ts> <anything else>                              other events (statistics, status, J1939TP, ...)
 
-The common classic line goes through the compiled fast path (:mod:`asc_kernel`); all
-other lines through :meth:`ASCReader.parse_line`, which also diagnoses damaged lines.
+The common classic line goes through the vectorised scanner (:mod:`asc_scan`, numpy only);
+all other lines through :meth:`ASCReader.parse_line`, which also diagnoses damaged lines.
 Frame semantics follow python-can's ``ASCReader`` (channel = number - 1, DLC via
 ``dlc2len``, at most 8 bytes on classic frames), except that damaged lines are reported
 and skipped instead of aborting or being silently shortened, that ``timestamps relative``
@@ -30,10 +30,12 @@ from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader, ChunkBuilder
 from app.ingest.readers._text import BadLine, LineSource, decimal_to_ns, dlc2len, hex_bytes, parse_int, printable
+from app.ingest.readers.asc_scan import scan_block
 
 _TS = re.compile(r"^\d+\.\d+$")
 _MONTHS = {"jan": 1, "feb": 2, "mar": 3, "mär": 3, "mrz": 3, "apr": 4, "may": 5, "mai": 5, "jun": 6, "jul": 7,
@@ -46,9 +48,9 @@ EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFla
 
 Frame = tuple[int, int, int, int, int, bytes]  # t_ns, channel, arb_id, flags, dlc, payload
 
-# Loading the compiled fast path (numba) has a fixed start-up cost; text blocks smaller than this
-# (files below ~8000 lines) are parsed line by line in less time than the load takes.
-FAST_PATH_MIN_BYTES = 512 * 1024
+# Text blocks of at least this many bytes go through the vectorised scanner (``asc_scan``);
+# smaller ones are parsed line by line (the same result; tests switch between the two).
+FAST_PATH_MIN_BYTES = 4096
 
 
 def parse_asc_date(text: str) -> tuple[datetime, str] | None:
@@ -227,55 +229,109 @@ class ASCReader(BaseReader):
         builder = ChunkBuilder(self.chunk_frames)
         lines = LineSource(self._stream, self._long_line, self.damage)
         self._mismatch = 0
-        t_acc = 0
-        kernel: Any = None
+        self._t_acc = 0
         for block, first in lines.blocks():
-            if kernel is None and len(block) >= FAST_PATH_MIN_BYTES:
-                from app.ingest.readers import asc_kernel as kernel  # numba loads on first use only
-            K = kernel
-            arr = np.frombuffer(block, np.uint8)
-            end = len(block)
-            pos, line_no = 0, first - 1
-            while pos < end:
-                if self.base == 16 and K is not None:
-                    st, pos, line_no, n, t_acc, eol = K.scan_lines(
-                        arr, pos, end, line_no, self.relative, t_acc, builder.t_ns, builder.channel,
-                        builder.arb_id, builder.flags, builder.dlc, builder.data, builder.n, builder.cap)
-                    builder.n = n
-                    if st == K.ST_FULL:
-                        yield builder.take()
-                        continue
-                    if st == K.ST_END:
-                        break
-                else:
-                    eol = block.find(b"\n", pos)
-                    eol = end if eol < 0 else eol
-                    line_no += 1
-                t_acc = self._slow(block[pos:eol], line_no, builder, t_acc)
-                pos = eol + 1
-                if builder.full:
-                    yield builder.take()
+            if len(block) < FAST_PATH_MIN_BYTES:
+                yield from self._line_by_line(block, first, builder)
+                continue
+            pos, line_no = 0, first
+            while pos < len(block):
+                part = block if pos == 0 else block[pos:]
+                used, rows = self._scan(part, line_no)
+                yield from builder.extend(*rows)
+                pos += used
+                line_no += part.count(b"\n", 0, used)
         if self._mismatch:
             self.problem("dlc_mismatch", f"{self._mismatch} CANFD line(s) whose DLC does not match their data "
                          "length; the data length was used", count=self._mismatch)
         if builder.n:
             yield builder.take()
 
-    def _slow(self, raw: bytes, line_no: int, builder: ChunkBuilder, t_acc: int) -> int:
+    def _line_by_line(self, block: bytes, first: int, builder: ChunkBuilder) -> Iterator[FrameChunk]:
+        """Every line through :meth:`parse_line` (small blocks, and the reference the scanner is tested against)."""
+        parts = block.split(b"\n")
+        if block.endswith(b"\n"):
+            parts.pop()
+        for i, raw in enumerate(parts):
+            got = self._slow(raw, first + i)
+            if got is None:
+                continue
+            ts = got[0]
+            if self.relative:
+                self._t_acc += ts
+                ts = self._t_acc
+            if got[1] is not None:
+                builder.add(ts, *got[1][1:])
+                if builder.full:
+                    yield builder.take()
+
+    def _scan(self, block: bytes, first: int) -> tuple[int, tuple[Any, ...]]:
+        """Frames of ``block`` in line order; returns the bytes used and the frame columns.
+
+        Lines the scanner does not accept go through :meth:`parse_line` in order. A line that
+        changes the number base or the time mode ends the pass there (the caller scans the rest).
+        """
+        scan = scan_block(block, self.base == 16)
+        slow = np.flatnonzero(~scan.fast & ~scan.blank)
+        mode = (self.base, self.relative)
+        limit, used = len(scan.fast), len(block)
+        events: list[tuple[int, int]] = []  # (line index, own time) of slow lines with a time
+        frames: list[tuple[int, Frame]] = []
+        for j in slow.tolist():
+            raw = block[scan.starts[j]:scan.ends[j]]
+            got = self._slow(raw, first + j)
+            if got is not None:
+                events.append((j, got[0]))
+                if got[1] is not None:
+                    frames.append((j, got[1]))
+            if (self.base, self.relative) != mode:
+                limit, used = j + 1, min(int(scan.ends[j]) + 1, len(block))
+                break
+        n_fast = int(np.count_nonzero(scan.fast[:limit]))
+        cols = [scan.t_ns[:n_fast], scan.channel[:n_fast], scan.arb_id[:n_fast], scan.flags[:n_fast],
+                scan.dlc[:n_fast]]
+        data = scan.data[:n_fast]
+        fast_line = np.flatnonzero(scan.fast[:limit])
+        if mode[1]:  # relative: every event's time adds to the running time, in line order
+            ev_line = np.concatenate([fast_line, np.array([e[0] for e in events], np.int64)])
+            ev_t = np.concatenate([cols[0], np.array([e[1] for e in events], np.int64)])
+            order = np.argsort(ev_line, kind="stable")
+            absolute = np.empty_like(ev_t)
+            absolute[order] = self._t_acc + np.cumsum(ev_t[order])
+            if ev_t.size:
+                self._t_acc = int(absolute[order[-1]])
+            cols[0] = absolute[:n_fast]
+            stamp = dict(zip((e[0] for e in events), absolute[n_fast:].tolist(), strict=True))
+            frames = [(j, (stamp[j], *fr[1:])) for j, fr in frames]
+        if frames:
+            cols, data = _merge(fast_line, cols, data, frames)
+        return used, (*cols, data)
+
+    def _slow(self, raw: bytes, line_no: int) -> tuple[int, Frame | None] | None:
+        """One line through the parser: (own time, frame or None), or None (no event, or damage reported)."""
         try:
             ts, frame = self.parse_line(raw.rstrip(b"\r").decode("latin-1"))
         except BadLine as bad:
             self.problem(bad.kind, f"line skipped: {bad.message}", line=line_no, frames_lost=None)
-            return t_acc
+            return None
         if ts is None:
-            return t_acc
-        if self.relative:
-            t_acc += ts
-            ts = t_acc
-        if frame is not None:
-            _, ch, ident, fl, dlc, payload = frame
-            builder.add(ts, ch, ident, fl, dlc, payload)
-        return t_acc
+            return None
+        return ts, frame
 
     def _long_line(self, line_no: int) -> None:
         self.problem("bad_line", "line skipped: longer than 64 kB (binary data?)", line=line_no)
+
+
+def _merge(fast_line: npt.NDArray[np.int64], cols: list[Any], data: npt.NDArray[np.uint8],
+           frames: list[tuple[int, Frame]]) -> tuple[list[Any], npt.NDArray[np.uint8]]:
+    """Scanner rows and parser frames as one set of columns in line order."""
+    line = np.concatenate([fast_line, np.array([j for j, _ in frames], np.int64)])
+    order = np.argsort(line, kind="stable")
+    extra = list(zip(*(fr for _, fr in frames), strict=True))
+    merged = [np.concatenate([c, np.array(e, np.int64)])[order] for c, e in zip(cols, extra[:5], strict=True)]
+    width = max([data.shape[1], *(len(p) for p in extra[5])])
+    wide = np.zeros((len(line), width), np.uint8)
+    wide[:len(data), :data.shape[1]] = data
+    for k, payload in enumerate(extra[5]):
+        wide[len(data) + k, :len(payload)] = np.frombuffer(payload, np.uint8)
+    return merged, wide[order]

@@ -66,7 +66,7 @@ def inflate(payload: bytes, unc_size: int) -> tuple[bytes, str | None]:
 
     Returns the bytes and an error description (None when the stream is complete and sound).
     A sound stream inflates in one call; a damaged one is inflated again in pieces
-    (:func:`_inflate_prefix`) so the output up to the byte where zlib detects the damage is kept.
+    (:func:`inflate_prefix`) so the output up to the byte where zlib detects the damage is kept.
     A stream whose only fault is its Adler-32 checksum inflated completely to bytes that are
     wrong somewhere unknown: nothing of it is kept.
     """
@@ -76,7 +76,7 @@ def inflate(payload: bytes, unc_size: int) -> tuple[bytes, str | None]:
     except zlib.error as exc:
         if "incorrect data check" in str(exc):
             return b"", f"corrupt zlib data ({exc}: the container inflates but its checksum fails)"
-        return _inflate_prefix(payload), f"corrupt zlib data ({exc})"
+        return inflate_prefix(payload), f"corrupt zlib data ({exc})"
     if len(out) > MAX_CONTAINER or d.unconsumed_tail:
         return out[:MAX_CONTAINER], f"inflates beyond {MAX_CONTAINER} bytes"
     if not d.eof:
@@ -84,7 +84,7 @@ def inflate(payload: bytes, unc_size: int) -> tuple[bytes, str | None]:
     return out, None
 
 
-def _inflate_prefix(payload: bytes) -> bytes:
+def inflate_prefix(payload: bytes) -> bytes:
     """The output of a damaged zlib stream up to the input byte where inflation fails.
 
     Fed in pieces of :data:`PIECE` bytes; the piece that fails is fed again byte by byte from
