@@ -29,6 +29,7 @@ from app.api import errors
 from app.api.formats import FormatGuard
 from app.api.routes import analyses, dashboard, diagnoses, fleet, health, live, logs, series, vehicles
 from app.api.security import RequestGuard
+from app.api.timing import ServerTiming
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
 from app.storage.results import ResultCache
@@ -84,6 +85,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                            lease_s=cfg.job_lease_s)
         app.state.store, app.state.runner, app.state.settings = store, runner, cfg
         app.state.results = ResultCache()
+        runner.on_done.append(lambda job: series.warm(store, app.state.results, job))
         await asyncio.to_thread(_warm_up)
         resumed = runner.start()
         if resumed:
@@ -106,6 +108,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     if cfg.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],
                            allow_headers=["*"])
+    app.add_middleware(ServerTiming)  # outermost: the whole of the service's time on a request
     errors.install(app)
     for router in ROUTERS:
         app.include_router(router)

@@ -91,7 +91,7 @@ def test_analysis_view_draws_the_log_and_lists_every_event(page: Any, server: Se
     events = api(server, f"/analyses/{analysis_id}/events")
     metrics = api(server, f"/analyses/{analysis_id}/metrics")
     assert events["count"] == 32  # the demo drive: 16 tip-ins and 16 tip-outs
-    tl = page.query_selector("#timeline")
+    tl = page.wait_for_selector("#timeline[data-inked]", state="attached")  # counted after the frame is shown
     assert int(tl.get_attribute("data-inked")) > 2000  # lines drawn in the plot area, not an empty frame
     whole = api(server, f"/analyses/{analysis_id}/speed?max_points=2000")
     assert int(tl.get_attribute("data-source-points")) == whole["source_points"]
@@ -129,6 +129,7 @@ def test_zoom_fetches_finer_data_for_the_window(page: Any, server: Server, analy
     assert body["points"] / (t1 - t0) > 5 * points0 / (t1_0 - t0_0)
     assert body["points"] == api(server, f"/analyses/{analysis_id}/speed?max_points={q['max_points'][0]}"
                                          f"&t0={q['t0'][0]}&t1={q['t1'][0]}")["points"]
+    page.wait_for_selector("#timeline[data-inked]", state="attached")  # the zoomed draw, counted
     assert int(tl.get_attribute("data-inked")) > 500
     screenshot(page, "analysis-zoomed")
 
