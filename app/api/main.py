@@ -23,6 +23,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import APIRouter, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.middleware.gzip import GZipMiddleware
 
 from app import __version__
 from app.api import errors
@@ -40,6 +41,8 @@ ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyse
                             live.router, diagnoses.router, fleet.router, dashboard.router]
 
 log = logging.getLogger("lashscope.api")
+GZIP_MIN_BYTES = 1024
+GZIP_LEVEL = 1
 
 DESCRIPTION = """EV CAN logs in, driveline shuffle and clunk answers out.
 
@@ -108,6 +111,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     if cfg.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],
                            allow_headers=["*"])
+    # gzip for answers of 1 KiB and more when the client accepts it (level 1: most of the size gone for a
+    # few ms per MB, bench/dashboard.py prints both); the dashboard's files come compressed already
+    app.add_middleware(GZipMiddleware, minimum_size=GZIP_MIN_BYTES, compresslevel=GZIP_LEVEL)
     app.add_middleware(ServerTiming)  # outermost: the whole of the service's time on a request
     errors.install(app)
     for router in ROUTERS:

@@ -87,6 +87,11 @@ class ResultFiles:
             return arr
 
 
+    def built(self, key: object) -> bool:
+        """Whether :meth:`derived` has built ``key`` for these files."""
+        with self._lock:
+            return key in self._derived
+
     def derived(self, key: object, build: Callable[[], T]) -> T:
         """``build()`` once per key and keep it with these files (results never change once written)."""
         with self._lock:
@@ -122,6 +127,11 @@ class ResultCache:
             while len(self._items) > max(self.size, 1):
                 self._items.popitem(last=False)
         return files
+
+    def peek(self, directory: Path) -> ResultFiles | None:
+        """The open files of ``directory`` if kept, without opening them (or counting as a use)."""
+        with self._lock:
+            return self._items.get(directory)
 
     def forget(self, directory: Path) -> None:
         with self._lock:
