@@ -120,14 +120,16 @@ def print_breakdown(samples: list[dict[str, Any]], parse: dict[str, float], aid:
               f"{(f'{med(srv):6.1f}' if srv else '     -')} {med([r['end'] for r in rs]):6.0f} "
               f"{med([r['decoded'] for r in rs]):9.0f} {med([r['wire'] for r in rs]):9.0f}")
     marks = [("DOMContentLoaded", [smp["nav"]["dcl"] for smp in samples])]
-    for m, label in (("route", "route"), ("analysis:render", "render"), ("analysis:layout", "layout"), ("analysis:record", "analysis record read (results done)"),
+    for m, label in (("route", "route"), ("analysis:render", "render"), ("analysis:layout", "layout"),
+                     ("analysis:record", "analysis record read (results done)"),
                      ("analysis:series", "whole-log rows fetched + parsed"),
                      ("chart:timeline:draw", "chart draw starts"), ("chart:timeline:drawn", "chart drawn"),
                      ("chart:timeline:inked", "drawn pixels counted"), ("analysis:drawn", "chart built")):
         marks.append((label, [smp["marks"][m] for smp in samples if m in smp["marks"]]))
     marks.append(("painted (next frame)", [smp["painted"] for smp in samples]))
     print("  page: " + ";  ".join(f"{label} {med(v):.0f}" for label, v in marks if v))
-    print("  the same, load by load: " + "  |  ".join(" ".join(f"{v[i]:.0f}" for _, v in marks if len(v) == len(samples))
+    every = [v for _, v in marks if len(v) == len(samples)]
+    print("  the same, load by load: " + "  |  ".join(" ".join(f"{v[i]:.0f}" for v in every)
                                                     for i in range(len(samples))))
     print("  API requests load by load (server ms / end ms): " + "  |  ".join(
         " ".join(f"{r['server'] or 0:.1f}/{r['end']:.0f}" for r in smp["res"] if "/static/" not in r["name"])

@@ -74,7 +74,8 @@ def test_files_are_gzipped_when_accepted_and_revalidated_by_etag(client: TestCli
     assert raw(client, path, {**PLAIN, "If-None-Match": '"stale"'})[0] == 200
     # too small to be worth it: sent as is
     status, head, body = raw(client, "/static/vendor/swagger-ui/NOTICE", GZ)
-    assert status == 200 and "content-encoding" not in head and body == (STATIC / "vendor/swagger-ui/NOTICE").read_bytes()
+    assert status == 200 and "content-encoding" not in head
+    assert body == (STATIC / "vendor/swagger-ui/NOTICE").read_bytes()
 
 
 def test_unknown_files_are_a_typed_404(client: TestClient) -> None:
@@ -151,3 +152,14 @@ def test_results_are_opened_when_the_analysis_finishes(tmp_path: Path, demo_log:
             full = [v for v in every[col] if v is not None]
             kept = [v for v in view[col] if v is not None]
             assert (min(kept), max(kept)) == (min(full), max(full)), col
+        # so do the decoded channels' (the pedal's is read beside the speed), whole log and a window
+        for name in files.doc["signals"]:
+            assert files.built(("signal_extremes", name))
+            for q in ({}, {"t0": 7.5, "t1": 31.0}):
+                all_rows = c.get(f"/analyses/{aid}/signals/{name}", params={"max_points": 0, **q}).json()
+                view = c.get(f"/analyses/{aid}/signals/{name}", params={"max_points": 60, **q}).json()
+                assert view["points"] <= 60 < view["source_points"] == all_rows["points"], name
+                assert view["t_s"][0] == all_rows["t_s"][0] and view["t_s"][-1] == all_rows["t_s"][-1]
+                full = [v for v in all_rows[name] if v is not None]
+                kept = [v for v in view[name] if v is not None]
+                assert (min(kept), max(kept)) == (min(full), max(full)), (name, q)

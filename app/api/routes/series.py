@@ -181,25 +181,44 @@ def _speed_columns(store: Store, cache: ResultCache, analysis_id: str, event: in
     return np.asarray(t[w]), {k: np.asarray(v[w]) for k, v in cols.items()}, w.stop - w.start
 
 
-def _extremes(files: ResultFiles, cols: dict[str, F64]) -> BlockExtremes:
-    return files.derived(("block_extremes", *cols), lambda: BlockExtremes([np.asarray(v) for v in cols.values()]))
+def _extremes(files: ResultFiles, cols: dict[str, F64], kind: str = "block_extremes") -> BlockExtremes:
+    return files.derived((kind, *cols), lambda: BlockExtremes([np.asarray(v) for v in cols.values()]))
+
+
+def _signal(files: ResultFiles, name: str) -> tuple[F64, dict[str, F64]]:
+    info = files.doc["signals"].get(name)
+    if info is None:
+        raise NotFoundError(f"no decoded channel {name!r}; have {sorted(files.doc['signals'])}")
+    return files.array(f"sig_{info['key']}_t"), {name: files.array(f"sig_{info['key']}_v")}
+
+
+def _signal_columns(files: ResultFiles, name: str, t0: float | None, t1: float | None, max_points: int,
+                    method: Method) -> tuple[F64, dict[str, F64], int]:
+    """As :func:`_speed_columns` for one decoded channel: a long min/max window from its block extremes."""
+    t, cols = _signal(files, name)
+    w = _window(t, t0, t1)
+    if method == "minmax" and max_points > 0 and w.stop - w.start > 8 * max_points:
+        rows = _extremes(files, cols, "signal_extremes").rows([np.asarray(v) for v in cols.values()],
+                                                              w.start, w.stop, max_points)
+        return np.asarray(t[rows]), {k: np.asarray(v[rows]) for k, v in cols.items()}, w.stop - w.start
+    return np.asarray(t[w]), {k: np.asarray(v[w]) for k, v in cols.items()}, w.stop - w.start
 
 
 def warm(store: Store, cache: ResultCache, job: JobRecord) -> None:
     """Open a just-finished analysis' results and build its whole-log block extremes (a job-runner hook).
 
-    The first read of a result parses its document and scans the whole-log series once: measured at
-    200 + 90 ms on a loaded 2-core machine, on the event loop of the first dashboard view after the
-    analysis (``bench/dashboard.py``). Done here, in the runner thread, as the job ends.
+    The first read of a result parses its document and scans the whole-log series and the pedal
+    channel once: measured at 200 + 90 + 240 ms on a loaded 2-core machine, on the event loop of the
+    first dashboard view after the analysis (``bench/dashboard.py``). Done here, in the runner thread,
+    as the job ends; the decoded channels' block extremes also serve every later zoom.
     """
     if job.kind != "analysis":
         return
     _, files = finished(store, cache, job.subject)
     if files.has("whole_t"):
         _extremes(files, _speed(files, None)[1])
-    for info in files.doc["signals"].values():  # the channels' columns, mapped (the view reads the pedal's)
-        files.array(f"sig_{info['key']}_t")
-        files.array(f"sig_{info['key']}_v")
+    for name in files.doc["signals"]:  # the view reads the pedal channel beside the speed
+        _extremes(files, _signal(files, name)[1], "signal_extremes")
 
 
 def _downsampled(analysis_id: str, event: int | None, t: F64, cols: dict[str, F64], max_points: int,
@@ -233,13 +252,7 @@ async def get_signal(analysis_id: str, name: str, request: Request, store: Store
     out = _wants_csv(request, fmt)
 
     def columns() -> tuple[F64, dict[str, F64], int]:
-        _, files = finished(store, cache, analysis_id)
-        info = files.doc["signals"].get(name)
-        if info is None:
-            raise NotFoundError(f"no decoded channel {name!r}; have {sorted(files.doc['signals'])}")
-        t = files.array(f"sig_{info['key']}_t")
-        w = _window(t, t0, t1)
-        return np.asarray(t[w]), {name: np.asarray(files.array(f"sig_{info['key']}_v")[w])}, w.stop - w.start
+        return _signal_columns(finished(store, cache, analysis_id)[1], name, t0, t1, max_points, method)
 
     key = ("signal", analysis_id, name, max_points, t0, t1, out, method)
     return await _answer(request, key, columns, analysis_id, None, max_points, out, method)
