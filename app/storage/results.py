@@ -70,7 +70,7 @@ class ResultFiles:
         self._arrays: dict[str, npt.NDArray[np.float64]] = {}
         self._derived: dict[object, object] = {}
         self._lock = threading.Lock()
-        self._build_lock = threading.Lock()
+        self._building: dict[object, threading.Lock] = {}
 
     def has(self, name: str) -> bool:
         return (self.directory / "arrays" / f"{name}.npy").exists()
@@ -97,13 +97,17 @@ class ResultFiles:
         with self._lock:
             if key in self._derived:
                 return self._derived[key]  # type: ignore[return-value]
-        with self._build_lock:  # concurrent first readers wait for one build
+            building = self._building.setdefault(key, threading.Lock())
+        # concurrent first readers of one key wait for one build; other keys' readers do not wait (a build
+        # of every channel after an analysis must not hold up the whole-log read on the event loop)
+        with building:
             with self._lock:
                 if key in self._derived:
                     return self._derived[key]  # type: ignore[return-value]
             value = build()
             with self._lock:
                 self._derived[key] = value
+                self._building.pop(key, None)
             return value
 
 
