@@ -5,7 +5,11 @@
 same-origin writes, body cap: :mod:`app.api.security`), CORS and the error handlers, and
 includes every router in :data:`ROUTERS` -- append a module's ``router`` there to add a resource.
 ``format=csv`` on a route without a CSV form is refused with 406 (:mod:`app.api.formats`); the
-dashboard and the offline ``/docs`` are mounted last (:mod:`app.web`).
+dashboard and the offline ``/docs`` are mounted last (:mod:`app.web`). Answers of 1 KiB and more
+are gzip-compressed for clients that accept it, and every answer says the service's time on it
+(``Server-Timing``, :mod:`app.api.timing`). When an analysis finishes, its results are opened and
+their series' block extremes built in the runner thread (:func:`app.api.routes.series.warm`), so the
+first dashboard view after it does not pay for them.
 
 On stop (SIGTERM, Ctrl-C) the lifespan closes the job runner to new work (queued jobs stay
 queued in SQLite and run after the next start; a running job's worker process is killed, so the
