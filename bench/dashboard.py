@@ -1,6 +1,6 @@
 """Dashboard benchmark: first paint of the analysis view and zoom round trips on a 30-minute log.
 
-Run: ``.venv/bin/python bench/dashboard.py`` (a few minutes on 2 cores; needs Debian's chromium
+Run: ``nice -n 5 .venv/bin/python bench/dashboard.py`` (a few minutes on 2 cores; needs Debian's chromium
 and playwright, as the browser tests). Builds a 30-minute drive with the demo tools, starts
 ``lashscope serve`` on a free loopback port with a fresh data directory, uploads and analyses the
 log through the API (not timed), then in headless Chromium:
@@ -14,8 +14,13 @@ log through the API (not timed), then in headless Chromium:
 * **zoom round trip**: the time from setting a new time window on the chart to the finer rows
   fetched (``max_points`` for the chart width), the chart redrawn and the next frame painted;
   random windows of 5 s to 5 min.
+* **where the first paint goes**: each request of it from Resource Timing (when it left, time to
+  first byte, the service's own time from its ``Server-Timing`` header, when it ended, body and
+  wire bytes), the page's ``performance.mark`` points (modules run, layout, status read, rows
+  parsed, chart drawn, next frame; medians and load by load) and ``JSON.parse`` of each answer.
 * **largest response** of every request the views made (analysis view, zooms, overlay pages,
-  ``/docs``).
+  ``/docs``), as sent (gzip-compressed where the browser accepts it), and what gzip levels 1, 6
+  and 9 cost and save on the largest API answers.
 
 Targets (issue 13): first paint <= 1 s on loopback; zoom round trip p95 <= 200 ms; no response
 over 2 MB.
