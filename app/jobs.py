@@ -25,6 +25,7 @@ import socket
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from importlib import import_module
 from multiprocessing.process import BaseProcess
@@ -61,6 +62,9 @@ class JobRunner:
         self._closed = False
         self._stop = threading.Event()
         self._cancelled: set[str] = set()
+        # called in the runner thread with each job that finished done (the API warms its readers of the
+        # result there, so the first dashboard view after an analysis does not pay for it); errors are logged
+        self.on_done: list[Callable[[JobRecord], None]] = []
 
     def start(self) -> list[JobRecord]:
         """Recover interrupted jobs and submit every queued one; returns what was submitted.
@@ -142,6 +146,7 @@ class JobRunner:
                 execute(self.store, job)
             else:
                 self._in_worker(job)
+            self._done(job_id)
         except Exception as exc:  # a bug must fail the job, not the server
             log.exception("job %s failed", job_id)
             self.store.fail_job(job_id, "internal_error", f"{type(exc).__name__}: {exc}")
@@ -149,6 +154,18 @@ class JobRunner:
             with self._lock:
                 self._futures.pop(job_id, None)
                 self._procs.pop(job_id, None)
+
+    def _done(self, job_id: str) -> None:
+        if not self.on_done:
+            return
+        job = self.store.get_job(job_id)
+        if job.status is not JobStatus.DONE:
+            return
+        for hook in self.on_done:
+            try:
+                hook(job)
+            except Exception:  # the job is done whatever a hook does
+                log.exception("after job %s: %r failed", job_id, hook)
 
     def _supervise(self, job: JobRecord, proc: BaseProcess) -> bool:
         """Wait for the worker, renewing the lease; kill it past the wall time or when the lease is lost

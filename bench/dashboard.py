@@ -1,6 +1,6 @@
 """Dashboard benchmark: first paint of the analysis view and zoom round trips on a 30-minute log.
 
-Run: ``.venv/bin/python bench/dashboard.py`` (a few minutes on 2 cores; needs Debian's chromium
+Run: ``nice -n 5 .venv/bin/python bench/dashboard.py`` (a few minutes on 2 cores; needs Debian's chromium
 and playwright, as the browser tests). Builds a 30-minute drive with the demo tools, starts
 ``lashscope serve`` on a free loopback port with a fresh data directory, uploads and analyses the
 log through the API (not timed), then in headless Chromium:
@@ -14,8 +14,13 @@ log through the API (not timed), then in headless Chromium:
 * **zoom round trip**: the time from setting a new time window on the chart to the finer rows
   fetched (``max_points`` for the chart width), the chart redrawn and the next frame painted;
   random windows of 5 s to 5 min.
+* **where the first paint goes**: each request of it from Resource Timing (when it left, time to
+  first byte, the service's own time from its ``Server-Timing`` header, when it ended, body and
+  wire bytes), the page's ``performance.mark`` points (modules run, layout, status read, rows
+  parsed, chart drawn, next frame; medians and load by load) and ``JSON.parse`` of each answer.
 * **largest response** of every request the views made (analysis view, zooms, overlay pages,
-  ``/docs``).
+  ``/docs``), as sent (gzip-compressed where the browser accepts it), and what gzip levels 1, 6
+  and 9 cost and save on the largest API answers.
 
 Targets (issue 13): first paint <= 1 s on loopback; zoom round trip p95 <= 200 ms; no response
 over 2 MB.
@@ -24,6 +29,7 @@ over 2 MB.
 from __future__ import annotations
 
 import argparse
+import gzip
 import os
 import random
 import shutil
@@ -55,6 +61,28 @@ ZOOM = """async ([t0, t1]) => {
   return performance.now() - start;
 }"""
 
+BREAKDOWN = """() => {
+  const painted = Number(document.querySelector('#timeline').dataset.paintedMs);
+  const nav = performance.getEntriesByType('navigation')[0];
+  const app = (r) => { const s = (r.serverTiming || []).find((x) => x.name === 'app'); return s ? s.duration : null; };
+  const row = (r) => ({name: r.name, start: r.startTime, ttfb: r.responseStart - r.requestStart, end: r.responseEnd,
+    bytes: r.encodedBodySize, wire: r.transferSize, decoded: r.decodedBodySize, server: app(r)});
+  return {painted, nav: {...row(nav), name: 'document', dcl: nav.domContentLoadedEventEnd},
+          res: performance.getEntriesByType('resource').filter((r) => r.startTime < painted).map(row),
+          marks: Object.fromEntries(performance.getEntriesByType('mark').map((m) => [m.name, m.startTime]))};
+}"""
+
+PARSE = """async (urls) => {
+  const out = {};
+  for (const url of urls) {
+    const text = await (await fetch(url, {cache: 'no-store'})).text();
+    const ms = [];
+    for (let i = 0; i < 5; i++) { const s = performance.now(); JSON.parse(text); ms.push(performance.now() - s); }
+    out[url] = ms.sort((a, b) => a - b)[2];
+  }
+  return out;
+}"""
+
 FETCH_PARSE = """async (url) => {
   const start = performance.now();
   const body = await (await fetch(url)).json();
@@ -75,6 +103,62 @@ def analysed_log(srv: Server, log: Path) -> str:
         s = body["summary"]
         print(f"analysed: {s['events']} events, {s['with_metrics']} with metrics (not part of the figures)")
         return aid
+
+
+def _key(url: str, aid: str) -> str:
+    return url.split("/", 3)[-1].replace(aid, "{id}") or "/"
+
+
+def print_breakdown(samples: list[dict[str, Any]], parse: dict[str, float], aid: str) -> None:
+    """Median timeline of the first paint over the cold loads: requests, the page's marks, JSON parse."""
+    med = statistics.median
+    rows: dict[str, list[dict[str, Any]]] = {}
+    for smp in samples:
+        for r in [smp["nav"], *smp["res"]]:
+            rows.setdefault("/ (document)" if r is smp["nav"] else _key(r["name"], aid), []).append(r)
+    print(f"\nwhere the first paint goes (median of {len(samples)} cold loads; ms since navigation start; "
+          "ttfb = request sent -> first byte; server = the service's own time, Server-Timing):")
+    print(f"  {'request':58s} {'start':>6s} {'ttfb':>6s} {'server':>6s} {'end':>6s} {'body B':>9s} {'wire B':>9s}")
+    for name, rs in sorted(rows.items(), key=lambda kv: med([r["start"] for r in kv[1]])):
+        srv = [r["server"] for r in rs if r["server"] is not None]
+        print(f"  {name[:58]:58s} {med([r['start'] for r in rs]):6.0f} {med([r['ttfb'] for r in rs]):6.1f} "
+              f"{(f'{med(srv):6.1f}' if srv else '     -')} {med([r['end'] for r in rs]):6.0f} "
+              f"{med([r['decoded'] for r in rs]):9.0f} {med([r['wire'] for r in rs]):9.0f}")
+    marks = [("DOMContentLoaded", [smp["nav"]["dcl"] for smp in samples])]
+    for m, label in (("route", "route"), ("analysis:render", "render"), ("analysis:layout", "layout"),
+                     ("analysis:record", "analysis record read (results done)"),
+                     ("analysis:series", "whole-log rows fetched + parsed"),
+                     ("chart:timeline:draw", "chart draw starts"), ("chart:timeline:drawn", "chart drawn"),
+                     ("chart:timeline:inked", "drawn pixels counted"), ("analysis:drawn", "chart built")):
+        marks.append((label, [smp["marks"][m] for smp in samples if m in smp["marks"]]))
+    marks.append(("painted (next frame)", [smp["painted"] for smp in samples]))
+    print("  page: " + ";  ".join(f"{label} {med(v):.0f}" for label, v in marks if v))
+    every = [v for _, v in marks if len(v) == len(samples)]
+    print("  the same, load by load: " + "  |  ".join(" ".join(f"{v[i]:.0f}" for v in every)
+                                                    for i in range(len(samples))))
+    print("  API requests load by load (server ms / end ms): " + "  |  ".join(
+        " ".join(f"{r['server'] or 0:.1f}/{r['end']:.0f}" for r in smp["res"] if "/static/" not in r["name"])
+        for smp in samples))
+    print("  JSON.parse in the page (median of 5): " + ";  ".join(
+        f"{_key(u, aid).split('?')[0]} {ms:.2f} ms" for u, ms in parse.items()))
+
+
+def gzip_costs(srv: Server, aid: str, max_points: int) -> None:
+    """What gzip costs and saves on the largest API answers (the service sends level 1)."""
+    print("\ngzip of the largest API answers (median of 3 compressions, this machine):")
+    with httpx.Client(base_url=srv.url, timeout=120.0, headers={"Accept-Encoding": "identity"}) as c:
+        for path in (f"/analyses/{aid}/metrics", f"/analyses/{aid}/speed?max_points={max_points}",
+                     f"/analyses/{aid}/speed?max_points=0"):
+            body = c.get(path).content
+            cells = []
+            for level in (1, 6, 9):
+                ms = []
+                for _ in range(3):
+                    t = time.perf_counter()
+                    n = len(gzip.compress(body, compresslevel=level))
+                    ms.append((time.perf_counter() - t) * 1e3)
+                cells.append(f"level {level}: {n / 1024:7.0f} KiB {statistics.median(ms):6.1f} ms")
+            print(f"  {_key(path, aid)[:40]:40s} {len(body) / 1024:7.0f} KiB -> " + ";  ".join(cells))
 
 
 def main() -> int:
@@ -106,6 +190,8 @@ def main() -> int:
             with sync_playwright() as p:
                 browser = p.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
                 paint, ready, every, bounded = [], [], [], []
+                samples: list[dict[str, Any]] = []
+                parse: dict[str, float] = {}
                 page: Any = None
                 warm = browser.new_context()  # the browser's own start-up is not the page's first paint
                 warm.new_page().goto(f"{srv.url}/#/logs")
@@ -113,10 +199,11 @@ def main() -> int:
                 for i in range(args.loads):
                     ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
                     page = ctx.new_page()
-                    page.on("response", lambda r: sizes.append((int(r.headers.get("content-length", 0)), r.url)))
+                    page.on("response", lambda r: sizes.append((int(r.headers.get("content-length", -1)), r.url)))
                     page.goto(f"{srv.url}/#/analysis/{aid}")
                     page.wait_for_selector("#timeline[data-painted-ms]", state="attached", timeout=120_000)
                     paint.append(float(page.get_attribute("#timeline", "data-painted-ms")))
+                    samples.append(page.evaluate(BREAKDOWN))
                     page.wait_for_selector("main[data-state='ready']", timeout=120_000)
                     page.wait_for_function("document.querySelector('#overlays').dataset.ready == '1'")
                     ready.append(page.evaluate("performance.now()"))
@@ -127,18 +214,23 @@ def main() -> int:
                     bounded.append(ms)
                     ms, rows = page.evaluate(FETCH_PARSE, f"{srv.url}/analyses/{aid}/speed?max_points=0&t1={1e6 + i}")
                     every.append(ms)
-                    if i < args.loads - 1:
+                    if i == args.loads - 1:
+                        parse = page.evaluate(PARSE, [r["name"] for r in samples[-1]["res"]
+                                                      if "/static/" not in r["name"]])
+                    else:
                         ctx.close()
                 print(f"\nanalysis view of the {args.minutes:g}-minute log, new browser context each (empty cache), "
                       f"n={args.loads}:")
                 print(f"first paint (whole-log chart drawn)   median {statistics.median(paint):7.0f} ms   "
-                      f"max {max(paint):7.0f} ms   target <= 1000 ms: {'PASS' if max(paint) <= 1000 else 'FAIL'}")
+                      f"max {max(paint):7.0f} ms   target <= 1000 ms: {'PASS' if max(paint) <= 1000 else 'FAIL'}   "
+                      f"(each, in order: {', '.join(f'{x:.0f}' for x in paint)})")
                 print(f"whole view ready (tables, overlays)   median {statistics.median(ready):7.0f} ms   "
                       f"max {max(ready):7.0f} ms")
                 print(f"whole-log read in the page (fetch + JSON parse): max_points={min(4000, mp)} "
                       f"({rows_b} rows) median {statistics.median(bounded):5.0f} ms; alternative, every row "
                       f"({rows} rows) median {statistics.median(every):5.0f} ms: "
                       f"{statistics.median(every) / statistics.median(bounded):.1f}x")
+                print_breakdown(samples, parse, aid)
                 t_end = float(page.get_attribute("#timeline", "data-t1"))
                 rnd = random.Random(0)
                 lat = []
@@ -152,12 +244,16 @@ def main() -> int:
                 page.goto(f"{srv.url}/docs")
                 page.wait_for_selector(".swagger-ui .opblock", timeout=60_000)
                 browser.close()
+            gzip_costs(srv, aid, min(4000, mp))
         finally:
             srv.stop()
     views = [(n, u) for n, u in sizes if "max_points=0" not in u]  # the every-row comparison is no view
-    print(f"\nlargest responses of {len(views)} (views, zooms, /docs):")
+    print(f"\nlargest responses of {len(views)} (views, zooms, /docs; bytes sent, gzip-compressed where accepted):")
     for n, url in sorted(views, reverse=True)[:3]:
         print(f"  {n / 2**20:6.2f} MiB  {url.split('/', 3)[-1][:90]}")
+    unknown = sum(1 for n, _ in views if n < 0)
+    if unknown:
+        print(f"  ({unknown} streamed without Content-Length, not sized)")
     worst = max(n for n, _ in views)
     print(f"largest: {worst / 2**20:.2f} MiB; target <= 2 MiB: {'PASS' if worst <= 2 * 2**20 else 'FAIL'}")
     return 0

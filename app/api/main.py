@@ -5,7 +5,11 @@
 same-origin writes, body cap: :mod:`app.api.security`), CORS and the error handlers, and
 includes every router in :data:`ROUTERS` -- append a module's ``router`` there to add a resource.
 ``format=csv`` on a route without a CSV form is refused with 406 (:mod:`app.api.formats`); the
-dashboard and the offline ``/docs`` are mounted last (:mod:`app.web`).
+dashboard and the offline ``/docs`` are mounted last (:mod:`app.web`). Answers of 1 KiB and more
+are gzip-compressed for clients that accept it, and every answer says the service's time on it
+(``Server-Timing``, :mod:`app.api.timing`). When an analysis finishes, its results are opened and
+their series' block extremes built in the runner thread (:func:`app.api.routes.series.warm`), so the
+first dashboard view after it does not pay for them.
 
 On stop (SIGTERM, Ctrl-C) the lifespan closes the job runner to new work (queued jobs stay
 queued in SQLite and run after the next start; a running job's worker process is killed, so the
@@ -23,12 +27,14 @@ from contextlib import asynccontextmanager
 
 from fastapi import APIRouter, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.middleware.gzip import GZipMiddleware
 
 from app import __version__
 from app.api import errors
 from app.api.formats import FormatGuard
 from app.api.routes import analyses, dashboard, diagnoses, fleet, health, live, logs, series, vehicles
 from app.api.security import RequestGuard
+from app.api.timing import ServerTiming
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
 from app.storage.results import ResultCache
@@ -39,6 +45,8 @@ ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyse
                             live.router, diagnoses.router, fleet.router, dashboard.router]
 
 log = logging.getLogger("lashscope.api")
+GZIP_MIN_BYTES = 1024
+GZIP_LEVEL = 1
 
 DESCRIPTION = """EV CAN logs in, driveline shuffle and clunk answers out.
 
@@ -84,6 +92,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                            lease_s=cfg.job_lease_s)
         app.state.store, app.state.runner, app.state.settings = store, runner, cfg
         app.state.results = ResultCache()
+        runner.on_done.append(lambda job: series.warm(store, app.state.results, job))
         await asyncio.to_thread(_warm_up)
         resumed = runner.start()
         if resumed:
@@ -106,6 +115,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     if cfg.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],
                            allow_headers=["*"])
+    # gzip for answers of 1 KiB and more when the client accepts it (level 1: most of the size gone for a
+    # few ms per MB, bench/dashboard.py prints both); the dashboard's files come compressed already
+    app.add_middleware(GZipMiddleware, minimum_size=GZIP_MIN_BYTES, compresslevel=GZIP_LEVEL)
+    app.add_middleware(ServerTiming)  # outermost: the whole of the service's time on a request
     errors.install(app)
     for router in ROUTERS:
         app.include_router(router)

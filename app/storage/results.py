@@ -70,7 +70,7 @@ class ResultFiles:
         self._arrays: dict[str, npt.NDArray[np.float64]] = {}
         self._derived: dict[object, object] = {}
         self._lock = threading.Lock()
-        self._build_lock = threading.Lock()
+        self._building: dict[object, threading.Lock] = {}
 
     def has(self, name: str) -> bool:
         return (self.directory / "arrays" / f"{name}.npy").exists()
@@ -87,18 +87,27 @@ class ResultFiles:
             return arr
 
 
+    def built(self, key: object) -> bool:
+        """Whether :meth:`derived` has built ``key`` for these files."""
+        with self._lock:
+            return key in self._derived
+
     def derived(self, key: object, build: Callable[[], T]) -> T:
         """``build()`` once per key and keep it with these files (results never change once written)."""
         with self._lock:
             if key in self._derived:
                 return self._derived[key]  # type: ignore[return-value]
-        with self._build_lock:  # concurrent first readers wait for one build
+            building = self._building.setdefault(key, threading.Lock())
+        # concurrent first readers of one key wait for one build; other keys' readers do not wait (a build
+        # of every channel after an analysis must not hold up the whole-log read on the event loop)
+        with building:
             with self._lock:
                 if key in self._derived:
                     return self._derived[key]  # type: ignore[return-value]
             value = build()
             with self._lock:
                 self._derived[key] = value
+                self._building.pop(key, None)
             return value
 
 
@@ -122,6 +131,11 @@ class ResultCache:
             while len(self._items) > max(self.size, 1):
                 self._items.popitem(last=False)
         return files
+
+    def peek(self, directory: Path) -> ResultFiles | None:
+        """The open files of ``directory`` if kept, without opening them (or counting as a use)."""
+        with self._lock:
+            return self._items.get(directory)
 
     def forget(self, directory: Path) -> None:
         with self._lock:

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlparse
@@ -52,6 +53,7 @@ def analysis_id(browser: Any, server: Server, demo_log: Path) -> str:
         pg.goto(f"{server.url}/#/logs")
         pg.wait_for_selector("#upload-form")
         pg.set_input_files("#upload-file", str(demo_log))
+        pg.fill("#upload-tz", "Europe/Berlin")  # the demo BLF records a local clock without a zone
         pg.click("#upload-button")
         pg.wait_for_function("document.querySelector('#upload-status').textContent.includes('stored as')")
         # the bar ends full, with the bytes sent
@@ -62,6 +64,7 @@ def analysis_id(browser: Any, server: Server, demo_log: Path) -> str:
         assert log_id, status
         logs = httpx.get(f"{server.url}/logs").json()
         assert [lg["id"] for lg in logs] == [log_id.group(0)]
+        assert logs[0]["start_time"].endswith("+00:00")  # stored in UTC, the zone named at upload
         assert f"{logs[0]['frames']} frames" in status
         row = pg.wait_for_selector(f"tr[data-log='{log_id.group(0)}']")
         row.query_selector("select.vehicle-select").select_option("ev")
@@ -91,13 +94,20 @@ def test_analysis_view_draws_the_log_and_lists_every_event(page: Any, server: Se
     events = api(server, f"/analyses/{analysis_id}/events")
     metrics = api(server, f"/analyses/{analysis_id}/metrics")
     assert events["count"] == 32  # the demo drive: 16 tip-ins and 16 tip-outs
-    tl = page.query_selector("#timeline")
+    tl = page.wait_for_selector("#timeline[data-inked]", state="attached")  # counted after the frame is shown
     assert int(tl.get_attribute("data-inked")) > 2000  # lines drawn in the plot area, not an empty frame
     whole = api(server, f"/analyses/{analysis_id}/speed?max_points=2000")
     assert int(tl.get_attribute("data-source-points")) == whole["source_points"]
     assert 500 < int(tl.get_attribute("data-points")) <= 4 * 2000
     assert len(page.query_selector_all("#events-table tbody tr")) == events["count"]
     assert len(page.query_selector_all("#metrics-table tbody tr")) == len(metrics["events"])
+    # the log's clock zone was named at upload: absolute stamps are UTC, not "log clock"
+    log = api(server, f"/logs/{api(server, f'/analyses/{analysis_id}')['log_id']}")
+    start = datetime.fromisoformat(log["start_time"])
+    summary = page.text_content("#summary") or ""
+    assert f"{start:%Y-%m-%d %H:%M:%S} UTC" in summary and "log clock" not in summary
+    info = page.text_content("#timeline-info") or ""
+    assert f"({start:%Y-%m-%d} " in info and info.endswith(" UTC)"), info
     # the verdict a person reads is the API's
     assert metrics["tracking"]["verdict"] in (page.text_content("#tracking") or "")
     # excluded events say why in the table
@@ -129,6 +139,7 @@ def test_zoom_fetches_finer_data_for_the_window(page: Any, server: Server, analy
     assert body["points"] / (t1 - t0) > 5 * points0 / (t1_0 - t0_0)
     assert body["points"] == api(server, f"/analyses/{analysis_id}/speed?max_points={q['max_points'][0]}"
                                          f"&t0={q['t0'][0]}&t1={q['t1'][0]}")["points"]
+    page.wait_for_selector("#timeline[data-inked]", state="attached")  # the zoomed draw, counted
     assert int(tl.get_attribute("data-inked")) > 500
     screenshot(page, "analysis-zoomed")
 

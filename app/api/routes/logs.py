@@ -10,6 +10,7 @@ from fastapi.concurrency import run_in_threadpool
 from app.api.deps import SettingsDep, StoreDep
 from app.api.routes.analyses import deleted
 from app.api.schemas import ERRORS, LogOut
+from app.api.timezones import TZ_DOC, time_zone, zoned_start
 from app.api.upload import receive_upload, user_file_names
 from app.errors import InputError
 from app.pipeline import inspect_log
@@ -20,7 +21,8 @@ UPLOAD_DOC = {
     "requestBody": {
         "content": {
             "multipart/form-data": {"schema": {"type": "object", "properties": {
-                "file": {"type": "string", "format": "binary"}}, "required": ["file"]}},
+                "file": {"type": "string", "format": "binary"},
+                "tz": {"type": "string", "description": "as the tz query parameter"}}, "required": ["file"]}},
             "application/octet-stream": {"schema": {"type": "string", "format": "binary"}},
         },
         "required": True,
@@ -31,14 +33,22 @@ UPLOAD_DOC = {
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=LogOut, openapi_extra=UPLOAD_DOC,
              summary="Upload a CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4, TCU text; gzip accepted)")
 async def upload_log(request: Request, response: Response, store: StoreDep, settings: SettingsDep,
-                     filename: Annotated[str | None, Query(description="name for a raw-body upload")] = None
-                     ) -> LogOut:
+                     filename: Annotated[str | None, Query(description="name for a raw-body upload")] = None,
+                     tz: Annotated[str | None, Query(max_length=64, description=TZ_DOC)] = None) -> LogOut:
     """The body is streamed to disk and hashed; the log is read once to validate it.
 
-    Same content as an existing log: 200 with that log and ``duplicate: true``.
+    Same content as an existing log: 200 with that log and ``duplicate: true`` (its start time as
+    first stored: ``tz`` is not applied again).
     """
     up = await receive_upload(request, store.temp_path, settings.max_upload_bytes,
                               int(settings.upload_drain_mb * 2**20), filename, idle_s=settings.upload_idle_s)
+    tz = tz or up.fields.get("tz") or None
+    try:
+        zone = time_zone(tz) if tz else None
+    except InputError:
+        for f in up.files:
+            f.path.unlink(missing_ok=True)
+        raise
     multipart = request.headers.get("content-type", "").startswith("multipart/form-data")
     if len(up.files) != 1:
         for f in up.files:
@@ -67,8 +77,8 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
         raise
     rec, created = await run_in_threadpool(
         store.add_log, f.path, sha256=f.sha256, filename=f.filename, fmt=info["format"], frames=info["frames"],
-        duration_s=info["duration_s"], start_time=info["start_time"], issues=info["issues"],
-        meta={"start_clock": info["start_clock"], "channels": info["channels"]})
+        duration_s=info["duration_s"], start_time=zoned_start(info["start_time"], zone), issues=info["issues"],
+        meta={"start_clock": info["start_clock"], "channels": info["channels"], "tz": tz})
     if not created:
         response.status_code = status.HTTP_200_OK
     return LogOut.of(rec, duplicate=not created)

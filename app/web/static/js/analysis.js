@@ -1,6 +1,6 @@
 // Analysis view: status until done, then the whole-log timeline (zoom and pan fetch finer data with
 // max_points for the window shown), the events, the metrics table and the per-event overlays.
-import { api, download, saveBlob } from "./api.js";
+import { answer, api, download, saveBlob } from "./api.js";
 import { chartPng, COLORS, holdOnto, seriesData, speedChart } from "./chart.js";
 import { eventOverlays, eventsTable, metricsTable } from "./events.js";
 import { badge, errorBox, fmt, h, logStart, progressBar, sleep, stamp, utc } from "./util.js";
@@ -8,51 +8,73 @@ import { badge, errorBox, fmt, h, logStart, progressBar, sleep, stamp, utc } fro
 const MAX_POINTS_CAP = 4000;
 
 export async function render(main, id) {
+  performance.mark("analysis:render");
   const ctrl = new AbortController();
   const head = h("div", {});
-  main.append(h("h1", {}, "Analysis ", h("code", {}, id)), head);
-  let rec;
-  for (;;) {
-    rec = await api(`/analyses/${id}`, { signal: ctrl.signal });
-    if (rec.status === "done" || rec.status === "failed" || ctrl.signal.aborted) break;
-    head.replaceChildren(h("p", {}, badge(rec.status), ` ${rec.job.stage}`),
-      progressBar(rec.progress, `${rec.job.stage}: ${Math.round(100 * rec.progress)} %`));
-    await sleep(1000);
-  }
-  if (rec.status === "failed") {
-    head.replaceChildren(badge("failed"), errorBox(new Error(`${rec.job.error.detail} [${rec.job.error.code}]`)));
-    return () => ctrl.abort();
-  }
-  head.replaceChildren(h("p", { class: "muted" }, "loading results ..."));
-  // First paint first: the chart needs one bounded series read (and the pedal channel's); the
-  // events (markers), the metrics (summary, tables) and the log record are asked for once it is
-  // drawn, so their parsing does not hold it up.
-  const signalsP = api(`/analyses/${id}/signals`);
   const timeline = h("div", { id: "timeline", class: "chart" });
   const info = h("span", { class: "muted", id: "timeline-info" });
-  const card = h("section", { class: "card" }, h("h2", {}, "Whole log: measured vs simulated motor speed, torque, pedal"),
+  // laid out (for its width) but not shown until the analysis is done and the chart drawn
+  const card = h("section", { class: "card", style: "visibility:hidden" },
+    h("h2", {}, "Whole log: measured vs simulated motor speed, torque, pedal"),
     h("p", { class: "muted" }, "Drag across the chart to zoom; the server sends at most one row pair per pixel ",
       "for the window shown (max_points), so zooming in shows finer data. Vertical lines: events ",
       h("span", { style: `color:${COLORS.tip_in}` }, "tip-in"), ", ",
       h("span", { style: `color:${COLORS.tip_out}` }, "tip-out"), ", ",
       h("span", { style: `color:${COLORS.excluded}` }, "excluded (dashed)"), "."));
-  main.append(card);
+  main.append(h("h1", {}, "Analysis ", h("code", {}, id)), head, card);
+  const width = Math.max(600, card.clientWidth - 40);
+  performance.mark("analysis:layout");
+  // First paint: the chart's reads (channel list, whole-log rows, pedal rows) go out with the status
+  // read, not after it, and on a fresh load of this page before the modules run (early.js, inlined
+  // in the page). While the analysis still runs they answer 409 analysis_not_ready; then they are
+  // dropped and asked again once it is done.
+  const pre = window.lashscopeEarly?.id === id ? window.lashscopeEarly : null;
+  window.lashscopeEarly = null; // once: coming back to the page reads afresh
+  const maxPoints = pre ? pre.maxPoints : Math.min(MAX_POINTS_CAP, 2 * width);
+  let pedalName; // known once the channel list has arrived
+  const pedalRows = (q) => (pedalName ? api(`/analyses/${id}/signals/${pedalName}?max_points=${maxPoints}${q}`) : null);
+  const early = (f) => {
+    const reads = { record: f.record.then(answer), speed: f.speed.then(answer), pedal: f.pedal.then((p) => {
+      pedalName = p ? p.name : null;
+      return p ? p.rows.then(answer) : null;
+    }) };
+    for (const p of Object.values(reads)) p.catch(() => {}); // settled later, or replaced
+    return reads;
+  };
+  let reads = early(pre || window.lashscopeFirstReads(id, maxPoints));
+  let rec;
+  for (let polls = 0; ; polls++) {
+    rec = polls ? await api(`/analyses/${id}`, { signal: ctrl.signal }) : await reads.record;
+    if (rec.status === "done" || rec.status === "failed" || ctrl.signal.aborted) {
+      if (polls > 0) reads = early(window.lashscopeFirstReads(id, maxPoints)); // the first were made too early
+      break;
+    }
+    head.replaceChildren(h("p", {}, badge(rec.status), ` ${rec.job.stage}`),
+      progressBar(rec.progress, `${rec.job.stage}: ${Math.round(100 * rec.progress)} %`));
+    await sleep(1000);
+  }
+  if (rec.status === "failed") {
+    card.remove();
+    head.replaceChildren(badge("failed"), errorBox(new Error(`${rec.job.error.detail} [${rec.job.error.code}]`)));
+    return () => ctrl.abort();
+  }
+  performance.mark("analysis:record"); // the marks time the first paint (bench/dashboard.py)
+  head.replaceChildren(h("p", { class: "muted" }, "loading results ..."));
+  // The events (markers), the metrics (summary, tables) and the log record are asked for once the
+  // chart is drawn, so their parsing does not hold it up.
   let markers = [];
   let start = null;
-  const width = Math.max(600, card.clientWidth - 40);
-  const maxPoints = Math.min(MAX_POINTS_CAP, 2 * width);
 
-  let pedalName; // known once the channel list has arrived
-  async function fetchWindow(t0, t1) {
+  // the rows of a window (t0, t1 s; the whole log when undefined), or of the early reads
+  async function fetchWindow(t0, t1, first) {
     const q = t0 === undefined ? "" : `&t0=${t0}&t1=${t1}`;
-    const speedP = api(`/analyses/${id}/speed?max_points=${maxPoints}${q}`);
-    if (pedalName === undefined) pedalName = Object.keys((await signalsP).signals).find((n) => n.startsWith("pedal")) || null;
-    const [s, p] = await Promise.all([speedP,
-      pedalName ? api(`/analyses/${id}/signals/${pedalName}?max_points=${maxPoints}${q}`) : null]);
+    const [s, p] = await Promise.all(first ? [first.speed, first.pedal]
+      : [api(`/analyses/${id}/speed?max_points=${maxPoints}${q}`), pedalRows(q)]);
     return { s, data: seriesData(s, p ? holdOnto(s.t_s, p.t_s, p[pedalName]) : undefined) };
   }
 
-  const first = await fetchWindow();
+  const first = await fetchWindow(undefined, undefined, reads);
+  performance.mark("analysis:series");
   let chart;
   let seq = 0;
   let timer = null;
@@ -83,6 +105,8 @@ export async function render(main, id) {
   chart = speedChart(timeline, first.data, { width, height: 380, markers: () => markers, pedal: !!pedalName,
     onZoom: zoomTo });
   timeline.chart = chart; // for scripts driving the page (bench/dashboard.py)
+  card.style.visibility = "";
+  performance.mark("analysis:drawn");
   const tStart = first.s.t_s[0];
   const tEnd = first.s.t_s[first.s.t_s.length - 1];
   show(first.s, tStart, tEnd);

@@ -47,7 +47,11 @@ export async function api(path, { method = "GET", json, signal } = {}) {
     opts.body = JSON.stringify(json);
     opts.headers["Content-Type"] = "application/json";
   }
-  const r = await fetch(path, opts);
+  return answer(await fetch(path, opts));
+}
+
+// A fetch() response as api() returns it: JSON (or text), ApiError when not ok.
+export async function answer(r) {
   if (!r.ok) throw await failure(r);
   if (r.status === 204) return null;
   const type = r.headers.get("content-type") || "";

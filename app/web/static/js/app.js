@@ -25,6 +25,7 @@ async function route() {
   main.replaceChildren();
   main.dataset.page = name;
   try {
+    performance.mark("route");
     const mod = await load();
     cleanup = (await mod.render(main, ...params.map(decodeURIComponent))) || null;
   } catch (err) {

@@ -61,10 +61,14 @@ function markerPlugin(getMarkers) {
 // options.onZoom(t0, t1) is called when the user zooms or pans the time axis.
 export function speedChart(el, data, { width, height, markers = () => [], pedal = false, yRange, onZoom,
   title, xLabel = "time since log start (s)" } = {}) {
+  // 1 px lines: the rows are min/max pairs, so a dense view is a zigzag of long vertical strokes, and
+  // the canvas rasterises a 1 px stroke as a hairline but a 1.5 px one as a filled outline, which
+  // measured 20x slower (30 vs 600 ms for 1700 zigzag rows on a loaded 2-core machine, headless
+  // Chromium): the difference between a first paint inside and outside the 1 s target.
   const series = [
     { label: "t (s)", value: (u, v) => (v == null ? "-" : v.toFixed(3)) },
-    { label: "measured rpm", scale: "rpm", stroke: COLORS.measured, width: 1.5 },
-    { label: "simulated rpm", scale: "rpm", stroke: COLORS.simulated, width: 1.5 },
+    { label: "measured rpm", scale: "rpm", stroke: COLORS.measured, width: 1 },
+    { label: "simulated rpm", scale: "rpm", stroke: COLORS.simulated, width: 1 },
     { label: "torque N m", scale: "nm", stroke: COLORS.torque, width: 1 },
   ];
   if (pedal) series.push({ label: "pedal %", scale: "pct", stroke: COLORS.pedal, width: 1, dash: [5, 3] });
@@ -89,11 +93,16 @@ export function speedChart(el, data, { width, height, markers = () => [], pedal 
       ready: [() => {
         quiet = false;
       }],
+      // the first draw's phases as performance marks, named by the element's id (bench/dashboard.py)
+      drawClear: [() => {
+        if (el.id && !el.dataset.draws) performance.mark(`chart:${el.id}:draw`);
+      }],
       // what was drawn, on the element: tests and people's scripts can see that lines are on the canvas
       draw: [(u) => {
-        el.dataset.inked = inkedPixels(u);
+        if (el.id && !el.dataset.draws) performance.mark(`chart:${el.id}:drawn`);
         el.dataset.ySpan = u.scales.rpm.max - u.scales.rpm.min;
         el.dataset.draws = (Number(el.dataset.draws) || 0) + 1;
+        countInkAfterPaint(el, u);
       }],
       setScale: [(u, key) => {
         if (key === "x" && onZoom && !quiet) onZoom(u.scales.x.min, u.scales.x.max);
@@ -128,6 +137,21 @@ export function chartPng(u, title) {
   ctx.fillText(title, 8 * devicePixelRatio, 18 * devicePixelRatio);
   ctx.drawImage(src, 0, pad);
   return new Promise((resolve) => c.toBlob(resolve, "image/png"));
+}
+
+// data-inked after the frame is shown, once per burst of draws, and absent until the latest draw is
+// counted: reading the canvas back (getImageData) took as long as the draw and the layout together
+// (about 180 ms of a 1 s first paint on a loaded 2-core machine), so it stays off the paint.
+function countInkAfterPaint(el, u) {
+  delete el.dataset.inked;
+  if (el.inkPending) return;
+  el.inkPending = true;
+  requestAnimationFrame(() => setTimeout(() => {
+    el.inkPending = false;
+    el.dataset.inked = inkedPixels(u);
+    if (el.id && !el.dataset.inkedOnce) performance.mark(`chart:${el.id}:inked`);
+    el.dataset.inkedOnce = "1";
+  }, 0));
 }
 
 // How many pixels of the plot area carry the speed lines' colours (measured, simulated): > 0 only

@@ -7,8 +7,11 @@ export async function render(main) {
   const ctrl = new AbortController();
   const status = h("div", { id: "upload-status" });
   const file = h("input", { type: "file", id: "upload-file", name: "file" });
+  const zone = h("input", { type: "text", id: "upload-tz", name: "tz", size: 16, placeholder: "e.g. Europe/Berlin",
+    title: "time zone of the log's clock, for logs that do not record one: their start is then shown in UTC" });
   const send = h("button", { class: "primary", id: "upload-button", type: "submit" }, "Upload");
-  const form = h("form", { class: "toolbar", id: "upload-form" }, file, send, status);
+  const form = h("form", { class: "toolbar", id: "upload-form" }, file,
+    h("label", {}, "log clock zone ", zone), send, status);
   const list = h("div", { id: "logs" });
   main.append(h("h1", {}, "Logs"),
     h("section", { class: "card" }, h("h2", {}, "Upload a CAN log"),
@@ -23,7 +26,8 @@ export async function render(main) {
     send.disabled = true;
     status.replaceChildren(progressBar(0, `${f.name}: 0 %`));
     try {
-      const rec = await upload("/logs", { file: f }, (frac, done, total) => {
+      const fields = zone.value.trim() ? { tz: zone.value.trim(), file: f } : { file: f };
+      const rec = await upload("/logs", fields, (frac, done, total) => {
         status.replaceChildren(progressBar(frac, `${f.name}: ${bytes(done)} of ${bytes(total)}`));
       });
       status.replaceChildren(progressBar(1, `${f.name}: ${bytes(f.size)} sent`),
