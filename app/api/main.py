@@ -27,7 +27,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from app import __version__
 from app.api import errors
 from app.api.formats import FormatGuard
-from app.api.routes import analyses, dashboard, diagnoses, fleet, health, live, logs, series, vehicles
+from app.api.routes import analyses, batches, dashboard, diagnoses, fleet, health, live, logs, series, vehicles
 from app.api.security import RequestGuard
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
@@ -36,7 +36,8 @@ from app.storage.url import open_store
 from app.web import install as install_dashboard
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
-                            live.router, diagnoses.router, fleet.router, dashboard.router]
+                            live.router, diagnoses.router, batches.router, fleet.router,
+                            dashboard.router]
 
 log = logging.getLogger("lashscope.api")
 
@@ -81,7 +82,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         store = open_store(cfg.store_location)
         store.clean_temp()  # uploads cut off by a previous stop
         runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts, cfg.job_timeout_s,
-                           lease_s=cfg.job_lease_s)
+                           lease_s=cfg.job_lease_s, timeouts=cfg.job_timeouts)
         app.state.store, app.state.runner, app.state.settings = store, runner, cfg
         app.state.results = ResultCache()
         await asyncio.to_thread(_warm_up)

@@ -23,7 +23,7 @@ from app.api.main import create_app
 from app.settings import Settings
 from tests.api.conftest import create_vehicle, upload
 from tests.conftest import REPO
-from tests.diagnosis.test_restart import write_lag_log
+from tests.diagnosis.lagdrive import write_lag_log
 
 
 @pytest.fixture(scope="module")
