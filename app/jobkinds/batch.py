@@ -66,7 +66,7 @@ def run(store: Store, job: JobRecord) -> None:
 
     summary = run_batch([str(rec.path) for rec in logs], cfg, stream=None, on_record=on_record)
     store.update_job(job.id, 0.99, "saving")
-    found = records(cfg.out)
+    found = records(cfg.out)  # by content hash; a log that could not be read is failed anyway
     ok = sum(1 for rec in logs if found.get(rec.sha256, {}).get("status") == "ok")
     write_json(d / SUMMARY, {
         "logs": len(logs), "ok": ok, "failed": len(logs) - ok,

@@ -45,8 +45,10 @@ def _load(store: Store, batch_id: str) -> tuple[dict[str, Any], JobRecord]:
 def _rows(store: Store, batch_id: str, req: dict[str, Any]) -> list[dict[str, Any]]:
     found = records(directory(store, batch_id) / "out")
     rows = []
-    for log_id, filename, sha in zip(req["log_ids"], req["filenames"], req["hashes"], strict=True):
-        rec = found.get(sha)
+    by_name = {str(r.get("log_name")): r for r in found.values()}  # a log that could not be read at all
+    for log_id, filename, sha, stored in zip(req["log_ids"], req["filenames"], req["hashes"], req["stored"],
+                                             strict=True):
+        rec = found.get(sha) or by_name.get(stored)
         if rec is None:
             rows.append({"log_id": log_id, "filename": filename, "status": "pending"})
             continue
@@ -83,6 +85,7 @@ def create_batch(body: BatchCreate, store: StoreDep, runner: RunnerDep, settings
     d = directory(store, batch_id)
     d.mkdir(parents=True, exist_ok=True)
     req = {"log_ids": body.log_ids, "filenames": [rec.filename for rec in logs], "hashes": [rec.sha256 for rec in logs],
+           "stored": [rec.path.name for rec in logs],
            "vehicle": vehicle.name, "vehicle_version": vehicle.version, "vehicle_id": body.vehicle_id or vehicle.name,
            "options": options.to_dict(), "diagnose": body.diagnose}
     write_json(d / REQUEST, req)
