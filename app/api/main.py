@@ -28,6 +28,7 @@ from app import __version__
 from app.api import errors
 from app.api.formats import FormatGuard
 from app.api.routes import analyses, batches, dashboard, diagnoses, fleet, health, live, logs, series, vehicles
+from app.api.routes.series import SeriesCache
 from app.api.security import RequestGuard
 from app.jobs import JobRunner
 from app.settings import Settings, get_settings
@@ -100,9 +101,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan,
                   docs_url=None, redoc_url=None)  # /docs is served from packaged assets (app.web)
-    if settings is not None:
-        app.dependency_overrides[get_settings] = lambda: settings
-    app.add_middleware(FormatGuard, openapi=app.openapi)  # innermost: a 406 passes the guard and CORS
+    app.state.settings = cfg  # what SettingsDep hands the routes (app.api.deps)
+    app.add_middleware(SeriesCache)  # innermost: a repeated speed read is answered before routing
+    app.add_middleware(FormatGuard, openapi=app.openapi)  # a 406 passes the guard and CORS
     app.add_middleware(RequestGuard, settings=cfg)  # inside CORS: preflights are answered before it
     if cfg.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],
