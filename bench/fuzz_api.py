@@ -157,6 +157,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--stalled", type=int, default=200)
     ap.add_argument("--clients", type=int, default=30)
+    ap.add_argument("--per-client", type=int, default=20, help="reads per client in each read measurement")
     ap.add_argument("--reads-only", action="store_true",
                     help="only the read p95 with and without a job (no fuzzing, stalled uploads or guard timing)")
     args = ap.parse_args()
@@ -190,14 +191,20 @@ def main() -> int:
                 t0 = (k * 7 + i * 3) % 30
                 return {"max_points": 2000, "t0": t0, "t1": t0 + 8}
 
-            idle, _ = hammer(speed, args.clients, 20, window)
+            idle, _ = hammer(speed, args.clients, args.per_client, window)
             r = c.post(f"/analyses/{analysis_id}/tolerance", params={"n": 2000, "seed": 3})
             assert r.status_code == 202, r.text
-            busy, _ = hammer(speed, args.clients, 20, window)
+            deadline = time.monotonic() + 120.0  # until the job computes (its worker has imported everything)
+            while time.monotonic() < deadline:
+                state = c.get(f"/analyses/{analysis_id}/tolerance", params={"n": 2000, "seed": 3})
+                if state.status_code != 202 or state.json()["progress"] > 0:
+                    break
+                time.sleep(0.1)
+            busy, _ = hammer(speed, args.clients, args.per_client, window)
             state = c.get(f"/analyses/{analysis_id}/tolerance", params={"n": 2000, "seed": 3})
-            print(f"read p95 with {args.clients} clients: {pct(idle, 95):.1f} ms idle, {pct(busy, 95):.1f} ms while a "
-                  f"tolerance job runs (ratio {pct(busy, 95) / pct(idle, 95):.2f}; job still "
-                  f"{'running' if state.status_code == 202 else 'done'} at the end; load average "
+            print(f"read p95 with {args.clients} clients x {args.per_client} reads: {pct(idle, 95):.1f} ms idle, "
+                  f"{pct(busy, 95):.1f} ms while a tolerance job runs (ratio {pct(busy, 95) / pct(idle, 95):.2f}; "
+                  f"job still {'running' if state.status_code == 202 else 'done'} at the end; load average "
                   f"{os.getloadavg()[0]:.1f})")
     finally:
         srv.stop()
