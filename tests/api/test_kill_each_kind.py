@@ -19,7 +19,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.api.conftest import Server, analysed, upload
+from tests.api.conftest import Server, analysed, create_vehicle, upload
 from tests.api.test_job_lifecycle import _alive, _workers
 from tests.conftest import REPO
 from tests.diagnosis.lagdrive import CANDIDATES, write_lag_log
@@ -61,8 +61,6 @@ def _diagnosed(c: httpx.Client, log: Path) -> tuple[str, str]:
 
 
 def _analysis(c: httpx.Client, demo: Path, lags: list[Path]) -> Case:
-    from tests.api.conftest import create_vehicle
-
     create_vehicle(c)
     log_id = upload(c, demo).json()["id"]
     body = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()
@@ -110,8 +108,6 @@ def _validation(c: httpx.Client, demo: Path, lags: list[Path]) -> Case:
 
 
 def _batch(c: httpx.Client, demo: Path, lags: list[Path]) -> Case:
-    from tests.api.conftest import create_vehicle
-
     create_vehicle(c)
     ids = [upload(c, p).json()["id"] for p in (*lags, demo)]
     body = c.post("/batches", json={"log_ids": ids, "vehicle": "ev"}).json()

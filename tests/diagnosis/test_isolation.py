@@ -6,7 +6,6 @@ diagnosis back to be resumed at the next start without counting an attempt. Both
 from __future__ import annotations
 
 import signal
-import sqlite3
 import time
 from pathlib import Path
 from typing import Any
@@ -16,6 +15,7 @@ import pytest
 
 from tests.api.conftest import Server, create_vehicle, upload, wait_for
 from tests.api.test_job_lifecycle import _workers
+from tests.api.test_kill_each_kind import _job
 from tests.diagnosis.lagdrive import CANDIDATES, process_gone, write_lag_log
 
 
@@ -34,12 +34,6 @@ def _start_diagnosis(c: httpx.Client, log: Path, body: dict[str, Any]) -> tuple[
     r = c.post(f"/analyses/{analysis_id}/diagnoses", json=body)
     assert r.status_code == 202, r.text
     return analysis_id, r.json()["id"]
-
-
-def _job(data: Path, job_id: str) -> dict[str, Any]:
-    with sqlite3.connect(data / "lashscope.sqlite3") as db:
-        db.row_factory = sqlite3.Row
-        return dict(db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone())
 
 
 def test_a_diagnosis_over_its_time_limit_fails_while_health_answers(tmp_path: Path, lag_log: Path,
