@@ -1,4 +1,7 @@
-"""Background jobs (analyses, tolerance bands): each run in its own worker process with a wall-time limit.
+"""Background jobs (analyses, tolerance bands, diagnoses, validations, batches): the one job runner.
+
+Every kind runs here, in its own worker process with a wall-time limit, under a lease; a kind is
+a module in :mod:`app.jobkinds` and a lane in :data:`KINDS`.
 
 The store is the source of truth: a job is queued in SQLite before it is submitted here,
 marked running under this runner's lease (renewed while the worker runs, see
@@ -14,10 +17,16 @@ fails with ``timed out after N s``) and fails the job if the process dies withou
 (e.g. out of memory). The worker reports progress and its result through the store, which is
 safe across processes. ``in_process=True`` runs jobs in the runner thread instead (for the
 command line, where nothing else has to stay responsive).
+
+Lanes: analyses and tolerance bands share the ``analysis`` lane (``workers`` at a time); the long
+kinds -- diagnoses, validations, batches, minutes each -- run one at a time in the ``long`` lane, so
+a whole-library fit never holds up a new analysis. Workers run at a lower OS priority
+(:data:`WORKER_NICE`), so on a small machine the scheduler serves request handling first.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 import os
@@ -35,7 +44,10 @@ from app.storage.base import Store
 from app.storage.records import JobRecord, JobStatus
 
 log = logging.getLogger("lashscope.jobs")
-KINDS = ("analysis", "tolerance")  # one module each in app.jobkinds, with run(store, job)
+#: kind -> lane; one module each in app.jobkinds, with run(store, job)
+KINDS = {"analysis": "analysis", "tolerance": "analysis", "diagnosis": "long", "validation": "long",
+         "batch": "long"}
+WORKER_NICE = 5  # added to a worker's niceness: the API's reads come first on a busy machine
 _SPAWN = multiprocessing.get_context("spawn")  # no fork of a threaded server; the child imports afresh
 
 
@@ -44,18 +56,23 @@ class JobRunner:
 
     ``lease_s``: how long a job stays this runner's without a heartbeat (renewed every third of it);
     after a crash of the whole server the job is resumed once that has run out. A background loop
-    re-checks the store every half lease and resumes jobs whose runner is gone.
+    re-checks the store every half lease and resumes jobs whose runner is gone. ``timeouts``: a
+    kind's own wall time (s) and the setting that names it, instead of ``timeout_s``
+    (``LASHSCOPE_JOB_TIMEOUT_S``).
     """
 
     def __init__(self, store: Store, workers: int = 1, max_attempts: int = 2, timeout_s: float | None = 600.0,
-                 in_process: bool = False, lease_s: float = 10.0) -> None:
+                 in_process: bool = False, lease_s: float = 10.0,
+                 timeouts: dict[str, tuple[float, str]] | None = None) -> None:
         self.store = store
         self.max_attempts = max_attempts
         self.timeout_s = timeout_s
+        self.timeouts = dict(timeouts or {})
         self.in_process = in_process
         self.lease_s = lease_s
         self.owner = f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
-        self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lashscope-job")
+        self._pools = {"analysis": ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lashscope-job"),
+                       "long": ThreadPoolExecutor(max_workers=1, thread_name_prefix="lashscope-long-job")}
         self._futures: dict[str, Future[None]] = {}
         self._procs: dict[str, BaseProcess] = {}
         self._lock = threading.Lock()
@@ -94,10 +111,11 @@ class JobRunner:
                 log.exception("job recovery pass failed")
 
     def submit(self, job_id: str) -> None:
+        lane = KINDS.get(self.store.get_job(job_id).kind, "analysis")  # an unknown kind fails in _run
         with self._lock:
             if self._closed or job_id in self._futures:
                 return
-            self._futures[job_id] = self._pool.submit(self._run, job_id)
+            self._futures[job_id] = self._pools[lane].submit(self._run, job_id)
 
     def wait(self, job_id: str, timeout: float | None = None) -> None:
         with self._lock:
@@ -121,8 +139,8 @@ class JobRunner:
             proc.kill()
 
     def shutdown(self, wait: bool = False) -> None:
-        """Take no new work; kill running workers (their jobs stay 'running' with the lease let go, so the
-        next start resumes them at once)."""
+        """Take no new work; kill running workers (their jobs stay 'running' with the lease let go and the
+        attempt not counted, so the next start resumes them at once)."""
         self._stop.set()
         with self._lock:
             self._closed = True
@@ -132,7 +150,8 @@ class JobRunner:
                 p.kill()
                 p.join(5.0)
                 self.store.release_lease(job_id, self.owner)
-        self._pool.shutdown(wait=wait, cancel_futures=True)
+        for pool in self._pools.values():
+            pool.shutdown(wait=wait, cancel_futures=True)
 
     # -- one job ---------------------------------------------------------------------------
     def _run(self, job_id: str) -> None:
@@ -170,7 +189,8 @@ class JobRunner:
     def _supervise(self, job: JobRecord, proc: BaseProcess) -> bool:
         """Wait for the worker, renewing the lease; kill it past the wall time or when the lease is lost
         (the job was cancelled or taken over). False: the runner has dealt with the job already."""
-        deadline = None if self.timeout_s is None else time.monotonic() + self.timeout_s
+        timeout_s, setting = self.timeouts.get(job.kind, (self.timeout_s, "LASHSCOPE_JOB_TIMEOUT_S"))
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while True:
             left = None if deadline is None else deadline - time.monotonic()
             proc.join(self.lease_s / 3 if left is None else max(0.0, min(self.lease_s / 3, left)))
@@ -179,9 +199,9 @@ class JobRunner:
             if deadline is not None and time.monotonic() >= deadline:
                 proc.kill()
                 proc.join()
-                self.store.fail_job(job.id, "timeout", f"timed out after {self.timeout_s:g} s "
-                                    "(LASHSCOPE_JOB_TIMEOUT_S); the worker was stopped")
-                log.warning("job %s timed out after %g s", job.id, self.timeout_s)
+                self.store.fail_job(job.id, "timeout", f"timed out after {timeout_s:g} s "
+                                    f"({setting}); the worker was stopped")
+                log.warning("job %s timed out after %g s", job.id, timeout_s)
                 return False
             if not self.store.renew_lease(job.id, self.owner, self.lease_s):
                 proc.kill()
@@ -215,6 +235,8 @@ def worker_main(url: str, job_id: str, parent: int | None = None) -> None:
 
     if parent is not None:
         die_with_parent(parent)
+        with contextlib.suppress(OSError):
+            os.nice(WORKER_NICE)
     store = open_store(url)
     try:
         execute(store, store.get_job(job_id))

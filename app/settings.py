@@ -12,6 +12,7 @@
                               resumed once the lease has run out, never while its runner may still live
 ``LASHSCOPE_DIAGNOSIS_TIMEOUT_S``  a diagnosis' (or validation's) worker process is killed after this wall time
                                  and it fails (default 1800)
+``LASHSCOPE_BATCH_TIMEOUT_S``   a batch job's worker process is killed after this wall time (default 3600)
 ``LASHSCOPE_DBC_DIR``           the project's DBC files and signal maps (default: ``dbc/`` in the source tree)
 ``LASHSCOPE_SHUTDOWN_GRACE_S``  on stop, open requests (e.g. live streams) get this long before they are cut
 ``LASHSCOPE_STORE_URL``         the store as a URL (``sqlite:////srv/ls/db.sqlite3``); default: the data directory's
@@ -21,6 +22,7 @@
 ``LASHSCOPE_UPLOAD_IDLE_S``     an upload that sends nothing for this long is dropped (408, partial file removed)
 ``LASHSCOPE_MAX_QUEUED_JOBS``   new jobs are refused (429 ``queue_full``) while this many wait (default 32)
 ``LASHSCOPE_KEY_RATE_PER_S``    requests a second per API key (bursts of two seconds' worth); past it 429 (0: off)
+``LASHSCOPE_CLIENT_RATE_PER_S`` requests a second per client address for requests without a key (default 200; 0: off)
 ``LASHSCOPE_LIVE_CHANNELS``     live buses a client may open, ``interface:channel`` or ``interface:*`` (comma-separated)
 """
 
@@ -56,6 +58,7 @@ class Settings(BaseSettings):
     job_timeout_s: float = Field(default=600.0, gt=0)
     job_lease_s: float = Field(default=10.0, ge=1)  # a crashed server's jobs are resumed this long after
     diagnosis_timeout_s: float = Field(default=1800.0, gt=0)  # a whole-library fit on a long log takes minutes
+    batch_timeout_s: float = Field(default=3600.0, gt=0)  # a batch analyses many logs in one job
     dbc_dir: Path = Field(default_factory=default_dbc_dir)
     series_cache_entries: int = Field(default=256, ge=0)
     series_cache_mb: float = Field(default=64.0, ge=0)  # rendered series responses kept in memory
@@ -69,6 +72,7 @@ class Settings(BaseSettings):
     upload_idle_s: float = Field(default=60.0, gt=0)
     max_queued_jobs: int = Field(default=32, ge=1)
     key_rate_per_s: float = Field(default=100.0, ge=0)  # per API key; 0: no limit
+    client_rate_per_s: float = Field(default=200.0, ge=0)  # per client address, requests without a key; 0: off
     live_channels: Annotated[list[str], NoDecode] = Field(
         default_factory=lambda: ["virtual:*", "tcp_loopback:*", "socketcan:*"])
 
@@ -86,6 +90,13 @@ class Settings(BaseSettings):
     @property
     def max_json_bytes(self) -> int:
         return int(self.max_json_kb * 1024)
+
+    @property
+    def job_timeouts(self) -> dict[str, tuple[float, str]]:
+        """Wall time (s) of the job kinds that do not use ``job_timeout_s``, with the setting that names it."""
+        diagnosis = (self.diagnosis_timeout_s, "LASHSCOPE_DIAGNOSIS_TIMEOUT_S")
+        return {"diagnosis": diagnosis, "validation": diagnosis,
+                "batch": (self.batch_timeout_s, "LASHSCOPE_BATCH_TIMEOUT_S")}
 
     @property
     def store_location(self) -> str:

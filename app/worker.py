@@ -1,7 +1,6 @@
 """What every background worker process shares: it dies with the server that spawned it.
 
-Both job runners (:mod:`app.jobs` for analyses and tolerance bands, :mod:`app.diagnosis_state` for
-diagnoses and validations) spawn one process per job. Without this, ``kill -9`` of the server
+The job runner (:mod:`app.jobs`) spawns one process per job. Without this, ``kill -9`` of the server
 would orphan a running worker; the restarted server would then run the same job again beside it,
 outside any time limit.
 """

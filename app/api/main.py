@@ -32,7 +32,8 @@ from fastapi.middleware.gzip import GZipMiddleware
 from app import __version__
 from app.api import errors
 from app.api.formats import FormatGuard
-from app.api.routes import analyses, dashboard, diagnoses, fleet, health, live, logs, series, vehicles
+from app.api.routes import analyses, batches, dashboard, diagnoses, fleet, health, live, logs, series, vehicles
+from app.api.routes.series import SeriesCache
 from app.api.security import RequestGuard
 from app.api.timing import ServerTiming
 from app.jobs import JobRunner
@@ -42,7 +43,8 @@ from app.storage.url import open_store
 from app.web import install as install_dashboard
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
-                            live.router, diagnoses.router, fleet.router, dashboard.router]
+                            live.router, diagnoses.router, batches.router, fleet.router,
+                            dashboard.router]
 
 log = logging.getLogger("lashscope.api")
 GZIP_MIN_BYTES = 1024
@@ -89,7 +91,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         store = open_store(cfg.store_location)
         store.clean_temp()  # uploads cut off by a previous stop
         runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts, cfg.job_timeout_s,
-                           lease_s=cfg.job_lease_s)
+                           lease_s=cfg.job_lease_s, timeouts=cfg.job_timeouts)
         app.state.store, app.state.runner, app.state.settings = store, runner, cfg
         app.state.results = ResultCache()
         runner.on_done.append(lambda job: series.warm(store, app.state.results, job))
@@ -108,9 +110,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan,
                   docs_url=None, redoc_url=None)  # /docs is served from packaged assets (app.web)
-    if settings is not None:
-        app.dependency_overrides[get_settings] = lambda: settings
-    app.add_middleware(FormatGuard, openapi=app.openapi)  # innermost: a 406 passes the guard and CORS
+    app.state.settings = cfg  # what SettingsDep hands the routes (app.api.deps)
+    app.add_middleware(SeriesCache)  # innermost: a repeated speed read is answered before routing
+    app.add_middleware(FormatGuard, openapi=app.openapi)  # a 406 passes the guard and CORS
     app.add_middleware(RequestGuard, settings=cfg)  # inside CORS: preflights are answered before it
     if cfg.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=cfg.cors_origins, allow_methods=["*"],

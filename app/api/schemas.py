@@ -247,3 +247,47 @@ class VehicleCompareOut(BaseModel):
     changed: int
     fields: list[FieldChange]
     files_changed: list[str]
+
+
+class BatchCreate(BaseModel):
+    """``POST /batches``: stored logs through the fleet batch pipeline (docs/fleet.md) as one job."""
+
+    log_ids: list[str] = Field(min_length=1, max_length=1000, description="ids of uploaded logs (no repeats)")
+    vehicle: str
+    vehicle_version: int | None = None
+    vehicle_id: str | None = Field(default=None, max_length=200,
+                                   description="the fleet's name of the car (default: the vehicle's name)")
+    options: dict[str, Any] = Field(default_factory=dict, description="AnalysisOptions fields (app.pipeline)")
+    diagnose: bool = Field(default=False, description="also diagnose each log (all candidates; slower)")
+
+
+class BatchOut(BaseModel):
+    """A batch job: its status and progress; ``counts`` of logs ok / failed / pending; ``summary`` once done."""
+
+    id: str
+    status: str
+    progress: float
+    stage: str
+    job: JobOut
+    vehicle: str
+    vehicle_version: int
+    vehicle_id: str
+    logs: int
+    counts: dict[str, int]
+    summary: dict[str, Any] | None = None
+    links: dict[str, str]
+
+
+class BatchLogOut(_Open):
+    """One log of a batch: ``status`` ok | failed | pending; events, summary and tracking when ok;
+    ``code`` and ``message`` when failed (the record of docs/fleet.md, named by log id)."""
+
+    log_id: str
+    filename: str
+    status: str
+
+
+class BatchLogsOut(BaseModel):
+    batch_id: str
+    count: int
+    logs: list[BatchLogOut]

@@ -13,7 +13,10 @@ before any route runs:
    ``invalid_key``, too small a scope 403 ``insufficient_scope``. Reads need ``read``; creating
    things (POST, PUT, PATCH) ``write``; deleting ``admin``. Each key gets
    ``LASHSCOPE_KEY_RATE_PER_S`` requests a second (a token bucket holding two seconds' worth);
-   past that 429 ``rate_limited`` with ``Retry-After``.
+   past that 429 ``rate_limited`` with ``Retry-After``. A request without a key counts against
+   its client address instead (``LASHSCOPE_CLIENT_RATE_PER_S``, the same kind of bucket), so an
+   open server cannot be flooded from one address either. (Behind a reverse proxy every request
+   comes from the proxy's address: limit there, or raise this.)
 3. **Same origin.** Without keys (a workstation on loopback) reads stay open, but a
    state-changing request from a browser must come from the service's own origin or a
    ``--cors-origin``: a foreign ``Origin`` or ``Sec-Fetch-Site: cross-site``/``same-site`` gets 403
@@ -52,6 +55,7 @@ PUBLIC_PREFIXES = ("/static/",)  # the dashboard's own files: the page must load
 UPLOAD_ROUTES = frozenset({("POST", "/logs"), ("POST", "/vehicles")})
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 KEYS_RECHECK_S = 1.0
+MAX_BUCKETS = 4096  # rate buckets kept before idle ones are dropped
 
 
 def is_loopback(host: str) -> bool:
@@ -103,7 +107,7 @@ class RequestGuard:
         self.open_network = not is_loopback(settings.host) and not settings.insecure
         self._keys_at = -1e9
         self._have_keys = False
-        self._buckets: dict[str, tuple[float, float]] = {}  # key id -> (tokens, monotonic time)
+        self._buckets: dict[str, tuple[float, float]] = {}  # key or client -> (tokens, monotonic time)
         self._verified: dict[str, tuple[Any, float]] = {}  # token -> (ApiKey or None, monotonic time)
 
     def _keys_exist(self, store: Any) -> bool:
@@ -142,6 +146,9 @@ class RequestGuard:
         if auth or self.open_network or (store is not None and self._keys_exist(store)):
             self._authorise(store, auth, need)
             return
+        client = scope.get("client")
+        self._spend(f"client {client[0] if client else 'unknown'}", self.cfg.client_rate_per_s,
+                    "LASHSCOPE_CLIENT_RATE_PER_S")
         if method not in SAFE_METHODS:
             self._same_origin(scope, headers)
 
@@ -159,7 +166,7 @@ class RequestGuard:
         if not scope_allows(key.scope, need):
             raise _Deny(403, "insufficient_scope", f"this request needs scope {need!r}; key {key.id} has "
                         f"{key.scope!r}")
-        self._spend(key.id)
+        self._spend(f"key {key.id}", self.cfg.key_rate_per_s, "LASHSCOPE_KEY_RATE_PER_S")
 
     def _verify(self, store: Any, token: str) -> Any:
         """``store.verify_key`` remembered for a second (a database read per request otherwise)."""
@@ -173,20 +180,22 @@ class RequestGuard:
         self._verified[token] = (key, now)
         return key
 
-    def _spend(self, key_id: str) -> None:
-        """Take one token from the key's bucket (refilled at the configured rate, two seconds deep)."""
-        rate = self.cfg.key_rate_per_s
+    def _spend(self, who: str, rate: float, setting: str) -> None:
+        """Take one token from ``who``'s bucket (a key or a client address; refilled at ``rate`` a second,
+        two seconds deep). Idle buckets are dropped once there are many (a full bucket holds no state)."""
         if rate <= 0:
             return
         now = time.monotonic()
-        tokens, then = self._buckets.get(key_id, (2 * rate, now))
+        if len(self._buckets) >= MAX_BUCKETS:
+            self._buckets = {k: v for k, v in self._buckets.items() if now - v[1] < 2.0}
+        tokens, then = self._buckets.get(who, (2 * rate, now))
         tokens = min(2 * rate, tokens + (now - then) * rate)
         if tokens < 1:
-            self._buckets[key_id] = (tokens, now)
+            self._buckets[who] = (tokens, now)
             wait = (1 - tokens) / rate
-            raise _Deny(429, "rate_limited", f"key {key_id} is over {rate:g} requests/s "
-                        "(LASHSCOPE_KEY_RATE_PER_S)", {"Retry-After": str(max(1, round(wait + 0.5)))})
-        self._buckets[key_id] = (tokens - 1, now)
+            raise _Deny(429, "rate_limited", f"{who} is over {rate:g} requests/s ({setting})",
+                        {"Retry-After": str(max(1, round(wait + 0.5)))})
+        self._buckets[who] = (tokens - 1, now)
 
     def _same_origin(self, scope: Scope, headers: dict[str, str]) -> None:
         site = headers.get("sec-fetch-site")

@@ -185,8 +185,12 @@ class Progress:
         self.stream.flush()
 
 
-def run_batch(sources: Sequence[str], cfg: BatchConfig, stream: TextIO | None = sys.stderr) -> BatchSummary:
-    """Analyse ``sources`` (see :func:`expand_sources`) into ``cfg.out``; never stops for one bad log."""
+def run_batch(sources: Sequence[str], cfg: BatchConfig, stream: TextIO | None = sys.stderr,
+              on_record: Callable[[dict[str, Any]], None] | None = None) -> BatchSummary:
+    """Analyse ``sources`` (see :func:`expand_sources`) into ``cfg.out``; never stops for one bad log.
+
+    ``on_record(record)`` is called as each log's record is written (the service's batch job reports
+    its progress with it)."""
     clock = time.perf_counter()
     summary = BatchSummary(total=len(sources))
     progress = Progress(len(sources), stream)
@@ -199,6 +203,8 @@ def run_batch(sources: Sequence[str], cfg: BatchConfig, stream: TextIO | None = 
             summary.failed += 1
             summary.failures.append({k: record[k] for k in ("log", "code", "message")})
         progress.update(summary, record["log_name"])
+        if on_record is not None:
+            on_record(record)
 
     todo = _plan(sources, cfg, summary, done)
     progress.total = progress.count + len(todo)

@@ -2,7 +2,7 @@
 
 :class:`app.jobs.JobRunner` owns everything kinds share -- the queue, the worker process, the
 wall-time limit, the lease, cancellation and the verdict -- and imports the kind's module in
-the worker (``app.jobkinds.<kind>``). A new kind is a module here plus its name in
+the worker (``app.jobkinds.<kind>``). A new kind is a module here plus its lane in
 :data:`app.jobs.KINDS`. :func:`progress_reporter` is the throttled progress callback every kind uses.
 """
 

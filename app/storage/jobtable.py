@@ -107,10 +107,12 @@ class JobTable:
         return cur.rowcount == 1
 
     def release_lease(self, job_id: str, owner: str) -> None:
-        """Let the lease lapse now (a clean stop): the next start resumes the job without waiting."""
+        """Let the lease lapse now (a clean stop): the next start resumes the job without waiting, and the
+        cut-off run does not count as an attempt (only a crash does)."""
         with self._tx() as db:
-            db.execute("UPDATE jobs SET lease_until = 0 WHERE id = ? AND status = 'running' AND lease_owner = ?",
-                       (job_id, owner))
+            db.execute("UPDATE jobs SET lease_until = 0, attempts = MAX(attempts - 1, 0), stage = ?, updated_at = ?"
+                       " WHERE id = ? AND status = 'running' AND lease_owner = ?",
+                       ("stopped with the server; resumes at the next start", now(), job_id, owner))
 
     def update_job(self, job_id: str, progress: float, stage: str) -> None:
         with self._tx() as db:
@@ -151,7 +153,8 @@ class JobTable:
                     requeued.append(row["id"])
                     db.execute("UPDATE jobs SET status = 'queued', stage = ?, updated_at = ?, lease_owner = NULL,"
                                " lease_until = NULL WHERE id = ?",
-                               (f"resumed after an interruption (attempt {row['attempts']} was cut off)", now(),
+                               ("resumed after a clean stop" if row["lease_until"] == 0 else
+                                f"resumed after an interruption (attempt {row['attempts']} was cut off)", now(),
                                 row["id"]))
                 else:
                     db.execute(

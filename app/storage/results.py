@@ -1,19 +1,21 @@
 """Result files of a finished job: one JSON document plus named float64 ``.npy`` arrays.
 
-Written to a temporary sibling directory and renamed into place, so a reader never sees
-half a result and a crash leaves no partial directory behind. Readers memory-map the
+Written to a temporary folder and renamed into place, so a reader never sees half a result and
+a crash leaves no partial result behind; nothing else in the directory is touched. Readers memory-map the
 arrays and keep recently used results open (:class:`ResultCache`), so a dashboard read
 touches only the pages it needs.
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import math
 import os
 import shutil
 import threading
+import uuid
 from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -42,20 +44,32 @@ def json_safe(obj: Any) -> Any:
 
 
 def write_result(directory: Path, doc: Mapping[str, Any], arrays: Mapping[str, npt.NDArray[Any]]) -> None:
-    tmp = directory.with_name(directory.name + ".tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
+    """Write a result into ``directory`` without touching anything else there.
+
+    The directory is shared: an analysis' diagnoses (``diagnoses/``) and tolerance bands live beside
+    its result and may be written while the analysis still runs, so only ``arrays/`` and
+    ``result.json`` are replaced. Both are built in a hidden temporary folder inside ``directory``;
+    the arrays folder is swapped in first and the document last, so a reader (which looks for the
+    document) never sees half a result and a crash leaves none.
+    """
+    tmp = directory / f".result-{uuid.uuid4().hex[:8]}.tmp"
+    old = directory / f".arrays-{uuid.uuid4().hex[:8]}.old"
     try:
         (tmp / "arrays").mkdir(parents=True)
         for name, arr in arrays.items():
             np.save(tmp / "arrays" / f"{name}.npy", np.ascontiguousarray(arr, dtype=np.float64))
         (tmp / DOC).write_text(json.dumps(json_safe(dict(doc)), allow_nan=False), encoding="utf-8")
-        shutil.rmtree(directory, ignore_errors=True)
-        os.replace(tmp, directory)
+        with contextlib.suppress(FileNotFoundError):
+            os.replace(directory / "arrays", old)
+        os.replace(tmp / "arrays", directory / "arrays")
+        os.replace(tmp / DOC, directory / DOC)
     except OSError as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
         full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
         raise (StorageFullError if full else StorageError)(
             f"cannot write results ({directory.name}): {exc.strerror}") from exc
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(old, ignore_errors=True)
 
 
 class ResultFiles:

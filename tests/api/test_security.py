@@ -106,6 +106,22 @@ def test_each_key_has_its_rate(tmp_path: Path) -> None:
         assert c.get("/logs", headers={"Authorization": f"Bearer {second}"}).status_code == 200  # its own bucket
 
 
+def test_each_client_address_has_its_rate_without_a_key(tmp_path: Path) -> None:
+    with in_process(tmp_path / "data", client_rate_per_s=1) as c:
+        codes = [c.get("/logs").status_code for _ in range(20)]
+        assert codes[:2] == [200, 200] and 429 in codes  # the bucket holds two seconds' worth
+        limited = c.get("/logs")
+        assert limited.json()["code"] == "rate_limited" and "client testclient" in limited.json()["detail"]
+        assert "LASHSCOPE_CLIENT_RATE_PER_S" in limited.json()["detail"]
+        assert c.get("/health").status_code == 200  # monitoring is never limited
+        other = TestClient(c.app, client=("192.0.2.7", 4000))  # another address (the app is running): its own bucket
+        assert other.get("/logs").status_code == 200
+        key = c.app.state.store.create_key("read")[1]  # type: ignore[attr-defined]
+        time.sleep(KEYS_RECHECK_S + 0.1)
+        # with a key, the key's own (larger) bucket counts instead of the address'
+        assert c.get("/logs", headers={"Authorization": f"Bearer {key}"}).status_code == 200
+
+
 def test_serve_refuses_a_network_address_without_keys(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     data = tmp_path / "d"
     assert main(["serve", "--host", "0.0.0.0", "--data-dir", str(data)]) == 2

@@ -6,6 +6,7 @@ uploaded BLF logs of drives with a known truth (a 15 ms torque lag) written thro
 
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from collections.abc import Iterator
@@ -23,7 +24,7 @@ from app.api.main import create_app
 from app.settings import Settings
 from tests.api.conftest import create_vehicle, upload
 from tests.conftest import REPO
-from tests.diagnosis.test_restart import write_lag_log
+from tests.diagnosis.lagdrive import write_lag_log
 
 
 @pytest.fixture(scope="module")
@@ -98,3 +99,27 @@ def test_bad_requests(client: TestClient) -> None:
     assert client.post("/analyses/nope/diagnoses", json={}).status_code == 404
     r = client.get("/diagnoses/nope")
     assert r.status_code == 404 and r.json()["code"] == "diagnosis_not_found"
+
+
+def test_deleting_the_analysis_cancels_its_diagnosis(client: TestClient) -> None:
+    from tests.api.test_job_lifecycle import _alive, _workers
+
+    st = client.app_state  # type: ignore[attr-defined]
+    store = client.app.state.store  # type: ignore[attr-defined]
+    r = client.post(f"/analyses/{st['analysis']}/diagnoses", json={"seed": 1})  # the whole library: minutes
+    assert r.status_code == 202, r.text
+    did, job_id = r.json()["id"], r.json()["job_id"]
+    deadline = time.monotonic() + 90
+    while not (workers := _workers(os.getpid())) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert workers, "the diagnosis never got a worker"
+    assert client.delete(f"/analyses/{st['analysis']}").status_code == 204
+    job = store.get_job(job_id)
+    assert job.status.value == "failed" and job.error_code == "cancelled"
+    assert st["analysis"] in (job.error_detail or "")
+    deadline = time.monotonic() + 15
+    while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_alive(p) for p in workers), "the deleted analysis' diagnosis worker still runs"
+    assert client.get(f"/diagnoses/{did}").status_code == 404
+    assert store.job_counts()["running"] == 0

@@ -1,10 +1,10 @@
 """A diagnosis runs in its own worker process: over LASHSCOPE_DIAGNOSIS_TIMEOUT_S it is killed and fails with
 code ``timeout`` while ``/health`` keeps answering; a SIGTERM of the server stops the worker and puts the
-diagnosis back in the queue. Both against the real server (``lashscope serve`` on 127.0.0.1)."""
+diagnosis back to be resumed at the next start without counting an attempt. Both against the real server
+(``lashscope serve`` on 127.0.0.1)."""
 
 from __future__ import annotations
 
-import json
 import signal
 import time
 from pathlib import Path
@@ -14,7 +14,9 @@ import httpx
 import pytest
 
 from tests.api.conftest import Server, create_vehicle, upload, wait_for
-from tests.diagnosis.test_restart import CANDIDATES, process_gone, write_lag_log
+from tests.api.test_job_lifecycle import _workers
+from tests.api.test_kill_each_kind import _job
+from tests.diagnosis.lagdrive import CANDIDATES, process_gone, write_lag_log
 
 
 @pytest.fixture(scope="module")
@@ -34,12 +36,6 @@ def _start_diagnosis(c: httpx.Client, log: Path, body: dict[str, Any]) -> tuple[
     return analysis_id, r.json()["id"]
 
 
-def _state(data: Path, analysis_id: str, did: str) -> dict[str, Any]:
-    doc: dict[str, Any] = json.loads((data / "analyses" / analysis_id / "diagnoses" / did / "status.json")
-                                     .read_text(encoding="utf-8"))
-    return doc
-
-
 def test_a_diagnosis_over_its_time_limit_fails_while_health_answers(tmp_path: Path, lag_log: Path,
                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     # long enough for the worker to start and report (~1.5 s to import on a quiet machine, up to ~5 s beside
@@ -49,10 +45,12 @@ def test_a_diagnosis_over_its_time_limit_fails_while_health_answers(tmp_path: Pa
     srv = Server(data).start()
     try:
         with httpx.Client(base_url=srv.url, timeout=60.0) as c:
-            analysis_id, did = _start_diagnosis(c, lag_log, {"seed": 1})  # the whole effect library
+            _, did = _start_diagnosis(c, lag_log, {"seed": 1})  # the whole effect library
             deadline = time.monotonic() + 90.0
-            health_checks, seen = 0, set()
+            health_checks, seen, workers = 0, set(), set()
+            assert srv.proc is not None
             while True:
+                workers.update(_workers(srv.proc.pid))
                 # a server whose GIL a fit held would raise a timeout here
                 assert c.get("/health", timeout=5.0).status_code == 200
                 health_checks += 1
@@ -65,14 +63,12 @@ def test_a_diagnosis_over_its_time_limit_fails_while_health_answers(tmp_path: Pa
             assert doc["error"]["code"] == "timeout"
             assert "timed out after 8 s" in doc["error"]["detail"]
             # whether the worker reported "running" before the limit depends on the machine's load (its imports
-            # alone took ~10 s at load average 10); progress reaching the state file is test_restart's to check
+            # alone took ~10 s at load average 10); progress reaching the job row is test_kill_each_kind's to check
             assert "LASHSCOPE_DIAGNOSIS_TIMEOUT_S" in doc["error"]["detail"]
             assert health_checks >= 5
             assert doc.get("report") is None  # the response model keeps the key, empty until done
             assert c.get("/health", timeout=5.0).json()["status"] == "ok"
-            left = _state(data, analysis_id, did)
-            assert srv.proc is not None and left["worker_pid"] != srv.proc.pid
-            assert process_gone(left["worker_pid"], timeout=1.0)
+            assert all(process_gone(pid, timeout=1.0) for pid in workers)
     finally:
         srv.stop()
 
@@ -83,7 +79,7 @@ def test_sigterm_stops_the_worker_and_requeues_the_diagnosis(tmp_path: Path, lag
     proc = srv.proc
     try:
         with httpx.Client(base_url=srv.url, timeout=60.0) as c:
-            analysis_id, did = _start_diagnosis(c, lag_log, {"candidates": CANDIDATES, "seed": 1})
+            _, did = _start_diagnosis(c, lag_log, {"candidates": CANDIDATES, "seed": 1})
             deadline = time.monotonic() + 90.0
             while time.monotonic() < deadline:
                 doc = c.get(f"/diagnoses/{did}").json()
@@ -91,11 +87,30 @@ def test_sigterm_stops_the_worker_and_requeues_the_diagnosis(tmp_path: Path, lag
                     break
                 time.sleep(0.05)
             assert doc["status"] == "running", doc
-            worker_pid = _state(data, analysis_id, did)["worker_pid"]
+            assert proc is not None
+            workers = _workers(proc.pid)
+            while not workers and time.monotonic() < deadline:
+                time.sleep(0.05)
+                workers = _workers(proc.pid)
+            assert workers
     finally:
         srv.stop(signal.SIGTERM)
     assert proc is not None and proc.returncode is not None  # uvicorn re-raises SIGTERM after its clean shutdown
-    left = _state(data, analysis_id, did)
-    assert left["status"] == "queued" and left["attempts"] == 1, left
+    left = _job(data, doc["job_id"])
+    assert left["status"] == "running" and left["lease_until"] == 0 and left["attempts"] == 0, left
     assert "stopped with the server" in left["stage"]
-    assert process_gone(worker_pid, timeout=1.0)
+    assert all(process_gone(pid, timeout=1.0) for pid in workers)
+
+    srv = Server(data).start()  # the next start resumes it at once and runs it to the end
+    try:
+        with httpx.Client(base_url=srv.url, timeout=60.0) as c:
+            deadline = time.monotonic() + 180.0
+            while time.monotonic() < deadline:
+                doc = c.get(f"/diagnoses/{did}").json()
+                if doc["status"] in ("done", "failed"):
+                    break
+                time.sleep(0.2)
+            assert doc["status"] == "done" and doc["attempts"] == 1, doc
+            assert doc["report"]["decision"]["top"] == ["torque_lag"]
+    finally:
+        srv.stop()

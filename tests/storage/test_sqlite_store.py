@@ -154,3 +154,42 @@ def test_result_files_round_trip_and_nan_to_null(tmp_path: Path) -> None:
     assert json_safe({"k": np.float64(2.5)}) == {"k": 2.5}
     with pytest.raises(NotFoundError):
         files.array("missing")
+
+
+def test_writing_a_result_keeps_what_else_lives_in_the_directory(tmp_path: Path) -> None:
+    """A diagnosis started before its analysis finished writes into the same directory: storing the
+    analysis' result (twice: a resumed job writes it again) must not wipe it."""
+    d = tmp_path / "an_1"
+    status = d / "diagnoses" / "an_1--dg01" / "status.json"
+    status.parent.mkdir(parents=True)
+    status.write_text('{"id": "an_1--dg01"}', encoding="utf-8")
+    (d / "tolerance_n10_seed0.json").write_text("{}", encoding="utf-8")
+    write_result(d, {"run": 1}, {"a": np.arange(3.0), "b": np.ones(2)})
+    write_result(d, {"run": 2}, {"a": np.arange(4.0)})
+    assert status.read_text(encoding="utf-8") == '{"id": "an_1--dg01"}'
+    assert (d / "tolerance_n10_seed0.json").is_file()
+    files = ResultFiles(d)
+    assert files.doc == {"run": 2}
+    np.testing.assert_array_equal(files.array("a"), np.arange(4.0))
+    assert not files.has("b")  # the second result replaced the first one's arrays whole
+    assert sorted(p.name for p in d.iterdir()) == ["arrays", "diagnoses", "result.json", "tolerance_n10_seed0.json"]
+
+
+def test_a_clean_stop_resumes_the_job_at_once_without_counting_an_attempt(tmp_path: Path) -> None:
+    """The server stopping (SIGTERM) lets the lease go: any runner resumes the job at once, and the
+    attempt it cut off is not counted -- only crashes use up LASHSCOPE_JOB_MAX_ATTEMPTS."""
+    store = SQLiteStore(tmp_path)
+    job = store.create_job("diagnosis", "an_1/diagnoses/an_1--dg01")
+    store.start_job(job.id, "server-a", lease_s=600.0)
+    assert store.requeue_orphans(2) == []  # the lease still runs: nobody else may take it
+    store.release_lease(job.id, "someone-else")  # only the lease's owner can let it go
+    assert store.get_job(job.id).attempts == 1 and store.requeue_orphans(2) == []
+    store.release_lease(job.id, "server-a")
+    stopped = store.get_job(job.id)
+    assert stopped.status is JobStatus.RUNNING and stopped.attempts == 0 and "stopped with the server" in stopped.stage
+    for _ in range(3):  # stopped cleanly again and again: never failed for it
+        [again] = store.requeue_orphans(max_attempts=2)
+        assert again.id == job.id and again.stage == "resumed after a clean stop"
+        assert store.start_job(job.id, "server-b", lease_s=600.0).attempts == 1
+        store.release_lease(job.id, "server-b")
+    assert store.get_job(job.id).status is JobStatus.RUNNING

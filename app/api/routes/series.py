@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
@@ -20,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
+from starlette.types import ASGIApp, Receive, Scope, Send
 
 from app.analysis.downsample import BlockExtremes, Method, downsample
 from app.api.deps import ResultsDep, StoreDep
@@ -73,6 +75,39 @@ class _Cache:
 
 _CACHE = _Cache()
 ON_DELETE.append(_CACHE.forget)
+_SPEED_PATH = re.compile(r"^/analyses/([^/]+)(?:/events/\d+)?/speed$")
+
+
+def cache_key(scope: Scope) -> tuple[object, ...]:
+    """A speed read's cache key: analysis id (second, for :meth:`_Cache.forget`), path, query string and
+    whether ``Accept`` asks for CSV -- what decides the answer, read without parsing anything."""
+    path = scope["path"]
+    m = _SPEED_PATH.match(path)
+    accept = next((v for k, v in scope.get("headers", ()) if k == b"accept"), b"")
+    return ("speed", m.group(1) if m else "", path, scope.get("query_string", b""), b"text/csv" in accept)
+
+
+class SeriesCache:
+    """Answers a repeated speed read from the response cache before routing (plain ASGI, innermost).
+
+    A cached read's cost was mostly the framework's: matching the route and validating seven query
+    parameters took about three quarters of it (cProfile, docs/api.md). Only reads that passed
+    validation once are cached (by :func:`get_speed`), and answers of a deleted analysis are
+    dropped, so a hit is always the answer the route would give; the request guard and the format
+    check have run already (they are outer layers).
+    """
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http" and scope["method"] == "GET" and scope["path"].endswith("/speed"):
+            hit = _CACHE.get(cache_key(scope))
+            if hit is not None:
+                await Response(hit[0], media_type=hit[1])(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
 INLINE_MAX_POINTS = 5000  # bounded answers from at most INLINE_MAX_ROWS rows are computed on the event loop
 INLINE_MAX_ROWS = 1_000_000
 
@@ -135,10 +170,10 @@ async def get_speed(analysis_id: str, request: Request, store: StoreDep, cache: 
                     event: Annotated[int | None, Query(ge=0, description="event index; omit for the whole log")] = None,
                     max_points: MaxPoints = 2000, t0: TimeQ = None, t1: TimeQ = None,
                     fmt: Fmt = None, method: MethodQ = "minmax") -> Response:
-    # async on purpose: a cached answer costs no thread hop and no database read; a miss reads one
-    # SQLite row and maps the columns here, and is downsampled here or, when large, in the thread pool
+    # async on purpose: no thread hop; a miss reads one SQLite row and maps the columns here, and is
+    # downsampled here or, when large, in the thread pool (a repeat is answered by SeriesCache)
     out = _wants_csv(request, fmt)
-    key = ("speed", analysis_id, event, max_points, t0, t1, out, method)
+    key = cache_key(request.scope)  # the raw request: SeriesCache answers a repeat before routing
 
     def columns() -> tuple[F64, dict[str, F64], int]:
         return _speed_columns(store, cache, analysis_id, event, t0, t1, max_points, method)
