@@ -159,18 +159,22 @@ class JobTable:
             for row in running:
                 if not self._orphaned(row, at):
                     continue  # its runner is alive and renewing the lease
+                # "... AND status = 'running' AND attempts = ?": only the run that was read is taken back,
+                # never one started since (each start counts an attempt), whatever the isolation level
                 if row["attempts"] < max_attempts:
-                    requeued.append(row["id"])
-                    db.execute("UPDATE jobs SET status = 'queued', stage = ?, updated_at = ?, lease_owner = NULL,"
-                               " lease_until = NULL WHERE id = ?",
-                               (f"resumed after an interruption (attempt {row['attempts']} was cut off)", now(),
-                                row["id"]))
+                    cur = db.execute("UPDATE jobs SET status = 'queued', stage = ?, updated_at = ?, lease_owner = NULL,"
+                                     " lease_until = NULL WHERE id = ? AND status = 'running' AND attempts = ?",
+                                     (f"resumed after an interruption (attempt {row['attempts']} was cut off)", now(),
+                                      row["id"], row["attempts"]))
+                    if cur.rowcount == 1:
+                        requeued.append(row["id"])
                 else:
                     db.execute(
                         "UPDATE jobs SET status = 'failed', stage = 'failed', error_code = 'interrupted',"
-                        " error_detail = ?, finished_at = ?, updated_at = ?, lease_until = NULL WHERE id = ?",
+                        " error_detail = ?, finished_at = ?, updated_at = ?, lease_until = NULL"
+                        " WHERE id = ? AND status = 'running' AND attempts = ?",
                         (f"interrupted: the server stopped while this job was running, {row['attempts']} of "
-                         f"{max_attempts} attempts used", now(), now(), row["id"]))
+                         f"{max_attempts} attempts used", now(), now(), row["id"], row["attempts"]))
         return [self.get_job(job_id) for job_id in requeued]
 
     def active_jobs(self, analysis_id: str) -> list[JobRecord]:

@@ -11,12 +11,18 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from app.storage.records import JobStatus
 from app.storage.sqlstore import SQLStore
+from app.storage.url import open_store
 from tests.conftest import REPO
+
+if TYPE_CHECKING:
+    from tests.pgserver import PgServer
 
 JOBS = 120
 
@@ -96,6 +102,28 @@ def test_two_recovery_passes_never_both_take_back_a_job(store: SQLStore, store_u
     won = _race(store_url, "recover")
     # each job was taken back once and started once more: a second take-back would show attempts == 3
     _assert_disjoint_and_complete(store, won, ids, attempts=2)
+
+
+def test_a_recovery_pass_skips_a_job_another_transaction_is_changing(pg_server: PgServer, tmp_path: Path) -> None:
+    """PostgreSQL: rows locked elsewhere (a runner renewing its lease) are skipped, not waited for or taken."""
+    import psycopg
+
+    url = pg_server.database()
+    store = open_store(f"{url}?files={tmp_path}")
+    ids = [store.create_job("analysis", f"an_{i}").id for i in range(3)]
+    for job_id in ids:
+        store.start_job(job_id, "gone", -1.0)
+    with psycopg.connect(url) as other:  # holds a row lock on the first job until this block ends
+        other.execute("SELECT id FROM jobs WHERE id = %s FOR UPDATE", (ids[0],))
+        result: list[list[str]] = []
+        recovery = threading.Thread(target=lambda: result.append([j.id for j in store.requeue_orphans(5)]))
+        recovery.start()
+        recovery.join(60)
+        assert not recovery.is_alive(), "the recovery pass waited for a row another transaction holds"
+        assert sorted(result[0]) == sorted(ids[1:])
+    assert store.get_job(ids[0]).status is JobStatus.RUNNING
+    assert [j.id for j in store.requeue_orphans(5)] == [ids[0]]  # once the lock is gone, it is taken back
+    store.close()
 
 
 def test_lease_times_keep_their_precision(store: SQLStore) -> None:
