@@ -17,8 +17,8 @@ from pathlib import Path
 from urllib.parse import parse_qs, unquote, urlsplit
 
 from app.errors import InputError
-from app.storage.sqlstore import SQLStore
 from app.storage.sqlite import SQLiteStore
+from app.storage.sqlstore import SQLStore
 
 POSTGRES_SCHEMES = ("postgresql", "postgres")
 

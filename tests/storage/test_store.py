@@ -15,9 +15,9 @@ import pytest
 
 from app.errors import ConflictError, InputError, NotFoundError
 from app.storage import JobStatus
+from app.storage.results import ResultFiles, json_safe, write_result
 from app.storage.sqlstore import SQLStore
 from app.storage.url import open_store
-from app.storage.results import ResultFiles, json_safe, write_result
 
 
 def _add_log(store: SQLStore, content: bytes, name: str = "a.blf") -> tuple[str, bool]:
