@@ -114,7 +114,11 @@ class PostgresStore(SQLStore):
         self._local = threading.local()
         self._all: list[PgConnection] = []
         self._lock = threading.Lock()
-        upgrade(self._conn(), POSTGRESQL)
+        try:
+            upgrade(self._conn(), POSTGRESQL)
+        except BaseException:
+            self.close()  # e.g. a schema newer than this program: no connection is left open
+            raise
 
     @property
     def url(self) -> str:
