@@ -15,8 +15,6 @@ their default thread counts; raise it for more.
 
 from __future__ import annotations
 
-import contextlib
-import threading
 from collections.abc import Iterator, Sequence
 from functools import lru_cache
 from pathlib import Path
@@ -76,6 +74,9 @@ class PgConnection:
     def usable(self) -> bool:
         return not (self.raw.closed or self.raw.broken)
 
+    def close(self) -> None:
+        self.raw.close()
+
 
 def split_url(url: str) -> tuple[str, Path | None]:
     """``postgresql://...?files=DIR&sslmode=...`` -> (the libpq URL without ``files``, DIR or None)."""
@@ -111,9 +112,6 @@ class PostgresStore(SQLStore):
         super().__init__(root)
         self.conninfo = conninfo
         self.connect_timeout_s = connect_timeout_s
-        self._local = threading.local()
-        self._all: list[PgConnection] = []
-        self._lock = threading.Lock()
         try:
             upgrade(self._conn(), POSTGRESQL)
         except BaseException:
@@ -125,27 +123,15 @@ class PostgresStore(SQLStore):
         sep = "&" if urlsplit(self.conninfo).query else "?"
         return f"{self.conninfo}{sep}files={quote(str(self.root))}"
 
-    def _conn(self) -> PgConnection:
-        conn: PgConnection | None = getattr(self._local, "conn", None)
-        if conn is None or not conn.usable:
-            try:
-                raw = self._psycopg.connect(self.conninfo, autocommit=True, row_factory=_row_factory,
-                                            connect_timeout=max(1, round(self.connect_timeout_s)))
-            except self._psycopg.Error as exc:
-                first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-                raise StorageError(f"cannot reach the store's database {redact(self.conninfo)}: {first}",
-                                   code="store_unreachable") from exc
-            conn = PgConnection(raw)
-            self._local.conn = conn
-            with self._lock:
-                self._all = [c for c in self._all if c.usable]
-                self._all.append(conn)
-        return conn
+    def _connect(self) -> PgConnection:
+        try:
+            raw = self._psycopg.connect(self.conninfo, autocommit=True, row_factory=_row_factory,
+                                        connect_timeout=max(1, round(self.connect_timeout_s)))
+        except self._psycopg.Error as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise StorageError(f"cannot reach the store's database {redact(self.conninfo)}: {first}",
+                               code="store_unreachable") from exc
+        return PgConnection(raw)
 
-    def close(self) -> None:
-        with self._lock:
-            for c in self._all:
-                with contextlib.suppress(Exception):
-                    c.raw.close()
-            self._all.clear()
-        self._local = threading.local()
+    def _usable(self, conn: PgConnection) -> bool:
+        return conn.usable

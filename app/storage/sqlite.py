@@ -17,9 +17,7 @@ from a URL). Processes on several machines share a store on PostgreSQL instead
 
 from __future__ import annotations
 
-import contextlib
 import sqlite3
-import threading
 from pathlib import Path
 from urllib.parse import quote
 
@@ -43,9 +41,6 @@ class SQLiteStore(SQLStore):
     def __init__(self, root: Path, database: Path | None = None) -> None:
         super().__init__(root)
         self.database = Path(database).resolve() if database is not None else self.root / "lashscope.sqlite3"
-        self._local = threading.local()
-        self._all: list[sqlite3.Connection] = []
-        self._lock = threading.Lock()
         upgrade(self._conn())
 
     @property
@@ -53,28 +48,13 @@ class SQLiteStore(SQLStore):
         files = "" if self.database.parent == self.root else f"?files={quote(str(self.root))}"
         return f"sqlite:///{self.database}{files}"
 
-    def _conn(self) -> sqlite3.Connection:
-        conn: sqlite3.Connection | None = getattr(self._local, "conn", None)
-        if conn is None:
-            try:
-                conn = sqlite3.connect(self.database, timeout=30.0, isolation_level=None,
-                                       check_same_thread=False)
-            except sqlite3.Error as exc:
-                raise StorageError(f"cannot open the store's database {self.database.name}: {exc}") from exc
-            conn.row_factory = sqlite3.Row
-            conn.execute("PRAGMA journal_mode=WAL")
-            conn.execute("PRAGMA synchronous=NORMAL")
-            conn.execute("PRAGMA foreign_keys=ON")
-            self._local.conn = conn
-            with self._lock:
-                self._all.append(conn)
+    def _connect(self) -> sqlite3.Connection:
+        try:
+            conn = sqlite3.connect(self.database, timeout=30.0, isolation_level=None, check_same_thread=False)
+        except sqlite3.Error as exc:
+            raise StorageError(f"cannot open the store's database {self.database.name}: {exc}") from exc
+        conn.row_factory = sqlite3.Row
+        conn.execute("PRAGMA journal_mode=WAL")
+        conn.execute("PRAGMA synchronous=NORMAL")
+        conn.execute("PRAGMA foreign_keys=ON")
         return conn
-
-    def close(self) -> None:
-        with self._lock:
-            for c in self._all:
-                with contextlib.suppress(sqlite3.Error):
-                    c.close()
-            self._all.clear()
-        self._local = threading.local()
-

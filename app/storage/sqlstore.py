@@ -23,6 +23,7 @@ import hashlib
 import json
 import os
 import shutil
+import threading
 import time
 import uuid
 from collections.abc import Iterator
@@ -59,17 +60,41 @@ class SQLStore(JobTable, KeyTable):
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise StorageError(f"cannot create the data directory {self.root.name!r}: {exc.strerror}") from exc
+        self._local = threading.local()
+        self._all: list[Any] = []  # every thread's connection, closed by close()
+        self._lock = threading.Lock()
 
     @property
     def url(self) -> str:
         """Where to open this store again (``app.storage.url.open_store``), e.g. from a job worker."""
         raise NotImplementedError
 
-    def _conn(self) -> Connection:
+    # -- connections: one per thread, made by the backend --------------------------------
+    def _connect(self) -> Any:
+        """A new connection in autocommit mode taking ``?`` placeholders."""
         raise NotImplementedError
 
+    def _usable(self, conn: Any) -> bool:
+        """False when ``conn`` can no longer be used (e.g. its server restarted): the thread gets a new one."""
+        return True
+
+    def _conn(self) -> Connection:
+        conn = getattr(self._local, "conn", None)
+        if conn is None or not self._usable(conn):
+            conn = self._connect()
+            self._local.conn = conn
+            with self._lock:
+                self._all = [c for c in self._all if self._usable(c)]
+                self._all.append(conn)
+        return conn
+
     def close(self) -> None:
-        raise NotImplementedError
+        with self._lock:
+            for c in self._all:
+                with contextlib.suppress(Exception):
+                    c.close()
+            self._all.clear()
+        self._local = threading.local()
 
     @contextlib.contextmanager
     def _tx(self) -> Iterator[Connection]:
