@@ -42,7 +42,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         callspec = getattr(item, "callspec", None)
         if "pg_server" in getattr(item, "fixturenames", ()) or (
-                callspec is not None and callspec.params.get("store_url") == "postgresql"):
+                callspec is not None and "postgresql" in callspec.params.values()):
             item.add_marker(pytest.mark.postgres)
         module = getattr(item, "module", None)
         if getattr(module, "Server", None) is Server or {"server", "small_cap_server"} & set(
@@ -65,13 +65,19 @@ def pg_server() -> Iterator[PgServer]:
         server.stop()
 
 
+def new_store_url(request: pytest.FixtureRequest, backend: str, files: Path) -> str:
+    """A new, empty store on ``backend`` ("sqlite" or "postgresql") with its files in ``files``, as a URL
+    ``open_store`` and ``--store`` take (PostgreSQL: a new database on the session's test server)."""
+    if backend == "sqlite":
+        return str(files)
+    server: PgServer = request.getfixturevalue("pg_server")
+    return f"{server.database()}?files={files}"
+
+
 @pytest.fixture(params=["sqlite", "postgresql"])
 def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
     """A new store's URL on each backend, its files in ``tmp_path`` (both open with ``open_store(url)``)."""
-    if request.param == "sqlite":
-        return str(tmp_path)
-    server: PgServer = request.getfixturevalue("pg_server")
-    return f"{server.database()}?files={tmp_path}"
+    return new_store_url(request, request.param, tmp_path)
 
 
 @pytest.fixture

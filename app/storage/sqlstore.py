@@ -4,7 +4,7 @@ Layout of the files directory (``root``)::
 
     <root>/tmp/                       uploads in progress (removed on failure and at startup)
     <root>/logs/<sha256><.ext>        uploaded logs, one file per distinct content
-    <root>/vehicles/<name>/v<N>/      driveline.toml, database<.ext>, signal_map.toml
+    <root>/vehicles/<name>/v<N>/      driveline.toml, database<.ext>, signals.map.toml
     <root>/analyses/<id>/             results written by the pipeline (atomic rename on completion)
     <root>/jobs/<id>/                 results of other jobs (gap sensitivity)
 

@@ -116,6 +116,19 @@ def test_busy_analysis_blocks_log_delete(store: SQLStore, tmp_path: Path) -> Non
         store.get_analysis(rec.id)
 
 
+def test_active_jobs_of_an_analysis_include_its_tolerance_bands(store: SQLStore, tmp_path: Path) -> None:
+    log_id, _ = _add_log(store, b"log")
+    veh, _ = store.add_vehicle("car", **_vehicle_files(tmp_path, "x"), summary={})
+    rec = store.create_analysis(log_id, veh, {})
+    band = store.create_job("tolerance", f"{rec.id}/n=200/seed=1")
+    other = store.create_job("tolerance", f"{rec.id}x/n=200/seed=1")  # another id with this one as prefix
+    assert {j.id for j in store.active_jobs(rec.id)} == {rec.job.id, band.id}
+    store.finish_job(band.id)
+    assert [j.id for j in store.active_jobs(rec.id)] == [rec.job.id]
+    assert store.find_job("tolerance", f"{rec.id}x/n=200/seed=1") == store.get_job(other.id)
+    assert store.job_counts() == {"queued": 2, "running": 0, "done": 1, "failed": 0}
+
+
 def test_concurrent_writers_from_threads_and_processes(store: SQLStore) -> None:
     errors: list[BaseException] = []
 
