@@ -228,7 +228,7 @@ def main() -> None:
     ap.add_argument("--overhead-logs", type=int, default=12)
     ap.add_argument("--events", type=int, default=100_000)
     ap.add_argument("--chunk", type=int, default=20, help="logs per alternating round, single vs cluster")
-    ap.add_argument("--chunk-overhead", type=int, default=2, help="logs per alternating round, direct vs cluster")
+    ap.add_argument("--chunk-overhead", type=int, default=6, help="logs per alternating round, direct vs cluster")
     ap.add_argument("--skip-batch", action="store_true")
     ap.add_argument("--skip-query", action="store_true")
     args = ap.parse_args()

@@ -121,6 +121,7 @@ def _store(out: Path, job: _Pending, result: dict[str, Any], cfg: BatchConfig,
         "format": RECORD_FORMAT, "log": job.source, "log_name": source_name(job.source), "log_hash": job.key,
         "vehicle": job.vehicle, "driveline": cfg.spec.inputs.vehicle.name, "status": result["status"],
         "elapsed_s": round(float(result.get("elapsed_s", 0.0)), 3),
+        "cpu_s": round(float(result.get("cpu_s", 0.0)), 3),
         "finished_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     if result["status"] == "ok":
