@@ -6,10 +6,14 @@ and over 20 weeks (one log every ~1.4 days), cached under ``bench/out/batch/logs
 into a fresh output directory:
 
 1. **throughput**: ``run_batch --workers 0`` (one process: hashing, rows, records included) and
-   ``run_batch`` on a running local cluster of ``--workers`` processes, alternating in rounds of
-   ``--chunk`` logs so both sides see the same load on a shared machine (cluster start reported apart);
+   ``run_batch`` on a running local cluster of ``--workers`` processes (one connected client, as a
+   program running batch after batch keeps it), alternating in rounds of ``--chunk`` logs so both
+   sides see the same load on a shared machine (cluster start and worker warm-up reported apart);
+   then the median wall and CPU time of one analysis on each side, from the per-log records, which
+   separates work the cluster adds from time its workers spent waiting for a core;
 2. **per-log overhead**: ``run_analysis`` in this process vs ``run_batch`` on a 1-worker cluster
-   (hash, submit, analyse, rows, record) over ``--overhead-logs`` logs, alternating likewise;
+   (hash, submit, analyse, rows, record) over ``--overhead-logs`` logs, alternating likewise, as
+   wall time and as CPU time of every process involved (client, scheduler, worker);
 3. **query**: an event store of ``--events`` rows (the real rows of step 2, replicated over 20
    vehicles and 26 weeks with a fixed seed, written as logs of 100 rows) queried for the median
    ripple per vehicle per week (:func:`app.fleet.store.weekly_ripple`, pyarrow + pandas) with one
@@ -95,7 +99,7 @@ def throughput(paths: list[str], workers: int, chunk: int) -> None:
     started and connected once (reported apart), as a user running batch after batch would keep it."""
     from app.fleet.batch import run_batch
 
-    for d in ("single", "cluster"):
+    for d in ("single", "cluster", "cluster-warm"):
         shutil.rmtree(OUT / d, ignore_errors=True)
     clock = time.perf_counter()
     cluster, client = local_cluster(workers)
@@ -123,6 +127,19 @@ def throughput(paths: list[str], workers: int, chunk: int) -> None:
           f"the workers' wall time", flush=True)
     print(f"  throughput ratio cluster/single: {(cluster_ok / cluster_s) / (single_ok / single_s):.2f}x "
           f"(rounds of {chunk} logs, alternating)", flush=True)
+    (s_wall, s_cpu), (c_wall, c_cpu) = _record_medians(OUT / "single"), _record_medians(OUT / "cluster")
+    print(f"  one analysis (median): single {s_wall:.3f} s wall / {s_cpu:.3f} s CPU, in a cluster worker "
+          f"{c_wall:.3f} s wall / {c_cpu:.3f} s CPU: the same work ({100 * (c_cpu / s_cpu - 1):+.1f} % CPU), "
+          f"{c_wall / c_cpu:.2f}x its CPU in wall time (waiting for a core) against {s_wall / s_cpu:.2f}x; "
+          f"with two free cores the ratio would be {workers * s_cpu / c_cpu:.2f}x", flush=True)
+
+
+def _record_medians(out: Path) -> tuple[float, float]:
+    """Median wall and task-thread CPU seconds of one analysis, from the records of a batch."""
+    import json
+
+    records = [json.loads(f.read_text()) for f in (out / "logs").glob("*.json")]
+    return (statistics.median(r["elapsed_s"] for r in records), statistics.median(r["cpu_s"] for r in records))
 
 
 def _task_seconds(out: Path, path: str) -> float:
@@ -144,7 +161,8 @@ def overhead(paths: list[str], chunk: int) -> None:
 
     warm_worker()
     run_analysis(paths[0], inputs())
-    shutil.rmtree(OUT / "one", ignore_errors=True)
+    for d in ("one", "one-warm"):
+        shutil.rmtree(OUT / d, ignore_errors=True)
     cluster, client = local_cluster(1)
     direct_s = cluster_s = direct_cpu = cluster_cpu = inside_s = 0.0
     try:
