@@ -247,7 +247,9 @@ def _run_on(client: Any, todo: list[_Pending], cfg: BatchConfig, done: Callable[
     timings = summary.timings_s
     client.register_plugin(WarmWorker())  # every worker imports and loads the kernels once (a no-op when warm)
     timings["cluster_start"] = time.perf_counter() - clock
-    spec = client.scatter(cfg.spec, broadcast=True)
+    # a key of its own per call: with the content-hash key, a second batch on the same client could scatter
+    # the same spec while the first one's release was still on its way, and lose it ("lost dependencies")
+    spec = client.scatter(cfg.spec, broadcast=True, hash=False)
     futures = {client.submit(analyse_log, job.source, spec, key=f"lashscope-{job.key}", pure=False): job
                for job in todo}
     for future in as_completed(futures, loop=client.loop):
