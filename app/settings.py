@@ -15,7 +15,9 @@
 ``LASHSCOPE_BATCH_TIMEOUT_S``   a batch job's worker process is killed after this wall time (default 3600)
 ``LASHSCOPE_DBC_DIR``           the project's DBC files and signal maps (default: ``dbc/`` in the source tree)
 ``LASHSCOPE_SHUTDOWN_GRACE_S``  on stop, open requests (e.g. live streams) get this long before they are cut
-``LASHSCOPE_STORE_URL``         the store as a URL (``sqlite:////srv/ls/db.sqlite3``); default: the data directory's
+``LASHSCOPE_STORE_URL``         the store as a URL (``sqlite:////srv/ls/db.sqlite3``, or ``postgresql://user@host/db``
+                              shared by several servers, its files in ``?files=DIR`` or the data directory);
+                              default: the data directory's SQLite
 ``LASHSCOPE_ALLOWED_HOSTS``     Host header names accepted besides the loopback names (comma-separated; ``*``: any)
 ``LASHSCOPE_INSECURE``          serve on a non-loopback address without API keys (default off: refused)
 ``LASHSCOPE_MAX_JSON_KB``       body cap of every request but the uploads, in KiB (default 1024); past it 413

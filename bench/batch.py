@@ -6,10 +6,14 @@ and over 20 weeks (one log every ~1.4 days), cached under ``bench/out/batch/logs
 into a fresh output directory:
 
 1. **throughput**: ``run_batch --workers 0`` (one process: hashing, rows, records included) and
-   ``run_batch`` on a running local cluster of ``--workers`` processes, alternating in rounds of
-   ``--chunk`` logs so both sides see the same load on a shared machine (cluster start reported apart);
+   ``run_batch`` on a running local cluster of ``--workers`` processes (one connected client, as a
+   program running batch after batch keeps it), alternating in rounds of ``--chunk`` logs so both
+   sides see the same load on a shared machine (cluster start and worker warm-up reported apart);
+   then the median wall and CPU time of one analysis on each side, from the per-log records, which
+   separates work the cluster adds from time its workers spent waiting for a core;
 2. **per-log overhead**: ``run_analysis`` in this process vs ``run_batch`` on a 1-worker cluster
-   (hash, submit, analyse, rows, record) over ``--overhead-logs`` logs, alternating likewise;
+   (hash, submit, analyse, rows, record) over ``--overhead-logs`` logs, alternating likewise, as
+   wall time and as CPU time of every process involved (client, scheduler, worker);
 3. **query**: an event store of ``--events`` rows (the real rows of step 2, replicated over 20
    vehicles and 26 weeks with a fixed seed, written as logs of 100 rows) queried for the median
    ripple per vehicle per week (:func:`app.fleet.store.weekly_ripple`, pyarrow + pandas) with one
@@ -24,6 +28,8 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import shutil
 import statistics
 import sys
@@ -65,68 +71,123 @@ def config(out: Path, workers: int, scheduler: str | None = None):  # type: igno
 
 
 def local_cluster(workers: int):  # type: ignore[no-untyped-def]
+    """A started local cluster and a client connected to it once (every round reuses the connection)."""
+    from distributed import Client
+
     from app.fleet.cluster import local_cluster as start
 
-    return start(workers)
+    cluster = start(workers)
+    return cluster, Client(cluster, set_as_default=False)
+
+
+def _cpu_s() -> float:
+    """CPU seconds (user + system) of this process (client, scheduler, result writing) and its children
+    (the cluster's nannies and workers): the work done, whatever share of the cores the load left us."""
+    import psutil
+
+    me = psutil.Process()
+    total = sum(me.cpu_times()[:2])
+    for child in me.children(recursive=True):
+        with contextlib.suppress(psutil.Error):  # a child that has just ended
+            total += sum(child.cpu_times()[:2])
+    return total
 
 
 def throughput(paths: list[str], workers: int, chunk: int) -> None:
     """``run_batch --workers 0`` and ``run_batch`` on a running cluster of ``workers``, alternating in
-    rounds of ``chunk`` logs so both see the same load (the machine is shared); each cluster round
-    connects anew and counts that too."""
+    rounds of ``chunk`` logs so both see the same load (the machine is shared); the cluster is
+    started and connected once (reported apart), as a user running batch after batch would keep it."""
     from app.fleet.batch import run_batch
 
-    for d in ("single", "cluster"):
+    for d in ("single", "cluster", "cluster-warm"):
         shutil.rmtree(OUT / d, ignore_errors=True)
     clock = time.perf_counter()
-    cluster = local_cluster(workers)
+    cluster, client = local_cluster(workers)
     start_s = time.perf_counter() - clock
-    single_s = cluster_s = 0.0
+    single_s = cluster_s = inside_s = 0.0
     single_ok = cluster_ok = events = 0
     try:
+        run_batch(paths[-1:], config(OUT / "cluster-warm", workers), stream=None, client=client)
+        warm = client.run(lambda dask_worker: dask_worker.lashscope_warm_s)
         for k in range(0, len(paths), chunk):
             part = paths[k:k + chunk]
             s = run_batch(part, config(OUT / "single", 0), stream=None)
-            c = run_batch(part, config(OUT / "cluster", workers, cluster.scheduler_address), stream=None)
+            c = run_batch(part, config(OUT / "cluster", workers), stream=None, client=client)
             single_s, single_ok, events = single_s + s.elapsed_s, single_ok + s.ok, events + s.events
             cluster_s, cluster_ok = cluster_s + c.elapsed_s, cluster_ok + c.ok
+            inside_s += sum(_task_seconds(OUT / "cluster", p) for p in part)
     finally:
+        client.close()
         cluster.close()
     print(f"single process (--workers 0): {single_ok} logs, {events} events in {single_s:.1f} s = "
           f"{single_ok / single_s:.3f} logs/s", flush=True)
-    print(f"cluster ({workers} workers, started once in {start_s:.1f} s, warm-up included): {cluster_ok} logs in "
-          f"{cluster_s:.1f} s = {cluster_ok / cluster_s:.3f} logs/s", flush=True)
+    print(f"cluster ({workers} workers; start {start_s:.1f} s, then each worker's imports and kernel load "
+          f"{', '.join(f'{v:.1f}' for v in warm.values())} s, both apart): {cluster_ok} logs in {cluster_s:.1f} s = "
+          f"{cluster_ok / cluster_s:.3f} logs/s; tasks busy {100 * inside_s / (workers * cluster_s):.0f} % of "
+          f"the workers' wall time", flush=True)
     print(f"  throughput ratio cluster/single: {(cluster_ok / cluster_s) / (single_ok / single_s):.2f}x "
           f"(rounds of {chunk} logs, alternating)", flush=True)
+    (s_wall, s_cpu), (c_wall, c_cpu) = _record_medians(OUT / "single"), _record_medians(OUT / "cluster")
+    print(f"  one analysis (median): single {s_wall:.3f} s wall / {s_cpu:.3f} s CPU, in a cluster worker "
+          f"{c_wall:.3f} s wall / {c_cpu:.3f} s CPU: the same work ({100 * (c_cpu / s_cpu - 1):+.1f} % CPU), "
+          f"{c_wall / c_cpu:.2f}x its CPU in wall time (waiting for a core) against {s_wall / s_cpu:.2f}x; "
+          f"with two free cores the ratio would be {workers * s_cpu / c_cpu:.2f}x", flush=True)
+
+
+def _record_medians(out: Path) -> tuple[float, float]:
+    """Median wall and task-thread CPU seconds of one analysis, from the records of a batch."""
+    import json
+
+    records = [json.loads(f.read_text()) for f in (out / "logs").glob("*.json")]
+    return (statistics.median(r["elapsed_s"] for r in records), statistics.median(r["cpu_s"] for r in records))
+
+
+def _task_seconds(out: Path, path: str) -> float:
+    """The analysis time a log's record reports (measured inside the task)."""
+    import json
+
+    from app.log_source import content_hash
+
+    return float(json.loads((out / "logs" / f"{content_hash(path)}.json").read_text())["elapsed_s"])
 
 
 def overhead(paths: list[str], chunk: int) -> None:
-    """Per-log wall time: ``run_analysis`` in this process vs ``run_batch`` on a 1-worker cluster
-    (hash, submit, analyse, rows, record), alternating in rounds of ``chunk`` logs."""
+    """Per-log cost: ``run_analysis`` in this process vs ``run_batch`` on a running 1-worker cluster
+    (hash, submit, analyse, rows, record, compaction), alternating in rounds of ``chunk`` logs; as
+    wall time and as CPU time of every process involved (which the machine's load does not inflate)."""
     from app.fleet.batch import run_batch
     from app.fleet.work import warm_worker
     from app.pipeline import run_analysis
 
     warm_worker()
     run_analysis(paths[0], inputs())
-    shutil.rmtree(OUT / "one", ignore_errors=True)
-    cluster = local_cluster(1)
-    direct_s = cluster_s = 0.0
+    for d in ("one", "one-warm"):
+        shutil.rmtree(OUT / d, ignore_errors=True)
+    cluster, client = local_cluster(1)
+    direct_s = cluster_s = direct_cpu = cluster_cpu = inside_s = 0.0
     try:
-        run_batch(paths[-1:], config(OUT / "one-warm", 1, cluster.scheduler_address), stream=None)
+        run_batch(paths[-1:], config(OUT / "one-warm", 1), stream=None, client=client)
         for k in range(0, len(paths), chunk):
             part = paths[k:k + chunk]
-            clock = time.perf_counter()
+            clock, cpu = time.perf_counter(), _cpu_s()
             for p in part:
                 run_analysis(p, inputs())
             direct_s += time.perf_counter() - clock
-            cluster_s += run_batch(part, config(OUT / "one", 1, cluster.scheduler_address), stream=None).elapsed_s
+            direct_cpu += _cpu_s() - cpu
+            cpu = _cpu_s()
+            cluster_s += run_batch(part, config(OUT / "one", 1), stream=None, client=client).elapsed_s
+            cluster_cpu += _cpu_s() - cpu
+            inside_s += sum(_task_seconds(OUT / "one", p) for p in part)
     finally:
+        client.close()
         cluster.close()
     n = len(paths)
     print(f"per-log cost over {n} logs: direct run_analysis {direct_s / n:.3f} s, cluster path (1 worker) "
-          f"{cluster_s / n:.3f} s: overhead {100 * (cluster_s / direct_s - 1):+.1f} % (rounds of {chunk}, "
+          f"{cluster_s / n:.3f} s: overhead {100 * (cluster_s / direct_s - 1):+.1f} % wall (rounds of {chunk}, "
           f"alternating)", flush=True)
+    print(f"  CPU time per log: direct {direct_cpu / n:.3f} s, cluster path {cluster_cpu / n:.3f} s (all processes): "
+          f"overhead {100 * (cluster_cpu / direct_cpu - 1):+.1f} %; inside the task {inside_s / n:.3f} s wall, "
+          f"around it (hash, scheduling, transfer, rows, record) {(cluster_s - inside_s) / n:.3f} s", flush=True)
 
 
 def inputs():  # type: ignore[no-untyped-def]
@@ -184,8 +245,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--overhead-logs", type=int, default=12)
     ap.add_argument("--events", type=int, default=100_000)
-    ap.add_argument("--chunk", type=int, default=10, help="logs per alternating round, single vs cluster")
-    ap.add_argument("--chunk-overhead", type=int, default=4, help="logs per alternating round, direct vs cluster")
+    ap.add_argument("--chunk", type=int, default=20, help="logs per alternating round, single vs cluster")
+    ap.add_argument("--chunk-overhead", type=int, default=6, help="logs per alternating round, direct vs cluster")
     ap.add_argument("--skip-batch", action="store_true")
     ap.add_argument("--skip-query", action="store_true")
     args = ap.parse_args()
@@ -195,8 +256,10 @@ def main() -> None:
           f"(generated/cached in {time.perf_counter() - clock:.1f} s)", flush=True)
 
     if not args.skip_batch:
+        print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
         throughput(paths, args.workers, args.chunk)
         overhead(paths[:args.overhead_logs], args.chunk_overhead)
+        print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
     if args.skip_query:
         return
     store = OUT / "query-store"

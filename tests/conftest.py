@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
+
+if TYPE_CHECKING:
+    from app.storage.sqlstore import SQLStore
+    from tests.pgserver import PgServer
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("LASHSCOPE_SHARED", REPO.parent / "shared")).resolve()
@@ -30,11 +36,57 @@ def shared_data() -> Path:
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Tests that start ``lashscope serve`` in a subprocess are ``slow``: ``pytest -m "not slow"`` is the
     development lane (the same code paths run in-process in ``tests/api/test_limits.py`` and
-    ``test_security.py``); CI runs everything."""
+    ``test_security.py``); CI runs everything. Tests on the PostgreSQL backend are ``postgres``."""
     from tests.api.conftest import Server
 
     for item in items:
+        callspec = getattr(item, "callspec", None)
+        if "pg_server" in getattr(item, "fixturenames", ()) or (
+                callspec is not None and "postgresql" in callspec.params.values()):
+            item.add_marker(pytest.mark.postgres)
         module = getattr(item, "module", None)
         if getattr(module, "Server", None) is Server or {"server", "small_cap_server"} & set(
                 getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(scope="session")
+def pg_server() -> Iterator[PgServer]:
+    """A PostgreSQL server on loopback for the whole session (started on first use, stopped at the end)."""
+    from tests.pgserver import PgServer, unavailable_reason
+
+    reason = unavailable_reason()
+    if reason is not None:
+        pytest.skip(reason)
+    server = PgServer().start()
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+def new_store_url(request: pytest.FixtureRequest, backend: str, files: Path) -> str:
+    """A new, empty store on ``backend`` ("sqlite" or "postgresql") with its files in ``files``, as a URL
+    ``open_store`` and ``--store`` take (PostgreSQL: a new database on the session's test server)."""
+    if backend == "sqlite":
+        return str(files)
+    server: PgServer = request.getfixturevalue("pg_server")
+    return f"{server.database()}?files={files}"
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """A new store's URL on each backend, its files in ``tmp_path`` (both open with ``open_store(url)``)."""
+    return new_store_url(request, request.param, tmp_path)
+
+
+@pytest.fixture
+def store(store_url: str) -> Iterator[SQLStore]:
+    """A new store on each backend (SQLite, PostgreSQL), its files in ``tmp_path``."""
+    from app.storage.url import open_store
+
+    s = open_store(store_url)
+    try:
+        yield s
+    finally:
+        s.close()

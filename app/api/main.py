@@ -88,8 +88,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        store = open_store(cfg.store_location)
-        store.clean_temp()  # uploads cut off by a previous stop
+        store = open_store(cfg.store_location, files=cfg.data_dir)
+        store.clean_temp(2 * cfg.upload_idle_s)  # uploads cut off by a stop (not those another server receives)
         runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts, cfg.job_timeout_s,
                            lease_s=cfg.job_lease_s, timeouts=cfg.job_timeouts)
         app.state.store, app.state.runner, app.state.settings = store, runner, cfg

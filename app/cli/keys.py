@@ -22,7 +22,8 @@ def register(sub: Any) -> None:
         "uploads, jobs), admin (+ DELETE).")
     where = argparse.ArgumentParser(add_help=False)
     where.add_argument("--data-dir", default=None, help="the server's data directory (default ./lashscope-data)")
-    where.add_argument("--store", default=None, help="the store as a URL instead, e.g. sqlite:////srv/ls/db.sqlite3")
+    where.add_argument("--store", default=None, help="the store as a URL instead, e.g. sqlite:////srv/ls/db.sqlite3 or "
+                       "postgresql://user@host:5432/db")
     actions = p.add_subparsers(dest="action", metavar="ACTION")
     actions.required = True
     create = actions.add_parser("create", parents=[where],
@@ -41,7 +42,8 @@ def run(args: argparse.Namespace) -> int:
     from app.storage.url import open_store
 
     overrides = {k: v for k, v in (("data_dir", args.data_dir), ("store_url", args.store)) if v is not None}
-    store = open_store(Settings(**overrides).store_location)
+    settings = Settings(**overrides)
+    store = open_store(settings.store_location, files=settings.data_dir)
     try:
         if args.action == "create":
             key, token = store.create_key(args.scope, args.name)

@@ -133,10 +133,10 @@ def _run_with_store(args: argparse.Namespace, done: threading.Event, emit: Any) 
     from app.live.manager import LiveManager, StartRequest
     from app.live.session import SessionOptions
     from app.settings import Settings, get_settings
-    from app.storage.sqlite import SQLiteStore
+    from app.storage.url import open_store
 
     settings = Settings(data_dir=args.data_dir) if args.data_dir is not None else get_settings()
-    store = SQLiteStore(settings.data_dir)
+    store = open_store(settings.store_location, files=settings.data_dir)  # LASHSCOPE_STORE_URL, if set
     runner = JobRunner(store)
     try:
         manager = LiveManager(store, settings.data_dir / "live", source_for, submit=runner.submit,

@@ -1,4 +1,4 @@
-"""``lashscope serve``: the REST API on uvicorn (SQLite + files in the data directory)."""
+"""``lashscope serve``: the REST API on uvicorn (SQLite + files in the data directory, or ``--store URL``)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ def register(sub: Any) -> None:
     p.add_argument("--cors-origin", action="append", default=None, dest="cors_origins",
                    help="allow this origin (repeatable)")
     p.add_argument("--store", default=None, dest="store_url",
-                   help="the store as a URL, e.g. sqlite:////srv/ls/db.sqlite3 (default: the data directory)")
+                   help="the store as a URL: sqlite:////srv/ls/db.sqlite3, or postgresql://user@host:5432/db "
+                   "shared by several servers (its files in ?files=DIR or --data-dir; default: the data directory)")
     p.add_argument("--allowed-host", action="append", default=None, dest="allowed_hosts",
                    help="accept this Host header name besides the loopback names (repeatable; '*': any)")
     p.add_argument("--insecure", action="store_true", default=None,
@@ -36,7 +37,7 @@ def refuse_open_network(settings: Any) -> None:
 
     if is_loopback(settings.host) or settings.insecure:
         return
-    store = open_store(settings.store_location)
+    store = open_store(settings.store_location, files=settings.data_dir)
     try:
         keys = store.active_keys()
     finally:
@@ -60,9 +61,10 @@ def run(args: argparse.Namespace) -> int:
     settings = Settings(**overrides)
     refuse_open_network(settings)
     from app.fleet.hook import enable_for_service
+    from app.storage.postgres import redact
 
     enable_for_service(settings.data_dir)  # the analyses' events also go to <data dir>/events (Parquet)
-    print(f"lashscope: serving on http://{settings.host}:{settings.port} (store {settings.store_location}; "
+    print(f"lashscope: serving on http://{settings.host}:{settings.port} (store {redact(settings.store_location)}; "
           f"API docs at /docs)", flush=True)
     # Without a grace limit uvicorn waits for every open response before the lifespan shutdown, and a
     # server-sent-event stream of a live session stays open until that very shutdown stops the session.

@@ -121,6 +121,7 @@ def _store(out: Path, job: _Pending, result: dict[str, Any], cfg: BatchConfig,
         "format": RECORD_FORMAT, "log": job.source, "log_name": source_name(job.source), "log_hash": job.key,
         "vehicle": job.vehicle, "driveline": cfg.spec.inputs.vehicle.name, "status": result["status"],
         "elapsed_s": round(float(result.get("elapsed_s", 0.0)), 3),
+        "cpu_s": round(float(result.get("cpu_s", 0.0)), 3),
         "finished_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     if result["status"] == "ok":
@@ -186,11 +187,13 @@ class Progress:
 
 
 def run_batch(sources: Sequence[str], cfg: BatchConfig, stream: TextIO | None = sys.stderr,
-              on_record: Callable[[dict[str, Any]], None] | None = None) -> BatchSummary:
+              on_record: Callable[[dict[str, Any]], None] | None = None, client: Any = None) -> BatchSummary:
     """Analyse ``sources`` (see :func:`expand_sources`) into ``cfg.out``; never stops for one bad log.
 
     ``on_record(record)`` is called as each log's record is written (the service's batch job reports
-    its progress with it)."""
+    its progress with it). ``client``: a connected ``distributed.Client`` to run on instead of
+    connecting (or starting a local cluster) for this call -- for callers that run many batches, each
+    of which would otherwise pay the connection and the workers' readiness check again."""
     clock = time.perf_counter()
     summary = BatchSummary(total=len(sources))
     progress = Progress(len(sources), stream)
@@ -212,7 +215,7 @@ def run_batch(sources: Sequence[str], cfg: BatchConfig, stream: TextIO | None = 
         for job in todo:
             done(_store(cfg.out, job, analyse_log(job.source, cfg.spec), cfg, summary.partitions))
     elif todo:
-        _on_cluster(todo, cfg, done, summary)
+        _on_cluster(todo, cfg, done, summary, client)
     if summary.partitions:
         from app.fleet.store import compact
 
@@ -224,31 +227,40 @@ def run_batch(sources: Sequence[str], cfg: BatchConfig, stream: TextIO | None = 
 
 
 def _on_cluster(todo: list[_Pending], cfg: BatchConfig, done: Callable[[dict[str, Any]], None],
-                summary: BatchSummary) -> None:
-    from distributed import as_completed
-
+                summary: BatchSummary, client: Any = None) -> None:
     from app.fleet.cluster import dask_client
     from app.fleet.work import warm_kernels
 
-    timings = summary.timings_s
-
+    if client is not None:
+        _run_on(client, todo, cfg, done, summary, time.perf_counter())
+        return
     if not cfg.scheduler:  # the local workers then load the kernels from numba's cache instead of compiling them
-        timings["warm_kernels"] = warm_kernels()
+        summary.timings_s["warm_kernels"] = warm_kernels()
     clock = time.perf_counter()
-    with dask_client(cfg.scheduler, cfg.workers, cfg.connect_timeout_s) as client:
-        from app.fleet.plugin import WarmWorker
+    with dask_client(cfg.scheduler, cfg.workers, cfg.connect_timeout_s) as connected:
+        _run_on(connected, todo, cfg, done, summary, clock)
 
-        client.register_plugin(WarmWorker())  # every worker imports and loads the kernels once, now
-        timings["cluster_start"] = time.perf_counter() - clock
-        spec = client.scatter(cfg.spec, broadcast=True)
-        futures = {client.submit(analyse_log, job.source, spec, key=f"lashscope-{job.key}", pure=False): job
-                   for job in todo}
-        for future in as_completed(futures, loop=client.loop):
-            job = futures[future]
-            try:
-                result = future.result()
-            except Exception as exc:  # the worker died (KilledWorker) or the task could not run there
-                result = {"status": "failed", "code": "worker_error", "message": f"{type(exc).__name__}: {exc}"}
-            done(_store(cfg.out, job, result, cfg, summary.partitions))
-            future.release()
-        timings["analyse"] = time.perf_counter() - clock - timings["cluster_start"]
+
+def _run_on(client: Any, todo: list[_Pending], cfg: BatchConfig, done: Callable[[dict[str, Any]], None],
+            summary: BatchSummary, clock: float) -> None:
+    from distributed import as_completed
+
+    from app.fleet.plugin import WarmWorker
+
+    timings = summary.timings_s
+    client.register_plugin(WarmWorker())  # every worker imports and loads the kernels once (a no-op when warm)
+    timings["cluster_start"] = time.perf_counter() - clock
+    # a key of its own per call: with the content-hash key, a second batch on the same client could scatter
+    # the same spec while the first one's release was still on its way, and lose it ("lost dependencies")
+    spec = client.scatter(cfg.spec, broadcast=True, hash=False)
+    futures = {client.submit(analyse_log, job.source, spec, key=f"lashscope-{job.key}", pure=False): job
+               for job in todo}
+    for future in as_completed(futures, loop=client.loop):
+        job = futures[future]
+        try:
+            result = future.result()
+        except Exception as exc:  # the worker died (KilledWorker) or the task could not run there
+            result = {"status": "failed", "code": "worker_error", "message": f"{type(exc).__name__}: {exc}"}
+        done(_store(cfg.out, job, result, cfg, summary.partitions))
+        future.release()
+    timings["analyse"] = time.perf_counter() - clock - timings["cluster_start"]

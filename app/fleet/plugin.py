@@ -21,4 +21,5 @@ class WarmWorker(WorkerPlugin):
     def setup(self, worker: Any) -> None:
         from app.fleet.work import warm_worker
 
-        worker.lashscope_warm_s = warm_worker()  # seconds, for the curious (client.run can read it)
+        if getattr(worker, "lashscope_warm_s", None) is None:  # registered again by a later batch: warm already
+            worker.lashscope_warm_s = warm_worker()  # seconds, for the curious (client.run can read it)

@@ -50,14 +50,15 @@ def _diagnosis(signals: Any, spec: BatchSpec) -> dict[str, Any]:
 
 
 def analyse_log(source: LogSource, spec: BatchSpec) -> dict[str, Any]:
-    """Analyse one log; ``{"status": "ok", "doc": {...}, "diagnosis": ..., "elapsed_s": ...}`` or a failure.
+    """Analyse one log; ``{"status": "ok", "doc": {...}, "diagnosis": ..., "elapsed_s": ..., "cpu_s": ...}``
+    or a failure (with the same two times, in seconds).
 
     ``doc`` holds the parts of the analysis document the event rows and the per-log record need
     (events, metrics, summary, tracking, ingest, notes), JSON-safe.
     """
     from sim import SimError
 
-    clock = time.perf_counter()
+    clock, cpu = time.perf_counter(), time.thread_time()
     name = source_name(source)
     try:
         from app.payload import result_payload
@@ -80,6 +81,7 @@ def analyse_log(source: LogSource, spec: BatchSpec) -> dict[str, Any]:
     except Exception as exc:
         out = _failure(exc, name)
     out["elapsed_s"] = time.perf_counter() - clock
+    out["cpu_s"] = time.thread_time() - cpu  # this thread's CPU: the analysis alone, whatever the machine's load
     return out
 
 

@@ -1,4 +1,5 @@
-"""Persistence: the :class:`~app.storage.base.Store` interface and its embedded SQLite + files default."""
+"""Persistence: the :class:`~app.storage.base.Store` interface, its embedded SQLite + files default and
+the shared PostgreSQL store (:mod:`app.storage.postgres`, opened through :func:`app.storage.url.open_store`)."""
 
 from app.storage.base import Store
 from app.storage.records import AnalysisRecord, JobRecord, JobStatus, LogRecord, VehicleRecord

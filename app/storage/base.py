@@ -2,7 +2,9 @@
 
 An implementation keeps logs (de-duplicated by content hash), versioned vehicles,
 analyses and their jobs, and result files, and survives restarts. The embedded default
-is :class:`app.storage.sqlite.SQLiteStore` (SQLite in WAL mode plus files).
+is :class:`app.storage.sqlite.SQLiteStore` (SQLite in WAL mode plus files); several processes,
+on several machines, share :class:`app.storage.postgres.PostgresStore` (PostgreSQL plus files).
+Both are :class:`app.storage.sqlstore.SQLStore`, opened from a URL by :func:`app.storage.url.open_store`.
 """
 
 from __future__ import annotations

@@ -6,8 +6,15 @@ every third of its length); a renewal that finds the job no longer running under
 (cancelled, or taken over) tells the runner to kill its worker. :meth:`JobTable.recover_jobs`
 re-queues or fails a ``running`` job only once its lease has run out -- whoever ran it is gone
 (and its worker with it: workers die with their server) -- so two servers on one store, or a
-restarted server beside a survivor, never run one job at the same time. The store's clock is
-the arbiter, which is sound for processes sharing one SQLite file on one machine.
+restarted server beside a survivor, never run one job at the same time.
+
+Taking a job is one conditional ``UPDATE ... WHERE status = 'queued' RETURNING *``: of two runners
+that try at once, one gets the row back and the other sees it taken, on SQLite (whose writers
+serialise) as on PostgreSQL (where the second ``UPDATE`` waits for the first and re-checks the
+condition). Taking back orphaned jobs reads them with ``FOR UPDATE SKIP LOCKED`` on PostgreSQL, so
+two recovery passes never both re-queue one job (and so never re-queue one another runner has just
+started). Lease times are epoch seconds from the clock of the process that writes them: processes
+on several machines sharing one PostgreSQL store need clocks in step to well under a lease (NTP).
 
 Rows without a lease (jobs started in-process by the command line, or by the first release)
 fall back to the owner's process id: orphaned when that process is gone.
@@ -17,12 +24,13 @@ from __future__ import annotations
 
 import contextlib
 import os
-import sqlite3
 import time
 import uuid
 from datetime import UTC, datetime
+from typing import Any
 
 from app.errors import NotFoundError
+from app.storage.dialect import Connection, Dialect
 from app.storage.records import JobRecord, JobStatus
 
 
@@ -45,15 +53,17 @@ def _pid_alive(pid: int | None) -> bool:
 
 
 class JobTable:
-    """Job rows of the SQLite store (mixed into it; it provides the connections)."""
+    """Job rows of the store (mixed into it; it provides the connections and the dialect)."""
 
-    def _conn(self) -> sqlite3.Connection:
+    dialect: Dialect
+
+    def _conn(self) -> Connection:
         raise NotImplementedError
 
-    def _tx(self) -> contextlib.AbstractContextManager[sqlite3.Connection]:
+    def _tx(self) -> contextlib.AbstractContextManager[Connection]:
         raise NotImplementedError
 
-    def _job(self, row: sqlite3.Row) -> JobRecord:
+    def _job(self, row: Any) -> JobRecord:
         return JobRecord(
             id=row["id"], kind=row["kind"], subject=row["subject"], status=JobStatus(row["status"]),
             progress=row["progress"], stage=row["stage"], attempts=row["attempts"], created_at=row["created_at"],
@@ -62,7 +72,7 @@ class JobTable:
             lease_owner=row["lease_owner"], lease_until=row["lease_until"],
         )
 
-    def _insert_job(self, db: sqlite3.Connection, kind: str, subject: str) -> str:
+    def _insert_job(self, db: Connection, kind: str, subject: str) -> str:
         job_id = f"job_{uuid.uuid4().hex[:16]}"
         ts = now()
         db.execute("INSERT INTO jobs (id, kind, subject, status, progress, stage, attempts, created_at, updated_at)"
@@ -93,11 +103,12 @@ class JobTable:
         """
         until = time.time() + lease_s if lease_s is not None else None
         with self._tx() as db:
-            db.execute("UPDATE jobs SET status = 'running', attempts = attempts + 1, started_at = ?, updated_at = ?,"
-                       " owner_pid = ?, progress = 0, stage = 'starting', error_code = NULL, error_detail = NULL,"
-                       " lease_owner = ?, lease_until = ? WHERE id = ? AND status = 'queued'",
-                       (now(), now(), os.getpid(), owner, until, job_id))
-        return self.get_job(job_id)
+            taken = db.execute(
+                "UPDATE jobs SET status = 'running', attempts = attempts + 1, started_at = ?, updated_at = ?,"
+                " owner_pid = ?, progress = 0, stage = 'starting', error_code = NULL, error_detail = NULL,"
+                " lease_owner = ?, lease_until = ? WHERE id = ? AND status = 'queued' RETURNING *",
+                (now(), now(), os.getpid(), owner, until, job_id)).fetchall()
+        return self._job(taken[0]) if taken else self.get_job(job_id)
 
     def renew_lease(self, job_id: str, owner: str, lease_s: float) -> bool:
         """Extend ``owner``'s lease; False when the job is no longer running under it (stop the worker)."""
@@ -131,7 +142,7 @@ class JobTable:
                        (code, detail, now(), now(), job_id))
 
     @staticmethod
-    def _orphaned(row: sqlite3.Row, at: float) -> bool:
+    def _orphaned(row: Any, at: float) -> bool:
         if row["lease_until"] is not None:
             return bool(row["lease_until"] < at)
         return not _pid_alive(row["owner_pid"]) or row["owner_pid"] == os.getpid()
@@ -146,22 +157,27 @@ class JobTable:
         at = time.time()
         requeued: list[str] = []
         with self._tx() as db:
-            for row in db.execute("SELECT * FROM jobs WHERE status = 'running'").fetchall():
+            running = db.execute("SELECT * FROM jobs WHERE status = 'running'" + self.dialect.lock_rows).fetchall()
+            for row in running:
                 if not self._orphaned(row, at):
                     continue  # its runner is alive and renewing the lease
+                # "... AND status = 'running' AND attempts = ?": only the run that was read is taken back,
+                # never one started since (each start counts an attempt), whatever the isolation level
                 if row["attempts"] < max_attempts:
-                    requeued.append(row["id"])
-                    db.execute("UPDATE jobs SET status = 'queued', stage = ?, updated_at = ?, lease_owner = NULL,"
-                               " lease_until = NULL WHERE id = ?",
-                               ("resumed after a clean stop" if row["lease_until"] == 0 else
-                                f"resumed after an interruption (attempt {row['attempts']} was cut off)", now(),
-                                row["id"]))
+                    cur = db.execute("UPDATE jobs SET status = 'queued', stage = ?, updated_at = ?, lease_owner = NULL,"
+                                     " lease_until = NULL WHERE id = ? AND status = 'running' AND attempts = ?",
+                                     ("resumed after a clean stop" if row["lease_until"] == 0 else
+                                      f"resumed after an interruption (attempt {row['attempts']} was cut off)", now(),
+                                      row["id"], row["attempts"]))
+                    if cur.rowcount == 1:
+                        requeued.append(row["id"])
                 else:
                     db.execute(
                         "UPDATE jobs SET status = 'failed', stage = 'failed', error_code = 'interrupted',"
-                        " error_detail = ?, finished_at = ?, updated_at = ?, lease_until = NULL WHERE id = ?",
+                        " error_detail = ?, finished_at = ?, updated_at = ?, lease_until = NULL"
+                        " WHERE id = ? AND status = 'running' AND attempts = ?",
                         (f"interrupted: the server stopped while this job was running, {row['attempts']} of "
-                         f"{max_attempts} attempts used", now(), now(), row["id"]))
+                         f"{max_attempts} attempts used", now(), now(), row["id"], row["attempts"]))
         return [self.get_job(job_id) for job_id in requeued]
 
     def active_jobs(self, analysis_id: str) -> list[JobRecord]:

@@ -15,11 +15,12 @@ import contextlib
 import hashlib
 import hmac
 import secrets
-import sqlite3
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from typing import Any
 
 from app.errors import InputError, NotFoundError
+from app.storage.dialect import Connection
 
 SCOPES = ("read", "write", "admin")
 PREFIX = "lsk_"
@@ -44,16 +45,16 @@ class ApiKey:
 
 
 class KeyTable:
-    """The ``api_keys`` table; mixed into the SQLite store, which provides the connections."""
+    """The ``api_keys`` table; mixed into the store, which provides the connections."""
 
-    def _conn(self) -> sqlite3.Connection:
+    def _conn(self) -> Connection:
         raise NotImplementedError
 
-    def _tx(self) -> contextlib.AbstractContextManager[sqlite3.Connection]:
+    def _tx(self) -> contextlib.AbstractContextManager[Connection]:
         raise NotImplementedError
 
     @staticmethod
-    def _key(row: sqlite3.Row) -> ApiKey:
+    def _key(row: Any) -> ApiKey:
         return ApiKey(row["id"], row["name"], row["scope"], row["created_at"], row["revoked_at"])
 
     def create_key(self, scope: str, name: str = "") -> tuple[ApiKey, str]:

@@ -1,4 +1,5 @@
-"""SQLite schema of the embedded store, as an ordered list of migrations.
+"""Schema of the store, as an ordered list of migrations (written for SQLite; PostgreSQL gets the same
+statements with wider column types, see :meth:`app.storage.dialect.Dialect.ddl`).
 
 ``V1`` is the schema of the first release exactly as it shipped (idempotent ``CREATE ... IF NOT
 EXISTS``), so a database made by that release -- which has no ``schema_version`` table -- is

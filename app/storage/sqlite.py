@@ -1,300 +1,60 @@
 """The embedded default store: SQLite (WAL) for rows, plain files for content.
 
-Layout of the data directory::
+Layout of the data directory (the files as in :mod:`app.storage.sqlstore`)::
 
-    <data_dir>/lashscope.sqlite3          logs, vehicles, analyses, jobs
-    <data_dir>/tmp/                       uploads in progress (removed on failure and at startup)
-    <data_dir>/logs/<sha256><.ext>        uploaded logs, one file per distinct content
-    <data_dir>/vehicles/<name>/v<N>/      driveline.toml, database<.ext>, signals.map.toml
-    <data_dir>/analyses/<id>/             results written by the pipeline (atomic rename on completion)
-    <data_dir>/jobs/<id>/                 results of other jobs (gap sensitivity)
+    <data_dir>/lashscope.sqlite3          logs, vehicles, analyses, jobs, API keys
+    <data_dir>/tmp/ logs/ vehicles/ analyses/ jobs/
 
 Every thread gets its own connection; writes run in ``BEGIN IMMEDIATE`` transactions
 with a busy timeout, so concurrent uploads and job progress updates serialise instead
-of failing. Jobs are held through leases (:mod:`app.storage.jobtable`), API keys as
-hashes (:mod:`app.storage.keys`); the schema is versioned and upgraded on open
-(:mod:`app.storage.migrations`). The database may live elsewhere than the files
-(``database=``; :func:`app.storage.url.open_store` opens a store from a URL).
+of failing -- between threads and between processes on one machine. Jobs are held through
+leases (:mod:`app.storage.jobtable`), API keys as hashes (:mod:`app.storage.keys`); the schema
+is versioned and upgraded on open (:mod:`app.storage.migrations`). The database may live
+elsewhere than the files (``database=``; :func:`app.storage.url.open_store` opens a store
+from a URL). Processes on several machines share a store on PostgreSQL instead
+(:mod:`app.storage.postgres`).
 """
 
 from __future__ import annotations
 
-import contextlib
-import hashlib
-import json
-import os
-import shutil
 import sqlite3
-import threading
-import uuid
-from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 from urllib.parse import quote
 
-from app.errors import ConflictError, InputError, NotFoundError, StorageError
-from app.storage.jobtable import JobTable, now
-from app.storage.keys import KeyTable
+from app.errors import StorageError
+from app.storage.dialect import SQLITE
 from app.storage.migrations import upgrade
-from app.storage.records import AnalysisRecord, JobStatus, LogRecord, VehicleRecord
+from app.storage.sqlstore import VEHICLE_NAME_CHARS, SQLStore, file_sha256
 
-VEHICLE_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789-_")
-
-
-def file_sha256(*paths: Path) -> str:
-    h = hashlib.sha256()
-    for p in paths:
-        with p.open("rb") as f:
-            for block in iter(lambda: f.read(1 << 20), b""):
-                h.update(block)
-    return h.hexdigest()
+__all__ = ["VEHICLE_NAME_CHARS", "SQLiteStore", "file_sha256"]
 
 
-class SQLiteStore(JobTable, KeyTable):
+class SQLiteStore(SQLStore):
     """SQLite + files under ``root``; safe to share between threads of one process and between processes.
 
     ``database`` is the SQLite file (default ``<root>/lashscope.sqlite3``); opening upgrades its
     schema to the latest version (:mod:`app.storage.migrations`).
     """
 
+    dialect = SQLITE
+
     def __init__(self, root: Path, database: Path | None = None) -> None:
-        self.root = Path(root).resolve()
+        super().__init__(root)
         self.database = Path(database).resolve() if database is not None else self.root / "lashscope.sqlite3"
-        try:
-            for sub in ("tmp", "logs", "vehicles", "analyses", "jobs"):
-                (self.root / sub).mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise StorageError(f"cannot create the data directory {self.root.name!r}: {exc.strerror}") from exc
-        self._local = threading.local()
-        self._all: list[sqlite3.Connection] = []
-        self._lock = threading.Lock()
         upgrade(self._conn())
 
     @property
     def url(self) -> str:
-        """Where to open this store again (``app.storage.url.open_store``), e.g. from a job worker."""
         files = "" if self.database.parent == self.root else f"?files={quote(str(self.root))}"
         return f"sqlite:///{self.database}{files}"
 
-    # -- connections -------------------------------------------------------------------
-    def _conn(self) -> sqlite3.Connection:
-        conn: sqlite3.Connection | None = getattr(self._local, "conn", None)
-        if conn is None:
-            try:
-                conn = sqlite3.connect(self.database, timeout=30.0, isolation_level=None,
-                                       check_same_thread=False)
-            except sqlite3.Error as exc:
-                raise StorageError(f"cannot open the store's database {self.database.name}: {exc}") from exc
-            conn.row_factory = sqlite3.Row
-            conn.execute("PRAGMA journal_mode=WAL")
-            conn.execute("PRAGMA synchronous=NORMAL")
-            conn.execute("PRAGMA foreign_keys=ON")
-            self._local.conn = conn
-            with self._lock:
-                self._all.append(conn)
-        return conn
-
-    @contextlib.contextmanager
-    def _tx(self) -> Iterator[sqlite3.Connection]:
-        db = self._conn()
-        db.execute("BEGIN IMMEDIATE")
+    def _connect(self) -> sqlite3.Connection:
         try:
-            yield db
-        except BaseException:
-            db.execute("ROLLBACK")
-            raise
-        else:
-            db.execute("COMMIT")
-
-    def close(self) -> None:
-        with self._lock:
-            for c in self._all:
-                with contextlib.suppress(sqlite3.Error):
-                    c.close()
-            self._all.clear()
-        self._local = threading.local()
-
-    # -- files -------------------------------------------------------------------------
-    def temp_path(self, suffix: str = "") -> Path:
-        return self.root / "tmp" / f"{uuid.uuid4().hex}{suffix}"
-
-    def clean_temp(self) -> int:
-        n = 0
-        for p in (self.root / "tmp").iterdir():
-            with contextlib.suppress(OSError):
-                shutil.rmtree(p) if p.is_dir() else p.unlink()
-                n += 1
-        return n
-
-    def analysis_dir(self, analysis_id: str) -> Path:
-        return self.root / "analyses" / analysis_id
-
-    def job_dir(self, job_id: str) -> Path:
-        return self.root / "jobs" / job_id
-
-    # -- logs --------------------------------------------------------------------------
-    def _log(self, row: sqlite3.Row) -> LogRecord:
-        return LogRecord(
-            id=row["id"], sha256=row["sha256"], filename=row["filename"], size_bytes=row["size_bytes"],
-            format=row["format"], created_at=row["created_at"], path=self.root / row["path"], frames=row["frames"],
-            duration_s=row["duration_s"], start_time=row["start_time"], issues=json.loads(row["issues"]),
-            meta=json.loads(row["meta"]),
-        )
-
-    def add_log(self, temp: Path, *, sha256: str, filename: str, fmt: str, frames: int, duration_s: float,
-                start_time: str | None, issues: list[dict[str, Any]], meta: dict[str, Any]) -> tuple[LogRecord, bool]:
-        """Move ``temp`` into the store; returns ``(record, created)`` (False: same content already there)."""
-        ext = "".join(Path(filename).suffixes[-2:]).lower()[:12] or ".log"
-        rel = f"logs/{sha256}{ext}"
-        with self._tx() as db:
-            row = db.execute("SELECT * FROM logs WHERE sha256 = ?", (sha256,)).fetchone()
-            if row is not None:
-                temp.unlink(missing_ok=True)
-                return self._log(row), False
-            os.replace(temp, self.root / rel)
-            db.execute(
-                "INSERT INTO logs (id, sha256, filename, size_bytes, format, created_at, path, frames, duration_s,"
-                " start_time, issues, meta) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
-                (f"log_{sha256[:16]}", sha256, filename, (self.root / rel).stat().st_size, fmt, now(), rel, frames,
-                 duration_s, start_time, json.dumps(issues), json.dumps(meta)),
-            )
-            row = db.execute("SELECT * FROM logs WHERE sha256 = ?", (sha256,)).fetchone()
-        return self._log(row), True
-
-    def find_log_by_hash(self, sha256: str) -> LogRecord | None:
-        row = self._conn().execute("SELECT * FROM logs WHERE sha256 = ?", (sha256,)).fetchone()
-        return self._log(row) if row else None
-
-    def get_log(self, log_id: str) -> LogRecord:
-        row = self._conn().execute("SELECT * FROM logs WHERE id = ?", (log_id,)).fetchone()
-        if row is None:
-            raise NotFoundError(f"log {log_id!r} not found")
-        return self._log(row)
-
-    def list_logs(self, limit: int = 100, offset: int = 0) -> list[LogRecord]:
-        rows = self._conn().execute("SELECT * FROM logs ORDER BY created_at DESC LIMIT ? OFFSET ?", (limit, offset))
-        return [self._log(r) for r in rows]
-
-    def delete_log(self, log_id: str) -> list[str]:
-        """Delete a log and its finished analyses; returns the ids of the analyses deleted with it."""
-        log = self.get_log(log_id)
-        with self._tx() as db:
-            busy = db.execute(
-                "SELECT a.id FROM analyses a JOIN jobs j ON j.id = a.job_id WHERE a.log_id = ? AND j.status IN "
-                "('queued', 'running')", (log_id,)).fetchone()
-            if busy is not None:
-                raise ConflictError(f"log {log_id} is in use by analysis {busy['id']} that has not finished",
-                                    code="log_in_use")
-            ids = [r["id"] for r in db.execute("SELECT id FROM analyses WHERE log_id = ?", (log_id,))]
-            db.execute("DELETE FROM analyses WHERE log_id = ?", (log_id,))
-            db.execute("DELETE FROM logs WHERE id = ?", (log_id,))
-        for aid in ids:
-            shutil.rmtree(self.analysis_dir(aid), ignore_errors=True)
-        log.path.unlink(missing_ok=True)
-        return ids
-
-    # -- vehicles ----------------------------------------------------------------------
-    def _vehicle(self, row: sqlite3.Row) -> VehicleRecord:
-        return VehicleRecord(
-            name=row["name"], version=row["version"], created_at=row["created_at"], sha256=row["sha256"],
-            driveline_path=self.root / row["driveline_path"], database_path=self.root / row["database_path"],
-            signal_map_path=self.root / row["signal_map_path"], summary=json.loads(row["summary"]),
-        )
-
-    def add_vehicle(self, name: str, *, driveline: Path, database: Path, signal_map: Path,
-                    summary: dict[str, Any]) -> tuple[VehicleRecord, bool]:
-        """Store a new version of vehicle ``name`` (files are copied); identical content returns the latest."""
-        if not name or len(name) > 64 or not set(name) <= VEHICLE_NAME_CHARS:
-            raise InputError(f"vehicle name {name!r}: use 1-64 of a-z, 0-9, '-' and '_'")
-        digest = file_sha256(driveline, database, signal_map)
-        with self._tx() as db:
-            last = db.execute("SELECT * FROM vehicles WHERE name = ? ORDER BY version DESC LIMIT 1",
-                              (name,)).fetchone()
-            if last is not None and last["sha256"] == digest:
-                return self._vehicle(last), False
-            version = (last["version"] + 1) if last is not None else 1
-            rel = Path("vehicles") / name / f"v{version}"
-            (self.root / rel).mkdir(parents=True, exist_ok=True)
-            dbc_name = "database" + (database.suffix.lower() or ".dbc")
-            for src, dst in ((driveline, "driveline.toml"), (database, dbc_name), (signal_map, "signals.map.toml")):
-                shutil.copyfile(src, self.root / rel / dst)
-            db.execute(
-                "INSERT INTO vehicles (name, version, created_at, sha256, driveline_path, database_path,"
-                " signal_map_path, summary) VALUES (?,?,?,?,?,?,?,?)",
-                (name, version, now(), digest, str(rel / "driveline.toml"), str(rel / dbc_name),
-                 str(rel / "signals.map.toml"), json.dumps(summary)),
-            )
-            row = db.execute("SELECT * FROM vehicles WHERE name = ? AND version = ?", (name, version)).fetchone()
-        return self._vehicle(row), True
-
-    def get_vehicle(self, name: str, version: int | None = None) -> VehicleRecord:
-        db = self._conn()
-        if version is None:
-            row = db.execute("SELECT * FROM vehicles WHERE name = ? ORDER BY version DESC LIMIT 1", (name,)).fetchone()
-        elif not 0 < version < 2**62:  # also keeps numbers SQLite cannot bind out of the query
-            row = None
-        else:
-            row = db.execute("SELECT * FROM vehicles WHERE name = ? AND version = ?", (name, version)).fetchone()
-        if row is None:
-            which = f"{name!r}" if version is None else f"{name!r} version {version}"
-            raise NotFoundError(f"vehicle {which} not found")
-        return self._vehicle(row)
-
-    def list_vehicles(self) -> list[VehicleRecord]:
-        rows = self._conn().execute(
-            "SELECT v.* FROM vehicles v JOIN (SELECT name, MAX(version) AS version FROM vehicles GROUP BY name) m"
-            " ON m.name = v.name AND m.version = v.version ORDER BY v.name")
-        return [self._vehicle(r) for r in rows]
-
-    def vehicle_versions(self, name: str) -> list[VehicleRecord]:
-        rows = list(self._conn().execute("SELECT * FROM vehicles WHERE name = ? ORDER BY version", (name,)))
-        if not rows:
-            raise NotFoundError(f"vehicle {name!r} not found")
-        return [self._vehicle(r) for r in rows]
-
-    # -- analyses ----------------------------------------------------------------------
-    _ANALYSIS_SQL = ("SELECT a.*, j.id AS j_id FROM analyses a JOIN jobs j ON j.id = a.job_id")
-
-    def _analysis(self, row: sqlite3.Row) -> AnalysisRecord:
-        return AnalysisRecord(
-            id=row["id"], log_id=row["log_id"], vehicle_name=row["vehicle_name"],
-            vehicle_version=row["vehicle_version"], options=json.loads(row["options"]), created_at=row["created_at"],
-            job=self.get_job(row["job_id"]), result_dir=self.analysis_dir(row["id"]),
-            summary=json.loads(row["summary"]),
-        )
-
-    def create_analysis(self, log_id: str, vehicle: VehicleRecord, options: dict[str, Any]) -> AnalysisRecord:
-        self.get_log(log_id)
-        analysis_id = f"an_{uuid.uuid4().hex[:16]}"
-        with self._tx() as db:
-            job_id = self._insert_job(db, "analysis", analysis_id)
-            db.execute("INSERT INTO analyses (id, log_id, vehicle_name, vehicle_version, options, created_at, job_id,"
-                       " summary) VALUES (?,?,?,?,?,?,?, '{}')",
-                       (analysis_id, log_id, vehicle.name, vehicle.version, json.dumps(options), now(), job_id))
-        return self.get_analysis(analysis_id)
-
-    def get_analysis(self, analysis_id: str) -> AnalysisRecord:
-        row = self._conn().execute(self._ANALYSIS_SQL + " WHERE a.id = ?", (analysis_id,)).fetchone()
-        if row is None:
-            raise NotFoundError(f"analysis {analysis_id!r} not found")
-        return self._analysis(row)
-
-    def list_analyses(self, log_id: str | None = None, limit: int = 100, offset: int = 0) -> list[AnalysisRecord]:
-        where, args = ("WHERE a.log_id = ?", (log_id,)) if log_id else ("", ())
-        rows = self._conn().execute(f"{self._ANALYSIS_SQL} {where} ORDER BY a.created_at DESC LIMIT ? OFFSET ?",
-                                    (*args, limit, offset)).fetchall()
-        return [self._analysis(r) for r in rows]
-
-    def set_analysis_summary(self, analysis_id: str, summary: dict[str, Any]) -> None:
-        with self._tx() as db:
-            db.execute("UPDATE analyses SET summary = ? WHERE id = ?", (json.dumps(summary), analysis_id))
-
-    def delete_analysis(self, analysis_id: str) -> None:
-        rec = self.get_analysis(analysis_id)
-        if rec.job.status in (JobStatus.QUEUED, JobStatus.RUNNING):
-            raise ConflictError(f"analysis {analysis_id} is {rec.job.status.value}; delete it when it has finished",
-                                code="analysis_busy")
-        with self._tx() as db:
-            db.execute("DELETE FROM analyses WHERE id = ?", (analysis_id,))
-            db.execute("DELETE FROM jobs WHERE id = ?", (rec.job.id,))
-        shutil.rmtree(rec.result_dir, ignore_errors=True)
+            conn = sqlite3.connect(self.database, timeout=30.0, isolation_level=None, check_same_thread=False)
+        except sqlite3.Error as exc:
+            raise StorageError(f"cannot open the store's database {self.database.name}: {exc}") from exc
+        conn.row_factory = sqlite3.Row
+        conn.execute("PRAGMA journal_mode=WAL")
+        conn.execute("PRAGMA synchronous=NORMAL")
+        conn.execute("PRAGMA foreign_keys=ON")
+        return conn

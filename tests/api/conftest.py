@@ -123,3 +123,42 @@ def analysed(client: httpx.Client, log: Path, vehicle: str = "ev") -> tuple[str,
     analysis_id = str(client.post("/analyses", json={"log_id": log_id, "vehicle": vehicle}).json()["id"])
     assert wait_for(client, analysis_id)["status"] == "done"
     return str(log_id), analysis_id
+
+
+def worker_pids(parent: int) -> list[int]:
+    """Job worker processes (spawned interpreters) whose parent is ``parent``."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            ppid = int((proc / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            cmd = (proc / "cmdline").read_bytes()
+        except (OSError, IndexError, ValueError):
+            continue
+        if ppid == parent and b"spawn_main" in cmd and b"resource_tracker" not in cmd:
+            found.append(int(proc.name))
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def running_worker(c: httpx.Client, srv: Server, url: str, timeout: float = 90.0) -> list[int]:
+    """Wait until the job behind ``url`` reports progress from its worker; return the worker pids."""
+    assert srv.proc is not None
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        body = c.get(url).json()
+        job = body.get("job", body)
+        pids = worker_pids(srv.proc.pid)
+        if job["status"] == "running" and job["stage"] not in ("starting", "queued") and pids:
+            return pids
+        assert job["status"] in ("queued", "running"), body
+        time.sleep(0.05)
+    raise AssertionError(f"no running worker for {url}")

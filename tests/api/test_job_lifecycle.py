@@ -10,48 +10,9 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.api.conftest import Server, analysed, create_vehicle, upload, wait_for
+from tests.api.conftest import Server, alive, analysed, create_vehicle, running_worker, upload, wait_for
 
 pytestmark = pytest.mark.slow
-
-
-def _workers(parent: int) -> list[int]:
-    """Job worker processes (spawned interpreters) whose parent is ``parent``."""
-    found = []
-    for proc in Path("/proc").iterdir():
-        if not proc.name.isdigit():
-            continue
-        try:
-            ppid = int((proc / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            cmd = (proc / "cmdline").read_bytes()
-        except (OSError, IndexError, ValueError):
-            continue
-        if ppid == parent and b"spawn_main" in cmd and b"resource_tracker" not in cmd:
-            found.append(int(proc.name))
-    return found
-
-
-def _alive(pid: int) -> bool:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] != "Z"
-
-
-def _running_worker(c: httpx.Client, srv: Server, url: str, timeout: float = 90.0) -> list[int]:
-    """Wait until the job behind ``url`` reports progress from its worker; return the worker pids."""
-    assert srv.proc is not None
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        body = c.get(url).json()
-        job = body.get("job", body)
-        pids = _workers(srv.proc.pid)
-        if job["status"] == "running" and job["stage"] not in ("starting", "queued") and pids:
-            return pids
-        assert job["status"] in ("queued", "running"), body
-        time.sleep(0.05)
-    raise AssertionError(f"no running worker for {url}")
 
 
 def test_kill_9_mid_analysis_runs_it_once_more(tmp_path: Path, demo_log: Path,
@@ -63,12 +24,12 @@ def test_kill_9_mid_analysis_runs_it_once_more(tmp_path: Path, demo_log: Path,
         create_vehicle(c)
         log_id = upload(c, demo_log).json()["id"]
         analysis_id = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
-        workers = _running_worker(c, srv, f"/analyses/{analysis_id}")
+        workers = running_worker(c, srv, f"/analyses/{analysis_id}")
     srv.stop(signal.SIGKILL)
     deadline = time.monotonic() + 15.0
-    while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+    while any(alive(p) for p in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert not any(_alive(p) for p in workers), "a worker outlived its killed server"
+    assert not any(alive(p) for p in workers), "a worker outlived its killed server"
 
     srv = Server(data).start()
     try:
@@ -97,13 +58,13 @@ def test_delete_cancels_running_jobs_and_forgets_cached_series(tmp_path: Path, d
             started = c.post(tol, params={"n": 2000, "seed": 1})
             assert started.status_code == 202
             assert c.post(tol, params={"n": 2000, "seed": 1}).json()["job_id"] == started.json()["job_id"]
-            workers = _running_worker(c, srv, f"{tol}?n=2000&seed=1")
+            workers = running_worker(c, srv, f"{tol}?n=2000&seed=1")
 
             assert c.delete(f"/analyses/{analysis_id}").status_code == 204
             deadline = time.monotonic() + 15.0
-            while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+            while any(alive(p) for p in workers) and time.monotonic() < deadline:
                 time.sleep(0.1)
-            assert not any(_alive(p) for p in workers), "the deleted analysis' tolerance worker still runs"
+            assert not any(alive(p) for p in workers), "the deleted analysis' tolerance worker still runs"
             gone = c.get(f"/analyses/{analysis_id}/speed", params={"max_points": 500})
             assert gone.status_code == 404 and gone.json()["code"] == "not_found"
             assert c.get(f"/analyses/{analysis_id}").status_code == 404

@@ -13,13 +13,16 @@ import pytest
 from sim import dump_toml, load_vehicle
 from tests.api.fuzzing import requests
 from tests.api.inprocess import TestClient, in_process
+from tests.conftest import new_store_url
 
 MP = "multipart/form-data; boundary=XX"
 
 
-@pytest.fixture
-def client(tmp_path: Path) -> Iterator[TestClient]:
-    with in_process(tmp_path / "data", max_json_kb=64, max_queued_jobs=2) as c:
+@pytest.fixture(params=["sqlite", "postgresql"])
+def client(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[TestClient]:
+    """The app on each store backend, the store's files in ``tmp_path / "data"``."""
+    url = new_store_url(request, request.param, tmp_path / "data")
+    with in_process(tmp_path / "data", store_url=url, max_json_kb=64, max_queued_jobs=2) as c:
         yield c
 
 

@@ -17,8 +17,9 @@ from tests.api.inprocess import TestClient, in_process
 
 
 @pytest.fixture
-def client(tmp_path: Path) -> Iterator[TestClient]:
-    with in_process(tmp_path / "data", cors_origins=["http://dashboard.test"]) as c:
+def client(tmp_path: Path, store_url: str) -> Iterator[TestClient]:
+    """The app on each store backend (``store_url``: SQLite, PostgreSQL)."""
+    with in_process(tmp_path / "data", store_url=store_url, cors_origins=["http://dashboard.test"]) as c:
         yield c
 
 
@@ -122,14 +123,17 @@ def test_each_client_address_has_its_rate_without_a_key(tmp_path: Path) -> None:
         assert c.get("/logs", headers={"Authorization": f"Bearer {key}"}).status_code == 200
 
 
-def test_serve_refuses_a_network_address_without_keys(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_serve_refuses_a_network_address_without_keys(tmp_path: Path, store_url: str,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
     data = tmp_path / "d"
-    assert main(["serve", "--host", "0.0.0.0", "--data-dir", str(data)]) == 2
+    where = ["--data-dir", str(data), "--store", store_url]
+    assert main(["serve", "--host", "0.0.0.0", *where]) == 2
     assert "[keys_required]" in capsys.readouterr().err
-    refuse_open_network(Settings(host="0.0.0.0", data_dir=data, insecure=True))  # the operator's choice
-    refuse_open_network(Settings(host="127.0.0.1", data_dir=data))
-    assert main(["keys", "create", "--scope", "admin", "--data-dir", str(data)]) == 0
-    refuse_open_network(Settings(host="0.0.0.0", data_dir=data))
+    same = {"data_dir": data, "store_url": store_url}
+    refuse_open_network(Settings(host="0.0.0.0", insecure=True, **same))  # the operator's choice
+    refuse_open_network(Settings(host="127.0.0.1", **same))
+    assert main(["keys", "create", "--scope", "admin", *where]) == 0
+    refuse_open_network(Settings(host="0.0.0.0", **same))
     with pytest.raises(ForbiddenError):
         refuse_open_network(Settings(host="192.0.2.7", data_dir=tmp_path / "other"))
 

@@ -75,6 +75,27 @@ def test_local_cluster_gives_the_same_rows(in_process: tuple[Path, BatchSummary]
     assert (again.ok, again.failed, again.skipped) == (0, 0, 4) and "cluster_start" not in again.timings_s
 
 
+def test_batches_on_one_connected_client_warm_each_worker_once(in_process: tuple[Path, BatchSummary],
+                                                               fleet_logs: dict[str, Path], tmp_path: Path) -> None:
+    from distributed import Client
+
+    from app.fleet.cluster import local_cluster
+
+    cluster = local_cluster(1)
+    client = Client(cluster, set_as_default=False)
+    try:
+        first = run_batch([str(fleet_logs["log0"])], _config(tmp_path, workers=1), stream=None, client=client)
+        warm = client.run(lambda dask_worker: dask_worker.lashscope_warm_s)
+        second = run_batch([str(fleet_logs[k]) for k in ("log1", "log2")], _config(tmp_path, workers=1),
+                           stream=None, client=client)
+        assert client.run(lambda dask_worker: dask_worker.lashscope_warm_s) == warm  # not warmed again
+        assert (first.ok, second.ok, second.skipped) == (1, 2, 0) and client.status == "running"
+    finally:
+        client.close()
+        cluster.close()
+    pd.testing.assert_frame_equal(_sorted_rows(tmp_path), _sorted_rows(in_process[0]))  # the broken log has none
+
+
 def test_rerun_resumes_after_an_interruption(fleet_logs: dict[str, Path], tmp_path: Path) -> None:
     sources = [str(fleet_logs[k]) for k in ("log0", "log1", "log2", "broken")]
     first = run_batch(sources, _config(tmp_path, workers=0), stream=None)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -13,19 +14,21 @@ from app.live.decoding import source_for
 from app.live.manager import LiveManager, StartRequest
 from app.live.recorder import FlushingBLFWriter
 from app.live.replay import Replayer
-from app.storage.sqlite import SQLiteStore
-from tests.conftest import REPO
+from app.storage.sqlstore import SQLStore
+from app.storage.url import open_store
+from tests.conftest import REPO, new_store_url
 from tests.live import drive
 
 
-@pytest.fixture()
-def store(tmp_path: Path):
-    s = SQLiteStore(tmp_path / "data")
+@pytest.fixture(params=["sqlite", "postgresql"])
+def store(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[SQLStore]:
+    """A store on each backend, its files in ``tmp_path / "data"``."""
+    s = open_store(new_store_url(request, request.param, tmp_path / "data"))
     yield s
     s.close()
 
 
-def test_session_with_a_vehicle_becomes_a_stored_log_with_an_analysis(tmp_path: Path, store: SQLiteStore) -> None:
+def test_session_with_a_vehicle_becomes_a_stored_log_with_an_analysis(tmp_path: Path, store: SQLStore) -> None:
     dbc = drive.write_dbc(tmp_path)
     store.add_vehicle("testcar", driveline=REPO / "sim" / "presets" / "paper.toml", database=dbc,
                       signal_map=drive.map_of(dbc), summary={})
@@ -57,14 +60,14 @@ def test_session_with_a_vehicle_becomes_a_stored_log_with_an_analysis(tmp_path: 
     assert not list((tmp_path / "data" / "live").glob("*.blf"))  # moved into the store
 
 
-def test_interfaces_reaching_the_network_are_off_by_default(tmp_path: Path, store: SQLiteStore) -> None:
+def test_interfaces_reaching_the_network_are_off_by_default(tmp_path: Path, store: SQLStore) -> None:
     manager = LiveManager(store, tmp_path / "live", source_for)
     for name in ("udp_multicast", "socketcand"):
         with pytest.raises(InputError, match="not enabled"):
             manager.start(StartRequest(BusConfig(name, "x"), database=drive.write_dbc(tmp_path)))
 
 
-def test_recording_left_by_a_crash_is_recovered_as_a_stored_log(tmp_path: Path, store: SQLiteStore) -> None:
+def test_recording_left_by_a_crash_is_recovered_as_a_stored_log(tmp_path: Path, store: SQLStore) -> None:
     live_dir = tmp_path / "live"
     live_dir.mkdir()
     msgs = drive.drive_messages(duration_s=1.0)

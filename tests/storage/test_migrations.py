@@ -3,15 +3,25 @@
 from __future__ import annotations
 
 import sqlite3
+import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
+from urllib.parse import urlsplit
 
 import pytest
 
 from app.errors import InputError, StorageError
 from app.storage import JobStatus, SQLiteStore
+from app.storage.dialect import POSTGRESQL
 from app.storage.migrations import LATEST, schema_version, upgrade
+from app.storage.postgres import PostgresStore
 from app.storage.schema import MIGRATIONS
+from app.storage.sqlstore import SQLStore
 from app.storage.url import open_store
+from tests.api.conftest import free_port
+
+if TYPE_CHECKING:
+    from tests.pgserver import PgServer
 
 V1_SQL = Path(__file__).parent / "fixtures" / "schema_v1.sql"  # app/storage/schema.py of the first release
 
@@ -100,7 +110,63 @@ def test_store_from_url(tmp_path: Path) -> None:
     plain = open_store(tmp_path / "dir")
     assert plain.database == tmp_path / "dir" / "lashscope.sqlite3"
     plain.close()
-    for bad in ("postgresql://db.example/lashscope", "sqlite://host/x.sqlite3", "sqlite:///"):
+    for bad in ("mysql://db.example/lashscope", "sqlite://host/x.sqlite3", "sqlite:///"):
         with pytest.raises(InputError) as e:
             open_store(bad)
         assert e.value.code == "unsupported_store"
+
+
+def test_postgres_database_gets_every_migration_once_with_wide_columns(pg_server: PgServer, tmp_path: Path) -> None:
+    url = pg_server.database()
+    stores: list[SQLStore] = []
+    errors: list[BaseException] = []
+
+    def open_one(k: int) -> None:  # two servers starting on one new database at once
+        try:
+            stores.append(open_store(url, files=tmp_path / f"files{k}"))
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=open_one, args=(k,)) for k in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors and len(stores) == 2
+    db = stores[0]._conn()
+    assert [r[0] for r in db.execute("SELECT version FROM schema_version ORDER BY version")] == [1, 2, 3]
+    assert schema_version(db, POSTGRESQL) == LATEST and upgrade(db, POSTGRESQL) == []
+    types = dict(db.execute("SELECT column_name, data_type FROM information_schema.columns"
+                            " WHERE table_name = 'jobs'").fetchall())
+    assert (types["lease_until"], types["progress"], types["attempts"]) == ("double precision", "double precision",
+                                                                           "bigint")
+    db.execute("INSERT INTO schema_version VALUES (?, 't')", (LATEST + 1,))
+    for s in stores:
+        s.close()
+    with pytest.raises(StorageError) as err:
+        open_store(url, files=tmp_path)
+    assert err.value.code == "schema_too_new"
+
+
+def test_postgres_store_from_url(pg_server: PgServer, tmp_path: Path) -> None:
+    url = pg_server.database()
+    files = tmp_path / "shared files"
+    store = open_store(f"{url}?files={files}")
+    assert isinstance(store, PostgresStore) and store.root == files and (files / "logs").is_dir()
+    key, token = store.create_key("admin")
+    again = open_store(store.url)  # what a job worker does
+    assert again.root == files and again.verify_key(token) == key
+    for s in (store, again):
+        s.close()
+    with_default = open_store(url, files=tmp_path / "data")  # the server's --data-dir
+    assert with_default.root == tmp_path / "data" and with_default.verify_key(token) == key
+    with_default.close()
+
+    port = urlsplit(url).port
+    for bad, code in ((url, "unsupported_store"),  # no files directory anywhere
+                      (f"postgresql://lashscope:s3cret@127.0.0.1:{port}/?files={tmp_path}", "unsupported_store"),
+                      (f"postgresql://lashscope:s3cret@127.0.0.1:{free_port()}/x?files={tmp_path}",
+                       "store_unreachable")):
+        with pytest.raises((InputError, StorageError)) as e:
+            open_store(bad)
+        assert e.value.code == code and "s3cret" not in str(e.value)  # type: ignore[union-attr]

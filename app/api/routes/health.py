@@ -1,12 +1,11 @@
 from __future__ import annotations
 
-import sqlite3
-
 from fastapi import APIRouter
 
 from app import __version__
 from app.api.deps import StoreDep
 from app.api.schemas import HealthOut
+from app.storage.dialect import database_errors
 
 router = APIRouter(tags=["health"])
 
@@ -17,7 +16,7 @@ def health(store: StoreDep) -> HealthOut:
     try:
         jobs = store.job_counts()
         db = "ok"
-    except sqlite3.Error as exc:
+    except database_errors() as exc:
         jobs, db = {}, f"error: {type(exc).__name__}"
     return HealthOut(status="ok" if db == "ok" else "degraded", version=__version__, data_dir=store.root.name,
                      database=db, jobs=jobs)

@@ -1,4 +1,5 @@
-"""The embedded store: de-duplication, versions, jobs across restarts, concurrent writers."""
+"""The store on both backends (SQLite, PostgreSQL): de-duplication, versions, jobs across restarts,
+concurrent writers. The ``store`` fixture (tests/conftest.py) opens each test on both, files in ``tmp_path``."""
 
 from __future__ import annotations
 
@@ -13,11 +14,13 @@ import numpy as np
 import pytest
 
 from app.errors import ConflictError, InputError, NotFoundError
-from app.storage import JobStatus, SQLiteStore
+from app.storage import JobStatus
 from app.storage.results import ResultFiles, json_safe, write_result
+from app.storage.sqlstore import SQLStore
+from app.storage.url import open_store
 
 
-def _add_log(store: SQLiteStore, content: bytes, name: str = "a.blf") -> tuple[str, bool]:
+def _add_log(store: SQLStore, content: bytes, name: str = "a.blf") -> tuple[str, bool]:
     tmp = store.temp_path(".blf")
     tmp.write_bytes(content)
     rec, created = store.add_log(tmp, sha256=hashlib.sha256(content).hexdigest(), filename=name, fmt="blf",
@@ -35,8 +38,7 @@ def _vehicle_files(tmp_path: Path, tag: str) -> dict[str, Path]:
     return files
 
 
-def test_logs_are_deduplicated_by_content(tmp_path: Path) -> None:
-    store = SQLiteStore(tmp_path)
+def test_logs_are_deduplicated_by_content(store: SQLStore, tmp_path: Path) -> None:
     a, created_a = _add_log(store, b"one")
     b, created_b = _add_log(store, b"one", "renamed.blf")
     c, _ = _add_log(store, b"two")
@@ -48,8 +50,7 @@ def test_logs_are_deduplicated_by_content(tmp_path: Path) -> None:
     assert len(list((tmp_path / "logs").iterdir())) == 1
 
 
-def test_vehicle_versions_and_unchanged_content(tmp_path: Path) -> None:
-    store = SQLiteStore(tmp_path / "data")
+def test_vehicle_versions_and_unchanged_content(store: SQLStore, tmp_path: Path) -> None:
     v1, new1 = store.add_vehicle("ev-1", **_vehicle_files(tmp_path, "a"), summary={"k": 1})
     same, new_same = store.add_vehicle("ev-1", **_vehicle_files(tmp_path, "a"), summary={})
     v2, new2 = store.add_vehicle("ev-1", **_vehicle_files(tmp_path, "b"), summary={})
@@ -61,8 +62,8 @@ def test_vehicle_versions_and_unchanged_content(tmp_path: Path) -> None:
         store.add_vehicle("Bad Name!", **_vehicle_files(tmp_path, "c"), summary={})
 
 
-def test_everything_survives_a_reopen_and_interrupted_jobs_are_resumed_then_failed(tmp_path: Path) -> None:
-    store = SQLiteStore(tmp_path)
+def test_everything_survives_a_reopen_and_interrupted_jobs_are_resumed_then_failed(store: SQLStore,
+                                                                                   tmp_path: Path) -> None:
     log_id, _ = _add_log(store, b"log")
     veh, _ = store.add_vehicle("car", **_vehicle_files(tmp_path, "x"), summary={})
     rec = store.create_analysis(log_id, veh, {"model": "multibody"})
@@ -71,7 +72,7 @@ def test_everything_survives_a_reopen_and_interrupted_jobs_are_resumed_then_fail
 
     # simulate a crash: the job row says running, owned by a process that no longer exists
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    reopened = SQLiteStore(tmp_path)
+    reopened = open_store(store.url)
     reopened._conn().execute("UPDATE jobs SET owner_pid = ?", (int(dead.stdout),))
     assert reopened.get_log(log_id).filename == "a.blf"
     assert reopened.get_vehicle("car").version == 1
@@ -85,10 +86,10 @@ def test_everything_survives_a_reopen_and_interrupted_jobs_are_resumed_then_fail
     job = reopened.get_job(rec.job.id)
     assert job.status is JobStatus.FAILED and job.error_code == "interrupted"
     assert "2 of 2 attempts" in (job.error_detail or "")
+    reopened.close()
 
 
-def test_a_job_owned_by_a_live_process_is_left_alone(tmp_path: Path) -> None:
-    store = SQLiteStore(tmp_path)
+def test_a_job_owned_by_a_live_process_is_left_alone(store: SQLStore) -> None:
     job = store.create_job("analysis", "x")
     store.start_job(job.id)
     other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
@@ -101,8 +102,7 @@ def test_a_job_owned_by_a_live_process_is_left_alone(tmp_path: Path) -> None:
         other.wait()
 
 
-def test_busy_analysis_blocks_log_delete(tmp_path: Path) -> None:
-    store = SQLiteStore(tmp_path)
+def test_busy_analysis_blocks_log_delete(store: SQLStore, tmp_path: Path) -> None:
     log_id, _ = _add_log(store, b"log")
     veh, _ = store.add_vehicle("car", **_vehicle_files(tmp_path, "x"), summary={})
     rec = store.create_analysis(log_id, veh, {})
@@ -116,8 +116,20 @@ def test_busy_analysis_blocks_log_delete(tmp_path: Path) -> None:
         store.get_analysis(rec.id)
 
 
-def test_concurrent_writers_from_threads_and_processes(tmp_path: Path) -> None:
-    store = SQLiteStore(tmp_path)
+def test_active_jobs_of_an_analysis_include_its_tolerance_bands(store: SQLStore, tmp_path: Path) -> None:
+    log_id, _ = _add_log(store, b"log")
+    veh, _ = store.add_vehicle("car", **_vehicle_files(tmp_path, "x"), summary={})
+    rec = store.create_analysis(log_id, veh, {})
+    band = store.create_job("tolerance", f"{rec.id}/n=200/seed=1")
+    other = store.create_job("tolerance", f"{rec.id}x/n=200/seed=1")  # another id with this one as prefix
+    assert {j.id for j in store.active_jobs(rec.id)} == {rec.job.id, band.id}
+    store.finish_job(band.id)
+    assert [j.id for j in store.active_jobs(rec.id)] == [rec.job.id]
+    assert store.find_job("tolerance", f"{rec.id}x/n=200/seed=1") == store.get_job(other.id)
+    assert store.job_counts() == {"queued": 2, "running": 0, "done": 1, "failed": 0}
+
+
+def test_concurrent_writers_from_threads_and_processes(store: SQLStore) -> None:
     errors: list[BaseException] = []
 
     def worker(k: int) -> None:
@@ -128,12 +140,12 @@ def test_concurrent_writers_from_threads_and_processes(tmp_path: Path) -> None:
         except BaseException as exc:
             errors.append(exc)
 
-    code = ("import hashlib,sys; from app.storage import SQLiteStore; s=SQLiteStore(sys.argv[1])\n"
+    code = ("import hashlib,sys; from app.storage.url import open_store; s=open_store(sys.argv[1])\n"
             "for i in range(15):\n"
             "    b=f'p-{i}'.encode(); t=s.temp_path(); t.write_bytes(b)\n"
             "    s.add_log(t, sha256=hashlib.sha256(b).hexdigest(), filename='p', fmt='blf', frames=1,"
             " duration_s=0.0, start_time=None, issues=[], meta={})\n")
-    proc = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], cwd=Path(__file__).resolve().parents[2],
+    proc = subprocess.Popen([sys.executable, "-c", code, store.url], cwd=Path(__file__).resolve().parents[2],
                             env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
     threads = [threading.Thread(target=worker, args=(k,)) for k in range(4)]
     for t in threads:
