@@ -187,10 +187,9 @@ def test_writing_a_result_keeps_what_else_lives_in_the_directory(tmp_path: Path)
     assert sorted(p.name for p in d.iterdir()) == ["arrays", "diagnoses", "result.json", "tolerance_n10_seed0.json"]
 
 
-def test_a_clean_stop_resumes_the_job_at_once_without_counting_an_attempt(tmp_path: Path) -> None:
+def test_a_clean_stop_resumes_the_job_at_once_without_counting_an_attempt(store: SQLStore) -> None:
     """The server stopping (SIGTERM) lets the lease go: any runner resumes the job at once, and the
     attempt it cut off is not counted -- only crashes use up LASHSCOPE_JOB_MAX_ATTEMPTS."""
-    store = SQLiteStore(tmp_path)
     job = store.create_job("diagnosis", "an_1/diagnoses/an_1--dg01")
     store.start_job(job.id, "server-a", lease_s=600.0)
     assert store.requeue_orphans(2) == []  # the lease still runs: nobody else may take it
