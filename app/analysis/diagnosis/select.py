@@ -29,6 +29,7 @@ from app.analysis.diagnosis.decide import (
     decide,
     score_candidate,
     structured,
+    with_tones,
 )
 from app.analysis.diagnosis.forward import (
     DiagEvent,
@@ -249,7 +250,7 @@ def run_diagnosis(
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
 
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
-    decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
+    decision = with_tones(with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle), noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
                   draws=draws, fit_order=fit_order, not_applicable=not_applicable)
