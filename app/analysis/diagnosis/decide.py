@@ -89,6 +89,9 @@ class CandidateScore:
     remainder : remainder-to-noise statistics of what the candidate leaves (None: not computed).
     without_second : pairs only: (n_heldout,) chi2 of the pair's fit with its second effect off --
         the first effect at the values the pair fit gave it.
+    entangled : pairs only: ``(first-effect parameter, second-effect parameter, correlation)`` when the
+        pair's fit cannot separate them (:func:`.calibrate.trade_offs`): the second effect then changes
+        what the first one already can, and is not named on its own.
     """
 
     id: str
@@ -100,6 +103,7 @@ class CandidateScore:
     significant: bool
     remainder: RemainderTest | None = None
     without_second: FloatArray | None = None  # pairs: chi2 per event with the second effect switched off
+    entangled: tuple[str, str, float] | None = None  # pairs: a first-effect parameter the second trades off with
 
     def noise_ratio(self, n: FloatArray) -> float:
         """Remaining residual-to-noise ratio ``sum(chi2) / sum(n)``."""
@@ -301,6 +305,12 @@ def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[Candid
         for_remainder = (structured(best, rules) and lower >= rules.min_separation
                          and of_remainder >= rules.pair_remainder_gain)
         if p >= rules.prefer_probability and (gain >= rules.pair_gain or for_remainder):
+            if pair.entangled is not None:
+                a, b, r = pair.entangled
+                return best, (f"; adding {pair.effects[1]} would lower the remainder from {left:.2f}x to "
+                              f"{pair.noise_ratio(n):.2f}x the noise floor, but {b} trades off with {a} "
+                              f"(correlation {r:+.2f}): it changes what {best.id} already does, where this "
+                              f"effect's law and the vehicle's differ, and is not named on its own")
             return pair, (f"; adding {pair.effects[1]} lowers the remainder from {left:.2f}x to "
                           f"{pair.noise_ratio(n):.2f}x the noise floor (p = {p:.2f})")
         break
