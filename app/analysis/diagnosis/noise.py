@@ -57,6 +57,9 @@ class NoiseFloor:
         ``torque_step_nm``'s part); 0 when the torque is clean or unknown.
     tones : motor-order tones found in the speed (:mod:`.orders`); ``sigma_rpm`` is then estimated
         with them removed, since a tone is structure, not noise.
+    retimed_bursts, retimed_frames, unresolved_bursts : runs of frames a buffering logger wrote
+        back-to-back, re-timed before anything else (:mod:`.retime`; torque and speed together), the
+        frames moved, and runs left as logged because frames were lost in them too.
     """
 
     sigma_rpm: float
@@ -67,6 +70,9 @@ class NoiseFloor:
     torque_step_nm: float = 0.0
     torque_sigma_nm: float = 0.0
     tones: tuple[OrderTone, ...] = ()
+    retimed_bursts: int = 0
+    retimed_frames: int = 0
+    unresolved_bursts: int = 0
 
     def variance(self, slope_rpm_s: npt.ArrayLike) -> FloatArray:
         """Per-sample residual variance (rpm^2) no model can remove, for samples with slope ``slope_rpm_s``."""
