@@ -8,8 +8,11 @@ increase at a reference deflection* (more readable than ``k3`` in N m/rad^3)::
     k3 = rel * k / x_ref^2      (the tangent stiffness is k (1 + 3 rel) at x = x_ref)
 
 with ``x_ref = 0.1 rad`` for a half-shaft (its wind-up under full drive torque) and
-``x_ref = 0.02 rad`` for the housing roll mount. Priors: 0 to 2 (no hardening to a spring three
-times stiffer in tangent at the reference deflection... and seven times at twice it).
+``x_ref = 0.02 rad`` for the housing roll mount. Priors: 0 to 4 for a half-shaft (no hardening to
+13 times the tangent stiffness at 0.1 rad: splines coming into full engagement) and 0 to 20 for the
+mount (a rubber mount running onto its snubber stiffens by an order of magnitude). The mount's range
+was 0 to 2 until the independent generator's hardening mount (docs/diagnosis.md) drove every fit to
+that bound, where a linear mount change then took up the rest as a second, false effect.
 """
 
 from __future__ import annotations
@@ -41,8 +44,8 @@ EFFECT = Effect(
     id="progressive_stiffness",
     title="Progressive (hardening) half-shaft and mount stiffness",
     params=(
-        ParamSpec("halfshaft_rel", "-", 0.0, 2.0, 0.0, "half-shaft k3 as relative hardening at 0.1 rad"),
-        ParamSpec("mount_rel", "-", 0.0, 2.0, 0.0, "mount roll k3 as relative hardening at 0.02 rad"),
+        ParamSpec("halfshaft_rel", "-", 0.0, 4.0, 0.0, "half-shaft k3 as relative hardening at 0.1 rad"),
+        ParamSpec("mount_rel", "-", 0.0, 20.0, 0.0, "mount roll k3 as relative hardening at 0.02 rad"),
     ),
     vehicle_change=_changes,
     model="multibody",

@@ -199,3 +199,30 @@ def test_a_pair_whose_gain_the_first_effect_reaches_alone_is_not_kept() -> None:
     needed = replace(pair, without_second=single.chi2.copy())
     d2 = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [needed], draws, RULES, 8)
     assert d2.top == ("backlash", "speed_sensor")
+
+
+def test_two_inseparable_singles_are_named_together_when_their_pair_beats_each() -> None:
+    """Both effects present: each alone takes up part of the other's signature and the two leave about the same
+    remainder (not separable), while their joint fit removes most of what either leaves."""
+    a, b = cand("backlash", BASE, 0.45, seed=4), cand("progressive_stiffness", BASE, 0.46, seed=5)
+    joint = cand("backlash+progressive_stiffness", BASE, 0.05, seed=6)
+    d = decide(BASE, N, [a, b], [joint], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d.status in ("explained", "partial")
+    assert set(d.top) == {"backlash", "progressive_stiffness"}
+    assert "not separated" in d.reason
+    # a joint fit no better than the singles leaves them ambiguous
+    weak = cand("backlash+progressive_stiffness", BASE, 0.44, seed=6)
+    assert run([a, b], [weak])[0] == "ambiguous"
+
+
+def test_a_second_effect_that_trades_off_with_the_first_is_not_named() -> None:
+    """The same winning pair, but its second effect's parameter trades off with the first's in the pair fit:
+    it changes what the first effect already does (where that effect's law misses the vehicle's) and is not
+    named on its own; the reason says what it would have lowered."""
+    single = _structured(cand("progressive_stiffness", BASE, 0.04, spread=0.005), 3.0)
+    pair = replace(cand("progressive_stiffness+housing_mount", BASE, 0.002, spread=0.001, seed=4),
+                   entangled=("progressive_stiffness.halfshaft_rel", "housing_mount.stiffness_log2", -0.93))
+    d = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [pair], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d.top == ("progressive_stiffness",)
+    assert d.status == "partial"
+    assert "housing_mount.stiffness_log2 trades off with progressive_stiffness.halfshaft_rel" in d.reason

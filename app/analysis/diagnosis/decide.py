@@ -37,12 +37,13 @@ reports as ``partial``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from app.analysis.diagnosis.orders import OrderTone
 from app.analysis.diagnosis.score import Interval, explained_interval, paired_better_probability, shrink_interval
 from app.analysis.diagnosis.structure import Remainder, RemainderTest, remainder_test, totals_only
 
@@ -88,6 +89,9 @@ class CandidateScore:
     remainder : remainder-to-noise statistics of what the candidate leaves (None: not computed).
     without_second : pairs only: (n_heldout,) chi2 of the pair's fit with its second effect off --
         the first effect at the values the pair fit gave it.
+    entangled : pairs only: ``(first-effect parameter, second-effect parameter, correlation)`` when the
+        pair's fit cannot separate them (:func:`.calibrate.trade_offs`): the second effect then changes
+        what the first one already can, and is not named on its own.
     """
 
     id: str
@@ -99,6 +103,7 @@ class CandidateScore:
     significant: bool
     remainder: RemainderTest | None = None
     without_second: FloatArray | None = None  # pairs: chi2 per event with the second effect switched off
+    entangled: tuple[str, str, float] | None = None  # pairs: a first-effect parameter the second trades off with
 
     def noise_ratio(self, n: FloatArray) -> float:
         """Remaining residual-to-noise ratio ``sum(chi2) / sum(n)``."""
@@ -219,10 +224,17 @@ def decide(
             f"{100 * best_share:.0f} %): the remainder is structure no candidate in the library explains"),
             details={"remainder": remainder_field(["overall"], ratio.value, explained=False)})
     best = sig[0]
+    joint_note = ""
     if len(sig) > 1:
         second = sig[1]
         preferred, p, gap = separation(best, second, n, draws, rules)
-        if not preferred:
+        joint = None if preferred else _both(base, best, second, pairs, n, draws, rules)
+        if joint is not None:  # the two are not rivals but both present: their pair beats each of them
+            joint_note = (f"; {best.id} and {second.id} alone are not separated by the held-out events "
+                          f"(p = {p:.2f}), their joint fit is preferred to each and lowers the remainder from "
+                          f"{best.noise_ratio(n):.2f}x to {joint.noise_ratio(n):.2f}x the noise floor")
+            best = joint
+        elif not preferred:
             return Decision("ambiguous", top=(best.id,), confusable=(best.id, second.id), gap_ratio=ratio, best=best,
                             reason=(f"{best.id} and {second.id} explain {100 * best.explained.value:.0f} % and "
                                     f"{100 * second.explained.value:.0f} % of the gap and leave "
@@ -233,7 +245,8 @@ def decide(
                             details={"prefer_probability": round(p, 3), "separation": round(gap, 4),
                                      "remainder": remainder_field(_left_over(best, n, rules)[0], best.noise_ratio(n),
                                                                   explained=False)})
-    chosen, pair_note = _with_partner(base, best, pairs, n, draws, rules)
+    chosen, pair_note = ((best, joint_note) if len(best.effects) > 1
+                         else _with_partner(base, best, pairs, n, draws, rules))
     share = chosen.explained
     above, left_text = _left_over(chosen, n, rules)
     if share.value >= rules.explained_share and share.lo >= rules.explained_share_lo and not above:
@@ -292,10 +305,32 @@ def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[Candid
         for_remainder = (structured(best, rules) and lower >= rules.min_separation
                          and of_remainder >= rules.pair_remainder_gain)
         if p >= rules.prefer_probability and (gain >= rules.pair_gain or for_remainder):
+            if pair.entangled is not None:
+                a, b, r = pair.entangled
+                return best, (f"; adding {pair.effects[1]} would lower the remainder from {left:.2f}x to "
+                              f"{pair.noise_ratio(n):.2f}x the noise floor, but {b} trades off with {a} "
+                              f"(correlation {r:+.2f}): it changes what {best.id} already does, where this "
+                              f"effect's law and the vehicle's differ, and is not named on its own")
             return pair, (f"; adding {pair.effects[1]} lowers the remainder from {left:.2f}x to "
                           f"{pair.noise_ratio(n):.2f}x the noise floor (p = {p:.2f})")
         break
     return best, ""
+
+
+def _both(base: FloatArray, best: CandidateScore, second: CandidateScore, pairs: Sequence[CandidateScore],
+          n: FloatArray, draws: npt.NDArray[np.int64], rules: DecisionRules) -> CandidateScore | None:
+    """The pair of two inseparable singles when held-out events prefer it to *each* of them and it explains
+    ``pair_gain`` more of the gap than the better one: two effects that are both present look alike one at a
+    time (each takes up part of the other's signature), and only their joint fit separates them."""
+    base_excess = float(base.sum() - n.sum())
+    for pair in pairs:
+        if set(pair.effects) != {best.id, second.id} or base_excess <= 0:
+            continue
+        p = min(paired_better_probability(pair.chi2, c.chi2, draws) for c in (best, second))
+        gain = float(best.chi2.sum() - pair.chi2.sum()) / base_excess
+        if pair.significant and p >= rules.prefer_probability and gain >= rules.pair_gain:
+            return pair
+    return None
 
 
 def remainder_field(above: Sequence[str], ratio_to_noise: float, explained: bool | None) -> dict[str, Any]:
@@ -308,3 +343,26 @@ def remainder_field(above: Sequence[str], ratio_to_noise: float, explained: bool
                 "ratio_to_noise": round(float(ratio_to_noise), 4)}
     return {"status": "structured", "explained_by_candidates": explained, "where": list(above),
             "ratio_to_noise": round(float(ratio_to_noise), 4)}
+
+
+def with_tones(decision: Decision, tones: Sequence[OrderTone]) -> Decision:
+    """``decision`` with the speed channel's motor-order tones (:mod:`.orders`) named as structured remainder.
+
+    A tone locked to the rotor angle is structure no candidate in the library models (torque ripple, a
+    resolver's angle error), so whatever the events say, the remainder is ``structured`` and the status
+    is never ``explained``.
+    """
+    if not tones or decision.status == "insufficient_data":
+        return decision
+    names = [t.describe() for t in tones]
+    old = decision.details.get("remainder") or {}
+    where = [*old.get("where", []), *names]
+    ratio = float(old.get("ratio_to_noise", 0.0))
+    explained = old.get("explained_by_candidates")
+    details = {**decision.details, "tones": [t.to_dict() for t in tones],
+               "remainder": remainder_field(where, ratio, explained=False if explained else explained)}
+    status = "partial" if decision.status == "explained" else decision.status
+    reason = (f"{decision.reason}. The speed carries {'a tone' if len(tones) == 1 else 'tones'} locked to the rotor "
+              f"angle: {', '.join(names)} (F = {max(t.f_stat for t in tones):.0f} against the blocks' own "
+              f"noise): torque ripple or a speed-sensor angle error, which no candidate in the library models")
+    return replace(decision, status=status, details=details, reason=reason)

@@ -27,10 +27,12 @@ on the samples makes the simulated driveline ring where the real one does not (s
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from app.analysis.diagnosis.orders import OrderTone, find_order_tones
 from app.errors import InsufficientDataError
 
 FloatArray = npt.NDArray[np.float64]
@@ -53,6 +55,11 @@ class NoiseFloor:
     torque_sigma_nm : white noise standard deviation of the torque channel (N m), from its second
         differences like the speed's (without the quantisation floor: held values are
         ``torque_step_nm``'s part); 0 when the torque is clean or unknown.
+    tones : motor-order tones found in the speed (:mod:`.orders`); ``sigma_rpm`` is then estimated
+        with them removed, since a tone is structure, not noise.
+    retimed_bursts, retimed_frames, unresolved_bursts : runs of frames a buffering logger wrote
+        back-to-back, re-timed before anything else (:mod:`.retime`; torque and speed together), the
+        frames moved, and runs left as logged because frames were lost in them too.
     """
 
     sigma_rpm: float
@@ -62,13 +69,17 @@ class NoiseFloor:
     n_samples: int
     torque_step_nm: float = 0.0
     torque_sigma_nm: float = 0.0
+    tones: tuple[OrderTone, ...] = ()
+    retimed_bursts: int = 0
+    retimed_frames: int = 0
+    unresolved_bursts: int = 0
 
     def variance(self, slope_rpm_s: npt.ArrayLike) -> FloatArray:
         """Per-sample residual variance (rpm^2) no model can remove, for samples with slope ``slope_rpm_s``."""
         s = np.asarray(slope_rpm_s, dtype=np.float64)
         return self.sigma_rpm**2 + (self.jitter_s * s) ** 2
 
-    def to_dict(self) -> dict[str, float | int]:
+    def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -142,7 +153,14 @@ def estimate_noise_floor(t: FloatArray, values: FloatArray, quiet: npt.NDArray[n
         # the quantiser was not dithered: the MAD is zero, fall back to the RMS, which sees the rare steps
         sigma = held
     sigma = max(sigma, q / np.sqrt(12.0), 1e-6)
-    return NoiseFloor(float(sigma), q, jitter, period, n_used)
+    tones, clean, tested = find_order_tones(t, v, np.ones(t.size, bool) if quiet is None else
+                                            np.asarray(quiet, bool)[ok], period)
+    if tones:  # the floor of what no model explains is measured where the tones were removed
+        d2 = _second_differences(t, clean, tested, period)
+        mad, held = _mad_sigma(d2)
+        sigma = max(held or mad, q / np.sqrt(12.0), 1e-6)
+        n_used = int(d2.size)
+    return NoiseFloor(float(sigma), q, jitter, period, n_used, tones=tuple(tones))
 
 
 def _second_differences(t: FloatArray, v: FloatArray, quiet: npt.NDArray[np.bool_] | None,

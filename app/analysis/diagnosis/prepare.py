@@ -1,6 +1,7 @@
 """From decoded signals and detected events to the diagnosis' event data.
 
 Checks the channels (a missing one raises :class:`~app.errors.MissingSignalError` naming it),
+puts frames a buffering logger wrote back-to-back back at their sampling times (:mod:`.retime`),
 estimates the model-free noise floor from the speed samples *outside* every event window, and
 cuts each included event to the window the diagnosis simulates and scores: ``pre_s`` before the
 torque crossing to ``post_s`` after it (inside the event's own window). Each window's simulation
@@ -21,8 +22,10 @@ from app.analysis.diagnosis.noise import (
     estimate_noise_floor,
     measured_slope,
     quantisation_step,
+    sample_period,
     white_noise_sigma,
 )
+from app.analysis.diagnosis.retime import Retimed, retime_bursts
 from app.analysis.events import SPEED, TORQUE, Event, EventParams
 from app.errors import InsufficientDataError, MissingSignalError
 from app.signals import SignalSet
@@ -99,9 +102,13 @@ def prepare(signals: SignalSet, events: Sequence[Event], params: WindowParams | 
     p = params or WindowParams()
     require_channels(signals)
     tq, sp = signals[TORQUE], signals[SPEED]
+    # frames a buffering logger held and wrote back-to-back get their sampling times back (before the
+    # invalid values are dropped, so a run keeps its frame count)
+    tq_time, tq_fix = retime_bursts(tq.t, sample_period(tq.t)) if tq.t.size > 1 else (tq.t, Retimed())
+    sp_time, sp_fix = retime_bursts(sp.t, sample_period(sp.t)) if sp.t.size > 1 else (sp.t, Retimed())
     ok_t, ok_s = np.isfinite(tq.values), np.isfinite(sp.values)
-    tq_t, tq_v = tq.t[ok_t], tq.values[ok_t]
-    sp_t, sp_v = sp.t[ok_s], sp.values[ok_s]
+    tq_t, tq_v = tq_time[ok_t], tq.values[ok_t]
+    sp_t, sp_v = sp_time[ok_s], sp.values[ok_s]
     if sp_t.size < 5 or tq_t.size < 5:
         raise InsufficientDataError(f"{TORQUE} has {tq_t.size} and {SPEED} {sp_t.size} finite samples")
     quiet = np.ones(sp_t.size, dtype=bool)
@@ -109,8 +116,10 @@ def prepare(signals: SignalSet, events: Sequence[Event], params: WindowParams | 
     for ev in events:
         quiet &= ~((sp_t >= ev.t_start_s) & (sp_t <= ev.t_end_s))
         quiet_tq &= ~((tq_t >= ev.t_start_s) & (tq_t <= ev.t_end_s))
+    fixed = tq_fix + sp_fix
     noise = replace(estimate_noise_floor(sp_t, sp_v, quiet), torque_step_nm=quantisation_step(tq_v),
-                    torque_sigma_nm=white_noise_sigma(tq_t, tq_v, quiet_tq))
+                    torque_sigma_nm=white_noise_sigma(tq_t, tq_v, quiet_tq), retimed_bursts=fixed.bursts,
+                    retimed_frames=fixed.frames, unresolved_bursts=fixed.unresolved)
     slope = measured_slope(sp_t, sp_v)
     out: list[DiagEvent] = []
     skipped: list[dict[str, object]] = []

@@ -29,6 +29,7 @@ from app.analysis.diagnosis.decide import (
     decide,
     score_candidate,
     structured,
+    with_tones,
 )
 from app.analysis.diagnosis.forward import (
     DiagEvent,
@@ -244,12 +245,16 @@ def run_diagnosis(
             rem = remainder(ho, evals[pid].scores, evals[pid].predictions, period)
             alone = replace(f, effects=f.effects[:1], values={first: f.values[first]}, settings=f.settings[:1])
             first_only = evaluate(vehicle, alone, ho, opts.model, phases, period).chi2(ho_idx)
+            tangled = next(((x, y, r) for x, y, r in f.trade_offs
+                            if {x.split(".")[0], y.split(".")[0]} == {first, second}), None)
+            if tangled is not None and tangled[0].split(".")[0] != first:  # (first's parameter, second's, r)
+                tangled = (tangled[1], tangled[0], tangled[2])
             pairs.append(replace(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules,
-                                                 rem), without_second=first_only))
+                                                 rem), without_second=first_only, entangled=tangled))
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
 
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
-    decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
+    decision = with_tones(with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle), noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
                   draws=draws, fit_order=fit_order, not_applicable=not_applicable)
