@@ -121,8 +121,8 @@ class JobTable:
         """Let the lease lapse now (a clean stop): the next start resumes the job without waiting, and the
         cut-off run does not count as an attempt (only a crash does)."""
         with self._tx() as db:
-            db.execute("UPDATE jobs SET lease_until = 0, attempts = CASE WHEN attempts > 0 THEN attempts - 1 ELSE 0 END,"
-                       " stage = ?, updated_at = ?"
+            db.execute("UPDATE jobs SET lease_until = 0,"
+                       " attempts = CASE WHEN attempts > 0 THEN attempts - 1 ELSE 0 END, stage = ?, updated_at = ?"
                        " WHERE id = ? AND status = 'running' AND lease_owner = ?",
                        ("stopped with the server; resumes at the next start", now(), job_id, owner))
 
