@@ -19,8 +19,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.api.conftest import Server, analysed, create_vehicle, upload
-from tests.api.test_job_lifecycle import _alive, _workers
+from tests.api.conftest import Server, alive, analysed, create_vehicle, upload, worker_pids
 from tests.conftest import REPO
 from tests.diagnosis.lagdrive import CANDIDATES, write_lag_log
 
@@ -154,7 +153,7 @@ def test_kill_9_during_each_job_kind(kind: str, tmp_path: Path, demo_log: Path, 
             while time.monotonic() < deadline:  # until the job's worker reports progress
                 job = _job(data, case.job_id)
                 assert job["status"] in ("queued", "running"), job
-                workers = _workers(srv.proc.pid)
+                workers = worker_pids(srv.proc.pid)
                 if job["status"] == "running" and job["stage"] not in ("starting", "queued") and workers:
                     break
                 time.sleep(0.05)
@@ -163,9 +162,9 @@ def test_kill_9_during_each_job_kind(kind: str, tmp_path: Path, demo_log: Path, 
     finally:
         srv.stop(signal.SIGKILL)
     deadline = time.monotonic() + 15.0
-    while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+    while any(alive(p) for p in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert not any(_alive(p) for p in workers), "a worker outlived its killed server"
+    assert not any(alive(p) for p in workers), "a worker outlived its killed server"
     cut = _job(data, case.job_id)
     assert cut["status"] == "running" and cut["attempts"] == 1, cut
 

@@ -102,7 +102,7 @@ def test_bad_requests(client: TestClient) -> None:
 
 
 def test_deleting_the_analysis_cancels_its_diagnosis(client: TestClient) -> None:
-    from tests.api.test_job_lifecycle import _alive, _workers
+    from tests.api.conftest import alive, worker_pids
 
     st = client.app_state  # type: ignore[attr-defined]
     store = client.app.state.store  # type: ignore[attr-defined]
@@ -110,7 +110,7 @@ def test_deleting_the_analysis_cancels_its_diagnosis(client: TestClient) -> None
     assert r.status_code == 202, r.text
     did, job_id = r.json()["id"], r.json()["job_id"]
     deadline = time.monotonic() + 90
-    while not (workers := _workers(os.getpid())) and time.monotonic() < deadline:
+    while not (workers := worker_pids(os.getpid())) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert workers, "the diagnosis never got a worker"
     assert client.delete(f"/analyses/{st['analysis']}").status_code == 204
@@ -118,8 +118,8 @@ def test_deleting_the_analysis_cancels_its_diagnosis(client: TestClient) -> None
     assert job.status.value == "failed" and job.error_code == "cancelled"
     assert st["analysis"] in (job.error_detail or "")
     deadline = time.monotonic() + 15
-    while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+    while any(alive(p) for p in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert not any(_alive(p) for p in workers), "the deleted analysis' diagnosis worker still runs"
+    assert not any(alive(p) for p in workers), "the deleted analysis' diagnosis worker still runs"
     assert client.get(f"/diagnoses/{did}").status_code == 404
     assert store.job_counts()["running"] == 0

@@ -13,8 +13,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.api.conftest import Server, create_vehicle, upload, wait_for
-from tests.api.test_job_lifecycle import _workers
+from tests.api.conftest import Server, create_vehicle, upload, wait_for, worker_pids
 from tests.api.test_kill_each_kind import _job
 from tests.diagnosis.lagdrive import CANDIDATES, process_gone, write_lag_log
 
@@ -50,7 +49,7 @@ def test_a_diagnosis_over_its_time_limit_fails_while_health_answers(tmp_path: Pa
             health_checks, seen, workers = 0, set(), set()
             assert srv.proc is not None
             while True:
-                workers.update(_workers(srv.proc.pid))
+                workers.update(worker_pids(srv.proc.pid))
                 # a server whose GIL a fit held would raise a timeout here
                 assert c.get("/health", timeout=5.0).status_code == 200
                 health_checks += 1
@@ -88,10 +87,10 @@ def test_sigterm_stops_the_worker_and_requeues_the_diagnosis(tmp_path: Path, lag
                 time.sleep(0.05)
             assert doc["status"] == "running", doc
             assert proc is not None
-            workers = _workers(proc.pid)
+            workers = worker_pids(proc.pid)
             while not workers and time.monotonic() < deadline:
                 time.sleep(0.05)
-                workers = _workers(proc.pid)
+                workers = worker_pids(proc.pid)
             assert workers
     finally:
         srv.stop(signal.SIGTERM)
