@@ -8,7 +8,8 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
     options           {"candidates": [...], "seed": int, "rules": {...decision thresholds}}
     split             {"seed", "calibration": [event], "heldout": [event], "sha256", "strata"}
     noise_floor       {"sigma_rpm", "quant_step_rpm", "jitter_s", "period_s", "n_samples", "torque_step_nm",
-                      "torque_sigma_nm"}
+                      "torque_sigma_nm", "tones": [{"order", "amplitude_rpm", "f_stat", "p_value", "blocks"}],
+                      "retimed_bursts", "retimed_frames", "unresolved_bursts"}
     events_skipped    [{"index", "reason"}]
     decision          {"status": one of explained|partial|ambiguous|none_of_candidates|
                                  no_significant_gap|insufficient_data,
@@ -20,8 +21,10 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                        "remainder_above_noise": [names of the remainder statistics above noise],
                        "remainder": {"status": "noise" | "structured",
                                      "explained_by_candidates": bool | null (null: there was no gap),
-                                     "where": ["overall" | "impact" | "locked" | "phase:<name>"],
+                                     "where": ["overall" | "impact" | "locked" | "phase:<name>" |
+                                               "motor order <k> (<a> rpm)"],
                                      "ratio_to_noise": float},
+                       "tones": [as in noise_floor] (when the speed carries motor-order tones),
                        "identifiability": [{"params": [a, b], "correlation",
                                             "identified": {"name", "unit", "value", "nominal"} | null}]
                                           (only when the chosen fit has parameters that trade off),
