@@ -149,6 +149,14 @@ def alive(pid: int) -> bool:
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
+def assert_gone(workers: list[int] | set[int], why: str, timeout: float = 15.0) -> None:
+    """Wait up to ``timeout`` s for every pid in ``workers`` to exit; fail with ``why`` if one still runs."""
+    deadline = time.monotonic() + timeout
+    while any(alive(p) for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(alive(p) for p in workers), why
+
+
 def running_worker(c: httpx.Client, srv: Server, url: str, timeout: float = 90.0) -> list[int]:
     """Wait until the job behind ``url`` reports progress from its worker; return the worker pids."""
     assert srv.proc is not None

@@ -4,13 +4,12 @@ after its lease lapses), and deleting an analysis cancels its running jobs and f
 from __future__ import annotations
 
 import signal
-import time
 from pathlib import Path
 
 import httpx
 import pytest
 
-from tests.api.conftest import Server, alive, analysed, create_vehicle, running_worker, upload, wait_for
+from tests.api.conftest import Server, analysed, assert_gone, create_vehicle, running_worker, upload, wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -26,10 +25,7 @@ def test_kill_9_mid_analysis_runs_it_once_more(tmp_path: Path, demo_log: Path,
         analysis_id = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
         workers = running_worker(c, srv, f"/analyses/{analysis_id}")
     srv.stop(signal.SIGKILL)
-    deadline = time.monotonic() + 15.0
-    while any(alive(p) for p in workers) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not any(alive(p) for p in workers), "a worker outlived its killed server"
+    assert_gone(workers, "a worker outlived its killed server")
 
     srv = Server(data).start()
     try:
@@ -61,10 +57,7 @@ def test_delete_cancels_running_jobs_and_forgets_cached_series(tmp_path: Path, d
             workers = running_worker(c, srv, f"{tol}?n=2000&seed=1")
 
             assert c.delete(f"/analyses/{analysis_id}").status_code == 204
-            deadline = time.monotonic() + 15.0
-            while any(alive(p) for p in workers) and time.monotonic() < deadline:
-                time.sleep(0.1)
-            assert not any(alive(p) for p in workers), "the deleted analysis' tolerance worker still runs"
+            assert_gone(workers, "the deleted analysis' tolerance worker still runs")
             gone = c.get(f"/analyses/{analysis_id}/speed", params={"max_points": 500})
             assert gone.status_code == 404 and gone.json()["code"] == "not_found"
             assert c.get(f"/analyses/{analysis_id}").status_code == 404

@@ -19,7 +19,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.api.conftest import Server, alive, analysed, create_vehicle, upload, worker_pids
+from tests.api.conftest import Server, analysed, assert_gone, create_vehicle, upload, worker_pids
 from tests.conftest import REPO
 from tests.diagnosis.lagdrive import CANDIDATES, write_lag_log
 
@@ -161,10 +161,7 @@ def test_kill_9_during_each_job_kind(kind: str, tmp_path: Path, demo_log: Path, 
                 raise AssertionError(f"the {kind} job never ran")
     finally:
         srv.stop(signal.SIGKILL)
-    deadline = time.monotonic() + 15.0
-    while any(alive(p) for p in workers) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not any(alive(p) for p in workers), "a worker outlived its killed server"
+    assert_gone(workers, "a worker outlived its killed server")
     cut = _job(data, case.job_id)
     assert cut["status"] == "running" and cut["attempts"] == 1, cut
 

@@ -4,14 +4,13 @@ mid-analysis the other takes the job over once the lease has run out and runs it
 from __future__ import annotations
 
 import signal
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import httpx
 import pytest
 
-from tests.api.conftest import Server, alive, create_vehicle, running_worker, upload, wait_for
+from tests.api.conftest import Server, assert_gone, create_vehicle, running_worker, upload, wait_for
 
 if TYPE_CHECKING:
     from tests.pgserver import PgServer
@@ -42,10 +41,7 @@ def test_two_servers_share_one_postgresql_store(tmp_path: Path, demo_log: Path, 
             second = cb.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
             workers = running_worker(cb, b, f"/analyses/{second}")
             b.stop(signal.SIGKILL)
-            deadline = time.monotonic() + 15.0
-            while any(alive(p) for p in workers) and time.monotonic() < deadline:
-                time.sleep(0.1)
-            assert not any(alive(p) for p in workers), "a worker outlived its killed server"
+            assert_gone(workers, "a worker outlived its killed server")
 
             taken_over = wait_for(ca, second, timeout=240.0)  # A's recovery pass resumes it
             assert taken_over["status"] == "done" and taken_over["job"]["attempts"] == 2, taken_over

@@ -102,7 +102,7 @@ def test_bad_requests(client: TestClient) -> None:
 
 
 def test_deleting_the_analysis_cancels_its_diagnosis(client: TestClient) -> None:
-    from tests.api.conftest import alive, worker_pids
+    from tests.api.conftest import assert_gone, worker_pids
 
     st = client.app_state  # type: ignore[attr-defined]
     store = client.app.state.store  # type: ignore[attr-defined]
@@ -117,9 +117,6 @@ def test_deleting_the_analysis_cancels_its_diagnosis(client: TestClient) -> None
     job = store.get_job(job_id)
     assert job.status.value == "failed" and job.error_code == "cancelled"
     assert st["analysis"] in (job.error_detail or "")
-    deadline = time.monotonic() + 15
-    while any(alive(p) for p in workers) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not any(alive(p) for p in workers), "the deleted analysis' diagnosis worker still runs"
+    assert_gone(workers, "the deleted analysis' diagnosis worker still runs")
     assert client.get(f"/diagnoses/{did}").status_code == 404
     assert store.job_counts()["running"] == 0
