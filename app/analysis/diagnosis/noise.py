@@ -146,20 +146,17 @@ def estimate_noise_floor(t: FloatArray, values: FloatArray, quiet: npt.NDArray[n
     period = sample_period(t)
     jitter = timestamp_jitter(t, period)
     q = quantisation_step(v)
-    d2 = _second_differences(t, v, None if quiet is None else np.asarray(quiet, bool)[ok], period)
+    mask = None if quiet is None else np.asarray(quiet, bool)[ok]
+    tones, clean, tested = find_order_tones(t, v, np.ones(t.size, bool) if mask is None else mask, period)
+    if tones:  # the floor of what no model explains is measured where the tones were removed
+        v, mask = clean, tested
+    d2 = _second_differences(t, v, mask, period)
     sigma, held = _mad_sigma(d2)
     n_used = int(d2.size)
     if held:
         # the quantiser was not dithered: the MAD is zero, fall back to the RMS, which sees the rare steps
         sigma = held
     sigma = max(sigma, q / np.sqrt(12.0), 1e-6)
-    tones, clean, tested = find_order_tones(t, v, np.ones(t.size, bool) if quiet is None else
-                                            np.asarray(quiet, bool)[ok], period)
-    if tones:  # the floor of what no model explains is measured where the tones were removed
-        d2 = _second_differences(t, clean, tested, period)
-        mad, held = _mad_sigma(d2)
-        sigma = max(held or mad, q / np.sqrt(12.0), 1e-6)
-        n_used = int(d2.size)
     return NoiseFloor(float(sigma), q, jitter, period, n_used, tones=tuple(tones))
 
 

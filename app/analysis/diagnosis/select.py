@@ -245,10 +245,9 @@ def run_diagnosis(
             rem = remainder(ho, evals[pid].scores, evals[pid].predictions, period)
             alone = replace(f, effects=f.effects[:1], values={first: f.values[first]}, settings=f.settings[:1])
             first_only = evaluate(vehicle, alone, ho, opts.model, phases, period).chi2(ho_idx)
-            tangled = next(((x, y, r) for x, y, r in f.trade_offs
+            # a trade-off between the two effects' parameters, as (first's parameter, second's, correlation)
+            tangled = next(((x, y, r) if x.split(".")[0] == first else (y, x, r) for x, y, r in f.trade_offs
                             if {x.split(".")[0], y.split(".")[0]} == {first, second}), None)
-            if tangled is not None and tangled[0].split(".")[0] != first:  # (first's parameter, second's, r)
-                tangled = (tangled[1], tangled[0], tangled[2])
             pairs.append(replace(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules,
                                                  rem), without_second=first_only, entangled=tangled))
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
