@@ -151,7 +151,9 @@ class JobRunner:
                 p.join(5.0)
                 self.store.release_lease(job_id, self.owner)
         for pool in self._pools.values():
-            pool.shutdown(wait=wait, cancel_futures=True)
+            # with the workers killed, the pool threads return at once; they are joined (unless jobs run in
+            # them) so that nobody closes the store under a thread still reading it
+            pool.shutdown(wait=wait or not self.in_process, cancel_futures=True)
 
     # -- one job ---------------------------------------------------------------------------
     def _run(self, job_id: str) -> None:
