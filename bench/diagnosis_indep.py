@@ -13,7 +13,8 @@ Printed: one line per case, a confusion matrix, and the issue's targets as PASS/
     .venv/bin/python bench/diagnosis_indep.py --set dev --quick     # 15 cases, 40 s drives
     .venv/bin/python bench/diagnosis_indep.py --set dev --jobs 2    # 44 cases, 60 s drives
     .venv/bin/python bench/diagnosis_indep.py --set final           # the held-back seed set
-    .venv/bin/python bench/diagnosis_indep.py --set holdout         # a second one, for the rule as fixed last
+    .venv/bin/python bench/diagnosis_indep.py --set holdout         # a second one (spent: used for tuning since)
+    .venv/bin/python bench/diagnosis_indep.py --set check           # a third, for the rule as fixed last
 """
 
 from __future__ import annotations
@@ -54,8 +55,8 @@ class Result:
     error: str = ""
 
 
-def generate(which: str, quick: bool) -> tuple[Path, list[Case]]:
-    """The set's cases, generated once and cached (manifest + BLF per drive)."""
+def generate(which: str, quick: bool, jobs: int = 1) -> tuple[Path, list[Case]]:
+    """The set's cases, generated once and cached (manifest + BLF per drive); ``jobs`` processes."""
     folder = OUT / which / ("quick" if quick else "full")
     manifest = folder / "manifest.json"
     todo = plan(which, quick)
@@ -65,11 +66,12 @@ def generate(which: str, quick: bool) -> tuple[Path, list[Case]]:
             return folder, [done[c.name] for c in todo]
     folder.mkdir(parents=True, exist_ok=True)
     out = []
-    for i, c in enumerate(todo):
-        t0 = time.time()
-        out.append(build(c, folder))
-        print(f"generate [{i + 1}/{len(todo)}] {c.name}: {c.signal_sigma:.1f} sigma ({time.time() - t0:.0f} s)",
-              file=sys.stderr, flush=True)
+    t0 = time.time()
+    with ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else _Serial() as pool:
+        for i, c in enumerate(pool.map(build, todo, [folder] * len(todo))):
+            out.append(c)
+            print(f"generate [{i + 1}/{len(todo)}] {c.name}: {c.signal_sigma:.1f} sigma ({time.time() - t0:.0f} s)",
+                  file=sys.stderr, flush=True)
     write_manifest(manifest, out)
     return folder, out
 
@@ -180,13 +182,19 @@ def targets(results: list[Result]) -> None:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--set", choices=("dev", "final", "holdout"), default="dev", dest="which")
+    ap.add_argument("--set", choices=("dev", "final", "holdout", "check"), default="dev", dest="which")
     ap.add_argument("--quick", action="store_true", help="15 cases, 40 s drives")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes for the diagnoses")
     ap.add_argument("--only", default=None, choices=("none", "single", "faint", "pair", "ool"), help="one case kind")
+    ap.add_argument("--case", action="append", default=[], help="only the case of this name (repeatable)")
     ap.add_argument("--generate-only", action="store_true", help="make (or check) the cached drives and stop")
     args = ap.parse_args()
-    folder, todo = generate(args.which, args.quick)
+    folder, todo = generate(args.which, args.quick, args.jobs)
+    if args.case:
+        todo = [c for c in todo if c.name in args.case]
+        if not todo:
+            print(f"no case named {args.case}", file=sys.stderr)
+            return 2
     if args.only:
         todo = [c for c in todo if c.kind == args.only]
         if not todo:

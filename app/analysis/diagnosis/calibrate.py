@@ -218,6 +218,7 @@ def fit(
     start: FitResult | None = None,
     max_nfev: int | None = None,
     n_random_starts: int = 1,
+    screen: bool = True,
     seed: int = 0,
 ) -> FitResult:
     """Fit nuisance (+ effect) parameters on the calibration events of ``split``.
@@ -233,6 +234,8 @@ def fit(
     start : a previous fit whose nuisance (and effect values) seed this one.
     max_nfev : budget of residual evaluations for the local refinement.
     n_random_starts : random effect-parameter start points screened besides the fixed ones.
+    screen : screen the fixed and random start points; False: refine from ``start`` alone (it must
+        hold values for every effect).
     seed : RNG seed of the random start points.
     """
     require_calibration(split, events)
@@ -246,15 +249,22 @@ def fit(
     else:
         prev = start.values if start is not None else None
         if prev is not None and all(e.id in prev for e in effects):
-            candidates.append(prob.encode(nui0, prev))
+            u0 = prob.encode(nui0, prev)
+            if not screen:  # a start on a bound barely moves (see _starts)
+                u0[prob.N_NUISANCE:] = np.clip(u0[prob.N_NUISANCE:], 0.03, 0.97)
+            candidates.append(u0)
+        elif not screen:
+            raise ValueError("fit(screen=False) needs a start with values for every effect")
+    if effects and screen:
         # the baseline's nuisance values may have soaked up the effect (a road load taking a drag, an
         # offset taking a delay): screen every start with them and with the nominal values
         u_nominal = prob.encode(Nuisance())[:prob.N_NUISANCE]
         for k, eff_u in enumerate(_starts(effects, rng, n_random_starts)):
             candidates.append(np.concatenate([u_nui, eff_u]))
-            if k < 2:  # mid-prior and near-off starts also with nominal nuisance values
+            if k < 4:  # the fixed starts also with nominal nuisance values (a drag start on top of a road load
+                # that took the drag in the baseline counts the drag twice and loses the screen)
                 candidates.append(np.concatenate([u_nominal, eff_u]))
-    scored = [(_chi2(prob.residuals(u)), i) for i, u in enumerate(candidates)]
+    scored = [(_chi2(prob.residuals(u)), i) for i, u in enumerate(candidates)] if len(candidates) > 1 else [(0.0, 0)]
     best_u = candidates[min(scored)[1]]
     n_par = best_u.size
     budget = max_nfev if max_nfev is not None else 6 * (n_par + 1)

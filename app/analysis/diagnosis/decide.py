@@ -64,9 +64,10 @@ class DecisionRules:
     prefer_probability: float = 0.95
     min_separation: float = 0.1
     pair_gain: float = 0.15
-    # a second effect kept for the structured remainder alone must remove at least half of that remainder's
-    # excess over noise: a smaller gain is what a second effect's extra freedom buys on model-form residue
-    pair_remainder_gain: float = 0.5
+    # a second effect kept for the structured remainder alone must remove at least this share of that
+    # remainder's excess over noise (and take it below the single's own event scatter, see _with_partner): a
+    # smaller gain is what a second effect's extra freedom buys on model-form residue
+    pair_remainder_gain: float = 0.4
     n_boot: int = 2000
     level: float = 0.9
 
@@ -231,8 +232,9 @@ def decide(
         joint = None if preferred else _both(base, best, second, pairs, n, draws, rules)
         if joint is not None:  # the two are not rivals but both present: their pair beats each of them
             joint_note = (f"; {best.id} and {second.id} alone are not separated by the held-out events "
-                          f"(p = {p:.2f}), their joint fit is preferred to each and lowers the remainder from "
-                          f"{best.noise_ratio(n):.2f}x to {joint.noise_ratio(n):.2f}x the noise floor")
+                          f"(p = {p:.2f}), the joint fit of {' and '.join(joint.effects)} is preferred to each "
+                          f"and lowers the remainder from {best.noise_ratio(n):.2f}x to "
+                          f"{joint.noise_ratio(n):.2f}x the noise floor")
             best = joint
         elif not preferred:
             return Decision("ambiguous", top=(best.id,), confusable=(best.id, second.id), gap_ratio=ratio, best=best,
@@ -302,8 +304,11 @@ def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[Candid
         left = float(ref.sum() / max(float(n.sum()), 1.0))
         lower = left - pair.noise_ratio(n)
         of_remainder = lower * float(n.sum()) / excess if excess > 0 else 0.0
+        # ... and takes it below what the single's own remainder could be, resampling the events: a second
+        # effect that lowers a remainder near the noise floor by less than that scatter is model-form residue
+        scatter_lo = best.remainder.overall.lo if best.remainder is not None else left
         for_remainder = (structured(best, rules) and lower >= rules.min_separation
-                         and of_remainder >= rules.pair_remainder_gain)
+                         and of_remainder >= rules.pair_remainder_gain and pair.noise_ratio(n) < scatter_lo)
         if p >= rules.prefer_probability and (gain >= rules.pair_gain or for_remainder):
             if pair.entangled is not None:
                 a, b, r = pair.entangled
@@ -319,17 +324,20 @@ def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[Candid
 
 def _both(base: FloatArray, best: CandidateScore, second: CandidateScore, pairs: Sequence[CandidateScore],
           n: FloatArray, draws: npt.NDArray[np.int64], rules: DecisionRules) -> CandidateScore | None:
-    """The pair of two inseparable singles when held-out events prefer it to *each* of them and it explains
-    ``pair_gain`` more of the gap than the better one: two effects that are both present look alike one at a
-    time (each takes up part of the other's signature), and only their joint fit separates them."""
+    """The best pair holding ``best`` when held-out events prefer it to *each* of the two inseparable singles
+    and it explains ``pair_gain`` more of the gap than ``best``: two effects that are both present look alike
+    one at a time (each takes up part of the other's signature), and only a joint fit separates them. The
+    pair's second effect need not be ``second``: the runner-up may only stand in for part of a third
+    effect's signature."""
     base_excess = float(base.sum() - n.sum())
-    for pair in pairs:
-        if set(pair.effects) != {best.id, second.id} or base_excess <= 0:
-            continue
+    if base_excess <= 0:
+        return None
+    for pair in sorted((q for q in pairs if best.id in q.effects), key=lambda c: float(c.chi2.sum())):
         p = min(paired_better_probability(pair.chi2, c.chi2, draws) for c in (best, second))
         gain = float(best.chi2.sum() - pair.chi2.sum()) / base_excess
         if pair.significant and p >= rules.prefer_probability and gain >= rules.pair_gain:
             return pair
+        break
     return None
 
 

@@ -42,6 +42,7 @@ from app.analysis.diagnosis.forward import (
 from app.analysis.diagnosis.identify import with_identifiability
 from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2, phase_times, uniform
 from app.analysis.diagnosis.noise import NoiseFloor
+from app.analysis.diagnosis.partners import screen_partners
 from app.analysis.diagnosis.score import EventScore
 from app.analysis.diagnosis.split import Split, make_split
 from app.analysis.diagnosis.structure import remainder
@@ -60,6 +61,9 @@ class DiagnosisOptions:
     seed: int = 0
     model: str = "multibody"
     max_pairs: int = 3  # partners tried with the best single effect
+    # a partner is fitted only if, to first order, it removes at least this share of what the best single fit
+    # leaves above noise on calibration events (partners.screen_partners): a pair fit costs 60-140 passes
+    min_partner_gain: float = 0.02
     # model-form tolerance: a residual under this fraction of the local predicted oscillation is no evidence
     # of a missing effect (see uncertainty.input_uncertainty). Off by default: at 0.15 it removed the false
     # attributions on the independent generator's no-effect drives but also hid clean 15 ms torque lags
@@ -68,6 +72,9 @@ class DiagnosisOptions:
     rules: DecisionRules = field(default_factory=DecisionRules)
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.min_partner_gain <= 1.0:
+            raise InputError(f"min_partner_gain = {self.min_partner_gain}: must be within 0..1 (a share of the "
+                             "remainder above noise)")
         if not 0.0 <= self.model_form_rel <= 1.0:
             raise InputError(f"model_form_rel = {self.model_form_rel}: must be within 0..1 (a fraction of the "
                              "predicted oscillation)")
@@ -136,11 +143,24 @@ def evaluate(base: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], mode
     return Evaluation(fitted, scores, preds)
 
 
-def _merge_start(base: FitResult, *parts: FitResult) -> FitResult:
-    values: dict[str, dict[str, float]] = {}
-    for p in parts:
-        values.update(p.values)
-    return FitResult((), base.nuisance, values, 0.0, 0, 0)
+def _refit_first(vehicle: Vehicle, cal: Sequence[DiagEvent], split: Split, first: str,
+                 evals: dict[str, Evaluation], pair_ids: Sequence[str], bounds: Bounds,
+                 opts: DiagnosisOptions) -> FitResult | None:
+    """The first effect fitted alone again, from the values the best pair (on calibration events) gave it.
+
+    A pair fit starts from the single fit and has more freedom, so it can leave a local minimum the
+    single fit stopped in; the second effect then takes the credit for what is a better fit of the
+    first. Refitted from the pair's values, the single keeps whichever of its two fits is better on
+    the calibration events (None: the first fit). Held-out data play no part in the choice.
+    """
+    single = evals[first].fit
+    best = min((evals[p].fit for p in pair_ids), key=lambda f: f.chi2, default=None)
+    if best is None or best.chi2 >= single.chi2:
+        return None
+    start = FitResult((first,), best.nuisance, {first: best.values[first]}, 0.0, 0, 0)
+    again = fit(vehicle, cal, split, (get_effect(first),), bounds=bounds, model=opts.model, start=start,
+                screen=False, seed=opts.seed)
+    return again if again.chi2 < single.chi2 else None
 
 
 def run_diagnosis(
@@ -233,13 +253,24 @@ def run_diagnosis(
     if ranked and len(ranked) > 1 and (ranked[0].explained.value < rules.explained_share
                                        or structured(ranked[0], rules)):
         first = ranked[0].id
-        # partners ranked by their calibration fit, so the choice does not peek at held-out data
-        partners = sorted((c for c in candidates if c != first), key=lambda c: evals[c].fit.chi2)
-        for second in partners[:opts.max_pairs]:
+        # partners by what each could add to the best single fit, to first order, on calibration events: the
+        # choice does not peek at held-out data, and an effect that fits to "off" alone is still found
+        say(step[0] / n_steps, f"screening partners of {first}")
+        screen = screen_partners(vehicle, cal, evals[first].fit, [c for c in candidates if c != first], opts.model)
+        fit_order.append(f"partners of {first} (linearised gain): {', '.join(s.describe() for s in screen)}")
+        excess = max(evals[first].fit.chi2 - evals[first].fit.n, 0.0)
+        for s in screen[:opts.max_pairs]:
+            if s.start and s.gain < opts.min_partner_gain * excess:
+                fit_order.append(f"{first}+{s.id}: not fitted (linearised gain under "
+                                 f"{100 * opts.min_partner_gain:g} % of the remainder above noise)")
+                continue
+            second = s.id
             say(step[0] / n_steps, f"fitting {first} + {second}")
             pid = f"{first}+{second}"
+            one = evals[first].fit
+            start = FitResult((), one.nuisance, {first: one.values[first], second: s.start}, 0.0, 0, 0)
             f = fit(vehicle, cal, split, (get_effect(first), get_effect(second)), bounds=bounds, model=opts.model,
-                    start=_merge_start(evals[first].fit, evals[first].fit, evals[second].fit), seed=opts.seed)
+                    start=start, screen=not s.start, seed=opts.seed)
             fit_order.append(f"{pid}: {[e.index for e in cal]}")
             evals[pid] = evaluate(vehicle, f, ho, opts.model, phases, period)
             rem = remainder(ho, evals[pid].scores, evals[pid].predictions, period)
@@ -251,6 +282,13 @@ def run_diagnosis(
             pairs.append(replace(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules,
                                                  rem), without_second=first_only, entangled=tangled))
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
+        refined = _refit_first(vehicle, cal, split, first, evals, [p.id for p in pairs], bounds, opts)
+        if refined is not None:
+            fit_order.append(f"{first} (again, from the pair's values): {[e.index for e in cal]}")
+            evals[first] = evaluate(vehicle, refined, ho, opts.model, phases, period)
+            rem = remainder(ho, evals[first].scores, evals[first].predictions, period)
+            singles = [score_candidate(first, (first,), b, evals[first].chi2(ho_idx), n, draws, rules, rem)
+                       if s.id == first else s for s in singles]
 
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_tones(with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle), noise.tones)
