@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import cache
 
 import numpy as np
+import pytest
 
 from app.analysis.diagnosis.calibrate import Bounds, fit
 from app.analysis.diagnosis.partners import screen_partners
@@ -30,24 +32,41 @@ def first_fit():  # type: ignore[no-untyped-def]
     cal = split.calibration_events(events)
     bounds = Bounds.for_period(noise.period_s)
     base = fit(v, cal, split, (), bounds=bounds)
-    return cal, fit(v, cal, split, (get_effect("backlash"),), bounds=bounds, start=base)
+    return cal, fit(v, cal, split, (get_effect("backlash"),), bounds=bounds, start=base), split, bounds
 
 
 def test_the_effect_left_in_the_remainder_ranks_first_with_a_start_near_its_value() -> None:
-    cal, first = first_fit()
+    cal, first, *_ = first_fit()
     screen = screen_partners(paper(), cal, first, ["torque_lag", "drag", "housing_mount", "speed_sensor"],
                              "multibody")
     assert screen[0].id == "drag"
     assert screen[0].gain > 2 * max(s.gain for s in screen[1:])
     assert screen[0].gain < first.chi2  # a share of what the first fit leaves, never more
-    assert 1.0 < screen[0].start["coulomb_nm"] <= 6.0
+    lin, third, tenth = (st["coulomb_nm"] for st in screen[0].starts)
+    assert 1.0 < lin <= 6.0 and third == pytest.approx(0.3 * lin) and tenth == pytest.approx(0.1 * lin)
     assert [s.gain for s in screen] == sorted((s.gain for s in screen), reverse=True)
 
 
 def test_a_partner_whose_signature_the_remainder_lacks_gains_little() -> None:
     """What a sensor filter could remove of the lash fit's remainder is a small fraction of the drag's: its
     signature is not what is left (the nuisance columns take what any time shift would)."""
-    cal, first = first_fit()
+    cal, first, *_ = first_fit()
     (s,) = screen_partners(paper(), cal, first, ["speed_sensor"], "multibody")
     drag = screen_partners(paper(), cal, first, ["drag"], "multibody")[0]
     assert s.gain < 0.2 * drag.gain
+
+
+def test_a_refinement_stops_at_its_pass_budget_with_the_best_point_seen() -> None:
+    """Jacobian passes count against the budget; the result is the best point seen, with the trade-off test
+    made on a Jacobian taken there."""
+    cal, first, split, bounds = first_fit()
+    effects = (get_effect("backlash"), get_effect("drag"))
+    start = {"backlash": first.values["backlash"], "drag": {"coulomb_nm": 0.5, "viscous_nms": 0.001}}
+    short = fit(paper(), cal, split, effects, bounds=bounds, start=replace(first, values=start),
+                screen=False, max_passes=8)
+    assert "pass budget" in short.message
+    assert short.nfev <= 1 + 8 + 6 + 2  # the start, the budget, one Jacobian, the final pass (and its repeat)
+    full = fit(paper(), cal, split, effects, bounds=bounds, start=replace(first, values=start),
+               screen=False)
+    assert "pass budget" not in full.message
+    assert full.chi2 <= short.chi2 < first.chi2  # the drag lowers it at once; the full refinement further

@@ -42,6 +42,8 @@ GRADE_BOUNDS_PCT = (-4.0, 4.0)
 OFFSET_PERIODS = 2.0  # time offset bounded to +-2 sample periods of the speed channel
 _PENALTY = 1e3  # residual (noise units) returned for a parameter set the simulator rejects
 TRADE_OFF_CORR = 0.9  # |correlation| of two fitted effect parameters above which the data do not separate them
+PASSES_PER_PARAM = 12  # simulator passes of a refinement per parameter (+1), finite-difference Jacobians included
+START_MARGIN = 0.005  # unit-box distance from a bound at which a refinement from a given start begins
 
 
 @dataclass(frozen=True)
@@ -132,6 +134,8 @@ class _Problem:
         self.n_res = sum(e.n for e in self.events)
         self.nfev = 0
         self.last_offset = 0.0
+        self.max_passes: int | None = None  # simulator passes before the refinement stops (see _Spent)
+        self.best: tuple[float, FloatArray, float] | None = None  # (chi2, u, offset) of the best pass so far
 
     def decode(self, u: FloatArray, offset: float = 0.0) -> tuple[Nuisance, tuple[EffectSetting, ...]]:
         x = self.lo + np.clip(u, 0.0, 1.0) * self.span
@@ -152,6 +156,8 @@ class _Problem:
         return np.asarray(np.clip((np.array(x) - self.lo) / self.span, 0.0, 1.0), dtype=np.float64)
 
     def residuals(self, u: FloatArray) -> FloatArray:
+        if self.max_passes is not None and self.nfev >= self.max_passes:
+            raise _Spent
         self.nfev += 1
         nui, settings = self.decode(u)
         try:
@@ -162,7 +168,25 @@ class _Problem:
         self.last_offset = best_offset(self.events, outs, self.bounds.offset_s)
         r = np.concatenate([weighted_residual(ev, prediction(ev, out, self.last_offset))
                             for ev, out in zip(self.events, outs, strict=True)])
-        return np.where(np.isfinite(r), r, _PENALTY)
+        r = np.where(np.isfinite(r), r, _PENALTY)
+        c2 = _chi2(r)
+        if self.best is None or c2 < self.best[0]:
+            self.best = (c2, np.array(u, dtype=np.float64), self.last_offset)
+        return r
+
+    def jacobian(self, u: FloatArray, r: FloatArray, step: float = 0.02) -> FloatArray:
+        """Forward-difference Jacobian at ``u`` (unit box, steps away from the nearer bound)."""
+        cols = []
+        for k in range(u.size):
+            du = step if u[k] <= 0.5 else -step
+            v = u.copy()
+            v[k] += du
+            cols.append((self.residuals(v) - r) / du)
+        return np.column_stack(cols)
+
+
+class _Spent(Exception):
+    """The refinement used up its simulator passes (``_Problem.max_passes``)."""
 
 
 def trade_offs(jac: FloatArray, names: Sequence[str], owners: Sequence[str],
@@ -219,6 +243,8 @@ def fit(
     max_nfev: int | None = None,
     n_random_starts: int = 1,
     screen: bool = True,
+    alternatives: Sequence[dict[str, dict[str, float]]] = (),
+    max_passes: int | None = None,
     seed: int = 0,
 ) -> FitResult:
     """Fit nuisance (+ effect) parameters on the calibration events of ``split``.
@@ -234,8 +260,10 @@ def fit(
     start : a previous fit whose nuisance (and effect values) seed this one.
     max_nfev : budget of residual evaluations for the local refinement.
     n_random_starts : random effect-parameter start points screened besides the fixed ones.
-    screen : screen the fixed and random start points; False: refine from ``start`` alone (it must
-        hold values for every effect).
+    screen : screen the fixed and random start points; False: refine from ``start`` (it must hold
+        values for every effect), or from the best of it and ``alternatives`` (effect values).
+    max_passes : simulator passes of the refinement, Jacobians included (None: ``PASSES_PER_PARAM``
+        per parameter, plus one); when they run out the best point seen is the result.
     seed : RNG seed of the random start points.
     """
     require_calibration(split, events)
@@ -249,12 +277,13 @@ def fit(
     else:
         prev = start.values if start is not None else None
         if prev is not None and all(e.id in prev for e in effects):
-            u0 = prob.encode(nui0, prev)
-            if not screen:  # a start on a bound barely moves (see _starts)
-                u0[prob.N_NUISANCE:] = np.clip(u0[prob.N_NUISANCE:], 0.03, 0.97)
-            candidates.append(u0)
+            candidates.append(prob.encode(nui0, prev))
         elif not screen:
             raise ValueError("fit(screen=False) needs a start with values for every effect")
+        if not screen:
+            candidates.extend(prob.encode(nui0, alt) for alt in alternatives)
+            for u0 in candidates:  # a start on a bound barely moves (see _starts)
+                u0[prob.N_NUISANCE:] = np.clip(u0[prob.N_NUISANCE:], START_MARGIN, 1.0 - START_MARGIN)
     if effects and screen:
         # the baseline's nuisance values may have soaked up the effect (a road load taking a drag, an
         # offset taking a delay): screen every start with them and with the nominal values
@@ -268,10 +297,20 @@ def fit(
     best_u = candidates[min(scored)[1]]
     n_par = best_u.size
     budget = max_nfev if max_nfev is not None else 6 * (n_par + 1)
-    sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
-                        diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6)
-    u = np.asarray(sol.x, dtype=np.float64)
+    prob.best = None
+    prob.max_passes = prob.nfev + (max_passes if max_passes is not None else PASSES_PER_PARAM * (n_par + 1))
+    try:
+        sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
+                            diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6)
+        u, jac, message = np.asarray(sol.x, dtype=np.float64), sol.jac, str(sol.message)
+    except _Spent:
+        assert prob.best is not None
+        u, jac, message = prob.best[1], None, f"stopped after {prob.nfev} simulator passes (the pass budget)"
+    prob.max_passes = None
     r = prob.residuals(u)
+    if jac is None and effects:
+        jac = prob.jacobian(u, r)
+        r = prob.residuals(u)  # last_offset of the solution itself
     nui, settings = prob.decode(u, prob.last_offset)
     values = {eff.id: dict(vals) for eff, vals in settings}
     at_bound = []
@@ -284,6 +323,6 @@ def fit(
         resting_off = owner != "nuisance" and abs(spec.off - value) <= 0.01 * (spec.hi - spec.lo)
         if near and not resting_off:
             at_bound.append(f"{owner}.{spec.name}")
-    pairs = trade_offs(sol.jac, [p.name for p in prob.specs], prob.owner) if effects else ()
+    pairs = trade_offs(jac, [p.name for p in prob.specs], prob.owner) if effects and jac is not None else ()
     return FitResult(tuple(e.id for e in effects), nui, values, _chi2(r), prob.n_res, prob.nfev, tuple(at_bound),
-                     str(sol.message), pairs, settings)
+                     message, pairs, settings)

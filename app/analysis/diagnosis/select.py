@@ -62,7 +62,8 @@ class DiagnosisOptions:
     model: str = "multibody"
     max_pairs: int = 3  # partners tried with the best single effect
     # a partner is fitted only if, to first order, it removes at least this share of what the best single fit
-    # leaves above noise on calibration events (partners.screen_partners): a pair fit costs 60-140 passes
+    # leaves above noise on calibration events (partners.screen_partners), and at least one standard deviation
+    # of the chi2 of pure noise (sqrt(2 n)): a pair fit costs up to 85 simulator passes
     min_partner_gain: float = 0.02
     # model-form tolerance: a residual under this fraction of the local predicted oscillation is no evidence
     # of a missing effect (see uncertainty.input_uncertainty). Off by default: at 0.15 it removed the false
@@ -258,19 +259,21 @@ def run_diagnosis(
         say(step[0] / n_steps, f"screening partners of {first}")
         screen = screen_partners(vehicle, cal, evals[first].fit, [c for c in candidates if c != first], opts.model)
         fit_order.append(f"partners of {first} (linearised gain): {', '.join(s.describe() for s in screen)}")
-        excess = max(evals[first].fit.chi2 - evals[first].fit.n, 0.0)
+        one = evals[first].fit
+        least = max(opts.min_partner_gain * max(one.chi2 - one.n, 0.0), float(np.sqrt(2.0 * one.n)))
         for s in screen[:opts.max_pairs]:
-            if s.start and s.gain < opts.min_partner_gain * excess:
-                fit_order.append(f"{first}+{s.id}: not fitted (linearised gain under "
-                                 f"{100 * opts.min_partner_gain:g} % of the remainder above noise)")
+            if s.starts and s.gain < least:
+                fit_order.append(f"{first}+{s.id}: not fitted (linearised gain {s.gain:.1f} under {least:.1f}: "
+                                 f"{100 * opts.min_partner_gain:g} % of the remainder above noise or one standard "
+                                 "deviation of the noise's chi2)")
                 continue
             second = s.id
             say(step[0] / n_steps, f"fitting {first} + {second}")
             pid = f"{first}+{second}"
-            one = evals[first].fit
-            start = FitResult((), one.nuisance, {first: one.values[first], second: s.start}, 0.0, 0, 0)
+            at = [{first: one.values[first], second: st} for st in s.starts]
+            start = FitResult((), one.nuisance, at[0] if at else {}, 0.0, 0, 0)
             f = fit(vehicle, cal, split, (get_effect(first), get_effect(second)), bounds=bounds, model=opts.model,
-                    start=start, screen=not s.start, seed=opts.seed)
+                    start=start, screen=not at, alternatives=at[1:], seed=opts.seed)
             fit_order.append(f"{pid}: {[e.index for e in cal]}")
             evals[pid] = evaluate(vehicle, f, ho, opts.model, phases, period)
             rem = remainder(ho, evals[pid].scores, evals[pid].predictions, period)
