@@ -150,6 +150,11 @@ def gap_ratio(base: FloatArray, n: FloatArray, draws: npt.NDArray[np.int64], lev
     return Interval(value, float(lo), float(hi))
 
 
+def has_gap(ratio: Interval, rules: DecisionRules) -> bool:
+    """Rule 2: whether the baseline's residual-to-noise ratio is clearly above the noise floor."""
+    return bool(ratio.value >= rules.min_gap_ratio and ratio.lo >= rules.min_gap_ratio_lo)
+
+
 def score_candidate(cid: str, effects: tuple[str, ...], base: FloatArray, cand: FloatArray, n: FloatArray,
                     draws: npt.NDArray[np.int64], rules: DecisionRules,
                     rem: Remainder | None = None) -> CandidateScore:
@@ -210,7 +215,7 @@ def decide(
             f"{n_calibration} calibration and {n_ho} held-out events; at least {rules.min_events_per_side} "
             f"usable events are needed on each side"))
     ratio = gap_ratio(base, n, draws, rules.level)
-    if ratio.value < rules.min_gap_ratio or ratio.lo < rules.min_gap_ratio_lo:
+    if not has_gap(ratio, rules):
         return Decision("no_significant_gap", gap_ratio=ratio, details={
             "remainder": remainder_field([], ratio.value, explained=None)}, reason=(
             f"baseline residual is {ratio.value:.2f}x the noise floor (90 % interval {ratio.lo:.2f}-{ratio.hi:.2f}); "

@@ -27,6 +27,8 @@ from app.analysis.diagnosis.decide import (
     DecisionRules,
     bootstrap_draws,
     decide,
+    gap_ratio,
+    has_gap,
     score_candidate,
     structured,
     with_tones,
@@ -236,6 +238,14 @@ def run_diagnosis(
     draws = bootstrap_draws(len(ho), rules, opts.seed + 1)
     b = base_eval.chi2(ho_idx)
     n = np.array([base_eval.scores[i].n for i in ho_idx], dtype=np.float64)
+    if not has_gap(gap_ratio(b, n, draws, rules.level), rules):
+        # the model fits: rule 2 decides on the baseline alone, whatever a candidate would do (a fit to a
+        # residual at the noise floor wanders over a flat objective and spends its whole pass budget)
+        fit_order.append("candidates: not fitted (the baseline residual is not clearly above the noise floor)")
+        decision = with_tones(decide(b, n, [], [], draws, rules, len(cal)), noise.tones)
+        say(1.0, f"decision: {decision.status}")
+        return result(decision, baseline=base_eval, phases=phases, draws=draws, fit_order=fit_order,
+                      not_applicable=not_applicable)
     evals: dict[str, Evaluation] = {}
     singles: list[CandidateScore] = []
     for cid in candidates:
