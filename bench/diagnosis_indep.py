@@ -14,7 +14,8 @@ Printed: one line per case, a confusion matrix, and the issue's targets as PASS/
     .venv/bin/python bench/diagnosis_indep.py --set dev --jobs 2    # 44 cases, 60 s drives
     .venv/bin/python bench/diagnosis_indep.py --set final           # the held-back seed set
     .venv/bin/python bench/diagnosis_indep.py --set holdout         # a second one (spent: used for tuning since)
-    .venv/bin/python bench/diagnosis_indep.py --set check           # a third, for the rule as fixed last
+    .venv/bin/python bench/diagnosis_indep.py --set check           # a third (scored once, then looked at)
+    .venv/bin/python bench/diagnosis_indep.py --set check2          # a fourth, for the rule as fixed last
 """
 
 from __future__ import annotations
@@ -182,7 +183,7 @@ def targets(results: list[Result]) -> None:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--set", choices=("dev", "final", "holdout", "check"), default="dev", dest="which")
+    ap.add_argument("--set", choices=("dev", "final", "holdout", "check", "check2"), default="dev", dest="which")
     ap.add_argument("--quick", action="store_true", help="15 cases, 40 s drives")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes for the diagnoses")
     ap.add_argument("--only", default=None, choices=("none", "single", "faint", "pair", "ool"), help="one case kind")

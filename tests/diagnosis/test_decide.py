@@ -226,3 +226,18 @@ def test_a_second_effect_that_trades_off_with_the_first_is_not_named() -> None:
     assert d.top == ("progressive_stiffness",)
     assert d.status == "partial"
     assert "housing_mount.stiffness_log2 trades off with progressive_stiffness.halfshaft_rel" in d.reason
+
+
+def test_a_second_effect_that_takes_the_first_off_its_prior_bound_is_not_named() -> None:
+    """The single fit left a first-effect parameter on its prior bound and the pair's fit moves it inside: the
+    second effect stands in for what the first effect's law cannot reach within its prior (a hardening mount
+    whose law is not ours read as more hardening than the prior allows, or less plus a stiffer mount)."""
+    single = _structured(cand("progressive_stiffness", BASE, 0.04, spread=0.005), 3.0)
+    pair = cand("progressive_stiffness+housing_mount", BASE, 0.002, spread=0.001, seed=4)
+    draws = bootstrap_draws(8, RULES, 1)
+    named = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [pair], draws, RULES, 8)
+    assert named.top == ("progressive_stiffness", "housing_mount")
+    relief = replace(pair, relieves=("progressive_stiffness.mount_rel", 20.0, 3.1))
+    d = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [relief], draws, RULES, 8)
+    assert (d.status, d.top) == ("partial", ("progressive_stiffness",))
+    assert "takes progressive_stiffness.mount_rel off its prior bound (20 alone, 3.1 in the pair)" in d.reason

@@ -245,6 +245,7 @@ def fit(
     screen: bool = True,
     alternatives: Sequence[dict[str, dict[str, float]]] = (),
     max_passes: int | None = None,
+    passes_per_param: int = PASSES_PER_PARAM,
     seed: int = 0,
 ) -> FitResult:
     """Fit nuisance (+ effect) parameters on the calibration events of ``split``.
@@ -262,8 +263,8 @@ def fit(
     n_random_starts : random effect-parameter start points screened besides the fixed ones.
     screen : screen the fixed and random start points; False: refine from ``start`` (it must hold
         values for every effect), or from the best of it and ``alternatives`` (effect values).
-    max_passes : simulator passes of the refinement, Jacobians included (None: ``PASSES_PER_PARAM``
-        per parameter, plus one); when they run out the best point seen is the result.
+    max_passes : simulator passes of the refinement, Jacobians included (None: ``passes_per_param``
+        per parameter, plus as many again); when they run out the best point seen is the result.
     seed : RNG seed of the random start points.
     """
     require_calibration(split, events)
@@ -298,7 +299,7 @@ def fit(
     n_par = best_u.size
     budget = max_nfev if max_nfev is not None else 6 * (n_par + 1)
     prob.best = None
-    prob.max_passes = prob.nfev + (max_passes if max_passes is not None else PASSES_PER_PARAM * (n_par + 1))
+    prob.max_passes = prob.nfev + (max_passes if max_passes is not None else passes_per_param * (n_par + 1))
     try:
         sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
                             diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6)

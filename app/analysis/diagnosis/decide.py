@@ -93,6 +93,10 @@ class CandidateScore:
     entangled : pairs only: ``(first-effect parameter, second-effect parameter, correlation)`` when the
         pair's fit cannot separate them (:func:`.calibrate.trade_offs`): the second effect then changes
         what the first one already can, and is not named on its own.
+    relieves : pairs only: ``(first-effect parameter, its value alone, its value in the pair)`` when the
+        single fit left it on a prior bound and the pair's fit moves it inside: the second effect then
+        stands in for what the first effect's law cannot reach within its prior, and is not named on
+        its own either.
     """
 
     id: str
@@ -105,6 +109,7 @@ class CandidateScore:
     remainder: RemainderTest | None = None
     without_second: FloatArray | None = None  # pairs: chi2 per event with the second effect switched off
     entangled: tuple[str, str, float] | None = None  # pairs: a first-effect parameter the second trades off with
+    relieves: tuple[str, float, float] | None = None  # pairs: a first-effect parameter the pair takes off a bound
 
     def noise_ratio(self, n: FloatArray) -> float:
         """Remaining residual-to-noise ratio ``sum(chi2) / sum(n)``."""
@@ -315,12 +320,18 @@ def _with_partner(base: FloatArray, best: CandidateScore, pairs: Sequence[Candid
         for_remainder = (structured(best, rules) and lower >= rules.min_separation
                          and of_remainder >= rules.pair_remainder_gain and pair.noise_ratio(n) < scatter_lo)
         if p >= rules.prefer_probability and (gain >= rules.pair_gain or for_remainder):
+            would = (f"; adding {pair.effects[1]} would lower the remainder from {left:.2f}x to "
+                     f"{pair.noise_ratio(n):.2f}x the noise floor, but ")
             if pair.entangled is not None:
                 a, b, r = pair.entangled
-                return best, (f"; adding {pair.effects[1]} would lower the remainder from {left:.2f}x to "
-                              f"{pair.noise_ratio(n):.2f}x the noise floor, but {b} trades off with {a} "
-                              f"(correlation {r:+.2f}): it changes what {best.id} already does, where this "
-                              f"effect's law and the vehicle's differ, and is not named on its own")
+                return best, (f"{would}{b} trades off with {a} (correlation {r:+.2f}): it changes what "
+                              f"{best.id} already does, where this effect's law and the vehicle's differ, and "
+                              f"is not named on its own")
+            if pair.relieves is not None:
+                name, alone, inside = pair.relieves
+                return best, (f"{would}it takes {name} off its prior bound ({alone:.4g} alone, {inside:.4g} in "
+                              f"the pair): it stands in for what {best.id}'s law cannot reach within its prior, "
+                              f"and is not named on its own")
             return pair, (f"; adding {pair.effects[1]} lowers the remainder from {left:.2f}x to "
                           f"{pair.noise_ratio(n):.2f}x the noise floor (p = {p:.2f})")
         break

@@ -55,6 +55,7 @@ from sim.effects import EFFECTS, get_effect
 
 FloatArray = npt.NDArray[np.float64]
 Progress = Callable[[float, str], None]
+PAIR_PASSES_PER_PARAM = 10  # a pair's refinement starts near its solution (the single fit + the screen's step)
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,7 @@ class DiagnosisOptions:
     candidates: tuple[str, ...] = tuple(EFFECTS)
     seed: int = 0
     model: str = "multibody"
-    max_pairs: int = 3  # partners tried with the best single effect
+    max_pairs: int = 2  # partners tried with the best single effect (the screen's best)
     # a partner is fitted only if, to first order, it removes at least this share of what the best single fit
     # leaves above noise on calibration events (partners.screen_partners), and at least one standard deviation
     # of the chi2 of pure noise (sqrt(2 n)): a pair fit costs up to 85 simulator passes
@@ -283,7 +284,8 @@ def run_diagnosis(
             at = [{first: one.values[first], second: st} for st in s.starts]
             start = FitResult((), one.nuisance, at[0] if at else {}, 0.0, 0, 0)
             f = fit(vehicle, cal, split, (get_effect(first), get_effect(second)), bounds=bounds, model=opts.model,
-                    start=start, screen=not at, alternatives=at[1:], seed=opts.seed)
+                    start=start, screen=not at, alternatives=at[1:], passes_per_param=PAIR_PASSES_PER_PARAM,
+                    seed=opts.seed)
             fit_order.append(f"{pid}: {[e.index for e in cal]}")
             evals[pid] = evaluate(vehicle, f, ho, opts.model, phases, period)
             rem = remainder(ho, evals[pid].scores, evals[pid].predictions, period)
@@ -292,8 +294,12 @@ def run_diagnosis(
             # a trade-off between the two effects' parameters, as (first's parameter, second's, correlation)
             tangled = next(((x, y, r) if x.split(".")[0] == first else (y, x, r) for x, y, r in f.trade_offs
                             if {x.split(".")[0], y.split(".")[0]} == {first, second}), None)
+            # a first-effect parameter the single fit left on a prior bound and the pair's fit moves inside it
+            relieved = next(((k, one.values[first][k.split(".", 1)[1]], f.values[first][k.split(".", 1)[1]])
+                             for k in one.at_bound if k.split(".")[0] == first and k not in f.at_bound), None)
             pairs.append(replace(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules,
-                                                 rem), without_second=first_only, entangled=tangled))
+                                                 rem), without_second=first_only, entangled=tangled,
+                                 relieves=relieved))
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
         refined = _refit_first(vehicle, cal, split, first, evals, [p.id for p in pairs], bounds, opts)
         if refined is not None:
