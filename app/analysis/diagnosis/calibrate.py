@@ -42,7 +42,7 @@ GRADE_BOUNDS_PCT = (-4.0, 4.0)
 OFFSET_PERIODS = 2.0  # time offset bounded to +-2 sample periods of the speed channel
 _PENALTY = 1e3  # residual (noise units) returned for a parameter set the simulator rejects
 TRADE_OFF_CORR = 0.9  # |correlation| of two fitted effect parameters above which the data do not separate them
-PASSES_PER_PARAM = 12  # simulator passes of a refinement per parameter (+1), finite-difference Jacobians included
+PASSES_PER_PARAM = 12  # a refinement's simulator passes: this x (parameters + 1), finite-difference Jacobians included
 START_MARGIN = 0.005  # unit-box distance from a bound at which a refinement from a given start begins
 
 
@@ -264,7 +264,8 @@ def fit(
     screen : screen the fixed and random start points; False: refine from ``start`` (it must hold
         values for every effect), or from the best of it and ``alternatives`` (effect values).
     max_passes : simulator passes of the refinement, Jacobians included (None: ``passes_per_param``
-        per parameter, plus as many again); when they run out the best point seen is the result.
+        x (parameters + 1)); when they run out the best point seen is the result.
+    passes_per_param : see ``max_passes``.
     seed : RNG seed of the random start points.
     """
     require_calibration(split, events)

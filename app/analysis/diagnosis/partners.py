@@ -17,7 +17,7 @@ that size) and would never be tried. The screen asks each candidate instead what
   hardening of 3 % of the prior raised the residual 55-fold).
 
 Only calibration events are used. Cost: one pass per parameter (about 15 passes for the library),
-against about 60-140 passes for each pair fit it saves.
+against up to about 70 for each pair fit it saves.
 """
 
 from __future__ import annotations

@@ -66,7 +66,7 @@ class DiagnosisOptions:
     max_pairs: int = 2  # partners tried with the best single effect (the screen's best)
     # a partner is fitted only if, to first order, it removes at least this share of what the best single fit
     # leaves above noise on calibration events (partners.screen_partners), and at least one standard deviation
-    # of the chi2 of pure noise (sqrt(2 n)): a pair fit costs up to 85 simulator passes
+    # of the chi2 of pure noise (sqrt(2 n)): a pair fit costs up to about 70 simulator passes
     min_partner_gain: float = 0.02
     # model-form tolerance: a residual under this fraction of the local predicted oscillation is no evidence
     # of a missing effect (see uncertainty.input_uncertainty). Off by default: at 0.15 it removed the false
