@@ -144,7 +144,8 @@ def run_case(case: Case, maker: LogMaker, duration: float, dump: Path | None = N
     shrink = d.best.shrink.value if d.best is not None and d.top else float("nan")
     oracle = float("nan")
     if case.truth and case.truth in case.candidates:
-        oracle = next(s.shrink.value for s in res.singles if s.id == case.truth)
+        # no singles are fitted when the baseline shows no significant gap
+        oracle = next((s.shrink.value for s in res.singles if s.id == case.truth), float("nan"))
     second = float("nan")
     fitted: dict[str, float] = {}
     if case.truth and d.top and d.top[0] == case.truth and d.status in ("explained", "partial"):
