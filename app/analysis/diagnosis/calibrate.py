@@ -310,10 +310,10 @@ def fit(
         u, jac, message = prob.best[1], None, f"stopped after {prob.nfev} simulator passes (the pass budget)"
     prob.max_passes = None
     r = prob.residuals(u)
+    offset = prob.last_offset  # of the solution itself (a Jacobian's passes move it)
     if jac is None and effects:
         jac = prob.jacobian(u, r)
-        r = prob.residuals(u)  # last_offset of the solution itself
-    nui, settings = prob.decode(u, prob.last_offset)
+    nui, settings = prob.decode(u, offset)
     values = {eff.id: dict(vals) for eff, vals in settings}
     at_bound = []
     lo_off, hi_off = bounds.offset_s

@@ -249,14 +249,19 @@ def run_diagnosis(
                       not_applicable=not_applicable)
     evals: dict[str, Evaluation] = {}
     singles: list[CandidateScore] = []
+
+    def held_out(cid: str, effects: tuple[str, ...], fitted: FitResult) -> CandidateScore:
+        """Evaluate ``fitted`` on the held-out events (kept in ``evals[cid]``) and score it."""
+        evals[cid] = evaluate(vehicle, fitted, ho, opts.model, phases, period)
+        rem = remainder(ho, evals[cid].scores, evals[cid].predictions, period)
+        return score_candidate(cid, effects, b, evals[cid].chi2(ho_idx), n, draws, rules, rem)
+
     for cid in candidates:
         say(step[0] / n_steps, f"fitting {cid}")
         f = fit(vehicle, cal, split, (get_effect(cid),), bounds=bounds, model=opts.model, start=base_fit,
                 seed=opts.seed)
         fit_order.append(f"{cid}: {[e.index for e in cal]}")
-        evals[cid] = evaluate(vehicle, f, ho, opts.model, phases, period)
-        rem = remainder(ho, evals[cid].scores, evals[cid].predictions, period)
-        singles.append(score_candidate(cid, (cid,), b, evals[cid].chi2(ho_idx), n, draws, rules, rem))
+        singles.append(held_out(cid, (cid,), f))
         tick(f"{cid}: held-out shrink {100 * singles[-1].shrink.value:.0f} %")
 
     pairs: list[CandidateScore] = []
@@ -287,8 +292,6 @@ def run_diagnosis(
                     start=start, screen=not at, alternatives=at[1:], passes_per_param=PAIR_PASSES_PER_PARAM,
                     seed=opts.seed)
             fit_order.append(f"{pid}: {[e.index for e in cal]}")
-            evals[pid] = evaluate(vehicle, f, ho, opts.model, phases, period)
-            rem = remainder(ho, evals[pid].scores, evals[pid].predictions, period)
             alone = replace(f, effects=f.effects[:1], values={first: f.values[first]}, settings=f.settings[:1])
             first_only = evaluate(vehicle, alone, ho, opts.model, phases, period).chi2(ho_idx)
             # a trade-off between the two effects' parameters, as (first's parameter, second's, correlation)
@@ -297,17 +300,14 @@ def run_diagnosis(
             # a first-effect parameter the single fit left on a prior bound and the pair's fit moves inside it
             relieved = next(((k, one.values[first][k.split(".", 1)[1]], f.values[first][k.split(".", 1)[1]])
                              for k in one.at_bound if k.split(".")[0] == first and k not in f.at_bound), None)
-            pairs.append(replace(score_candidate(pid, (first, second), b, evals[pid].chi2(ho_idx), n, draws, rules,
-                                                 rem), without_second=first_only, entangled=tangled,
+            pairs.append(replace(held_out(pid, (first, second), f), without_second=first_only, entangled=tangled,
                                  relieves=relieved))
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
         refined = _refit_first(vehicle, cal, split, first, evals, [p.id for p in pairs], bounds, opts)
         if refined is not None:
             fit_order.append(f"{first} (again, from the pair's values): {[e.index for e in cal]}")
-            evals[first] = evaluate(vehicle, refined, ho, opts.model, phases, period)
-            rem = remainder(ho, evals[first].scores, evals[first].predictions, period)
-            singles = [score_candidate(first, (first,), b, evals[first].chi2(ho_idx), n, draws, rules, rem)
-                       if s.id == first else s for s in singles]
+            again = held_out(first, (first,), refined)
+            singles = [again if s.id == first else s for s in singles]
 
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_tones(with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle), noise.tones)
