@@ -108,6 +108,12 @@ class InsufficientDataError(AnalysisError):
     code = "insufficient_data"
 
 
+class NotIdentifiableError(AnalysisError):
+    """The log cannot pin down what was asked of it (a parameter, or anything of the vehicle)."""
+
+    code = "not_identifiable"
+
+
 class InputError(AppError, ValueError):
     code = "invalid_input"
     status = 400

@@ -92,6 +92,10 @@ class FitResult:
     message: str = ""
     trade_offs: tuple[tuple[str, str, float], ...] = ()
     settings: tuple[EffectSetting, ...] = field(default=(), repr=False, compare=False)
+    # at the solution, for interval estimates: the weighted residual (events in order) and its Jacobian in the
+    # unit box (nuisance columns first, then the effects'; None when it was not computed, e.g. the baseline)
+    residual: FloatArray | None = field(default=None, repr=False, compare=False)
+    jac: FloatArray | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -327,4 +331,4 @@ def fit(
             at_bound.append(f"{owner}.{spec.name}")
     pairs = trade_offs(jac, [p.name for p in prob.specs], prob.owner) if effects and jac is not None else ()
     return FitResult(tuple(e.id for e in effects), nui, values, _chi2(r), prob.n_res, prob.nfev, tuple(at_bound),
-                     message, pairs, settings)
+                     message, pairs, settings, r, None if jac is None else np.asarray(jac, dtype=np.float64))

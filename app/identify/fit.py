@@ -1,0 +1,363 @@
+"""Grey-box identification: the base parameters of the vehicle file fitted to the log's event windows.
+
+The fit is the diagnosis' bounded joint least squares (:func:`app.analysis.diagnosis.calibrate.fit`)
+with the base parameters of :mod:`.base` as its "effects" and the nuisance parameters (torque-speed
+offset, torque gain, road load) free as always. Procedure::
+
+    baseline (nuisance only), input uncertainty added        all fitted events
+    start points: the file's values, and the model-free mode's (stiffness from the frequency ratio
+        squared, damping from the damping-ratio ratio)
+    joint fit of every base parameter + nuisance              pass budget PASSES_PER_PARAM x (params + 1)
+    intervals: event-clustered sandwich covariance            the residuals of one event are correlated in
+        time, events are independent: cov = B^-1 (sum_e J_e^T r_e r_e^T J_e) B^-1 G/(G-1), B = J^T J,
+        quantiles of Student's t with G-1 degrees of freedom (G events)
+    identifiability: a parameter whose interval spans more than IDENT_SPAN of its prior range is not
+        identified; it is held at the file's value and the rest refitted once
+
+A parameter resting within 1 % of its prior bound is reported ``at_bound`` (the fit says so, the
+value is not trusted). A parameter is *named* (the data sheet is off) when it is identified, not at a
+bound, its interval excludes the file's value and it moved by more than :data:`PRACTICAL` (a 1 %
+stiffness change with a tight interval is no engineering finding).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy import stats
+
+from app.analysis.diagnosis.calibrate import GAIN_BOUNDS, Bounds, FitResult, fit
+from app.analysis.diagnosis.forward import DiagEvent, Nuisance
+from app.analysis.diagnosis.noise import NoiseFloor
+from app.analysis.diagnosis.split import Split
+from app.analysis.diagnosis.uncertainty import with_input_uncertainty
+from app.errors import InsufficientDataError, NotIdentifiableError
+from app.identify.base import BASE_EFFECTS, BASE_NAMES, LABELS, UNITS, Physical, physical, ratio_of, with_base
+from sim import Vehicle
+from sim.errors import SimError
+
+FloatArray = npt.NDArray[np.float64]
+Progress = Callable[[float, str], None]
+
+PASSES_PER_PARAM = 10  # simulator passes of the joint refinement per parameter (+1), Jacobians included
+IDENT_SPAN = 0.5  # a parameter whose interval covers more than this share of its prior range is not identified
+MIN_EVENTS = 4  # events an identification needs (the interval has G-1 degrees of freedom)
+PRACTICAL = {"stiffness": 0.04, "damping": 0.15, "mass": 0.03, "lash": 0.08}  # smallest change worth naming
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """What is fitted and how.
+
+    Attributes
+    ----------
+    params : base parameters to fit (subset of :data:`~.base.BASE_NAMES`).
+    model : simulator model.
+    level : interval level.
+    seed : seed of the input-uncertainty draws.
+    passes_per_param : pass budget of the joint refinement (x (parameters + 1)).
+    """
+
+    params: tuple[str, ...] = BASE_NAMES
+    model: str = "multibody"
+    level: float = 0.9
+    seed: int = 0
+    passes_per_param: int = PASSES_PER_PARAM
+
+
+@dataclass(frozen=True)
+class Param:
+    """One identified quantity (physical units) with its interval and status."""
+
+    name: str
+    label: str
+    unit: str
+    value: float
+    lo: float
+    hi: float
+    nominal: float
+    ratio: float  # fitted parameter / the file's (the damping: its scale on every damper)
+    ratio_lo: float
+    ratio_hi: float
+    identified: bool
+    at_bound: bool
+    named: bool
+    note: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        def r(x: float) -> float | None:
+            return round(float(x), 6) if np.isfinite(x) else None
+        return {"name": self.name, "label": self.label, "unit": self.unit, "value": r(self.value), "lo": r(self.lo),
+                "hi": r(self.hi), "nominal": r(self.nominal), "ratio": r(self.ratio), "ratio_lo": r(self.ratio_lo),
+                "ratio_hi": r(self.ratio_hi), "identified": self.identified, "at_bound": self.at_bound,
+                "named": self.named, "note": self.note}
+
+    def describe(self) -> str:
+        """One line: "torsional stiffness at the motor 0.70x nominal [0.66, 0.75] (79.0 N m/rad)"."""
+        if not self.identified:
+            return f"{self.label}: not identified, kept at the file's {self.nominal:.4g} {self.unit}"
+        bound = ", at a prior bound" if self.at_bound else ""
+        return (f"{self.label} {self.value / self.nominal:.2f}x nominal [{self.lo / self.nominal:.2f}, "
+                f"{self.hi / self.nominal:.2f}] ({self.value:.4g} {self.unit}, file {self.nominal:.4g}{bound})")
+
+
+@dataclass
+class Identification:
+    """Outcome of :func:`identify_events`."""
+
+    vehicle: Vehicle  # the identified vehicle (unidentified parameters at the file's values)
+    params: dict[str, Param]
+    nuisance: dict[str, float]
+    ratios: dict[str, float]  # every fitted base parameter as a ratio to the file's value
+    chi2_before: float  # weighted SSE of the file's vehicle (nuisance fitted) on the fitted events
+    chi2_after: float
+    n_samples: int
+    n_events: int
+    fit: FitResult
+    nominal_physical: Physical
+    physical: Physical
+    not_identified: list[str] = field(default_factory=list)
+    fit_log: list[str] = field(default_factory=list)
+    elapsed_s: float = 0.0
+    modal_start: dict[str, float] | None = None
+
+    @property
+    def named(self) -> list[str]:
+        return [k for k, p in self.params.items() if p.named]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "params": {k: p.to_dict() for k, p in self.params.items()},
+            "named": self.named,
+            "not_identified": self.not_identified,
+            "nuisance": {k: round(v, 6) for k, v in self.nuisance.items()},
+            "ratios": {k: round(v, 6) for k, v in self.ratios.items()},
+            "residual_to_noise_before": round(self.chi2_before / max(self.n_samples, 1), 4),
+            "residual_to_noise_after": round(self.chi2_after / max(self.n_samples, 1), 4),
+            "events": self.n_events,
+            "simulator_passes": self.fit.nfev,
+            "at_bound": list(self.fit.at_bound),
+            "fit_log": self.fit_log,
+            "modal_start": self.modal_start,
+            "elapsed_s": round(self.elapsed_s, 3),
+        }
+
+
+def all_events_split(events: Sequence[DiagEvent]) -> Split:
+    """Every event on the fitting side (identification scores on another drive, not on held-out events)."""
+    return Split(-1, tuple(e.index for e in events), (), "identification")
+
+
+def _spec_offset(fitted: FitResult) -> int:
+    """Columns of the Jacobian before the base parameters (the nuisance vector)."""
+    assert fitted.jac is not None
+    return int(fitted.jac.shape[1]) - len(fitted.effects)
+
+
+def sandwich(fitted: FitResult, events: Sequence[DiagEvent]) -> FloatArray:
+    """Event-clustered covariance of the unit-box parameters at the solution (nuisance columns included)."""
+    if fitted.jac is None or fitted.residual is None:
+        raise NotIdentifiableError("the fit has no Jacobian at its solution")
+    j, r = fitted.jac, fitted.residual
+    b_inv = np.linalg.pinv(j.T @ j)
+    meat = np.zeros_like(b_inv)
+    i = 0
+    for ev in events:
+        je, re = j[i:i + ev.n], r[i:i + ev.n]
+        s = je.T @ re
+        meat += np.outer(s, s)
+        i += ev.n
+    g = len(events)
+    return np.asarray(b_inv @ meat @ b_inv * g / max(g - 1, 1), dtype=np.float64)
+
+
+def _starts(names: Sequence[str], vehicle: Vehicle, modal: Mapping[str, float] | None) -> list[dict[str, dict[str, float]]]:
+    """Effect values to start from: the file's, and the model-free mode's where one is given."""
+    nominal = {BASE_EFFECTS[n].id: BASE_EFFECTS[n].off_values() for n in names}
+    if not modal:
+        return [nominal]
+    ph = physical(vehicle)
+    guess = dict(nominal)
+    k = 1.0
+    if "stiffness" in names and np.isfinite(ph.freq_hz) and modal.get("freq_hz", 0.0) > 0:
+        spec = BASE_EFFECTS["stiffness"].params[0]
+        k = float(np.clip((modal["freq_hz"] / ph.freq_hz) ** 2, spec.lo, spec.hi))
+        guess[BASE_EFFECTS["stiffness"].id] = {"scale": k}
+    if "damping" in names and np.isfinite(ph.damping_ratio) and ph.damping_ratio > 0 and modal.get("zeta", 0.0) > 0:
+        spec = BASE_EFFECTS["damping"].params[0]
+        c = float(np.clip(np.log2(modal["zeta"] / ph.damping_ratio * np.sqrt(k)), spec.lo, spec.hi))
+        guess[BASE_EFFECTS["damping"].id] = {"log2_scale": c}
+    return [guess, nominal]
+
+
+def _joint(vehicle: Vehicle, events: Sequence[DiagEvent], split: Split, names: Sequence[str], bounds: Bounds,
+           opts: FitOptions, base: FitResult, starts: Sequence[dict[str, dict[str, float]]]) -> FitResult:
+    effects = tuple(BASE_EFFECTS[n] for n in names)
+    first = FitResult((), base.nuisance, dict(starts[0]), 0.0, 0, 0)
+    return fit(vehicle, events, split, effects, bounds=bounds, model=opts.model, start=first, screen=False,
+               alternatives=list(starts[1:]), passes_per_param=opts.passes_per_param, seed=opts.seed)
+
+
+def _physical_interval(vehicle: Vehicle, ratios: Mapping[str, float], cov_ratio: FloatArray, names: Sequence[str],
+                       t: float) -> dict[str, tuple[float, float, float]]:
+    """(value, lo, hi) of each physical figure: the delta method through :func:`.base.physical`."""
+    ph0 = physical(with_base(vehicle, ratios))
+    grads = np.zeros((len(BASE_NAMES), len(names)))
+    for c, n in enumerate(names):
+        h = 0.01 * ratios[n]
+        ph1 = physical(with_base(vehicle, {**ratios, n: ratios[n] + h}))
+        for row, q in enumerate(BASE_NAMES):
+            grads[row, c] = (ph1.value(q) - ph0.value(q)) / h
+    out = {}
+    for row, q in enumerate(BASE_NAMES):
+        g = grads[row]
+        sd = float(np.sqrt(max(g @ cov_ratio @ g, 0.0))) if names else 0.0
+        v = ph0.value(q)
+        out[q] = (v, v - t * sd, v + t * sd)
+    return out
+
+
+def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Vehicle,
+                    options: FitOptions | None = None, progress: Progress | None = None,
+                    modal: Mapping[str, float] | None = None, split: Split | None = None) -> Identification:
+    """Identify the base parameters of ``vehicle`` on prepared event windows.
+
+    Parameters
+    ----------
+    events : prepared events (:func:`app.analysis.diagnosis.prepare.prepare`), from one or several logs.
+    noise : the speed channel's noise floor (its sampling period bounds the time offset).
+    vehicle : the vehicle file's description (the nominal values and the priors' centre).
+    options : what to fit.
+    progress : ``progress(fraction, message)``.
+    modal : the model-free first mode (``freq_hz``, ``zeta``), used as a start point.
+    split : fit only the calibration side of this split (the diagnosis); None: every event.
+
+    Raises
+    ------
+    InsufficientDataError : fewer than :data:`MIN_EVENTS` events.
+    NotIdentifiableError : nothing the vehicle offers can be fitted from these events.
+    """
+    opts = options or FitOptions()
+    say = progress or (lambda f, m: None)
+    clock = time.process_time()
+    unknown = [n for n in opts.params if n not in BASE_NAMES]
+    if unknown:
+        raise NotIdentifiableError(f"unknown base parameters {unknown}; known: {list(BASE_NAMES)}")
+    split = split or all_events_split(events)
+    evs = list(split.calibration_events(events))
+    if len(evs) < MIN_EVENTS:
+        raise InsufficientDataError(f"identification needs at least {MIN_EVENTS} usable tip-in/tip-out events; "
+                                    f"the log gives {len(evs)}")
+    names = [n for n in opts.params if _fittable(vehicle, n)]
+    if not names:
+        raise NotIdentifiableError(f"the vehicle {vehicle.name!r} has nothing identifiable: no stiffness, damping, "
+                                   "mass or lash field with a value above zero")
+    bounds = Bounds.for_period(noise.period_s)
+    log: list[str] = []
+    say(0.02, f"baseline nuisance fit on {len(evs)} events")
+    base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
+    evs = with_input_uncertainty(evs, vehicle, base, opts.model, noise, 0.0, opts.seed)
+    base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, start=base, seed=opts.seed)
+    log.append(f"baseline: chi2/n {base.chi2 / base.n:.3g}, nuisance {base.nuisance.to_dict()}")
+    starts = _starts(names, vehicle, modal)
+    say(0.15, f"joint fit of {', '.join(names)} with the nuisance")
+    joint = _joint(vehicle, evs, split, names, bounds, opts, base, starts)
+    log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
+    cov, t = _cov(joint, evs, opts.level)
+    off = _spec_offset(joint)
+    span_u = 2.0 * t * np.sqrt(np.clip(np.diag(cov)[off:], 0.0, None))
+    dropped = [n for n, s in zip(names, span_u, strict=True) if not s < IDENT_SPAN]
+    if dropped:
+        keep = [n for n in names if n not in dropped]
+        log.append(f"not identified (90 % interval over {IDENT_SPAN:.0%} of the prior range): "
+                   + ", ".join(f"{n} {s:.0%}" for n, s in zip(names, span_u, strict=True) if n in dropped))
+        if keep:
+            say(0.7, f"refit of {', '.join(keep)} with {', '.join(dropped)} at the file's values")
+            at = {BASE_EFFECTS[n].id: joint.values[BASE_EFFECTS[n].id] for n in keep}
+            joint = _joint(vehicle, evs, split, keep, bounds, opts, joint, [at])
+            log.append(f"refit {keep}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes")
+            cov, t = _cov(joint, evs, opts.level)
+            off = _spec_offset(joint)
+        else:
+            joint = base
+        names = keep
+    say(0.9, "intervals")
+    result = _assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), off, t, base, evs, opts)
+    result.fit_log = log
+    result.modal_start = dict(modal) if modal else None
+    result.elapsed_s = time.process_time() - clock
+    say(1.0, "identified: " + (", ".join(result.named) or "nothing off the file"))
+    return result
+
+
+def _fittable(vehicle: Vehicle, name: str) -> bool:
+    """Whether ``vehicle`` has any field the base parameter acts on."""
+    eff = BASE_EFFECTS[name]
+    try:
+        return bool(eff.vehicle_change(vehicle, eff.off_values())) if eff.vehicle_change else False
+    except SimError:
+        return False
+
+
+def _cov(fitted: FitResult, events: Sequence[DiagEvent], level: float) -> tuple[FloatArray, float]:
+    cov = sandwich(fitted, events)
+    t = float(stats.t.ppf(0.5 + level / 2.0, max(len(events) - 1, 1)))
+    return cov, t
+
+
+def _assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joint: FitResult, cov: FloatArray,
+              off: int, t: float, base: FitResult, evs: Sequence[DiagEvent], opts: FitOptions) -> Identification:
+    specs = [BASE_EFFECTS[n].params[0] for n in names]
+    raw = np.array([joint.values[BASE_EFFECTS[n].id][s.name] for n, s in zip(names, specs, strict=True)])
+    ratios = {n: ratio_of(n, v) for n, v in zip(names, raw, strict=True)}
+    spans = np.array([s.hi - s.lo for s in specs])
+    cov_raw = cov[off:, off:] * np.outer(spans, spans) if names else np.zeros((0, 0))
+    # d ratio / d raw: 1 for scales, ln2 * 2^v for the log2 damping
+    d = np.array([np.log(2.0) * ratios[n] if n == "damping" else 1.0 for n in names])
+    cov_ratio = cov_raw * np.outer(d, d)
+    identified = with_base(vehicle, ratios)
+    ph_nom, ph = physical(vehicle), physical(identified)
+    phys = _physical_interval(vehicle, ratios, cov_ratio, names, t)
+    params: dict[str, Param] = {}
+    for q in BASE_NAMES:
+        if q in names:
+            k = names.index(q)
+            sd_r = float(np.sqrt(max(cov_ratio[k, k], 0.0)))
+            r, r_lo, r_hi = ratios[q], ratios[q] - t * sd_r, ratios[q] + t * sd_r
+            if q == "damping":  # symmetric on the log2 scale: never below zero
+                sd_l = float(np.sqrt(max(cov_raw[k, k], 0.0)))
+                r_lo, r_hi = 2.0 ** (raw[k] - t * sd_l), 2.0 ** (raw[k] + t * sd_l)
+            at_bound = f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or \
+                min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo)
+            v, lo, hi = phys[q]
+            if q == "damping":  # the damping ratio's interval follows the damping scale's (log-symmetric)
+                lo, hi = v * r_lo / r, v * r_hi / r
+            named = (not at_bound and not (r_lo <= 1.0 <= r_hi) and abs(r - 1.0) > PRACTICAL[q])
+            params[q] = Param(q, LABELS[q], UNITS[q], v, min(lo, v), max(hi, v), ph_nom.value(q), r, r_lo, r_hi,
+                              True, at_bound, named, "at a prior bound: not trusted" if at_bound else "")
+        else:
+            why = "not identifiable from these events" if q in dropped else "not fitted"
+            if q not in dropped and not _fittable(vehicle, q):
+                why = "the vehicle has no such field"
+            nv = ph_nom.value(q) if q != "damping" else ph.damping_ratio
+            params[q] = Param(q, LABELS[q], UNITS[q], nv, float("nan"), float("nan"), ph_nom.value(q), 1.0,
+                              float("nan"), float("nan"), False, False, False, why)
+    nui = joint.nuisance
+    gain_sd = float(np.sqrt(max(cov[0, 0], 0.0))) * (GAIN_BOUNDS[1] - GAIN_BOUNDS[0]) if names else 0.0
+    params["torque_gain"] = Param("torque_gain", "torque gain (CAN torque to air-gap torque)", "-", nui.gain,
+                                  nui.gain - t * gain_sd, nui.gain + t * gain_sd, 1.0, nui.gain,
+                                  nui.gain - t * gain_sd, nui.gain + t * gain_sd, True,
+                                  "nuisance.gain" in joint.at_bound, False, "a nuisance parameter, fitted always")
+    return Identification(
+        vehicle=identified, params=params, nuisance=_nuisance_dict(nui), ratios=ratios, chi2_before=base.chi2,
+        chi2_after=joint.chi2, n_samples=joint.n, n_events=len(evs), fit=joint, nominal_physical=ph_nom,
+        physical=ph, not_identified=list(dropped))
+
+
+def _nuisance_dict(n: Nuisance) -> dict[str, float]:
+    return {"offset_s": n.offset_s, "torque_gain": n.gain, "road_load_grade_pct": n.grade_pct}
