@@ -73,6 +73,7 @@ def load_vehicle_text(text: str, *, source: str = "<text>") -> Vehicle:
         raise ParameterError("vehicle", source, f"not valid TOML/JSON: {exc}") from exc
     if isinstance(data, dict):
         data.pop("tip_in", None)  # the torque input a fitted file was identified with (sim.paper.load_tip_in)
+        data.pop("provenance", None)  # what an identified file was identified from (lashscope identify)
     return Vehicle.from_dict(data)
 
 

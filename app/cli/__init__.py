@@ -19,8 +19,8 @@ from collections.abc import Sequence
 from app.errors import AppError
 
 # Subcommand modules, in the order they appear in --help.
-COMMANDS: tuple[str, ...] = ("decode", "sim", "serve", "keys", "analyze", "diagnose", "batch", "fleet", "demo",
-                             "replay", "live")
+COMMANDS: tuple[str, ...] = ("decode", "sim", "serve", "keys", "analyze", "identify", "diagnose", "batch", "fleet",
+                             "demo", "replay", "live")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -38,6 +38,7 @@ from app.analysis.diagnosis.split import Split
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.errors import InsufficientDataError, NotIdentifiableError
 from app.identify.base import BASE_EFFECTS, BASE_NAMES, LABELS, UNITS, Physical, physical, ratio_of, with_base
+from app.identify.modal import EventWindow, ModalEstimate, estimate_modes
 from sim import Vehicle
 from sim.errors import SimError
 
@@ -124,7 +125,8 @@ class Identification:
     not_identified: list[str] = field(default_factory=list)
     fit_log: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
-    modal_start: dict[str, float] | None = None
+    modal: ModalEstimate | None = None
+    modal_error: str = ""
 
     @property
     def named(self) -> list[str]:
@@ -143,7 +145,8 @@ class Identification:
             "simulator_passes": self.fit.nfev,
             "at_bound": list(self.fit.at_bound),
             "fit_log": self.fit_log,
-            "modal_start": self.modal_start,
+            "modal": self.modal.to_dict() if self.modal is not None else None,
+            "modal_error": self.modal_error or None,
             "elapsed_s": round(self.elapsed_s, 3),
         }
 
@@ -176,7 +179,10 @@ def sandwich(fitted: FitResult, events: Sequence[DiagEvent]) -> FloatArray:
     return np.asarray(b_inv @ meat @ b_inv * g / max(g - 1, 1), dtype=np.float64)
 
 
-def _starts(names: Sequence[str], vehicle: Vehicle, modal: Mapping[str, float] | None) -> list[dict[str, dict[str, float]]]:
+Values = dict[str, dict[str, float]]
+
+
+def _starts(names: Sequence[str], vehicle: Vehicle, modal: Mapping[str, float] | None) -> list[Values]:
     """Effect values to start from: the file's, and the model-free mode's where one is given."""
     nominal = {BASE_EFFECTS[n].id: BASE_EFFECTS[n].off_values() for n in names}
     if not modal:
@@ -196,7 +202,7 @@ def _starts(names: Sequence[str], vehicle: Vehicle, modal: Mapping[str, float] |
 
 
 def _joint(vehicle: Vehicle, events: Sequence[DiagEvent], split: Split, names: Sequence[str], bounds: Bounds,
-           opts: FitOptions, base: FitResult, starts: Sequence[dict[str, dict[str, float]]]) -> FitResult:
+           opts: FitOptions, base: FitResult, starts: Sequence[Values]) -> FitResult:
     effects = tuple(BASE_EFFECTS[n] for n in names)
     first = FitResult((), base.nuisance, dict(starts[0]), 0.0, 0, 0)
     return fit(vehicle, events, split, effects, bounds=bounds, model=opts.model, start=first, screen=False,
@@ -222,9 +228,23 @@ def _physical_interval(vehicle: Vehicle, ratios: Mapping[str, float], cov_ratio:
     return out
 
 
+def windows(events: Sequence[DiagEvent]) -> list[EventWindow]:
+    """The model-free estimator's view of prepared events."""
+    return [EventWindow(speed_t=ev.speed_t, speed_rpm=ev.speed_meas, torque_t=ev.torque_t, torque_nm=ev.torque_nm,
+                        t_cross=ev.t_event, direction=float(np.sign(ev.torque_step_nm) or 1.0)) for ev in events]
+
+
+def model_free_mode(events: Sequence[DiagEvent], level: float = 0.9) -> tuple[ModalEstimate | None, str]:
+    """The pooled first mode of the events' windows, or None and the reason there is none."""
+    try:
+        return estimate_modes(windows(events), level=level), ""
+    except InsufficientDataError as exc:
+        return None, str(exc)
+
+
 def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Vehicle,
                     options: FitOptions | None = None, progress: Progress | None = None,
-                    modal: Mapping[str, float] | None = None, split: Split | None = None) -> Identification:
+                    split: Split | None = None, baseline: FitResult | None = None) -> Identification:
     """Identify the base parameters of ``vehicle`` on prepared event windows.
 
     Parameters
@@ -234,8 +254,9 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     vehicle : the vehicle file's description (the nominal values and the priors' centre).
     options : what to fit.
     progress : ``progress(fraction, message)``.
-    modal : the model-free first mode (``freq_hz``, ``zeta``), used as a start point.
     split : fit only the calibration side of this split (the diagnosis); None: every event.
+    baseline : the file's vehicle already calibrated on these events, whose variances already carry the
+        input uncertainty (the diagnosis); None: both done here.
 
     Raises
     ------
@@ -259,12 +280,17 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
                                    "mass or lash field with a value above zero")
     bounds = Bounds.for_period(noise.period_s)
     log: list[str] = []
-    say(0.02, f"baseline nuisance fit on {len(evs)} events")
-    base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
-    evs = with_input_uncertainty(evs, vehicle, base, opts.model, noise, 0.0, opts.seed)
-    base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, start=base, seed=opts.seed)
+    say(0.02, f"model-free first mode of {len(evs)} event windows")
+    modal, modal_error = model_free_mode(evs, opts.level)
+    if baseline is None:
+        say(0.05, f"baseline nuisance fit on {len(evs)} events")
+        base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
+        evs = with_input_uncertainty(evs, vehicle, base, opts.model, noise, 0.0, opts.seed)
+        base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, start=base, seed=opts.seed)
+    else:
+        base = baseline
     log.append(f"baseline: chi2/n {base.chi2 / base.n:.3g}, nuisance {base.nuisance.to_dict()}")
-    starts = _starts(names, vehicle, modal)
+    starts = _starts(names, vehicle, {"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None)
     say(0.15, f"joint fit of {', '.join(names)} with the nuisance")
     joint = _joint(vehicle, evs, split, names, bounds, opts, base, starts)
     log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
@@ -289,7 +315,7 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     say(0.9, "intervals")
     result = _assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), off, t, base, evs, opts)
     result.fit_log = log
-    result.modal_start = dict(modal) if modal else None
+    result.modal, result.modal_error = modal, modal_error
     result.elapsed_s = time.process_time() - clock
     say(1.0, "identified: " + (", ".join(result.named) or "nothing off the file"))
     return result

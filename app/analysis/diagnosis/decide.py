@@ -4,6 +4,9 @@ Inputs are held-out scores only (per-event weighted residual energies, see :mod:
 remainder statistics of :mod:`.structure`). The rules, in order (thresholds in
 :class:`DecisionRules`):
 
+(``base_parameters`` -- the vehicle file is off -- is decided before these rules, by
+:mod:`.rebase`, when the identified base explains the gap or sits on a prior bound.)
+
 1. ``insufficient_data`` -- fewer than ``min_events_per_side`` calibration or held-out events;
 2. ``no_significant_gap`` -- the calibrated baseline's residual is not clearly above the
    model-free noise floor (ratio ``chi2 / n`` below ``min_gap_ratio`` or its bootstrap lower
@@ -49,7 +52,8 @@ from app.analysis.diagnosis.structure import Remainder, RemainderTest, remainder
 
 FloatArray = npt.NDArray[np.float64]
 
-STATUSES = ("explained", "partial", "ambiguous", "none_of_candidates", "no_significant_gap", "insufficient_data")
+STATUSES = ("explained", "partial", "ambiguous", "none_of_candidates", "no_significant_gap", "insufficient_data",
+            "base_parameters")
 
 
 @dataclass(frozen=True)

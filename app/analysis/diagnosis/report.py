@@ -12,7 +12,7 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                       "retimed_bursts", "retimed_frames", "unresolved_bursts"}
     events_skipped    [{"index", "reason"}]
     decision          {"status": one of explained|partial|ambiguous|none_of_candidates|
-                                 no_significant_gap|insufficient_data,
+                                 no_significant_gap|insufficient_data|base_parameters,
                        "top": [effect ids], "confusable": [id, id] | null, "reason": str,
                        "residual_to_noise_before": interval, "explained_share": interval,
                        "heldout_shrink": interval, "residual_to_noise_after": float,
@@ -28,7 +28,12 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                        "identifiability": [{"params": [a, b], "correlation",
                                             "identified": {"name", "unit", "value", "nominal"} | null}]
                                           (only when the chosen fit has parameters that trade off),
-                       "prefer_probability", "separation" (ambiguous only)}
+                       "prefer_probability", "separation" (ambiguous only),
+                       "base_parameters": [{"name", "label", "ratio", "lo", "hi", "value", "nominal", "unit"}]
+                                          (the vehicle file's base parameters that the log says are off:
+                                          ratio to the file's value with its 90 % interval; with
+                                          ``base_parameters`` alone, or before an effect named on top),
+                       "identify_first": bool (base_parameters: a parameter rests on its prior bound)}
                       "explained_share" is the share of the residual *above the noise floor* removed,
                       "heldout_shrink" the relative drop of the residual energy; the reason quotes
                       both under these names (explained share, held-out shrink).
@@ -45,6 +50,12 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                        "phases": [{"phase", "energy_share", "residual_to_noise", "samples"}],
                        "bands": [{"band", "energy_share", "coherence"}],
                        "residual_torque_lag_s", "residual_torque_xcorr", "notes": [str]}
+    identification    null (the file's vehicle had no significant gap) or {"params": {name: {"value", "lo", "hi",
+                        "nominal", "ratio", "ratio_lo", "ratio_hi", "identified", "at_bound", "named", "unit",
+                        "label", "note"}}, "named", "not_identified", "nuisance", "modal": {"freq_hz",
+                        "freq_ci", "zeta", "zeta_ci", ...} | null, "heldout": {"shrink", "explained_share",
+                        "residual_to_noise"}, "residual_to_noise_nominal", ...} -- app.identify on the
+                        calibration events, scored on the held-out ones against the file's vehicle
     fit_log           ["<fit>: [calibration event indices]"] -- every fit and the events it saw
     elapsed_s
 
@@ -170,6 +181,19 @@ def _localisation(res: DiagnosisResult) -> dict[str, Any]:
             "residual_torque_xcorr": _f(xc), "notes": notes}
 
 
+def _identification(res: DiagnosisResult) -> dict[str, Any] | None:
+    if res.identification is None:
+        return None
+    out = res.identification.to_dict()
+    sc = res.identified_score
+    if sc is not None:
+        n = sum(res.baseline.scores[i].n for i in res.heldout()) if res.baseline else 0
+        out["heldout"] = {"shrink": sc.shrink.to_dict(), "explained_share": sc.explained.to_dict(),
+                          "residual_to_noise": _f(float(sc.chi2.sum()) / max(n, 1))}
+    out["residual_to_noise_nominal"] = res.nominal_gap.to_dict() if res.nominal_gap is not None else None
+    return out
+
+
 def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None) -> dict[str, Any]:
     """The JSON-ready report of a diagnosis (see the module docstring for the schema)."""
     decision = res.decision.to_dict()
@@ -190,6 +214,7 @@ def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None) 
         "candidates": [_candidate(res, s) for s in res.singles],
         "pairs": [_candidate(res, s) for s in res.pairs],
         "localisation": _localisation(res) if res.baseline else None,
+        "identification": _identification(res),
         "fit_log": list(res.fit_order),
         "candidates_not_applicable": dict(res.not_applicable),
         "elapsed_s": round(res.elapsed_s, 3),

@@ -5,6 +5,12 @@
 
     split (frozen, seed + SHA-256)          all events
     baseline fit (nuisance only)            calibration events
+    no significant gap: stop                held-out events
+    identification of the base parameters   calibration events (app.identify)
+    held-out test of the identified base    held-out events: no gap left -> ``base_parameters``;
+                                            a base parameter at its prior bound -> ``base_parameters``
+                                            ("identify the vehicle first"); otherwise the identified
+                                            vehicle is the base every candidate is fitted on
     each candidate: joint fit               calibration events
     scores, localisation                    held-out events (fitted values frozen)
     greedy pairs: best single + partners    fit on calibration, scored on held-out
@@ -45,11 +51,13 @@ from app.analysis.diagnosis.identify import with_identifiability
 from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2, phase_times, uniform
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.partners import screen_partners
-from app.analysis.diagnosis.score import EventScore
+from app.analysis.diagnosis.rebase import BASE_ID, judge, nuisance_only, with_base
+from app.analysis.diagnosis.score import EventScore, Interval
 from app.analysis.diagnosis.split import Split, make_split
 from app.analysis.diagnosis.structure import remainder
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
-from app.errors import InputError
+from app.errors import InputError, InsufficientDataError, NotIdentifiableError
+from app.identify.fit import FitOptions, Identification, identify_events
 from sim import Vehicle
 from sim.effects import EFFECTS, get_effect
 
@@ -123,6 +131,9 @@ class DiagnosisResult:
     elapsed_s: float
     fit_order: list[str] = field(default_factory=list)  # every fit, in order, with the events it used
     not_applicable: dict[str, str] = field(default_factory=dict)  # candidate -> why the vehicle has no such effect
+    identification: Identification | None = None  # the base parameters identified first (None: not needed/possible)
+    identified_score: CandidateScore | None = None  # the identified base on held-out events, against the file's
+    nominal_gap: Interval | None = None  # held-out residual-to-noise ratio of the file's vehicle
 
     def heldout(self) -> list[int]:
         return list(self.split.heldout)
@@ -247,6 +258,37 @@ def run_diagnosis(
         say(1.0, f"decision: {decision.status}")
         return result(decision, baseline=base_eval, phases=phases, draws=draws, fit_order=fit_order,
                       not_applicable=not_applicable)
+    nominal_gap = gap_ratio(b, n, draws, rules.level)
+    ident, ident_score = None, None
+    say(step[0] / n_steps, "identifying the vehicle's base parameters on calibration events")
+    try:
+        ident = identify_events(events, noise, vehicle, FitOptions(model=opts.model, seed=opts.seed), split=split,
+                                baseline=base_fit)
+    except (InsufficientDataError, NotIdentifiableError) as exc:
+        fit_order.append(f"identification: {exc}")
+    if ident is not None:
+        fit_order.append(f"identification ({', '.join(ident.ratios) or 'nothing fitted'}): "
+                         f"{[e.index for e in cal]}")
+        id_eval = evaluate(vehicle, ident.fit, ho, opts.model, phases, period)
+        ident_score = score_candidate(BASE_ID, (), b, id_eval.chi2(ho_idx), n, draws, rules,
+                                      remainder(ho, id_eval.scores, id_eval.predictions, period))
+        outcome = judge(ident, ident_score, n, draws, rules, nominal_gap)
+        fit_order.append(outcome.note)
+        if outcome.stop is not None:
+            decision = with_tones(outcome.stop, noise.tones)
+            say(1.0, f"decision: {decision.status}")
+            return result(decision, baseline=base_eval, phases=phases, draws=draws, fit_order=fit_order,
+                          not_applicable=not_applicable, identification=ident, identified_score=ident_score,
+                          nominal_gap=nominal_gap)
+        if outcome.use:  # the candidates explain only what the identified vehicle cannot
+            vehicle = ident.vehicle
+            base_fit = nuisance_only(ident)
+            base_eval = evaluate(vehicle, base_fit, events, opts.model, None, period)
+            phases = {ev.index: phase_times(ev, base_eval.predictions[ev.index]) for ev in events}
+            base_eval = evaluate(vehicle, base_fit, events, opts.model, phases, period)
+            b = base_eval.chi2(ho_idx)
+        else:
+            ident = replace(ident, params={k: replace(p, named=False) for k, p in ident.params.items()})
     evals: dict[str, Evaluation] = {}
     singles: list[CandidateScore] = []
 
@@ -310,7 +352,11 @@ def run_diagnosis(
             singles = [again if s.id == first else s for s in singles]
 
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
-    decision = with_tones(with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle), noise.tones)
+    decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
+    if ident is not None:
+        decision = with_base(decision, ident)
+    decision = with_tones(decision, noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
-                  draws=draws, fit_order=fit_order, not_applicable=not_applicable)
+                  draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=ident,
+                  identified_score=ident_score, nominal_gap=nominal_gap)

@@ -30,6 +30,7 @@ from app.analysis.diagnosis.split import Split
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.analysis.events import EventParams, detect_events
 from app.errors import AnalysisError, InsufficientDataError
+from app.identify.base import with_base
 from app.signals import SignalSet
 from sim import Vehicle
 from sim.effects import apply_effects
@@ -57,11 +58,22 @@ def chosen_effects(result: DiagnosisResult) -> dict[str, dict[str, float]]:
 
 
 def augmented_vehicle(result: DiagnosisResult, base: Vehicle) -> Vehicle:
-    """``base`` with the diagnosed effect(s) applied at their fitted values (nuisance values are not kept)."""
+    """``base`` with the diagnosed effect(s) applied at their fitted values (nuisance values are not kept).
+
+    Base parameters the diagnosis named (``decision.details["base_parameters"]``) are applied first, at their
+    identified values: the effect was fitted on that vehicle. ``base_parameters`` alone gives the identified
+    vehicle (a diagnosis that stopped at a prior bound has no trusted values, and nothing to apply).
+    """
     chosen = chosen_effects(result)
-    if not chosen:
+    items = result.decision.details.get("base_parameters") or []
+    if result.decision.details.get("identify_first"):
+        raise AnalysisError("the diagnosis stopped at a prior bound of a base parameter: identify the vehicle "
+                            "(lashscope identify) and diagnose again with the identified file")
+    if items and result.identification is not None:
+        base = with_base(base, result.identification.ratios)
+    elif not chosen:
         raise AnalysisError(f"diagnosis decided {result.decision.status!r}: there is no effect to apply")
-    return apply_effects(base, chosen)
+    return apply_effects(base, chosen) if chosen else base
 
 
 @dataclass(frozen=True)

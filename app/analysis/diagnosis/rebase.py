@@ -1,0 +1,98 @@
+"""Identification before attribution: is the vehicle file off, and what base do the candidates start from?
+
+A data sheet that is off (a softer half-shaft, a heavier car, more lash) leaves a gap that an
+unmodelled effect can mimic convincingly: a soft mount lowers the shuffle mode like a soft shaft.
+So once the file's vehicle shows a significant gap, its base parameters are identified on the
+calibration events (:func:`app.identify.fit.identify_events`) and the identified vehicle is
+scored on the held-out events against the file's, like a candidate (:func:`.decide.score_candidate`):
+
+- a base parameter resting on its prior bound: the file is further off than the priors allow, and
+  nothing is attributed -- ``base_parameters``, "identify the vehicle first", naming the parameter;
+- identified parameters that differ from the file (:attr:`Identification.named`) and a significant
+  held-out improvement: when no gap is left, ``base_parameters`` ("your data sheet is off", with the
+  values and intervals); otherwise the identified vehicle becomes the base every candidate effect
+  is fitted on, so that an effect is named only for what the identified base cannot explain;
+- anything else: the file's vehicle stays the base (the identification is reported).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+from app.analysis.diagnosis.calibrate import FitResult
+from app.analysis.diagnosis.decide import CandidateScore, Decision, DecisionRules, gap_ratio, has_gap
+from app.identify.fit import Identification
+
+BASE_ID = "base_parameters"
+
+
+@dataclass(frozen=True)
+class Rebase:
+    """What the identification means for the diagnosis.
+
+    Attributes
+    ----------
+    stop : a decision to return at once (the data sheet alone explains the gap, or is beyond its priors).
+    use : the identified vehicle is the base for the candidates.
+    """
+
+    stop: Decision | None
+    use: bool
+    note: str
+
+
+def base_items(ident: Identification) -> list[dict[str, Any]]:
+    """The named base parameters as the report lists them (ratios to the file's values, with intervals)."""
+    return [{"name": p.name, "label": p.label, "ratio": round(p.value / p.nominal, 4),
+             "lo": round(p.lo / p.nominal, 4), "hi": round(p.hi / p.nominal, 4), "value": round(p.value, 6),
+             "nominal": round(p.nominal, 6), "unit": p.unit}
+            for p in ident.params.values() if p.named and p.nominal]
+
+
+def sentence(ident: Identification) -> str:
+    """"torsional stiffness at the motor 0.70x nominal [0.66, 0.75] (...); vehicle mass ..." for the named ones."""
+    return "; ".join(ident.params[k].describe() for k in ident.named)
+
+
+def judge(ident: Identification, score: CandidateScore, n_heldout: Any, draws: Any, rules: DecisionRules,
+          nominal_gap: Any) -> Rebase:
+    """The outcome of identifying first (see the module docstring)."""
+    bound = [p for p in ident.params.values() if p.identified and p.at_bound]
+    if bound:
+        names = ", ".join(f"{p.label} (ratio {p.ratio:.2f} to the file's)" for p in bound)
+        reason = (f"identify the vehicle first: {names} rests on the bound of its prior, so the file is further "
+                  "off than an identification of this log can say; no unmodelled effect is attributed "
+                  "until the vehicle file is corrected")
+        return Rebase(Decision(BASE_ID, reason=reason, gap_ratio=nominal_gap,
+                               details={"base_parameters": base_items(ident), "identify_first": True,
+                                        "at_bound": [p.name for p in bound]}), False, reason)
+    if not ident.named or not score.significant:
+        why = ("no base parameter differs from the file beyond its interval" if not ident.named else
+               f"the identified base does not improve the held-out events significantly (explained share "
+               f"{100 * score.explained.value:.0f} % [{100 * score.explained.lo:.0f}, {100 * score.explained.hi:.0f}])")
+        return Rebase(None, False, f"identification: {why}; the file's vehicle stays the base")
+    left = gap_ratio(score.chi2, n_heldout, draws, rules.level)
+    if not has_gap(left, rules):
+        reason = (f"the vehicle file is off, and that explains the gap: {sentence(ident)}. With the identified "
+                  f"values the held-out residual is {left.value:.2f}x the noise floor (from {nominal_gap.value:.2f}x): "
+                  "no unmodelled effect is needed")
+        return Rebase(Decision(BASE_ID, reason=reason, gap_ratio=nominal_gap, best=score,
+                               details={"base_parameters": base_items(ident), "identify_first": False}),
+                      False, reason)
+    return Rebase(None, True, f"identification: {sentence(ident)}; the candidates are fitted on the identified "
+                              f"vehicle (held-out residual {left.value:.2f}x the noise floor left)")
+
+
+def nuisance_only(ident: Identification) -> FitResult:
+    """The identified fit as a baseline of the identified vehicle (its nuisance values, no effects)."""
+    return replace(ident.fit, effects=(), values={}, settings=(), trade_offs=(), residual=None, jac=None)
+
+
+def with_base(decision: Decision, ident: Identification) -> Decision:
+    """``decision`` (made on the identified vehicle) saying which base parameters were corrected first."""
+    items = base_items(ident)
+    if not items:
+        return decision
+    reason = f"after identifying the vehicle ({sentence(ident)}): {decision.reason}"
+    return replace(decision, reason=reason, details={**decision.details, "base_parameters": items})
