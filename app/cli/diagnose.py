@@ -81,6 +81,18 @@ def summary(doc: dict[str, Any]) -> str:
             params = "; ".join(f"{k}={v:.4g}" for vals in c["fit"]["params"].values() for k, v in vals.items())
             lines.append(f"{c['id']:34s} {_pct(h['shrink']):>22s} {_pct(h['explained_share']):>22s} "
                          f"{100 * h['improved_fraction']:8.0f}%  {params}")
+    ident = doc.get("identification")
+    if ident:
+        ho = ident.get("heldout") or {}
+        lines += ["", "identification of the base parameters (calibration events; held-out shrink "
+                      f"{_pct(ho.get('shrink'))}):"]
+        for p in ident["params"].values():
+            if p["identified"]:
+                lines.append(f"  {p['label']:44s} {p['value']:.4g} [{p['lo']:.4g}, {p['hi']:.4g}] {p['unit']}  "
+                             f"file {p['nominal']:.4g}" + ("  OFF THE FILE" if p["named"] else "")
+                             + ("  AT PRIOR BOUND" if p["at_bound"] else ""))
+            else:
+                lines.append(f"  {p['label']:44s} not identified ({p['note']})")
     loc = doc.get("localisation")
     if loc:
         lines += ["", "where (held-out, baseline): phase  share  residual/noise"]

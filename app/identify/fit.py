@@ -47,6 +47,7 @@ Progress = Callable[[float, str], None]
 
 PASSES_PER_PARAM = 10  # simulator passes of the joint refinement per parameter (+1), Jacobians included
 IDENT_SPAN = 0.5  # a parameter whose interval covers more than this share of its prior range is not identified
+N_NUISANCE = 2  # unit-box columns before the effects': torque gain and road load (the offset is profiled)
 MIN_EVENTS = 4  # events an identification needs (the interval has G-1 degrees of freedom)
 PRACTICAL = {"stiffness": 0.04, "damping": 0.15, "mass": 0.03, "lash": 0.08}  # smallest change worth naming
 
@@ -154,12 +155,6 @@ class Identification:
 def all_events_split(events: Sequence[DiagEvent]) -> Split:
     """Every event on the fitting side (identification scores on another drive, not on held-out events)."""
     return Split(-1, tuple(e.index for e in events), (), "identification")
-
-
-def _spec_offset(fitted: FitResult) -> int:
-    """Columns of the Jacobian before the base parameters (the nuisance vector)."""
-    assert fitted.jac is not None
-    return int(fitted.jac.shape[1]) - len(fitted.effects)
 
 
 def sandwich(fitted: FitResult, events: Sequence[DiagEvent]) -> FloatArray:
@@ -295,8 +290,7 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     joint = _joint(vehicle, evs, split, names, bounds, opts, base, starts)
     log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
     cov, t = _cov(joint, evs, opts.level)
-    off = _spec_offset(joint)
-    span_u = 2.0 * t * np.sqrt(np.clip(np.diag(cov)[off:], 0.0, None))
+    span_u = 2.0 * t * np.sqrt(np.clip(np.diag(cov)[N_NUISANCE:N_NUISANCE + len(names)], 0.0, None))
     dropped = [n for n, s in zip(names, span_u, strict=True) if not s < IDENT_SPAN]
     if dropped:
         keep = [n for n in names if n not in dropped]
@@ -308,12 +302,11 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
             joint = _joint(vehicle, evs, split, keep, bounds, opts, joint, [at])
             log.append(f"refit {keep}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes")
             cov, t = _cov(joint, evs, opts.level)
-            off = _spec_offset(joint)
         else:
             joint = base
         names = keep
     say(0.9, "intervals")
-    result = _assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), off, t, base, evs, opts)
+    result = assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), t, base.chi2, len(evs))
     result.fit_log = log
     result.modal, result.modal_error = modal, modal_error
     result.elapsed_s = time.process_time() - clock
@@ -336,13 +329,27 @@ def _cov(fitted: FitResult, events: Sequence[DiagEvent], level: float) -> tuple[
     return cov, t
 
 
-def _assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joint: FitResult, cov: FloatArray,
-              off: int, t: float, base: FitResult, evs: Sequence[DiagEvent], opts: FitOptions) -> Identification:
+def refined(vehicle: Vehicle, names: Sequence[str], joint: FitResult, events: Sequence[DiagEvent],
+            chi2_before: float, level: float = 0.9) -> Identification:
+    """The identification a joint fit of base parameters *and* an effect gives (base effects first in the fit)."""
+    cov, t = _cov(joint, events, level)
+    return assemble(vehicle, names, (), joint, cov, t, chi2_before, len(events))
+
+
+def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joint: FitResult, cov: FloatArray,
+             t: float, chi2_before: float, n_events: int) -> Identification:
+    """Physical figures, intervals and status of the base parameters ``names`` of a fit.
+
+    ``joint``'s effects start with the base effects of ``names`` (one parameter each, in that order), after the
+    nuisance; ``cov`` is the unit-box covariance of all its parameters.
+    """
+    off = N_NUISANCE
     specs = [BASE_EFFECTS[n].params[0] for n in names]
     raw = np.array([joint.values[BASE_EFFECTS[n].id][s.name] for n, s in zip(names, specs, strict=True)])
     ratios = {n: ratio_of(n, v) for n, v in zip(names, raw, strict=True)}
     spans = np.array([s.hi - s.lo for s in specs])
-    cov_raw = cov[off:, off:] * np.outer(spans, spans) if names else np.zeros((0, 0))
+    k_n = len(names)
+    cov_raw = cov[off:off + k_n, off:off + k_n] * np.outer(spans, spans) if names else np.zeros((0, 0))
     # d ratio / d raw: 1 for scales, ln2 * 2^v for the log2 damping
     d = np.array([np.log(2.0) * ratios[n] if n == "damping" else 1.0 for n in names])
     cov_ratio = cov_raw * np.outer(d, d)
@@ -380,8 +387,8 @@ def _assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], jo
                                   nui.gain - t * gain_sd, nui.gain + t * gain_sd, True,
                                   "nuisance.gain" in joint.at_bound, False, "a nuisance parameter, fitted always")
     return Identification(
-        vehicle=identified, params=params, nuisance=_nuisance_dict(nui), ratios=ratios, chi2_before=base.chi2,
-        chi2_after=joint.chi2, n_samples=joint.n, n_events=len(evs), fit=joint, nominal_physical=ph_nom,
+        vehicle=identified, params=params, nuisance=_nuisance_dict(nui), ratios=ratios, chi2_before=chi2_before,
+        chi2_after=joint.chi2, n_samples=joint.n, n_events=n_events, fit=joint, nominal_physical=ph_nom,
         physical=ph, not_identified=list(dropped))
 
 

@@ -17,14 +17,21 @@ scored on the held-out events against the file's, like a candidate (:func:`.deci
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from app.analysis.diagnosis.calibrate import FitResult
+from app.analysis.diagnosis.calibrate import Bounds, FitResult, fit
 from app.analysis.diagnosis.decide import CandidateScore, Decision, DecisionRules, gap_ratio, has_gap
+from app.analysis.diagnosis.forward import DiagEvent
+from app.analysis.diagnosis.split import Split
+from app.identify.base import BASE_EFFECTS
 from app.identify.fit import Identification
+from sim import Vehicle
+from sim.effects import get_effect
 
 BASE_ID = "base_parameters"
+JOINT_PASSES_PER_PARAM = 8  # the joint refit starts at the identified values and the single fit's
 
 
 @dataclass(frozen=True)
@@ -82,6 +89,23 @@ def judge(ident: Identification, score: CandidateScore, n_heldout: Any, draws: A
                       False, reason)
     return Rebase(None, True, f"identification: {sentence(ident)}; the candidates are fitted on the identified "
                               f"vehicle (held-out residual {left.value:.2f}x the noise floor left)")
+
+
+def joint_with_base(nominal: Vehicle, ident: Identification, events: Sequence[DiagEvent], split: Split, cid: str,
+                    single: FitResult, bounds: Bounds, model: str) -> FitResult | None:
+    """Effect ``cid`` and the identified base parameters fitted together on the file's vehicle, from their values.
+
+    The total lash is left out next to ``backlash`` (both set the gaps). None when no base parameter is left.
+    """
+    names = [k for k in ident.ratios if not (k == "lash" and cid == "backlash")]
+    if not names or cid not in single.values:
+        return None
+    effects = (*(BASE_EFFECTS[k] for k in names), get_effect(cid))
+    values = {BASE_EFFECTS[k].id: dict(ident.fit.values[BASE_EFFECTS[k].id]) for k in names}
+    values[cid] = dict(single.values[cid])
+    start = FitResult((), single.nuisance, values, 0.0, 0, 0)
+    return fit(nominal, events, split, effects, bounds=bounds, model=model, start=start, screen=False,
+               passes_per_param=JOINT_PASSES_PER_PARAM)
 
 
 def nuisance_only(ident: Identification) -> FitResult:

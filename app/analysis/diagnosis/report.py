@@ -197,8 +197,8 @@ def _identification(res: DiagnosisResult) -> dict[str, Any] | None:
 def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None) -> dict[str, Any]:
     """The JSON-ready report of a diagnosis (see the module docstring for the schema)."""
     decision = res.decision.to_dict()
-    if res.decision.best is not None:
-        n = sum(res.candidates[res.decision.best.id].scores[i].n for i in res.heldout())
+    if res.decision.best is not None and res.baseline is not None:
+        n = sum(res.baseline.scores[i].n for i in res.heldout())  # the same samples for every model
         decision["residual_to_noise_after"] = _f(float(res.decision.best.chi2.sum()) / max(n, 1))
     doc: dict[str, Any] = {
         "schema": SCHEMA_VERSION,

@@ -51,13 +51,15 @@ from app.analysis.diagnosis.identify import with_identifiability
 from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2, phase_times, uniform
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.partners import screen_partners
-from app.analysis.diagnosis.rebase import BASE_ID, judge, nuisance_only, with_base
+from app.analysis.diagnosis.rebase import BASE_ID, joint_with_base, judge, nuisance_only, with_base
 from app.analysis.diagnosis.score import EventScore, Interval
 from app.analysis.diagnosis.split import Split, make_split
 from app.analysis.diagnosis.structure import remainder
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.errors import InputError, InsufficientDataError, NotIdentifiableError
+from app.identify.base import BASE_EFFECTS
 from app.identify.fit import FitOptions, Identification, identify_events
+from app.identify.fit import refined as identified_with
 from sim import Vehicle
 from sim.effects import EFFECTS, get_effect
 
@@ -259,7 +261,9 @@ def run_diagnosis(
         return result(decision, baseline=base_eval, phases=phases, draws=draws, fit_order=fit_order,
                       not_applicable=not_applicable)
     nominal_gap = gap_ratio(b, n, draws, rules.level)
-    ident, ident_score = None, None
+    nominal = vehicle
+    ident, ident_score, rebased = None, None, None
+    joint_ident: dict[str, Identification] = {}  # candidate -> the base parameters identified jointly with it
     say(step[0] / n_steps, "identifying the vehicle's base parameters on calibration events")
     try:
         ident = identify_events(events, noise, vehicle, FitOptions(model=opts.model, seed=opts.seed), split=split,
@@ -281,6 +285,7 @@ def run_diagnosis(
                           not_applicable=not_applicable, identification=ident, identified_score=ident_score,
                           nominal_gap=nominal_gap)
         if outcome.use:  # the candidates explain only what the identified vehicle cannot
+            rebased = ident
             vehicle = ident.vehicle
             base_fit = nuisance_only(ident)
             base_eval = evaluate(vehicle, base_fit, events, opts.model, None, period)
@@ -292,9 +297,10 @@ def run_diagnosis(
     evals: dict[str, Evaluation] = {}
     singles: list[CandidateScore] = []
 
-    def held_out(cid: str, effects: tuple[str, ...], fitted: FitResult) -> CandidateScore:
-        """Evaluate ``fitted`` on the held-out events (kept in ``evals[cid]``) and score it."""
-        evals[cid] = evaluate(vehicle, fitted, ho, opts.model, phases, period)
+    def held_out(cid: str, effects: tuple[str, ...], fitted: FitResult, on: Vehicle | None = None) -> CandidateScore:
+        """Evaluate ``fitted`` (on ``on``, default the base vehicle) on the held-out events (kept in ``evals[cid]``)
+        and score it."""
+        evals[cid] = evaluate(on or vehicle, fitted, ho, opts.model, phases, period)
         rem = remainder(ho, evals[cid].scores, evals[cid].predictions, period)
         return score_candidate(cid, effects, b, evals[cid].chi2(ho_idx), n, draws, rules, rem)
 
@@ -351,9 +357,23 @@ def run_diagnosis(
             again = held_out(first, (first,), refined)
             singles = [again if s.id == first else s for s in singles]
 
+    if rebased is not None and singles:
+        # the best effect refitted jointly with the base parameters, from the nominal file: the identification
+        # alone may have taken part of the effect (a mass and a torque gain standing in for a torque lag), and
+        # the effect is judged on what the jointly identified base cannot explain
+        top = min(singles, key=lambda c: float(c.chi2.sum())).id
+        say(step[0] / n_steps, f"refitting {top} jointly with the base parameters")
+        joint = joint_with_base(nominal, rebased, cal, split, top, evals[top].fit, bounds, opts.model)
+        fit_order.append(f"{top} + base parameters (jointly, from the file's vehicle): {[e.index for e in cal]}")
+        if joint is not None and joint.chi2 < evals[top].fit.chi2:  # kept on calibration events, like every fit
+            again = held_out(top, (top,), joint, on=nominal)
+            singles = [again if c.id == top else c for c in singles]
+            fitted_base = [k for k in rebased.ratios if BASE_EFFECTS[k].id in joint.values]
+            joint_ident[top] = identified_with(nominal, fitted_base, joint, cal, rebased.chi2_before)
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
-    if ident is not None:
+    if ident is not None:  # the base parameters as identified with the chosen effect, where it was refitted with them
+        ident = joint_ident.get("+".join(decision.top), ident)
         decision = with_base(decision, ident)
     decision = with_tones(decision, noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
