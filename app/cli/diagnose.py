@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     signals, _ = decode_log(args.log, dbc, smap)
     result = diagnose_signals(signals, vehicle, options, say, thresholds)
     validation = None
-    if args.validate is not None and result.decision.top:
+    if args.validate is not None and (result.decision.top or result.decision.details.get("base_parameters")):
         say(0.0, f"decoding {args.validate}")
         other, _ = decode_log(args.validate, dbc, smap)
         validation = validate_on(result, other, vehicle, progress=say, event_params=thresholds).to_dict()

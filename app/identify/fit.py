@@ -96,8 +96,8 @@ class Param:
             return round(float(x), 6) if np.isfinite(x) else None
         return {"name": self.name, "label": self.label, "unit": self.unit, "value": r(self.value), "lo": r(self.lo),
                 "hi": r(self.hi), "nominal": r(self.nominal), "ratio": r(self.ratio), "ratio_lo": r(self.ratio_lo),
-                "ratio_hi": r(self.ratio_hi), "identified": self.identified, "at_bound": self.at_bound,
-                "named": self.named, "note": self.note}
+                "ratio_hi": r(self.ratio_hi), "identified": bool(self.identified), "at_bound": bool(self.at_bound),
+                "named": bool(self.named), "note": self.note}
 
     def describe(self) -> str:
         """One line: "torsional stiffness at the motor 0.70x nominal [0.66, 0.75] (79.0 N m/rad)"."""
@@ -365,12 +365,12 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
             if q == "damping":  # symmetric on the log2 scale: never below zero
                 sd_l = float(np.sqrt(max(cov_raw[k, k], 0.0)))
                 r_lo, r_hi = 2.0 ** (raw[k] - t * sd_l), 2.0 ** (raw[k] + t * sd_l)
-            at_bound = f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or \
-                min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo)
+            at_bound = bool(f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or
+                            min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo))
             v, lo, hi = phys[q]
             if q == "damping":  # the damping ratio's interval follows the damping scale's (log-symmetric)
                 lo, hi = v * r_lo / r, v * r_hi / r
-            named = (not at_bound and not (r_lo <= 1.0 <= r_hi) and abs(r - 1.0) > PRACTICAL[q])
+            named = bool(not at_bound and not (r_lo <= 1.0 <= r_hi) and abs(r - 1.0) > PRACTICAL[q])
             params[q] = Param(q, LABELS[q], UNITS[q], v, min(lo, v), max(hi, v), ph_nom.value(q), r, r_lo, r_hi,
                               True, at_bound, named, "at a prior bound: not trusted" if at_bound else "")
         else:

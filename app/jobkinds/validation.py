@@ -9,7 +9,17 @@ done (one atomic rewrite), so a re-run after a crash leaves one answer.
 from __future__ import annotations
 
 from app.errors import InputError
-from app.jobkinds.diagnosis import REPORT, STATUS, VALIDATION, chosen, decode, options, read_json, write_json
+from app.jobkinds.diagnosis import (
+    REPORT,
+    STATUS,
+    VALIDATION,
+    base_ratios,
+    chosen,
+    decode,
+    options,
+    read_json,
+    write_json,
+)
 from app.jobkinds.diagnosis import subject as diagnosis_subject
 from app.storage.base import Store
 from app.storage.records import JobRecord
@@ -33,5 +43,6 @@ def run(store: Store, job: JobRecord) -> None:
     progress = progress_reporter(store, job.id)
     progress("decoding", 0.0)
     signals, vehicle = decode(store, val["log_id"], st["vehicle"]["name"], st["vehicle"]["version"])
-    result = validate_effects(effects, signals, vehicle, opts, lambda fraction, message: progress(message, fraction))
+    result = validate_effects(effects, signals, vehicle, opts, lambda fraction, message: progress(message, fraction),
+                              base_ratios=base_ratios(report))
     write_json(d / VALIDATION, {"log_id": val["log_id"], "job_id": val.get("job_id"), **result.to_dict()})

@@ -50,12 +50,13 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                        "phases": [{"phase", "energy_share", "residual_to_noise", "samples"}],
                        "bands": [{"band", "energy_share", "coherence"}],
                        "residual_torque_lag_s", "residual_torque_xcorr", "notes": [str]}
-    identification    null (the file's vehicle had no significant gap) or {"params": {name: {"value", "lo", "hi",
-                        "nominal", "ratio", "ratio_lo", "ratio_hi", "identified", "at_bound", "named", "unit",
-                        "label", "note"}}, "named", "not_identified", "nuisance", "modal": {"freq_hz",
-                        "freq_ci", "zeta", "zeta_ci", ...} | null, "heldout": {"shrink", "explained_share",
-                        "residual_to_noise"}, "residual_to_noise_nominal", ...} -- app.identify on the
-                        calibration events, scored on the held-out ones against the file's vehicle
+    identification    null (the file's vehicle had no significant gap), {"skipped": reason}, or
+                       {"note", "params": {name: {"value", "lo", "hi", "nominal", "ratio", "ratio_lo",
+                        "ratio_hi", "identified", "at_bound", "named", "unit", "label", "note"}}, "named",
+                        "not_identified", "nuisance", "modal": {"freq_hz", "freq_ci", "zeta", ...} | null,
+                        "heldout": {"shrink", "explained_share", "residual_to_noise"},
+                        "residual_to_noise_nominal", ...} -- app.identify on the calibration events,
+                        scored on the held-out ones against the file's vehicle
     fit_log           ["<fit>: [calibration event indices]"] -- every fit and the events it saw
     elapsed_s
 
@@ -183,8 +184,9 @@ def _localisation(res: DiagnosisResult) -> dict[str, Any]:
 
 def _identification(res: DiagnosisResult) -> dict[str, Any] | None:
     if res.identification is None:
-        return None
+        return {"skipped": res.identification_note} if res.identification_note else None
     out = res.identification.to_dict()
+    out["note"] = res.identification_note
     sc = res.identified_score
     if sc is not None:
         n = sum(res.baseline.scores[i].n for i in res.heldout()) if res.baseline else 0

@@ -66,6 +66,7 @@ from sim.effects import EFFECTS, get_effect
 FloatArray = npt.NDArray[np.float64]
 Progress = Callable[[float, str], None]
 PAIR_PASSES_PER_PARAM = 10  # a pair's refinement starts near its solution (the single fit + the screen's step)
+JOINT_REFITS = 2  # best single effects refitted jointly with the identified base parameters
 
 
 @dataclass(frozen=True)
@@ -136,6 +137,7 @@ class DiagnosisResult:
     identification: Identification | None = None  # the base parameters identified first (None: not needed/possible)
     identified_score: CandidateScore | None = None  # the identified base on held-out events, against the file's
     nominal_gap: Interval | None = None  # held-out residual-to-noise ratio of the file's vehicle
+    identification_note: str = ""  # what the identification meant for the diagnosis, or why there is none
 
     def heldout(self) -> list[int]:
         return list(self.split.heldout)
@@ -262,14 +264,14 @@ def run_diagnosis(
                       not_applicable=not_applicable)
     nominal_gap = gap_ratio(b, n, draws, rules.level)
     nominal = vehicle
-    ident, ident_score, rebased = None, None, None
+    ident, ident_score, rebased, ident_note = None, None, None, ""
     joint_ident: dict[str, Identification] = {}  # candidate -> the base parameters identified jointly with it
     say(step[0] / n_steps, "identifying the vehicle's base parameters on calibration events")
     try:
         ident = identify_events(events, noise, vehicle, FitOptions(model=opts.model, seed=opts.seed), split=split,
                                 baseline=base_fit)
     except (InsufficientDataError, NotIdentifiableError) as exc:
-        fit_order.append(f"identification: {exc}")
+        ident_note = f"not identified: {exc}"
     if ident is not None:
         fit_order.append(f"identification ({', '.join(ident.ratios) or 'nothing fitted'}): "
                          f"{[e.index for e in cal]}")
@@ -277,13 +279,13 @@ def run_diagnosis(
         ident_score = score_candidate(BASE_ID, (), b, id_eval.chi2(ho_idx), n, draws, rules,
                                       remainder(ho, id_eval.scores, id_eval.predictions, period))
         outcome = judge(ident, ident_score, n, draws, rules, nominal_gap)
-        fit_order.append(outcome.note)
+        ident_note = outcome.note
         if outcome.stop is not None:
             decision = with_tones(outcome.stop, noise.tones)
             say(1.0, f"decision: {decision.status}")
             return result(decision, baseline=base_eval, phases=phases, draws=draws, fit_order=fit_order,
                           not_applicable=not_applicable, identification=ident, identified_score=ident_score,
-                          nominal_gap=nominal_gap)
+                          nominal_gap=nominal_gap, identification_note=ident_note)
         if outcome.use:  # the candidates explain only what the identified vehicle cannot
             rebased = ident
             vehicle = ident.vehicle
@@ -361,15 +363,16 @@ def run_diagnosis(
         # the best effect refitted jointly with the base parameters, from the nominal file: the identification
         # alone may have taken part of the effect (a mass and a torque gain standing in for a torque lag), and
         # the effect is judged on what the jointly identified base cannot explain
-        top = min(singles, key=lambda c: float(c.chi2.sum())).id
-        say(step[0] / n_steps, f"refitting {top} jointly with the base parameters")
-        joint = joint_with_base(nominal, rebased, cal, split, top, evals[top].fit, bounds, opts.model)
-        fit_order.append(f"{top} + base parameters (jointly, from the file's vehicle): {[e.index for e in cal]}")
-        if joint is not None and joint.chi2 < evals[top].fit.chi2:  # kept on calibration events, like every fit
-            again = held_out(top, (top,), joint, on=nominal)
-            singles = [again if c.id == top else c for c in singles]
-            fitted_base = [k for k in rebased.ratios if BASE_EFFECTS[k].id in joint.values]
-            joint_ident[top] = identified_with(nominal, fitted_base, joint, cal, rebased.chi2_before)
+        # (the two best, so that the runner-up the decision compares with gets the same freedom)
+        for top in [c.id for c in sorted(singles, key=lambda c: float(c.chi2.sum()))[:JOINT_REFITS]]:
+            say(step[0] / n_steps, f"refitting {top} jointly with the base parameters")
+            joint = joint_with_base(nominal, rebased, cal, split, top, evals[top].fit, bounds, opts.model)
+            fit_order.append(f"{top} + base parameters (jointly, from the file's vehicle): {[e.index for e in cal]}")
+            if joint is not None and joint.chi2 < evals[top].fit.chi2:  # kept on calibration events, like every fit
+                again = held_out(top, (top,), joint, on=nominal)
+                singles = [again if c.id == top else c for c in singles]
+                fitted_base = [k for k in rebased.ratios if BASE_EFFECTS[k].id in joint.values]
+                joint_ident[top] = identified_with(nominal, fitted_base, joint, cal, rebased.chi2_before)
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     if ident is not None:  # the base parameters as identified with the chosen effect, where it was refitted with them
@@ -379,4 +382,4 @@ def run_diagnosis(
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
                   draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=ident,
-                  identified_score=ident_score, nominal_gap=nominal_gap)
+                  identified_score=ident_score, nominal_gap=nominal_gap, identification_note=ident_note)

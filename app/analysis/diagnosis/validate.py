@@ -8,7 +8,7 @@ the baseline on every event of that drive, with event-bootstrap intervals.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,7 +54,7 @@ def chosen_effects(result: DiagnosisResult) -> dict[str, dict[str, float]]:
     ev = result.candidates.get(key)
     if ev is None:
         return {}
-    return {k: dict(v) for k, v in ev.fit.values.items()}
+    return {k: dict(v) for k, v in ev.fit.values.items() if k in d.top}  # not the base parameters fitted with it
 
 
 def augmented_vehicle(result: DiagnosisResult, base: Vehicle) -> Vehicle:
@@ -70,7 +70,7 @@ def augmented_vehicle(result: DiagnosisResult, base: Vehicle) -> Vehicle:
         raise AnalysisError("the diagnosis stopped at a prior bound of a base parameter: identify the vehicle "
                             "(lashscope identify) and diagnose again with the identified file")
     if items and result.identification is not None:
-        base = with_base(base, result.identification.ratios)
+        base = with_base(base, identified_ratios(result))
     elif not chosen:
         raise AnalysisError(f"diagnosis decided {result.decision.status!r}: there is no effect to apply")
     return apply_effects(base, chosen) if chosen else base
@@ -113,18 +113,29 @@ def validate_on(result: DiagnosisResult, signals: SignalSet, vehicle: Vehicle,
                 event_params: EventParams | None = None) -> Validation:
     """Shrink of the diagnosed (or given) effect on another drive, nuisance re-fitted, effect frozen."""
     chosen = effects if effects is not None else chosen_effects(result)
-    if not chosen:
+    ratios = identified_ratios(result)
+    if not chosen and not ratios:
         raise AnalysisError(f"diagnosis decided {result.decision.status!r}: there is no effect to validate")
-    return validate_effects(chosen, signals, vehicle, result.options, progress, event_params)
+    return validate_effects(chosen, signals, vehicle, result.options, progress, event_params, ratios)
+
+
+def identified_ratios(result: DiagnosisResult) -> dict[str, float]:
+    """The identified base parameters (ratios to the file's) the decision rests on; {} when it names none."""
+    if not result.decision.details.get("base_parameters") or result.decision.details.get("identify_first") \
+            or result.identification is None:
+        return {}
+    return dict(result.identification.ratios)
 
 
 def validate_effects(effects: dict[str, dict[str, float]], signals: SignalSet, vehicle: Vehicle,
                      options: DiagnosisOptions | None = None, progress: Progress | None = None,
-                     event_params: EventParams | None = None) -> Validation:
+                     event_params: EventParams | None = None,
+                     base_ratios: Mapping[str, float] | None = None) -> Validation:
     """Shrink of ``vehicle`` + ``effects`` (values frozen) against ``vehicle`` on the drive in ``signals``.
 
     Each model gets its own nuisance fit (offset, gain, road load) on all events of this drive;
-    nothing about the effect is fitted here.
+    nothing about the effect is fitted here. ``base_ratios``: identified base parameters applied first
+    (ratios to the file's values, :func:`app.identify.base.with_base`).
     """
     opts = options or DiagnosisOptions()
     say = progress or (lambda f, m: None)
@@ -141,7 +152,7 @@ def validate_effects(effects: dict[str, dict[str, float]], signals: SignalSet, v
     events = with_input_uncertainty(events, vehicle, base_fit, model, noise, opts.model_form_rel, opts.seed)
     base_fit = fit(vehicle, events, split, (), bounds=bounds, model=model, start=base_fit)
     say(0.5, "validation: augmented nuisance fit")
-    aug = apply_effects(vehicle, effects)
+    aug = apply_effects(with_base(vehicle, base_ratios or {}), effects)
     aug_fit = fit(aug, events, split, (), bounds=bounds, model=model, start=base_fit)
     b_eval = evaluate(vehicle, base_fit, events, model, None, noise.period_s)
     a_eval = evaluate(aug, aug_fit, events, model, None, noise.period_s)

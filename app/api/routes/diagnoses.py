@@ -38,6 +38,7 @@ from app.jobkinds.diagnosis import (
     SEP,
     STATUS,
     VALIDATION,
+    base_ratios,
     chosen,
     directory,
     read_json,
@@ -163,6 +164,7 @@ def _done_report(store: Store, d: Path, diagnosis_id: str) -> dict[str, Any]:
 @router.post("/diagnoses/{diagnosis_id}/apply", status_code=status.HTTP_201_CREATED, response_model=AppliedOut,
              summary="Apply the diagnosed effect: store a new vehicle version (the augmented model)")
 def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict[str, Any]:
+    from app.identify.base import with_base
     from app.pipeline import check_vehicle_files
     from sim import dump_toml, load_vehicle
     from sim.effects import apply_effects
@@ -172,7 +174,7 @@ def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict
     st = read_json(d / STATUS) or {}
     veh = store.get_vehicle(st["vehicle"]["name"], st["vehicle"]["version"])
     effects = chosen(report)
-    augmented = apply_effects(load_vehicle(veh.driveline_path), effects)
+    augmented = apply_effects(with_base(load_vehicle(veh.driveline_path), base_ratios(report)), effects)
     name = body.name or veh.name
     path = d / f"{name}-augmented.toml"
     path.write_text(dump_toml(augmented), encoding="utf-8")
