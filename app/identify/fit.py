@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -32,7 +32,7 @@ import numpy.typing as npt
 from scipy import stats
 
 from app.analysis.diagnosis.calibrate import GAIN_BOUNDS, Bounds, FitResult, fit
-from app.analysis.diagnosis.forward import DiagEvent, Nuisance
+from app.analysis.diagnosis.forward import DiagEvent, Nuisance, simulate_events, vehicle_with
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.split import Split
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
@@ -49,6 +49,7 @@ PASSES_PER_PARAM = 10  # simulator passes of the joint refinement per parameter 
 IDENT_SPAN = 0.5  # a parameter whose interval covers more than this share of its prior range is not identified
 N_NUISANCE = 2  # unit-box columns before the effects': torque gain and road load (the offset is profiled)
 MIN_EVENTS = 4  # events an identification needs (the interval has G-1 degrees of freedom)
+MIN_RESPONSE = 0.1  # measured / predicted speed swing below which the speed does not follow the torque
 PRACTICAL = {"stiffness": 0.04, "damping": 0.15, "mass": 0.03, "lash": 0.08}  # smallest change worth naming
 
 
@@ -198,10 +199,20 @@ def _starts(names: Sequence[str], vehicle: Vehicle, modal: Mapping[str, float] |
 
 def _joint(vehicle: Vehicle, events: Sequence[DiagEvent], split: Split, names: Sequence[str], bounds: Bounds,
            opts: FitOptions, base: FitResult, starts: Sequence[Values]) -> FitResult:
+    """The joint refinement from the best of ``starts`` (with the baseline's nuisance, and with the rigid-body
+    response moved from the torque gain onto the mass: a baseline without the mass free puts a heavier car's
+    slower acceleration on the gain, and a refinement from there stays in that valley)."""
     effects = tuple(BASE_EFFECTS[n] for n in names)
-    first = FitResult((), base.nuisance, dict(starts[0]), 0.0, 0, 0)
-    return fit(vehicle, events, split, effects, bounds=bounds, model=opts.model, start=first, screen=False,
-               alternatives=list(starts[1:]), passes_per_param=opts.passes_per_param, seed=opts.seed)
+    points = [FitResult((), base.nuisance, dict(v), 0.0, 0, 0) for v in starts]
+    if "mass" in names and abs(base.nuisance.gain - 1.0) > 0.01:
+        spec = BASE_EFFECTS["mass"].params[0]
+        nui = replace(base.nuisance, gain=1.0)
+        for v in starts:
+            moved = {**v, BASE_EFFECTS["mass"].id: {spec.name: float(np.clip(
+                v[BASE_EFFECTS["mass"].id][spec.name] / base.nuisance.gain, spec.lo, spec.hi))}}
+            points.append(FitResult((), nui, moved, 0.0, 0, 0))
+    return fit(vehicle, events, split, effects, bounds=bounds, model=opts.model, start=points[0], screen=False,
+               alternatives=points[1:], passes_per_param=opts.passes_per_param, seed=opts.seed)
 
 
 def _physical_interval(vehicle: Vehicle, ratios: Mapping[str, float], cov_ratio: FloatArray, names: Sequence[str],
@@ -285,6 +296,7 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     else:
         base = baseline
     log.append(f"baseline: chi2/n {base.chi2 / base.n:.3g}, nuisance {base.nuisance.to_dict()}")
+    _require_response(vehicle, evs, base, opts.model)
     starts = _starts(names, vehicle, {"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None)
     say(0.15, f"joint fit of {', '.join(names)} with the nuisance")
     joint = _joint(vehicle, evs, split, names, bounds, opts, base, starts)
@@ -303,7 +315,10 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
             log.append(f"refit {keep}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes")
             cov, t = _cov(joint, evs, opts.level)
         else:
-            joint = base
+            raise NotIdentifiableError(
+                "none of " + ", ".join(names) + " is identifiable from these events: their 90 % intervals span "
+                + ", ".join(f"{n} {s:.0%}" for n, s in zip(names, span_u, strict=True)) + " of the prior ranges "
+                "(too few or too similar events, or a speed that hardly responds to the torque)")
         names = keep
     say(0.9, "intervals")
     result = assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), t, base.chi2, len(evs))
@@ -312,6 +327,35 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     result.elapsed_s = time.process_time() - clock
     say(1.0, "identified: " + (", ".join(result.named) or "nothing off the file"))
     return result
+
+
+def _require_response(vehicle: Vehicle, events: Sequence[DiagEvent], base: FitResult, model: str) -> None:
+    """NotIdentifiableError when the measured speed does not follow the torque at all.
+
+    The test is on the events' speed swings: the file's vehicle, driven by the logged torque, predicts a swing
+    (range of the speed less its straight line) in every window; a log whose measured swings stay under
+    :data:`MIN_RESPONSE` of the predicted ones in most windows carries no driveline dynamics to identify (a speed
+    channel that is a constant, a wheel speed from a locked axle, a torque from another motor).
+    """
+    outs = simulate_events(events, vehicle_with(vehicle, base.nuisance, ()), base.nuisance.gain, (), model)
+    ratios = []
+    for ev, out in zip(events, outs, strict=True):
+        pred = out.at(ev.speed_t, base.nuisance.offset_s)
+        ratios.append(_swing(ev.speed_t, ev.speed_meas) / max(_swing(ev.speed_t, pred), 1e-9))
+    if float(np.median(ratios)) < MIN_RESPONSE:
+        raise NotIdentifiableError(
+            f"stiffness, damping, mass, lash: the measured motor speed does not respond to the torque (its swings "
+            f"in the event windows are a median {float(np.median(ratios)):.0%} of what the vehicle file predicts); "
+            "check the speed and torque channels of the signal map")
+
+
+def _swing(t: FloatArray, y: FloatArray) -> float:
+    """Range of ``y`` less its straight-line trend (what a torque step adds to a steady acceleration)."""
+    if t.size < 3:
+        return 0.0
+    c = np.polyfit(t - t[0], y, 1)
+    r = y - np.polyval(c, t - t[0])
+    return float(r.max() - r.min())
 
 
 def _fittable(vehicle: Vehicle, name: str) -> bool:

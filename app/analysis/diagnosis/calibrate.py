@@ -247,7 +247,7 @@ def fit(
     max_nfev: int | None = None,
     n_random_starts: int = 1,
     screen: bool = True,
-    alternatives: Sequence[dict[str, dict[str, float]]] = (),
+    alternatives: Sequence[dict[str, dict[str, float]] | FitResult] = (),
     max_passes: int | None = None,
     passes_per_param: int = PASSES_PER_PARAM,
     seed: int = 0,
@@ -266,7 +266,8 @@ def fit(
     max_nfev : budget of residual evaluations for the local refinement.
     n_random_starts : random effect-parameter start points screened besides the fixed ones.
     screen : screen the fixed and random start points; False: refine from ``start`` (it must hold
-        values for every effect), or from the best of it and ``alternatives`` (effect values).
+        values for every effect), or from the best of it and ``alternatives`` (effect values with the start's
+        nuisance, or fits whose own nuisance and values are the start point).
     max_passes : simulator passes of the refinement, Jacobians included (None: ``passes_per_param``
         x (parameters + 1)); when they run out the best point seen is the result.
     passes_per_param : see ``max_passes``.
@@ -287,7 +288,8 @@ def fit(
         elif not screen:
             raise ValueError("fit(screen=False) needs a start with values for every effect")
         if not screen:
-            candidates.extend(prob.encode(nui0, alt) for alt in alternatives)
+            candidates.extend(prob.encode(alt.nuisance, alt.values) if isinstance(alt, FitResult)
+                              else prob.encode(nui0, alt) for alt in alternatives)
             for u0 in candidates:  # a start on a bound barely moves (see _starts)
                 u0[prob.N_NUISANCE:] = np.clip(u0[prob.N_NUISANCE:], START_MARGIN, 1.0 - START_MARGIN)
     if effects and screen:

@@ -1,0 +1,109 @@
+"""The grey-box identification on prepared events: values, intervals, identifiability, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.analysis.diagnosis.synthetic import CanSampling
+from app.errors import InsufficientDataError, NotIdentifiableError
+from app.identify import FitOptions, identify_events, physical, with_base
+from app.identify.base import effective_stiffness, first_mode, lash_mrad
+from app.signals import Signal, SignalSet
+from sim import load_vehicle
+from tests.identify.drives import OFF, drive_signals, prepared
+
+
+@pytest.fixture(scope="module")
+def off_result():  # type: ignore[no-untyped-def]
+    events, noise = prepared(drive_signals(OFF, seed=5))
+    return identify_events(events, noise, load_vehicle("paper"))
+
+
+def test_effective_stiffness_is_the_series_sum_referred_to_the_rotor() -> None:
+    v = load_vehicle("paper")
+    red, hs = v.reducer, v.halfshaft
+    assert red is not None and hs is not None
+    r1, r = red.ratio1, red.ratio
+    compliance = (1 / red.spline_stiffness + r1 ** 2 / red.mesh1_stiffness + r ** 2 / red.mesh2_stiffness
+                  + r ** 2 / red.diff_stiffness + r ** 2 / (hs.count * hs.stiffness))
+    assert effective_stiffness(v) == pytest.approx(1 / compliance, rel=1e-9)
+    # every stiffness x 0.6: the effective stiffness x 0.6, the mode near x sqrt(0.6) (the rotor side dominates;
+    # the housing on its mounts and the damping move it a little)
+    soft = with_base(v, {"stiffness": 0.6})
+    assert effective_stiffness(soft) == pytest.approx(0.6 / compliance, rel=1e-9)
+    assert first_mode(soft)[0] / first_mode(v)[0] == pytest.approx(np.sqrt(0.6), rel=0.05)
+    assert lash_mrad(with_base(v, {"lash": 1.3})) == pytest.approx(1.3 * lash_mrad(v), rel=1e-9)
+
+
+def test_every_base_parameter_recovered_with_an_interval_that_holds_it(off_result) -> None:  # type: ignore[no-untyped-def]
+    truth = physical(with_base(load_vehicle("paper"), OFF))
+    for name in ("stiffness", "damping", "mass", "lash"):
+        p = off_result.params[name]
+        assert p.identified and not p.at_bound and p.named, (name, p)
+        assert p.value == pytest.approx(truth.value(name), rel=0.03), name
+        assert p.lo <= truth.value(name) <= p.hi, (name, p)
+    assert off_result.params["torque_gain"].value == pytest.approx(1.0, abs=0.02)
+    assert sorted(off_result.named) == ["damping", "lash", "mass", "stiffness"]
+    assert off_result.chi2_after < 0.1 * off_result.chi2_before
+    # the model-free mode sees the truth's first mode, not the file's
+    assert off_result.modal is not None
+    assert off_result.modal.freq_hz == pytest.approx(truth.freq_hz, rel=0.05)
+
+
+def test_a_correct_file_names_nothing() -> None:
+    events, noise = prepared(drive_signals({}, seed=6, duration_s=30.0))
+    res = identify_events(events, noise, load_vehicle("paper"))
+    assert res.named == []
+    for name in ("stiffness", "mass", "lash"):
+        p = res.params[name]
+        assert p.value == pytest.approx(p.nominal, rel=0.04), name
+
+
+def test_a_subset_of_parameters_keeps_the_rest_at_the_file() -> None:
+    events, noise = prepared(drive_signals({"mass": 1.2}, seed=7, duration_s=30.0))
+    res = identify_events(events, noise, load_vehicle("paper"), FitOptions(params=("mass",)))
+    assert res.named == ["mass"]
+    assert res.params["mass"].value == pytest.approx(1.2 * 1750.0, rel=0.03)
+    assert not res.params["stiffness"].identified and res.params["stiffness"].note == "not fitted"
+    assert res.params["stiffness"].value == res.params["stiffness"].nominal
+
+
+def test_too_few_events_is_insufficient_data() -> None:
+    events, noise = prepared(drive_signals({}, seed=8, duration_s=30.0))
+    with pytest.raises(InsufficientDataError) as err:
+        identify_events(events[:3], noise, load_vehicle("paper"))
+    assert err.value.code == "insufficient_data" and "at least 4" in str(err.value)
+
+
+def test_a_speed_that_does_not_respond_to_the_torque_is_not_identifiable() -> None:
+    sig = drive_signals({}, seed=9, duration_s=30.0)
+    sp = sig["motor_speed_rpm"]
+    rng = np.random.default_rng(0)
+    flat = SignalSet()
+    flat.add(sig["motor_torque_nm"])
+    flat.add(Signal.from_samples("motor_speed_rpm", sp.t, 3000.0 + rng.normal(0, 0.5, sp.t.size), "rpm"))
+    events, noise = prepared(flat)
+    with pytest.raises(NotIdentifiableError) as err:
+        identify_events(events, noise, load_vehicle("paper"))
+    assert err.value.code == "not_identifiable" and "does not respond to the torque" in str(err.value)
+
+
+def test_a_vehicle_without_the_field_is_not_identifiable() -> None:
+    v = load_vehicle("paper")
+    no_lash = v.with_changes({f"gaps.{g}": 0.0 for g in v.gap_names})
+    events, noise = prepared(drive_signals({}, seed=10, duration_s=30.0))
+    with pytest.raises(NotIdentifiableError) as err:
+        identify_events(events, noise, no_lash, FitOptions(params=("lash",)))
+    assert "nothing identifiable" in str(err.value)
+    with pytest.raises(NotIdentifiableError, match="unknown base parameters"):
+        identify_events(events, noise, v, FitOptions(params=("stiffness", "colour")))
+
+
+def test_bursty_50_hz_sampling_still_identifies_the_stiffness() -> None:
+    sampling = CanSampling(period_s=0.02, jitter_s=0.001, drop_fraction=0.03)
+    events, noise = prepared(drive_signals({"stiffness": 0.7}, seed=11, duration_s=40.0, sampling=sampling))
+    res = identify_events(events, noise, load_vehicle("paper"))
+    p = res.params["stiffness"]
+    assert p.value / p.nominal == pytest.approx(0.7, rel=0.05)
+    assert "stiffness" in res.named
