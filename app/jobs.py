@@ -46,7 +46,7 @@ from app.storage.records import JobRecord, JobStatus
 log = logging.getLogger("lashscope.jobs")
 #: kind -> lane; one module each in app.jobkinds, with run(store, job)
 KINDS = {"analysis": "analysis", "tolerance": "analysis", "diagnosis": "long", "validation": "long",
-         "batch": "long"}
+         "batch": "long", "identification": "long"}
 WORKER_NICE = 5  # added to a worker's niceness: the API's reads come first on a busy machine
 _SPAWN = multiprocessing.get_context("spawn")  # no fork of a threaded server; the child imports afresh
 

@@ -97,7 +97,7 @@ class Settings(BaseSettings):
     def job_timeouts(self) -> dict[str, tuple[float, str]]:
         """Wall time (s) of the job kinds that do not use ``job_timeout_s``, with the setting that names it."""
         diagnosis = (self.diagnosis_timeout_s, "LASHSCOPE_DIAGNOSIS_TIMEOUT_S")
-        return {"diagnosis": diagnosis, "validation": diagnosis,
+        return {"diagnosis": diagnosis, "validation": diagnosis, "identification": diagnosis,
                 "batch": (self.batch_timeout_s, "LASHSCOPE_BATCH_TIMEOUT_S")}
 
     @property

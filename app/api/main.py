@@ -32,7 +32,19 @@ from fastapi.middleware.gzip import GZipMiddleware
 from app import __version__
 from app.api import errors
 from app.api.formats import FormatGuard
-from app.api.routes import analyses, batches, dashboard, diagnoses, fleet, health, live, logs, series, vehicles
+from app.api.routes import (
+    analyses,
+    batches,
+    dashboard,
+    diagnoses,
+    fleet,
+    health,
+    identifications,
+    live,
+    logs,
+    series,
+    vehicles,
+)
 from app.api.routes.series import SeriesCache
 from app.api.security import RequestGuard
 from app.api.timing import ServerTiming
@@ -43,7 +55,7 @@ from app.storage.url import open_store
 from app.web import install as install_dashboard
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
-                            live.router, diagnoses.router, batches.router, fleet.router,
+                            live.router, diagnoses.router, identifications.router, batches.router, fleet.router,
                             dashboard.router]
 
 log = logging.getLogger("lashscope.api")

@@ -261,6 +261,81 @@ class BatchCreate(BaseModel):
     diagnose: bool = Field(default=False, description="also diagnose each log (all candidates; slower)")
 
 
+class IdentificationCreate(BaseModel):
+    """``POST /identifications``: identify a vehicle's base parameters from uploaded logs (one job)."""
+
+    log_ids: list[str] = Field(min_length=1, max_length=50, description="ids of uploaded logs of the car (fitted)")
+    validate_log_ids: list[str] = Field(default_factory=list, max_length=10,
+                                        description="withheld drives: tracking before and after, never fitted")
+    vehicle: str
+    vehicle_version: int | None = None
+    params: list[str] = Field(default_factory=lambda: ["stiffness", "damping", "mass", "lash"], min_length=1,
+                              max_length=4, description="base parameters to fit: stiffness, damping, mass, lash")
+    seed: int = Field(default=0, ge=0, le=2**31 - 1)
+
+
+class IdentifiedParamOut(_Open):
+    """One identified quantity: value with its interval (90 %) and the file's value, in ``unit``."""
+
+    name: str
+    label: str
+    unit: str
+    value: float | None
+    lo: float | None
+    hi: float | None
+    nominal: float | None
+    identified: bool = Field(description="false: the data do not pin it down; it stays at the file's value")
+    at_bound: bool = Field(description="the fit rests on a prior bound: not trusted")
+    named: bool = Field(description="off the file: identified, interval excluding the file's value, a change "
+                                    "large enough to matter")
+    note: str = ""
+
+
+class ModalOut(_Open):
+    """The model-free first torsional mode pooled over the event windows."""
+
+    freq_hz: float
+    freq_ci: list[float]
+    zeta: float
+    zeta_ci: list[float]
+    n_windows: int
+    n_used: int
+
+
+class IdentificationResultOut(_Open):
+    """The result of an identification (``lashscope identify --json``)."""
+
+    vehicle: str
+    params: dict[str, IdentifiedParamOut]
+    named: list[str]
+    not_identified: list[str]
+    modal: ModalOut | None = None
+    nuisance: dict[str, float]
+    residual_to_noise_before: float
+    residual_to_noise_after: float
+    events: int
+    validation: dict[str, Any] = Field(default_factory=dict, description="withheld drives: nrmse_before, "
+                                       "nrmse_after, verdict_before, verdict_after, per drive before/after")
+
+
+class IdentificationOut(BaseModel):
+    """An identification job: status and progress; ``result`` once done; ``applied`` once stored as a version."""
+
+    id: str
+    status: str
+    progress: float
+    stage: str
+    job: JobOut
+    vehicle: str
+    vehicle_version: int
+    log_ids: list[str]
+    validate_log_ids: list[str]
+    params: list[str]
+    result: IdentificationResultOut | None = None
+    applied: dict[str, Any] | None = None
+    links: dict[str, str]
+
+
 class BatchOut(BaseModel):
     """A batch job: its status and progress; ``counts`` of logs ok / failed / pending; ``summary`` once done."""
 

@@ -38,8 +38,13 @@ def directory(store: Store, diagnosis_id: str) -> Path:
 
 def write_json(path: Path, doc: dict[str, Any]) -> None:
     """Write ``doc`` to a temporary sibling and rename it into place: a reader never sees half a file."""
+    write_text(path, json.dumps(doc, indent=1, allow_nan=False, default=str))
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write ``text`` to a temporary sibling and rename it into place."""
     tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(doc, indent=1, allow_nan=False, default=str), encoding="utf-8")
+    tmp.write_text(text, encoding="utf-8")
     tmp.replace(path)
 
 

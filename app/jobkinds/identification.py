@@ -1,0 +1,60 @@
+"""Job kind ``identification``: :func:`app.identify.logs.identify_logs` over stored logs of one vehicle.
+
+Subject: the identification id (``id_<hex>``). Its folder (:func:`directory`, under the store's
+``jobs/``) holds ``request.json`` (the log ids, the withheld logs, the vehicle and its version, the
+base parameters to fit) and, once done, ``result.json`` (the documented result of
+:meth:`~app.identify.logs.IdentifyResult.to_dict`) and ``identified.toml`` (the identified vehicle
+with its ``[provenance]``), which ``POST /identifications/{id}/apply`` stores as a new version.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from app.errors import InputError
+from app.storage.base import Store
+from app.storage.records import JobRecord
+
+REQUEST, RESULT, IDENTIFIED = "request.json", "result.json", "identified.toml"
+
+
+def directory(store: Store, identification_id: str) -> Path:
+    return store.job_dir(identification_id)
+
+
+def request(store: Store, identification_id: str) -> dict[str, Any]:
+    try:
+        doc: dict[str, Any] = json.loads((directory(store, identification_id) / REQUEST).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(f"identification {identification_id} has no readable request",
+                         code="identification_not_found") from exc
+    return doc
+
+
+def run(store: Store, job: JobRecord) -> None:
+    from app.identify.logs import IdentifyOptions, identify_logs
+    from app.jobkinds import progress_reporter
+    from app.jobkinds.diagnosis import write_json, write_text
+    from sim import load_vehicle
+
+    d = directory(store, job.subject)
+    req = request(store, job.subject)
+    veh = store.get_vehicle(req["vehicle"], req["vehicle_version"])
+    logs = [store.get_log(log_id).path for log_id in req["log_ids"]]
+    withheld = [store.get_log(log_id).path for log_id in req["validate_log_ids"]]
+    names = {store.get_log(log_id).path.name: store.get_log(log_id).filename
+             for log_id in [*req["log_ids"], *req["validate_log_ids"]]}
+    progress = progress_reporter(store, job.id)
+    options = IdentifyOptions(dbc=veh.database_path, signal_map=veh.signal_map_path, seed=int(req["seed"]),
+                              params=tuple(req["params"]))
+    result = identify_logs(logs, load_vehicle(veh.driveline_path), options, withheld,
+                           lambda fraction, message: progress(message, fraction))
+    store.update_job(job.id, 0.99, "saving")
+    val = result.validation
+    for item in [*result.logs, *val.get("before", []), *val.get("after", [])]:
+        key = "name" if "name" in item else "log"  # logs by their upload name: the stored file's stays inside
+        item[key] = names.get(item[key], item[key])
+    write_text(d / IDENTIFIED, result.vehicle_toml(req["name"]))
+    write_json(d / RESULT, json.loads(json.dumps(result.to_dict(), allow_nan=False)))
