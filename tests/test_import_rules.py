@@ -14,7 +14,11 @@ FORBIDDEN = {
     "sim": ("app", "fastapi", "can", "cantools", "uvicorn", "starlette", "pandas"),
     "app/signals": ("app.ingest", "app.analysis", "app.pipeline", "app.api", "app.storage", "app.cli"),
     "app/ingest": ("app.analysis", "app.pipeline", "app.api", "app.cli"),
-    "app/analysis": ("app.pipeline", "app.api", "app.cli", "fastapi"),
+    "app/analysis": ("app.pipeline", "app.api", "app.cli", "fastapi", "app.identify.logs"),
+    "app/identify/base.py": ("app.pipeline", "app.api", "app.cli", "fastapi", "app.analysis.diagnosis.select"),
+    "app/identify/fit.py": ("app.pipeline", "app.api", "app.cli", "fastapi", "app.analysis.diagnosis.select"),
+    "app/identify/modal.py": ("app.pipeline", "app.api", "app.cli", "fastapi", "app.analysis.diagnosis.select"),
+    "app/identify/logs.py": ("app.api", "app.cli", "fastapi"),
     "app/storage": ("app.api", "app.cli", "fastapi"),
     "app/pipeline.py": ("app.api", "app.cli", "fastapi"),
 }

@@ -12,8 +12,25 @@ Modules: :mod:`.base` (the identifiable base parameters and their physical figur
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from app.identify.base import BASE_NAMES, Physical, physical, with_base
 from app.identify.fit import FitOptions, Identification, Param, identify_events
 
-__all__ = ["BASE_NAMES", "FitOptions", "Identification", "Param", "Physical", "identify_events", "physical",
-           "with_base"]
+if TYPE_CHECKING:
+    from app.identify.logs import IdentifyOptions, IdentifyResult, identify_logs
+
+__all__ = ["BASE_NAMES", "FitOptions", "Identification", "IdentifyOptions", "IdentifyResult", "Param", "Physical",
+           "identify_events", "identify_logs", "physical", "with_base"]
+_LOGS = ("IdentifyOptions", "IdentifyResult", "identify_logs")
+
+
+def __getattr__(name: str) -> Any:
+    # the log-level entry decodes and analyses through app.pipeline, a layer above the diagnosis that uses
+    # this package's fit: it loads on first use, so that importing the fit never imports the pipeline
+    if name not in _LOGS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module("app.identify.logs"), name)
+    globals()[name] = value
+    return value

@@ -16,8 +16,15 @@ import numpy as np
 from app.analysis.diagnosis.forward import DiagEvent
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, prepare
-from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure, measure_frames, run_truth
-from app.analysis.diagnosis.synthetic import to_signals
+from app.analysis.diagnosis.synthetic import (
+    CanSampling,
+    DriveSpec,
+    make_drive,
+    measure,
+    measure_frames,
+    run_truth,
+    to_signals,
+)
 from app.analysis.diagnosis.truthlog import write_blf
 from app.analysis.events import detect_events
 from app.identify.base import with_base
