@@ -12,7 +12,7 @@ Printed: one line per case, then the targets as PASS/FAIL with their figures and
 per identification and per diagnosis. Without ``app.identify`` the drives are still made and the
 diagnosis still scored; the identification targets are reported unavailable.
 
-    .venv/bin/python bench/identify_indep.py --set idev --quick      # 10 cases, 40 s drives
+    .venv/bin/python bench/identify_indep.py --set idev --quick      # 9 cases, 40 s drives
     .venv/bin/python bench/identify_indep.py --set idev --jobs 2     # 35 cases, 60 s drives
     .venv/bin/python bench/identify_indep.py --set idev --case chain_none_210033 --generate-only
     .venv/bin/python bench/identify_indep.py --set ifinal            # scored once, with the rule fixed
@@ -227,7 +227,7 @@ def diagnosis_targets(out: list[Outcome]) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--set", choices=IDENTIFY_SETS, default="idev", dest="which")
-    ap.add_argument("--quick", action="store_true", help="10 cases, 40 s drives")
+    ap.add_argument("--quick", action="store_true", help="9 cases, 40 s drives")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     ap.add_argument("--case", action="append", default=[], help="only the case of this name (repeatable)")
     ap.add_argument("--generate-only", action="store_true", help="make (or check) the cached drives and stop")

@@ -234,7 +234,8 @@ def plan_identify(which: str, quick: bool) -> list[Case]:
 
     Paper car: ``none``; ``base`` with each base parameter moved alone (two each) and 2-4 moved together,
     alternately logged at 100 Hz and 1 kHz; ``base_effect`` (one per library effect). Chain car (slow,
-    bursty logger drawn from :data:`CHAIN_RATES_HZ`): ``base`` with its damping raised until the first mode's
+    bursty logger: every other case at 50 Hz, the others at a rate drawn from the slower
+    :data:`CHAIN_RATES_HZ`): ``base`` with its damping raised until the first mode's
     damping ratio is a drawn value in :data:`CHAIN_ZETA` (the preset's is ~0.04), alone or with other
     errors, and ``none`` (the preset's car).
     """
@@ -264,12 +265,13 @@ def plan_identify(which: str, quick: bool) -> list[Case]:
         s += 1
     for i in range(n_chain + n_chain_none):
         r = np.random.default_rng(s)
-        rate = float(r.choice(CHAIN_RATES_HZ))
+        rate = CHAIN_RATES_HZ[-1] if i % 2 == 0 else float(r.choice(CHAIN_RATES_HZ[:-1]))  # half at 50 Hz
         if i >= n_chain:
             out.append(Case(f"chain_none_{s}", "none", s, {}, ["none"], dur, car="chain_drive", rate_hz=rate))
         else:
-            others = [] if i % 2 == 0 else [str(k) for k in r.choice(knobs[:1] + knobs[2:], size=1 + i % 3 // 2,
-                                                                     replace=False)]
+            combined = i % 4 in (1, 2)  # damping alone or with 1-2 other errors, at 50 Hz and slower alike
+            others = [str(k) for k in r.choice(knobs[:1] + knobs[2:], size=1 + i // 4 % 2, replace=False)] \
+                if combined else []
             v = {k: BASE_DRAWS[k](r) for k in others}
             zeta = _u(r, *CHAIN_ZETA)
             v["c_scale"] = _chain_damping(v, zeta)
