@@ -40,8 +40,10 @@ from sim import load_vehicle  # noqa: E402
 
 try:
     from app.identify import IdentifyOptions, identify_logs
-except ImportError:  # identification not in this checkout: the drives and the diagnosis are still scored
+    UNAVAILABLE = ""
+except ImportError as exc:  # identification not in this checkout: the drives and the diagnosis are still scored
     IdentifyOptions = identify_logs = None  # type: ignore[assignment,misc]
+    UNAVAILABLE = str(exc)
 
 # identified parameter -> (truth key in Case.truth, relative tolerance of the target)
 PARAMS = {"stiffness": ("stiffness", 0.10), "damping_ratio": ("zeta", 0.20), "mass": ("mass", 0.05),
@@ -248,7 +250,7 @@ def main() -> int:
     print(f"independent-generator identification benchmark, set {args.which}: {len(todo)} cases, "
           f"{todo[0].duration_s:.0f} s drives, BLF through {DBC.name}")
     if identify_logs is None:
-        print("identification unavailable (no app.identify in this checkout): only the diagnosis is scored")
+        print(f"identification unavailable ({UNAVAILABLE}): only the diagnosis is scored")
     out: list[Outcome] = []
     with ProcessPoolExecutor(max_workers=args.jobs) if args.jobs > 1 else Serial() as pool:
         for i, o in enumerate(pool.map(run, todo, [folder] * len(todo))):
@@ -256,7 +258,7 @@ def main() -> int:
             print(f"[{i + 1:2d}/{len(todo)}] {line(o)}", flush=True)
     print("\ntargets")
     if identify_logs is None:
-        print("  [n/a] identification targets: app.identify unavailable")
+        print(f"  [n/a] identification targets: identification unavailable ({UNAVAILABLE})")
     else:
         identification_targets(out)
     diagnosis_targets(out)
