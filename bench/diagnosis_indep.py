@@ -54,31 +54,31 @@ class Result:
     cpu_s: float
     n_events: int
     error: str = ""
+    base_named: tuple[str, ...] = ()  # base parameters the report says the data sheet has wrong
 
 
-def generate(which: str, quick: bool, jobs: int = 1) -> tuple[Path, list[Case]]:
-    """The set's cases, generated once and cached (manifest + BLF per drive); ``jobs`` processes."""
+def generate(which: str, quick: bool, jobs: int = 1, names: list[str] | None = None) -> tuple[Path, list[Case]]:
+    """The set's cases (only those in ``names`` when given), generated once and cached (manifest + BLF per
+    drive, cases made earlier kept in the manifest); ``jobs`` processes."""
     folder = OUT / which / ("quick" if quick else "full")
     manifest = folder / "manifest.json"
-    todo = plan(which, quick)
-    if manifest.exists():
-        done = {c.name: c for c in read_manifest(manifest)}
-        if all(c.name in done and (folder / done[c.name].drive_a).exists() for c in todo):
-            return folder, [done[c.name] for c in todo]
-    folder.mkdir(parents=True, exist_ok=True)
-    out = []
-    t0 = time.time()
-    with ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else _Serial() as pool:
-        for i, c in enumerate(pool.map(build, todo, [folder] * len(todo))):
-            out.append(c)
-            print(f"generate [{i + 1}/{len(todo)}] {c.name}: {c.signal_sigma:.1f} sigma ({time.time() - t0:.0f} s)",
-                  file=sys.stderr, flush=True)
-    write_manifest(manifest, out)
-    return folder, out
+    todo = [c for c in plan(which, quick) if not names or c.name in names]
+    done = {c.name: c for c in read_manifest(manifest)} if manifest.exists() else {}
+    missing = [c for c in todo if c.name not in done or not (folder / done[c.name].drive_a).exists()]
+    if missing:
+        folder.mkdir(parents=True, exist_ok=True)
+        t0 = time.time()
+        with ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else Serial() as pool:
+            for i, c in enumerate(pool.map(build, missing, [folder] * len(missing))):
+                done[c.name] = c
+                print(f"generate [{i + 1}/{len(missing)}] {c.name}: {c.signal_sigma:.1f} sigma "
+                      f"({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
+        write_manifest(manifest, list(done.values()))
+    return folder, [done[c.name] for c in todo]
 
 
 def diagnose(case: Case, folder: Path) -> Result:
-    vehicle = load_vehicle("paper")
+    vehicle = load_vehicle(case.car)
     try:
         signals = read_log(folder / case.drive_a, DBC, MAP)
         t0 = time.process_time()
@@ -90,14 +90,16 @@ def diagnose(case: Case, folder: Path) -> Result:
     rep = report_dict(res)
     rem = (rep.get("decision") or {}).get("remainder") or {}
     remainder = str(rem.get("status", "")) if isinstance(rem, dict) else str(rem)
+    details = (rep.get("decision") or {}).get("details") or {}
+    base_named = tuple(str(b["name"]) for b in details.get("base_parameters", ())) if isinstance(details, dict) else ()
     shrink_b = float("nan")
     if d.top and d.status in (*CONFIDENT, "ambiguous"):
         try:
             shrink_b = validate_on(res, read_log(folder / case.drive_b, DBC, MAP), vehicle).shrink.value
         except Exception as exc:
             return Result(case, d.status, tuple(d.top), remainder, shrink_b, cpu, len(res.events),
-                          f"validation: {type(exc).__name__}: {exc}")
-    return Result(case, d.status, tuple(d.top), remainder, shrink_b, cpu, len(res.events))
+                          f"validation: {type(exc).__name__}: {exc}", base_named)
+    return Result(case, d.status, tuple(d.top), remainder, shrink_b, cpu, len(res.events), base_named=base_named)
 
 
 def _structured(r: Result) -> bool:
@@ -190,12 +192,10 @@ def main() -> int:
     ap.add_argument("--case", action="append", default=[], help="only the case of this name (repeatable)")
     ap.add_argument("--generate-only", action="store_true", help="make (or check) the cached drives and stop")
     args = ap.parse_args()
-    folder, todo = generate(args.which, args.quick, args.jobs)
-    if args.case:
-        todo = [c for c in todo if c.name in args.case]
-        if not todo:
-            print(f"no case named {args.case}", file=sys.stderr)
-            return 2
+    folder, todo = generate(args.which, args.quick, args.jobs, args.case)
+    if args.case and not todo:
+        print(f"no case named {args.case}", file=sys.stderr)
+        return 2
     if args.only:
         todo = [c for c in todo if c.kind == args.only]
         if not todo:
@@ -207,7 +207,7 @@ def main() -> int:
     print(f"independent-generator diagnosis benchmark, set {args.which}: {len(todo)} cases, "
           f"{todo[0].duration_s:.0f} s drives, BLF through {DBC.name}; preset paper")
     results: list[Result] = []
-    with ProcessPoolExecutor(max_workers=args.jobs) if args.jobs > 1 else _Serial() as pool:
+    with ProcessPoolExecutor(max_workers=args.jobs) if args.jobs > 1 else Serial() as pool:
         for i, r in enumerate(pool.map(diagnose, todo, [folder] * len(todo))):
             results.append(r)
             c = r.case
@@ -219,10 +219,10 @@ def main() -> int:
     return 0
 
 
-class _Serial:
+class Serial:
     """``map`` in this process (``--jobs 1``), with the pool's context-manager shape."""
 
-    def __enter__(self) -> _Serial:
+    def __enter__(self) -> Serial:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -11,7 +11,16 @@ the paper model, i.e. a faint tyre effect on every "no effect" drive; at 20 MN t
 0.8 rpm, set by the other formulation differences (``tests/bench/test_indep_generator.py`` checks it). The preset's
 differential stiffness and damping are for both side gears together; each side-gear contact
 gets half. Each effect is a
-plain field change (see :func:`with_effect`), so an effect drawn for a case is a ``Car``.
+plain field change (see :func:`with_effect`), so an effect drawn for a case is a ``Car``; so is a
+base-parameter error, a wrong data sheet (see :func:`with_base`).
+
+The second car, :func:`chain_car`, is ``sim/presets/chain_drive.toml`` read as data and mapped onto
+the same equations: the spline stage is the spline, the chain (11/42) is the first gear pair (the
+pair's reversed rotation is undone by the second one, and with the housing held it carries no
+reaction), the second pair is a 1:1 pair that is very stiff and lash-free (the driven sprocket
+and the differential case are one body, its inertia split between the pair's two sides), and "no
+housing" is a housing on very stiff, well damped mounts. The preset's rotor and hub-bearing drags
+are lumped as a rotor drag (the wheel part referred through the ratio).
 """
 
 from __future__ import annotations
@@ -21,7 +30,10 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-PRESET = Path(__file__).resolve().parents[2] / "sim" / "presets" / "paper.toml"
+PRESETS = Path(__file__).resolve().parents[2] / "sim" / "presets"
+PRESET = PRESETS / "paper.toml"
+CHAIN_PRESET = PRESETS / "chain_drive.toml"
+CARS = ("paper", "chain_drive")  # lashscope preset names of the generator's nominal cars
 G = 9.81
 
 
@@ -115,6 +127,48 @@ def nominal_car(preset: Path = PRESET) -> Car:
     )
 
 
+def chain_car(preset: Path = CHAIN_PRESET) -> Car:
+    """The chain_drive preset's car in this generator's terms (mapping in the module docstring)."""
+    p = tomllib.loads(preset.read_text(encoding="utf-8"))
+    st = {s["kind"]: s for s in p["stage"]}
+    rotor, spline, chain, diff, hs, wheel = (st[k] for k in ("rotor", "spline", "chain", "differential",
+                                                              "halfshaft", "wheel"))
+    z = chain["teeth"]
+    i1 = z[1] / z[0]
+    lash = chain["lash_rad"]
+    k_chain = chain["stiffness"]
+    return Car(
+        j_rotor=rotor["rotor_inertia"], j_input=spline["inertia"],
+        j_inter=chain["inertia"] / 2, j_case=chain["inertia"] / 2, j_side=diff["inertia"] / 2, j_pinion=0.0005,
+        i1=i1, i2=1.0,
+        k_spline=spline["stiffness"], c_spline=spline["damping"],
+        k_mesh1=k_chain, c_mesh1=chain["damping"],
+        # the joint between sprocket and case: 20x the chain, damped at ~0.3 of its own critical damping
+        k_mesh2=20 * k_chain, c_mesh2=0.6 * (20 * k_chain * chain["inertia"] / 4) ** 0.5,
+        k_diff=diff["stiffness"] / 2, c_diff=diff["damping"] / 2,  # preset: both side gears together
+        gap_spline=spline["lash_rad"], gap_mesh1=lash["nominal"] if isinstance(lash, dict) else lash,
+        gap_mesh2=0.0, gap_diff=diff["lash_rad"], gap_shaft=hs["lash_rad"],
+        k_shaft_l=hs["stiffness"], k_shaft_r=hs["stiffness"], c_shaft_l=hs["damping"], c_shaft_r=hs["damping"],
+        j_shaft=hs["inertia"], j_wheel=wheel["inertia"], radius=wheel["radius"],
+        mass=float(p["body"]["mass"]), crr=p["body"]["rolling_resistance"], cda=p["body"]["drag_area"],
+        rho=p["body"]["air_density"],
+        tyre_c=2.0e7, tyre_sigma=0.05, tyre_mu=1.6,
+        # no housing: a 1 kg m^2 body on mounts 1000x the driveline's stiffness at the rotor, near critically damped
+        j_housing=1.0, k_mount=1.0e7, c_mount=5.0e3,
+        drag_coulomb=rotor["coulomb_drag"] + 2 * wheel["coulomb_drag"] / i1,
+        drag_viscous=rotor["viscous_damping"] + 2 * wheel["viscous_drag"] / i1**2,
+    )
+
+
+def car_named(name: str) -> Car:
+    """The nominal car of a lashscope preset name (:data:`CARS`)."""
+    if name == "paper":
+        return nominal_car()
+    if name == "chain_drive":
+        return chain_car()
+    raise ValueError(f"no generator car for preset {name!r}")
+
+
 def ratio(car: Car) -> float:
     """Overall reduction, motor to wheel."""
     return car.i1 * car.i2
@@ -123,6 +177,44 @@ def ratio(car: Car) -> float:
 def tyre_load(car: Car) -> float:
     """Vertical load on one driven tyre, N (55 % of the weight on the driven axle)."""
     return 0.55 * car.mass * G / 2
+
+
+def with_base(car: Car, v: dict[str, float]) -> Car:
+    """``car`` with a wrong data sheet undone: the truth differs from the nominal car by ``v``'s scales.
+
+    ``k_scale`` both half-shafts' stiffness, ``c_scale`` every shaft and mesh damping (spline, both
+    pairs, differential, half-shafts; not the mounts), ``mass_scale`` the body mass, ``gap_scale``
+    every clearance. Missing keys leave a parameter as it is.
+    """
+    k, c, gap = v.get("k_scale", 1.0), v.get("c_scale", 1.0), v.get("gap_scale", 1.0)
+    return car.with_(
+        k_shaft_l=car.k_shaft_l * k, k_shaft_r=car.k_shaft_r * k,
+        c_spline=car.c_spline * c, c_mesh1=car.c_mesh1 * c, c_mesh2=car.c_mesh2 * c, c_diff=car.c_diff * c,
+        c_shaft_l=car.c_shaft_l * c, c_shaft_r=car.c_shaft_r * c,
+        mass=car.mass * v.get("mass_scale", 1.0),
+        gap_spline=car.gap_spline * gap, gap_mesh1=car.gap_mesh1 * gap, gap_mesh2=car.gap_mesh2 * gap,
+        gap_diff=car.gap_diff * gap, gap_shaft=car.gap_shaft * gap)
+
+
+def stiffness_at_motor(car: Car) -> float:
+    """Effective torsional stiffness of the driveline referred to the motor (N m/rad).
+
+    Every compliance divided by its squared ratio from the motor, in series; each side's differential
+    contact and half-shaft in series, both sides in parallel. The housing mounts are not part of it
+    (lashscope models them as their own element).
+    """
+    i1, ig = car.i1, ratio(car)
+    side = 1 / (1 / car.k_diff + 1 / car.k_shaft_l) + 1 / (1 / car.k_diff + 1 / car.k_shaft_r)
+    return 1 / (1 / car.k_spline + i1**2 / car.k_mesh1 + ig**2 / car.k_mesh2 + ig**2 / side)
+
+
+def lash_at_motor_mrad(car: Car) -> float:
+    """Total lash seen at the rotor (mrad): each clearance times the motor's turns per its shaft's turn.
+
+    The two side-gear contacts and the two half-shafts are in parallel: each side's clearance counts once.
+    """
+    i1, ig = car.i1, ratio(car)
+    return 1e3 * (car.gap_spline + i1 * car.gap_mesh1 + ig * (car.gap_mesh2 + car.gap_diff + car.gap_shaft))
 
 
 # Effect knobs: library id -> parameter -> (car field change). Values are the generator's own

@@ -3,7 +3,10 @@
 Kinds: ``none`` (nominal car), ``single`` (one library effect, drawn from the ranges below),
 ``faint`` (one library effect scaled toward off until the truth differs from the nominal car by
 2-10 noise sigma), ``pair`` (two library effects at once), ``ool`` (out of the library: unequal
-half-shafts, or a first-order torque ripple). Effect sizes are the generator's own parameters;
+half-shafts, or a first-order torque ripple); for the vehicle identification sets (``idev``,
+``ifinal``, :func:`plan_identify`) also ``base`` (a wrong data sheet: one or several base parameters
+off, no effect) and ``base_effect`` (every base parameter off by up to 20 % plus one library effect).
+Effect sizes are the generator's own parameters;
 each maps to the library id it should be diagnosed as (``EFFECT_DRAWS``).
 
 Signal size: RMS over event windows (-0.2..+1.0 s around each torque reversal, 100 Hz) of the
@@ -15,7 +18,8 @@ over the noise sigma of the log's speed (sensor noise and 0.5 rpm quantisation).
 10 000, ``final`` from 50 000, ``holdout`` from 90 000 (made after the final set had been scored once,
 for the rule as fixed at the end), ``check`` from 130 000 (made after ``holdout`` had been scored once and
 then used for tuning, to score the rule that came out of that once), ``check2`` from 170 000 (for the
-rule as changed after ``check`` had been scored once).
+rule as changed after ``check`` had been scored once); ``idev`` from 210 000 (identification
+development) and ``ifinal`` from 250 000 (scored once, with the rule fixed).
 """
 
 from __future__ import annotations
@@ -28,9 +32,19 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.indep.car import PRESET, Car, nominal_car, with_effect
-from bench.indep.drive import BAND_A, BAND_B, Band, Drive, make_drive
-from bench.indep.dynamics import simulate
+from bench.indep.car import (
+    CHAIN_PRESET,
+    PRESET,
+    Car,
+    car_named,
+    lash_at_motor_mrad,
+    nominal_car,
+    stiffness_at_motor,
+    with_base,
+    with_effect,
+)
+from bench.indep.drive import BANDS, Band, Drive, make_drive
+from bench.indep.dynamics import first_mode, simulate
 from bench.indep.record import DBC, Recording, sensor_speed, write_drive
 
 Draw = Callable[[np.random.Generator], dict[str, float]]
@@ -65,7 +79,30 @@ OUT_OF_LIBRARY: dict[str, Draw] = {
 }
 LIBRARY = tuple(EFFECT_DRAWS)
 FAINT_SIGMA = (2.0, 10.0)
-SEED_BASE = {"dev": 10_000, "final": 50_000, "holdout": 90_000, "check": 130_000, "check2": 170_000}
+SEED_BASE = {"dev": 10_000, "final": 50_000, "holdout": 90_000, "check": 130_000, "check2": 170_000,
+             "idev": 210_000, "ifinal": 250_000}
+IDENTIFY_SETS = ("idev", "ifinal")
+
+
+def _off_by(rng: np.random.Generator, down: tuple[float, float], up: tuple[float, float]) -> float:
+    """A scale factor drawn below 1 (range ``down``) or above it (range ``up``), each half the time."""
+    return _u(rng, *(down if rng.random() < 0.5 else up))
+
+
+# Base-parameter errors (with_base's scales), each at least a third of its range away from 1 so that
+# a moved parameter is one the data can show: half-shaft stiffness +-12..35 %, damping x0.3-0.66 or
+# x1.5-3, body mass -10..-4 % or +6..+25 %, every clearance +-15..40 %.
+BASE_DRAWS: dict[str, Callable[[np.random.Generator], float]] = {
+    "k_scale": lambda r: _off_by(r, (0.65, 0.88), (1.12, 1.35)),
+    "c_scale": lambda r: _off_by(r, (0.3, 0.66), (1.5, 3.0)),
+    "mass_scale": lambda r: _off_by(r, (0.90, 0.96), (1.06, 1.25)),
+    "gap_scale": lambda r: _off_by(r, (0.60, 0.85), (1.15, 1.40)),
+}
+BASE_NEAR = 0.2  # base_effect cases: every base scale within 1 +- 20 %
+PARAM_OF = {"k_scale": "stiffness", "c_scale": "damping_ratio", "mass_scale": "mass", "gap_scale": "lash"}
+CHAIN_ZETA = (0.2, 0.35)  # chain car: heavily damped first mode, the damping scale solved for it
+CHAIN_RATES_HZ = (20.0, 25.0, 33.3, 50.0)  # chain car: torque and speed message rates of its logger
+MODE_KMH = 30.0  # vehicle speed of the linearisation (the tyre's damping depends on it)
 REC = Recording()
 NOISE_RPM = float(np.hypot(REC.speed_noise_rpm, 0.5 / np.sqrt(12)))
 
@@ -73,15 +110,23 @@ NOISE_RPM = float(np.hypot(REC.speed_noise_rpm, 0.5 / np.sqrt(12)))
 @dataclass
 class Case:
     name: str
-    kind: str  # none | single | faint | pair | ool
+    kind: str  # none | single | faint | pair | ool | base | base_effect
     seed: int
     effects: dict[str, dict[str, float]]  # generator effect id -> its parameters
-    expected: list[str]  # library ids, ["none"] or ["out_of_library"]
+    expected: list[str]  # library ids, ["none"], ["out_of_library"] or ["base_parameters"]
     duration_s: float
     signal_sigma: float = 0.0
     drive_a: str = ""
     drive_b: str = ""
     recorded: dict[str, float] = field(default_factory=dict)
+    car: str = "paper"  # lashscope preset of the nominal car (bench.indep.car.CARS)
+    base: dict[str, float] = field(default_factory=dict)  # with_base scales: the data sheet's errors
+    rate_hz: float = 100.0  # torque and speed message rate
+    truth: dict[str, float] = field(default_factory=dict)  # see truth_values
+
+    def moved(self) -> list[str]:
+        """lashscope names of the base parameters this case moves on purpose (``base`` kind only)."""
+        return sorted(PARAM_OF[k] for k in self.base) if self.kind == "base" else []
 
 
 def _scaled(effect: str, v: dict[str, float], lam: float) -> dict[str, float]:
@@ -96,8 +141,10 @@ def _scaled(effect: str, v: dict[str, float], lam: float) -> dict[str, float]:
     return out
 
 
-def truth_car(effects: dict[str, dict[str, float]]) -> Car:
-    car = nominal_car()
+def truth_car(effects: dict[str, dict[str, float]], base: dict[str, float] | None = None,
+              car_name: str = "paper") -> Car:
+    """The car a case drives: the named nominal car, its data-sheet errors, then its effects."""
+    car = with_base(car_named(car_name), base or {})
     for eff, v in effects.items():
         car = with_effect(car, eff, v)
     return car
@@ -135,6 +182,8 @@ def signal_sigma(truth: Car, drive: Drive, nominal: tuple[np.ndarray, np.ndarray
 
 def plan(which: str, quick: bool) -> list[Case]:
     """The cases of a seed set (``dev`` or ``final``); ``quick`` keeps a smaller, fixed subset."""
+    if which in IDENTIFY_SETS:
+        return plan_identify(which, quick)
     base = SEED_BASE[which]
     rng = np.random.default_rng(base)
     dur = 40.0 if quick else 60.0
@@ -170,6 +219,69 @@ def plan(which: str, quick: bool) -> list[Case]:
     return out
 
 
+def _chain_damping(base: dict[str, float], zeta: float) -> float:
+    """Damping scale that gives the chain car (with ``base``'s other errors) a first mode damped at ``zeta``."""
+    lo, hi = 0.0, np.log(20.0)  # zeta rises with the scale over this range
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        got = first_mode(with_base(car_named("chain_drive"), base | {"c_scale": float(np.exp(mid))}), MODE_KMH)[1]
+        lo, hi = (mid, hi) if got < zeta else (lo, mid)
+    return float(np.exp(0.5 * (lo + hi)))
+
+
+def plan_identify(which: str, quick: bool) -> list[Case]:
+    """The cases of an identification set (``idev`` or ``ifinal``); ``quick`` keeps a smaller subset.
+
+    Paper car: ``none``; ``base`` with each base parameter moved alone (two each) and 2-4 moved together,
+    alternately logged at 100 Hz and 1 kHz; ``base_effect`` (one per library effect). Chain car (slow,
+    bursty logger: every other case at 50 Hz, the others at a rate drawn from the slower
+    :data:`CHAIN_RATES_HZ`): ``base`` with its damping raised until the first mode's
+    damping ratio is a drawn value in :data:`CHAIN_ZETA` (the preset's is ~0.04), alone or with other
+    errors, and ``none`` (the preset's car).
+    """
+    base = SEED_BASE[which]
+    dur = 40.0 if quick else 60.0
+    knobs = list(BASE_DRAWS)
+    n_each, n_combo, effects, n_chain, n_chain_none, n_none = \
+        (1, 0, LIBRARY[:2], 2, 0, 1) if quick else (2, 6, LIBRARY, 8, 2, 4)
+    out: list[Case] = []
+    s = base
+    for _ in range(n_none):
+        out.append(Case(f"none_{s}", "none", s, {}, ["none"], dur, rate_hz=100.0 if s % 2 else 1000.0))
+        s += 1
+    moves = [[k] for _ in range(n_each) for k in knobs]
+    moves += [sorted(str(k) for k in np.random.default_rng(s + i).choice(knobs, size=2 + i % 3, replace=False))
+              for i in range(n_combo)]
+    for i, ks in enumerate(moves):
+        r = np.random.default_rng(s)
+        v = {k: BASE_DRAWS[k](r) for k in ks}
+        out.append(Case(f"base_{'+'.join(PARAM_OF[k] for k in ks)}_{s}", "base", s, {}, ["base_parameters"], dur,
+                        base=v, rate_hz=100.0 if i % 2 == 0 else 1000.0))
+        s += 1
+    for eff in effects:
+        r = np.random.default_rng(s)
+        v = {k: _u(r, 1 - BASE_NEAR, 1 + BASE_NEAR) for k in knobs}
+        out.append(Case(f"base_effect_{eff}_{s}", "base_effect", s, {eff: EFFECT_DRAWS[eff](r)}, [eff], dur, base=v))
+        s += 1
+    for i in range(n_chain + n_chain_none):
+        r = np.random.default_rng(s)
+        rate = CHAIN_RATES_HZ[-1] if i % 2 == 0 else float(r.choice(CHAIN_RATES_HZ[:-1]))  # half at 50 Hz
+        if i >= n_chain:
+            out.append(Case(f"chain_none_{s}", "none", s, {}, ["none"], dur, car="chain_drive", rate_hz=rate))
+        else:
+            combined = i % 4 in (1, 2)  # damping alone or with 1-2 other errors, at 50 Hz and slower alike
+            others = [str(k) for k in r.choice(knobs[:1] + knobs[2:], size=1 + i // 4 % 2, replace=False)] \
+                if combined else []
+            v = {k: BASE_DRAWS[k](r) for k in others}
+            zeta = _u(r, *CHAIN_ZETA)
+            v["c_scale"] = _chain_damping(v, zeta)
+            names = "+".join(PARAM_OF[k] for k in sorted(v))
+            out.append(Case(f"chain_base_{names}_{s}", "base", s, {}, ["base_parameters"], dur, car="chain_drive",
+                            base=v, rate_hz=rate, recorded={"target_zeta": zeta}))
+        s += 1
+    return out
+
+
 def _faint(case: Case, drive: Drive) -> None:
     """Scale the case's one effect toward off until its signal is the drawn target (bisection on the fraction)."""
     (eff, v), = case.effects.items()
@@ -183,22 +295,49 @@ def _faint(case: Case, drive: Drive) -> None:
     case.effects = {eff: _scaled(eff, v, 0.5 * (lo + hi))}
 
 
-def _band_drive(band: Band, seed: int, duration: float) -> Drive:
-    return make_drive(nominal_car(), band, np.random.default_rng(seed), duration)
+def _band_drive(band: Band, seed: int, duration: float, car: Car | None = None) -> Drive:
+    return make_drive(car or nominal_car(), band, np.random.default_rng(seed), duration)
+
+
+def recording(case: Case) -> Recording:
+    """How the case's drives are logged: the paper car at 100 Hz (or 1 kHz), the chain car slow and bursty."""
+    if case.car == "chain_drive":
+        return Recording(period_s=1.0 / case.rate_hz, bursts_per_min=20.0, burst_s=(0.1, 0.5))
+    return REC if case.rate_hz == 100.0 else Recording(period_s=1.0 / case.rate_hz)
+
+
+def truth_values(truth: Car, nominal: Car) -> dict[str, float]:
+    """The case's base parameters in lashscope's terms, by this generator's equations, with the nominal car's.
+
+    ``stiffness`` N m/rad at the motor, ``freq_hz`` natural frequency and ``zeta`` damping ratio of
+    the first mode (linearised at :data:`MODE_KMH`, contacts engaged), ``freq_damped_hz`` its damped
+    frequency, ``mass`` kg, ``lash_mrad`` total lash at the rotor; ``*_nominal`` the same for ``nominal``.
+    """
+    out: dict[str, float] = {}
+    for suffix, car in (("", truth), ("_nominal", nominal)):
+        fn, zeta, fd = first_mode(car, MODE_KMH)
+        out |= {f"stiffness{suffix}": stiffness_at_motor(car), f"freq_hz{suffix}": fn, f"zeta{suffix}": zeta,
+                f"freq_damped_hz{suffix}": fd, f"mass{suffix}": car.mass, f"lash_mrad{suffix}": lash_at_motor_mrad(car)}
+    return out
 
 
 def build(case: Case, folder: Path) -> Case:
-    """Simulate and record the case's drives A and B into ``folder``; fills paths and signal size."""
-    da = _band_drive(BAND_A, case.seed, case.duration_s)
-    db = _band_drive(BAND_B, case.seed + 500_000, case.duration_s)
+    """Simulate and record the case's drives A and B into ``folder``; fills paths, signal size and truth."""
+    nominal = car_named(case.car)
+    band_a, band_b = BANDS[case.car]
+    da = _band_drive(band_a, case.seed, case.duration_s, nominal)
+    db = _band_drive(band_b, case.seed + 500_000, case.duration_s, nominal)
     if case.kind == "faint":
         _faint(case, da)
-    car = truth_car(case.effects)
-    case.signal_sigma = signal_sigma(car, da) if case.effects else 0.0
+    car = truth_car(case.effects, case.base, case.car)
+    case.truth = truth_values(car, nominal)
+    moved = bool(case.effects or case.base)
+    case.signal_sigma = signal_sigma(car, da, _reported(nominal, da)) if moved else 0.0
+    rec = recording(case)
     for tag, drive, extra in (("A", da, 0), ("B", db, 500_000)):
         sim = simulate(car, drive.t, drive.torque, drive.speed0_kmh)
         path = folder / f"{case.name}_{tag}.blf"
-        info = write_drive(path, car, sim, drive.t, drive.torque, np.random.default_rng(case.seed + 1 + extra), REC,
+        info = write_drive(path, car, sim, drive.t, drive.torque, np.random.default_rng(case.seed + 1 + extra), rec,
                            epoch=1.7e9 + case.seed)
         case.recorded[f"offset_{tag}_s"] = info["offset_s"]
         case.recorded[f"reversals_{tag}"] = float(drive.reversals.size)
@@ -209,7 +348,7 @@ def build(case: Case, folder: Path) -> Case:
 def generator_version() -> str:
     """Hash of the generator's sources and the data it reads: a cached set is reused only when equal."""
     h = hashlib.sha256()
-    for f in [*sorted(Path(__file__).parent.glob("*.py")), PRESET, DBC]:
+    for f in [*sorted(Path(__file__).parent.glob("*.py")), PRESET, CHAIN_PRESET, DBC]:
         h.update(f.read_bytes())
     return h.hexdigest()[:16]
 

@@ -7,7 +7,8 @@ A drive alternates driving and coasting/regenerating torque levels. Reversals co
 chosen so that a point-mass estimate of the vehicle speed stays inside the drive's speed band: the
 driver asks for more when slow and coasts harder when fast.
 
-Two bands per case: drive A (diagnosed) and drive B (withheld) differ in speed and pedal.
+Two bands per case: drive A (diagnosed) and drive B (withheld) differ in speed and pedal; each car
+has its own (``BANDS``).
 """
 
 from __future__ import annotations
@@ -31,6 +32,12 @@ class Band:
 
 BAND_A = Band((18.0, 35.0), (35.0, 90.0), (15.0, 45.0))
 BAND_B = Band((38.0, 60.0), (70.0, 140.0), (25.0, 70.0))
+# The chain car (300 kg, ratio 3.8, 0.2 m wheels): 30 N m at the motor is 2 m/s^2, so the levels are a
+# fraction of its ~230 N m peak, or a 0.7-2.5 s hold leaves the band (the planner then keeps the speed
+# within ~15-45 km/h on drive A and ~20-65 km/h on drive B; peaks ~50 and ~75 N m).
+CHAIN_A = Band((22.0, 36.0), (8.0, 35.0), (8.0, 30.0))
+CHAIN_B = Band((34.0, 50.0), (12.0, 50.0), (10.0, 40.0))
+BANDS = {"paper": (BAND_A, BAND_B), "chain_drive": (CHAIN_A, CHAIN_B)}  # drives A and B per car
 
 
 @dataclass(frozen=True)

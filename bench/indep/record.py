@@ -3,12 +3,13 @@
 Speed sensor: the inverter estimates rotor-minus-housing speed as a moving average over
 ``sensor_window`` (nominal 2 ms) and reports it ``sensor_delay`` later. CAN: every message
 (``MCU_Torque``, ``MCU_Speed``, ``ESP_WheelSpeeds``, ``ESP_Vehicle``, ``VCU_Pedal`` of
-``dbc/lashscope_ev.dbc``) is sent every 10 ms with its own phase; the torque is sampled
+``dbc/lashscope_ev.dbc``) is sent every 10 ms with its own phase (torque and speed every
+``period_s``: 1 ms for a fast logger, 20-50 ms for a slow one); the torque is sampled
 ``offset`` s away from the speed (drawn within +-15 ms, i.e. under two CAN periods); values get
 sensor noise and the DBC's quantisation (raw integers, encoded with cantools); about 0.1 % of the
 torque and speed frames carry the not-available raw value; 1 % of frames are dropped plus a few
 runs of 2-8 consecutive frames; log timestamps jitter (0.15 ms s.d.) and in a few bursty periods
-(50-200 ms) frames are held back and logged back-to-back at the end. Alive counters count in the
+(``burst_s``, 50-200 ms) frames are held back and logged back-to-back at the end. Alive counters count in the
 sender's sequence.
 """
 
@@ -43,6 +44,8 @@ class Recording:
     max_offset_s: float = 0.015
     drop_runs_per_min: float = 3.0
     bursts_per_min: float = 4.0
+    burst_s: tuple[float, float] = (0.05, 0.2)  # s, range of a burst's length
+    period_s: float = PERIOD  # s, period of the torque and speed messages
 
 
 def sensor_speed(car: Car, t: np.ndarray, speed_rel: np.ndarray) -> np.ndarray:
@@ -64,9 +67,10 @@ def _raw(sig: cantools.database.can.Signal, phys: np.ndarray) -> np.ndarray:
     return np.clip(raw, lo, hi).astype(np.int64)
 
 
-def _times(rng: np.random.Generator, duration: float, rec: Recording) -> tuple[np.ndarray, np.ndarray]:
-    """(sample times, sender sequence numbers) of one 10 ms message with drops."""
-    t = float(rng.uniform(0, PERIOD)) + np.arange(int(duration / PERIOD) - 1) * PERIOD
+def _times(rng: np.random.Generator, duration: float, rec: Recording,
+           period: float = PERIOD) -> tuple[np.ndarray, np.ndarray]:
+    """(sample times, sender sequence numbers) of one message sent every ``period`` s, with drops."""
+    t = float(rng.uniform(0, period)) + np.arange(int(duration / period) - 1) * period
     seq = np.arange(t.size)
     keep = rng.random(t.size) >= rec.drop_fraction
     for start in rng.integers(0, t.size, size=int(rng.poisson(rec.drop_runs_per_min * duration / 60))):
@@ -94,7 +98,7 @@ def write_drive(path: Path, car: Car, sim: dict[str, np.ndarray], torque_t: np.n
     speed = sensor_speed(car, t, sim["speed_rel"])
     offset = float(rng.uniform(-rec.max_offset_s, rec.max_offset_s))
     n_bursts = int(rng.poisson(rec.bursts_per_min * duration / 60))
-    bursts = [(a, a + float(rng.uniform(0.05, 0.2))) for a in rng.uniform(1, duration - 1, size=n_bursts)]
+    bursts = [(a, a + float(rng.uniform(*rec.burst_s))) for a in rng.uniform(1, duration - 1, size=n_bursts)]
     rows: list[tuple[float, int, bytes]] = []
 
     def emit(name: str, values: dict[str, np.ndarray], sna: tuple[str, ...] = ()) -> None:
@@ -123,11 +127,11 @@ def write_drive(path: Path, car: Car, sim: dict[str, np.ndarray], torque_t: np.n
             data = msg.encode({n: int(raws[n][k]) for n in names}, scaling=False, strict=False)
             rows.append((float(logged[k]), msg.frame_id, bytes(data)))
 
-    tt, sq = _times(rng, duration, rec)
+    tt, sq = _times(rng, duration, rec, rec.period_s)
     tq = np.interp(tt + offset, torque_t, torque) + rng.normal(0, rec.torque_noise_nm, tt.size)
     emit("MCU_Torque", {"_t": tt, "_seq": sq, "MotorTorqueActual": tq, "MotorTorqueRequest": tq},
          ("MotorTorqueActual",))
-    ts, sq = _times(rng, duration, rec)
+    ts, sq = _times(rng, duration, rec, rec.period_s)
     emit("MCU_Speed", {"_t": ts, "_seq": sq, "MotorSpeed": np.interp(ts, t, speed)
                        + rng.normal(0, rec.speed_noise_rpm, ts.size)}, ("MotorSpeed",))
     tw, sq = _times(rng, duration, rec)

@@ -241,3 +241,94 @@ def test_nominal_car_lies_in_the_paper_models_family():
     real_tyre = gap(with_effect(CAR, "tyre_slip", {"c_n": 8.0e4, "sigma_m": 0.3}))
     assert nominal < 1.2  # rpm; 0.8 measured
     assert real_tyre > 10 * nominal
+
+
+def test_chain_car_is_the_chain_drive_preset_and_its_mode_is_the_presets():
+    from bench.indep.car import chain_car
+    from bench.indep.dynamics import first_mode, substeps
+    from sim import load_vehicle
+    from sim.linear import modal_frequencies_hz
+    from sim.model import build_chain
+
+    chain = chain_car()
+    assert ratio(chain) == pytest.approx(42 / 11)
+    assert (chain.mass, chain.k_shaft_l, chain.gap_mesh1, chain.gap_mesh2) == (300.0, 4000.0, 0.019, 0.0)
+    for car, preset in ((CAR, "paper"), (chain, "chain_drive")):
+        theirs = modal_frequencies_hz(build_chain(load_vehicle(preset)))[1]
+        # same physical car, other equations: the chain car's stiff sprocket-case joint adds ~1 % compliance
+        assert first_mode(car)[0] == pytest.approx(theirs, rel=0.01), preset
+        assert substeps(car) == 1  # the nominal cars integrate at the plain step
+
+
+def test_base_parameter_truths():
+    from bench.indep.car import lash_at_motor_mrad, stiffness_at_motor, with_base
+
+    k0, lash0 = stiffness_at_motor(CAR), lash_at_motor_mrad(CAR)
+    ig = ratio(CAR)
+    assert lash0 == pytest.approx(1e3 * (0.014 + 79 / 27 * 0.0026 + ig * (0.0012 + 0.006 + 0.024)))
+    shafts_share = ig**2 / (2 * CAR.k_shaft_l) * k0  # the half-shafts: ~89 % of the compliance at the motor
+    assert 0.88 < shafts_share < 0.9
+    soft = with_base(CAR, {"k_scale": 0.7})
+    expect = 1 / (1 - shafts_share + shafts_share / 0.7)
+    assert stiffness_at_motor(soft) / k0 == pytest.approx(expect)
+    assert 0.72 < expect < 0.73  # near 0.7x: the shafts dominate
+    assert lash_at_motor_mrad(with_base(CAR, {"gap_scale": 1.4})) == pytest.approx(1.4 * lash0)
+    heavy = with_base(CAR, {"mass_scale": 1.2, "c_scale": 2.0})
+    assert (heavy.mass, heavy.c_shaft_r, heavy.c_mesh2, heavy.c_mount) == (2100.0, 50.0, 120.0, CAR.c_mount)
+    assert stiffness_at_motor(heavy) == k0
+
+
+def _fitted_mode(car, lo: float, hi: float) -> tuple[float, float]:
+    """(damped frequency Hz, damping ratio) of the twist ringing after a 5 ms step, by a plain damped-cosine fit."""
+    from scipy.optimize import curve_fit
+
+    _t, _, o = _run(car, _step(lo, hi, ramp=0.005), 2.0, v_kmh=30.0)
+    twist = o["speed_rel"] / ratio(car) - 0.5 * (o["wheel_l"] + o["wheel_r"])
+    m = (o["t"] > 0.51) & (o["t"] < 1.5)
+    tt, y = o["t"][m] - 0.51, twist[m]
+
+    def model(t, a, s, w, p, c0, c1):
+        return a * np.exp(-s * t) * np.cos(w * t + p) + c0 + c1 * t
+
+    w0 = 2 * np.pi * _freq(o["t"], twist, 0.51, 1.0)  # zero crossings start the fit
+    p, _ = curve_fit(model, tt, y, p0=[np.ptp(y) / 2, 0.1 * w0, w0, 0.0, float(y.mean()), 0.0], maxfev=20000)
+    return abs(p[2]) / (2 * np.pi), p[1] / np.hypot(p[1], p[2])
+
+
+@pytest.mark.parametrize("which", ["paper", "paper_soft_damped", "chain_heavily_damped"])
+def test_linearised_mode_is_the_mode_of_a_simulated_tip_in(which):
+    from bench.indep.car import chain_car, with_base
+    from bench.indep.dynamics import first_mode
+
+    car, lo, hi = {"paper": (CAR, 20.0, 60.0),
+                   "paper_soft_damped": (with_base(CAR, {"k_scale": 0.7, "c_scale": 2.5}), 20.0, 60.0),
+                   "chain_heavily_damped": (with_base(chain_car(), {"c_scale": 8.0}), 10.0, 40.0)}[which]
+    fn, zeta, fd = first_mode(car, 30.0)
+    f_fit, z_fit = _fitted_mode(car, lo, hi)
+    assert f_fit == pytest.approx(fd, rel=0.005)
+    assert z_fit == pytest.approx(zeta, rel=0.02)
+    assert fn == pytest.approx(fd / np.sqrt(1 - zeta**2))
+    if which == "chain_heavily_damped":
+        assert 0.2 < zeta < 0.35  # the heavily damped chain car of the identification sets
+
+
+def test_identification_cases_and_their_truths(tmp_path):
+    from bench.indep.cases import CHAIN_ZETA, build, plan, recording
+
+    cases = plan("idev", True)
+    kinds = {c.kind for c in cases}
+    assert kinds == {"none", "base", "base_effect"}
+    chain = [c for c in cases if c.car == "chain_drive"]
+    assert chain and all(c.rate_hz <= 50 and recording(c).bursts_per_min > 4 for c in chain)
+    assert [c.moved() for c in cases if c.kind == "base" and c.car == "paper"] == [
+        ["stiffness"], ["damping_ratio"], ["mass"], ["lash"]]
+    assert recording(plan("dev", True)[0]) == Recording()  # the old sets keep their logger
+    assert {recording(c).period_s for c in cases if c.car == "paper"} == {0.01, 0.001}
+    c = next(c for c in chain if c.kind == "base")
+    c.duration_s = 4.0  # a short drive: only the truths and the recording are checked here
+    build(c, tmp_path)
+    tr = c.truth
+    assert CHAIN_ZETA[0] < tr["zeta"] < CHAIN_ZETA[1]
+    assert tr["zeta_nominal"] < 0.05 and 14 < tr["freq_hz_nominal"] < 17
+    assert tr["mass_nominal"] == 300.0 and tr["stiffness_nominal"] == pytest.approx(371.6, rel=1e-3)
+    assert (tmp_path / c.drive_a).exists() and (tmp_path / c.drive_b).exists()
