@@ -113,6 +113,23 @@ def nuisance_only(ident: Identification) -> FitResult:
     return replace(ident.fit, effects=(), values={}, settings=(), trade_offs=(), residual=None, jac=None)
 
 
+def base_only(decision: Decision, ident: Identification, score: CandidateScore, nominal_gap: Any) -> Decision:
+    """``base_parameters`` when no candidate adds anything significant to the identified vehicle.
+
+    ``decision`` was made on the identified vehicle and found no effect (``none_of_candidates``): the file's
+    base parameters are what the log says is wrong, and what the identified vehicle leaves is reported as
+    the remainder no candidate explains (model form, or physics outside the library), not attributed.
+    """
+    left = decision.gap_ratio.value if decision.gap_ratio is not None else float("nan")
+    reason = (f"the vehicle file is off: {sentence(ident)}. The identified values remove "
+              f"{100 * score.explained.value:.0f} % [{100 * score.explained.lo:.0f}, {100 * score.explained.hi:.0f}] "
+              f"of the held-out residual above the noise floor ({nominal_gap.value:.2f}x -> {left:.2f}x); no candidate "
+              "effect removes a significant share of what is left, which is not attributed")
+    return replace(decision, status=BASE_ID, reason=reason, gap_ratio=nominal_gap, best=score,
+                   details={**decision.details, "base_parameters": base_items(ident), "identify_first": False,
+                            "residual_to_noise_identified": round(left, 4)})
+
+
 def with_base(decision: Decision, ident: Identification) -> Decision:
     """``decision`` (made on the identified vehicle) saying which base parameters were corrected first."""
     items = base_items(ident)

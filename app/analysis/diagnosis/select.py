@@ -51,7 +51,7 @@ from app.analysis.diagnosis.identify import with_identifiability
 from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2, phase_times, uniform
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.partners import screen_partners
-from app.analysis.diagnosis.rebase import BASE_ID, joint_with_base, judge, nuisance_only, with_base
+from app.analysis.diagnosis.rebase import BASE_ID, base_only, joint_with_base, judge, nuisance_only, with_base
 from app.analysis.diagnosis.score import EventScore, Interval
 from app.analysis.diagnosis.split import Split, make_split
 from app.analysis.diagnosis.structure import remainder
@@ -375,7 +375,9 @@ def run_diagnosis(
                 joint_ident[top] = identified_with(nominal, fitted_base, joint, cal, rebased.chi2_before)
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
-    if ident is not None:  # the base parameters as identified with the chosen effect, where it was refitted with them
+    if rebased is not None and ident_score is not None and decision.status == "none_of_candidates":
+        decision = base_only(decision, rebased, ident_score, nominal_gap)
+    elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
         ident = joint_ident.get("+".join(decision.top), ident)
         decision = with_base(decision, ident)
     decision = with_tones(decision, noise.tones)
