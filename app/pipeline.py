@@ -30,7 +30,7 @@ from app.analysis.compare import EventComparison, SpeedError, compare_event, spe
 from app.analysis.events import SPEED, TORQUE, Event, EventParams, find_events
 from app.analysis.lash import LashParams
 from app.analysis.metrics import MetricParams, ripple_metrics
-from app.analysis.sampling import mean_period
+from app.analysis.sampling import sample_period
 from app.analysis.series import FloatArray, finite_signal
 from app.analysis.slip import Drive, log_ratio_scale
 from app.analysis.tracking import TrackingParams, Verdict, event_verdict, log_verdict
@@ -347,7 +347,7 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     whole_err: SpeedError | None = None
     if opts.whole_log:
         t0, t1 = overlap([torque, speed])
-        dt_whole = whole_log_output_dt(t1 - t0, mean_period(speed.t))
+        dt_whole = whole_log_output_dt(t1 - t0, sample_period(speed.t))
         try:
             res = _simulate(vehicle, torque, speed, t0, t1, opts, dt_whole)
             grid = common_time_base(t0, t1, dt_whole)

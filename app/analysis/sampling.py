@@ -9,6 +9,12 @@ the **maximum** spacing; a stream that comes in bursts or with holes (the rule o
 :func:`app.signals.sampling.spacing`, the same one the decode report applies per message) is
 resampled onto a uniform grid at its mean spacing by linear interpolation between its actual
 time stamps before the ripple metrics are computed.
+
+:func:`sample_period` is the one rule for a channel's period that the analysis (whole-log time
+base) and the diagnosis (noise floor, re-timing, fit bounds) share: the mean spacing of a
+stream that comes in bursts (median below ``BURST_MEDIAN_RATIO`` of the mean), else the median
+of the spacings that are not drop-outs, so a few lost frames do not lengthen the period of a
+regular stream. The two commands gave 21 ms and 4 ms on the same bursty log before.
 """
 
 from __future__ import annotations
@@ -16,14 +22,28 @@ from __future__ import annotations
 import numpy as np
 
 from app.analysis.series import FloatArray
-from app.signals.sampling import Spacing, spacing
+from app.errors import InsufficientDataError
+from app.signals.sampling import BURST_MEDIAN_RATIO, Spacing, spacing
 
-__all__ = ["Spacing", "mean_period", "spacing", "uniform_by_timestamps"]
+__all__ = ["Spacing", "sample_period", "spacing", "uniform_by_timestamps"]
+
+DROPOUT_PERIODS = 1.5  # a spacing longer than this many median spacings is a drop-out
 
 
-def mean_period(t: FloatArray) -> float:
-    """Mean sample period (s) of time stamps ``t``; NaN for fewer than two samples."""
-    return spacing(t).mean_s
+def sample_period(t: FloatArray) -> float:
+    """The sampling period (s) of time stamps ``t`` (see the module docstring).
+
+    Raises InsufficientDataError with fewer than two distinct time stamps.
+    """
+    d = np.diff(np.asarray(t, dtype=np.float64))
+    d = d[d > 0]
+    if d.size == 0:
+        raise InsufficientDataError("the channel has fewer than two distinct timestamps")
+    mean, first = float(np.mean(d)), float(np.median(d))
+    if first < BURST_MEDIAN_RATIO * mean:
+        return mean
+    single = d[d < DROPOUT_PERIODS * first]
+    return float(np.median(single)) if single.size else first
 
 
 def uniform_by_timestamps(t: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray, Spacing]:

@@ -4,7 +4,8 @@ The diagnosis must know how much of the residual *no* model could ever explain: 
 DBC quantisation and timestamp jitter. All three are estimated from the measured data alone,
 without any simulation, so the floor cannot be bent by a fit:
 
-- **sample period and jitter** from the timestamp differences: with ``t_k = kT + j_k`` the
+- **sample period and jitter** from the timestamp differences (the period by
+  :func:`app.analysis.sampling.sample_period`, the rule the analysis uses as well): with ``t_k = kT + j_k`` the
   differences are ``T + j_{k+1} - j_k``, so their robust spread is ``sqrt(2)`` times the jitter;
   dropped frames (differences near ``2T``, ``3T``...) are folded back onto ``T`` first;
 - **white noise** from second differences on quiet samples (away from events):
@@ -33,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from app.analysis.diagnosis.orders import OrderTone, find_order_tones
+from app.analysis.sampling import sample_period
 from app.errors import InsufficientDataError
 
 FloatArray = npt.NDArray[np.float64]
@@ -81,18 +83,6 @@ class NoiseFloor:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-
-def sample_period(t: FloatArray) -> float:
-    """Nominal sample period (s): the median of the timestamp differences that are not drop-outs."""
-    d = np.diff(np.asarray(t, dtype=np.float64))
-    d = d[d > 0]
-    if d.size == 0:
-        raise InsufficientDataError("speed channel has fewer than two distinct timestamps")
-    first = float(np.median(d))
-    # drop-outs double the difference; the median of the single-period ones is the period
-    single = d[d < 1.5 * first]
-    return float(np.median(single)) if single.size else first
 
 
 def timestamp_jitter(t: FloatArray, period_s: float) -> float:
