@@ -58,6 +58,27 @@ def _pct(iv: dict[str, float] | None) -> str:
     return f"{100 * iv['value']:.0f} % [{100 * iv['lo']:.0f}, {100 * iv['hi']:.0f}]"
 
 
+def _ratio(iv: dict[str, float] | float | None) -> str:
+    value = iv.get("value") if isinstance(iv, dict) else iv
+    return "-" if value is None else f"{value:.2f}x"
+
+
+def _residual_lines(d: dict[str, Any]) -> list[str]:
+    """The held-out residual in rpm beside its ratio to the noise floor, and an event that carries most of it."""
+    before = d.get("residual_rms_rpm_before")
+    if before is None:
+        return []
+    after = d.get("residual_rms_rpm_after")
+    line = (f"held-out residual: {before:.2f} rpm RMS ({_ratio(d.get('residual_to_noise_before'))} the noise floor)"
+            + (f", {after:.2f} rpm after {' + '.join(d['top'])} ({_ratio(d.get('residual_to_noise_after'))})"
+               if after is not None and d.get("top") else ""))
+    one = d.get("dominant_event")
+    if not one:
+        return [line]
+    return [line, f"  event {one['index']} carries {100 * one['share']:.0f} % of the residual above the noise floor; "
+                  f"without it {one['residual_to_noise_without']:.2f}x"]
+
+
 def summary(doc: dict[str, Any]) -> str:
     d = doc["decision"]
     lines = [f"decision: {d['status'].upper()}" + (f"  top: {' + '.join(d['top'])}" if d["top"] else "")
@@ -69,6 +90,7 @@ def summary(doc: dict[str, Any]) -> str:
     nf = doc["noise_floor"]
     lines.append(f"noise floor: {nf['sigma_rpm']:.2f} rpm white, {nf['quant_step_rpm']:g} rpm steps, "
                  f"{1e3 * nf['jitter_s']:.2f} ms jitter, {1e3 * nf['period_s']:.1f} ms period")
+    lines += _residual_lines(d)
     if doc["baseline"]:
         nu = doc["baseline"]["nuisance"]
         lines.append(f"baseline nuisance: offset {1e3 * nu['offset_s']:+.1f} ms, gain {nu['gain']:.3f}, "

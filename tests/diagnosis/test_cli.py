@@ -41,6 +41,10 @@ def test_cli_diagnoses_a_blf_log_and_validates_on_another(tmp_path: Path, capsys
     doc = json.loads(capsys.readouterr().out)
     assert doc["decision"]["status"] == "explained" and doc["decision"]["top"] == ["torque_lag"]
     assert doc["validation"]["shrink"]["value"] > 0.7
+    d = doc["decision"]
+    assert d["residual_rms_rpm_before"] > 5.0 > 1.5 > d["residual_rms_rpm_after"] and d["dominant_event"] is None
+    (lag,) = [c for c in doc["candidates"] if c["id"] == "torque_lag"]
+    assert lag["heldout"]["residual_rms_rpm"] == d["residual_rms_rpm_after"]
     assert all(Path(p).stat().st_size > 1000 for p in doc["plots"])
 
 
@@ -49,6 +53,8 @@ def test_cli_summary_and_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture
     assert main(["diagnose", str(log), "--vehicle", "paper", "--candidates", "torque_lag", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "decision: EXPLAINED  top: torque_lag" in out and "held-out shrink" in out
+    # the residual in rpm beside its ratio to the noise floor, before and after the effect
+    assert "held-out residual: 10.31 rpm RMS (30.91x the noise floor), 1.08 rpm after torque_lag (0.93x)" in out
     assert main(["diagnose", str(log), "--vehicle", "paper", "--candidates", "gremlins", "--quiet"]) == 2
     assert "gremlins" in capsys.readouterr().err
     assert main(["diagnose", str(log), "--vehicle", "paper", "--model-form-tolerance", "2", "--quiet"]) == 2
