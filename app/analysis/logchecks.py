@@ -33,8 +33,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from app.analysis.diagnosis.noise import quantisation_step
-from app.analysis.series import FloatArray, finite_signal, moving_mean
+from app.analysis.series import FloatArray, finite_signal, moving_mean, quantisation_step
 from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
 from app.errors import ImplausibleSignalError
 from app.signals import Signal, SignalSet

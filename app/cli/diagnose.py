@@ -81,7 +81,8 @@ def _residual_lines(d: dict[str, Any]) -> list[str]:
 
 def summary(doc: dict[str, Any]) -> str:
     d = doc["decision"]
-    lines = [f"decision: {d['status'].upper()}" + (f"  top: {' + '.join(d['top'])}" if d["top"] else "")
+    lines = [f"WARNING [{f['code']}]: {f['message']}" for f in doc.get("findings") or []]
+    lines += [f"decision: {d['status'].upper()}" + (f"  top: {' + '.join(d['top'])}" if d["top"] else "")
              + (f"  confusable: {' / '.join(d['confusable'])}" if d.get("confusable") else ""),
              f"  {d['reason']}"]
     sp = doc["split"]
@@ -129,8 +130,9 @@ def summary(doc: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict, validate_on
+    from app.analysis.diagnosis import DiagnosisOptions, diagnose_checked, report_dict, validate_on
     from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
+    from app.analysis.logchecks import Limits, check_log
     from app.errors import InputError
     from app.pipeline import decode_log
     from sim.effects import EFFECTS
@@ -147,15 +149,18 @@ def run(args: argparse.Namespace) -> int:
     say = _progress(args.quiet)
     say(0.0, f"decoding {args.log}")
     signals, _ = decode_log(args.log, dbc, smap)
-    result = diagnose_signals(signals, vehicle, options, say, thresholds)
+    result, checked = diagnose_checked(signals, vehicle, options, say, thresholds)
     validation = None
     if args.validate is not None and result.decision.top:
         say(0.0, f"decoding {args.validate}")
         other, _ = decode_log(args.validate, dbc, smap)
-        validation = validate_on(result, other, vehicle, progress=say, event_params=thresholds).to_dict()
+        other_checked = check_log(other, Limits.for_vehicle(vehicle))
+        validation = validate_on(result, other_checked.signals, vehicle, progress=say,
+                                 event_params=thresholds).to_dict()
+        validation["findings"] = [f.to_dict() for f in other_checked.findings]
     elif args.validate is not None:
         validation = {"skipped": f"decision {result.decision.status}: no effect to validate"}
-    doc = report_dict(result, validation)
+    doc = report_dict(result, validation, checked.findings)
     if args.plots is not None and result.baseline is not None:
         from app.diagnosis_plots import event_overlay_png, residual_chart_png
 

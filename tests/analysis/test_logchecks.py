@@ -21,6 +21,7 @@ from app.pipeline import AnalysisOptions, AnalysisResult, analyze_signals
 from app.settings import default_dbc_dir
 from app.signals import Interp, Signal, SignalSet
 from sim import load_vehicle
+from tests.conftest import edited_map
 
 PAPER = load_vehicle("paper")
 DBC = default_dbc_dir()
@@ -143,18 +144,9 @@ def demo_blf(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def _map_with(tmp_path: Path, channel: str, line: str) -> Path:
-    text = (DBC / "lashscope_ev.map.toml").read_text(encoding="utf-8")
-    head = f"[channels.{channel}]\n"
-    assert head in text
-    out = tmp_path / "edited.map.toml"
-    out.write_text(text.replace(head, head + line + "\n"), encoding="utf-8")
-    return out
-
-
 def test_cli_warns_about_an_inverted_torque_in_a_real_file(demo_blf: Path, tmp_path: Path,
                                                             capsys: pytest.CaptureFixture[str]) -> None:
-    smap = _map_with(tmp_path, "motor_torque_nm", "invert = true")
+    smap = edited_map(tmp_path, "motor_torque_nm", "invert = true")
     assert main(["analyze", str(demo_blf), "--vehicle", "paper", "--no-whole-log", "--signal-map", str(smap)]) == 0
     out = capsys.readouterr().out
     assert "WARNING [torque_sign_inverted]: motor_torque_nm is inverted relative to the motor speed" in out
@@ -168,8 +160,9 @@ def test_cli_warns_about_an_inverted_torque_in_a_real_file(demo_blf: Path, tmp_p
 
 def test_cli_refuses_a_speed_scaled_by_the_wrong_factor(demo_blf: Path, tmp_path: Path,
                                                         capsys: pytest.CaptureFixture[str]) -> None:
-    smap = _map_with(tmp_path, "motor_speed_rpm", "factor = 12.0")
+    smap = edited_map(tmp_path, "motor_speed_rpm", "factor = 12.0")
     assert main(["analyze", str(demo_blf), "--vehicle", "paper", "--signal-map", str(smap)]) != 0
     err = capsys.readouterr().err
     assert err.startswith("lashscope: error [implausible_signal]: motor_speed_rpm reads")
     assert "wrong DBC version or scaling" in err and len(err.strip().splitlines()) == 1
+

@@ -35,6 +35,7 @@ import numpy.typing as npt
 
 from app.analysis.diagnosis.orders import OrderTone, find_order_tones
 from app.analysis.sampling import sample_period
+from app.analysis.series import quantisation_step
 from app.errors import InsufficientDataError
 
 FloatArray = npt.NDArray[np.float64]
@@ -95,21 +96,6 @@ def timestamp_jitter(t: FloatArray, period_s: float) -> float:
     # a slow clock-rate mismatch shifts every difference equally; the median removes it
     dev = dev - np.median(dev)
     return float(_MAD_TO_SIGMA * np.median(np.abs(dev)) / np.sqrt(2.0))
-
-
-def quantisation_step(values: FloatArray) -> float:
-    """Smallest step (rpm) between distinct sample values, robust to float round-off; 0 if none."""
-    v = np.unique(np.round(np.asarray(values, dtype=np.float64), 9))
-    if v.size < 2:
-        return 0.0
-    steps = np.diff(v)
-    steps = steps[steps > 1e-9]
-    if steps.size == 0:
-        return 0.0
-    q = float(steps.min())
-    # only a quantiser if the other steps are (nearly) integer multiples of the smallest one
-    ratio = steps[: min(steps.size, 2000)] / q
-    return q if float(np.median(np.abs(ratio - np.round(ratio)))) < 0.05 else 0.0
 
 
 def estimate_noise_floor(t: FloatArray, values: FloatArray, quiet: npt.NDArray[np.bool_] | None = None) -> NoiseFloor:

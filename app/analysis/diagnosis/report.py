@@ -51,6 +51,8 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                        "bands": [{"band", "energy_share", "coherence"}],
                        "residual_torque_lag_s", "residual_torque_xcorr", "notes": [str]}
     fit_log           ["<fit>: [calibration event indices]"] -- every fit and the events it saw
+    findings          [{"code", "channel", "message"}] -- problems of the log as decoded
+                      (:mod:`app.analysis.logchecks`; empty when the log was not checked)
     elapsed_s
 
 ``localisation`` is computed on held-out events with the calibrated baseline.
@@ -66,6 +68,7 @@ from app.analysis.diagnosis.decide import CandidateScore, dominant_event
 from app.analysis.diagnosis.localise import coherence_by_band, residual_torque_lag, uniform
 from app.analysis.diagnosis.score import BAND_NAMES, PHASES, EventScore, shrink_interval
 from app.analysis.diagnosis.select import DiagnosisResult, Evaluation
+from app.analysis.logchecks import Finding
 from app.analysis.metrics import ripple_metrics
 from app.errors import AppError
 from app.signals import Signal
@@ -182,8 +185,10 @@ def _localisation(res: DiagnosisResult) -> dict[str, Any]:
             "residual_torque_xcorr": _f(xc), "notes": notes}
 
 
-def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The JSON-ready report of a diagnosis (see the module docstring for the schema)."""
+def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None,
+                findings: list[Finding] | None = None) -> dict[str, Any]:
+    """The JSON-ready report of a diagnosis (see the module docstring for the schema); ``findings``: the log
+    checks' (:func:`app.analysis.diagnosis.validate.diagnose_checked`)."""
     decision = res.decision.to_dict()
     if res.decision.best is not None:
         n = sum(res.candidates[res.decision.best.id].scores[i].n for i in res.heldout())
@@ -212,6 +217,7 @@ def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None) 
         "pairs": [_candidate(res, s) for s in res.pairs],
         "localisation": _localisation(res) if res.baseline else None,
         "fit_log": list(res.fit_order),
+        "findings": [f.to_dict() for f in findings or []],
         "candidates_not_applicable": dict(res.not_applicable),
         "elapsed_s": round(res.elapsed_s, 3),
     }
