@@ -25,6 +25,13 @@ events at all) without a word; :func:`check_log` finds them and says so, one
     quantisation while the motor shuffles against the wheels (``computed_tolerance``
     relative): no wheel follows the motor's shuffle that closely, so the channel was
     computed, not measured, and is not used as road truth (:mod:`app.analysis.slip`).
+``speed_retimed``
+    The signal map has a ``time_base`` (a timer or counter in the speed's own message): the
+    speed samples are put at the times it gives (:func:`app.analysis.sampling.timer_times`)
+    before anything else, and the finding says how far the logged stamps were off.
+``time_base_unmatched``
+    Fewer than half of the speed samples have a time-base value from the same frame: the
+    speed keeps its logged stamps.
 """
 
 from __future__ import annotations
@@ -33,6 +40,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from app.analysis.sampling import timer_times
 from app.analysis.series import FloatArray, finite_signal, moving_mean, quantisation_step
 from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
 from app.errors import ImplausibleSignalError
@@ -44,6 +52,9 @@ SPEED = "motor_speed_rpm"
 TORQUE_SIGN_INVERTED = "torque_sign_inverted"
 IMPLAUSIBLE_SIGNAL = "implausible_signal"
 WHEEL_SPEED_COMPUTED = "wheel_speed_computed"
+SPEED_RETIMED = "speed_retimed"
+TIME_BASE_UNMATCHED = "time_base_unmatched"
+TIME_BASE = "time_base"
 RAD_S_PER_RPM = np.pi / 30.0
 
 MIN_BASE_SPEED_RPM = 2500.0  # lowest corner speed of a traction motor: peak torque <= max power / this
@@ -205,13 +216,40 @@ def computed_road_speed(name: str, road: Signal, speed: Signal, p: CheckParams) 
                    "speed")
 
 
+def retimed_speed(speed: Signal, timer: Signal) -> tuple[Signal, Finding]:
+    """The speed at the times its frames' ``timer`` gives, and what was done, in words.
+
+    Samples are paired with the timer values of the same frames (equal stamps); without a pair for half
+    of them the speed is returned as logged.
+    """
+    timer = finite_signal(timer)
+    common, i_s, i_t = np.intersect1d(speed.t, timer.t, return_indices=True)
+    if common.size < max(20, speed.t.size // 2):
+        return speed, Finding(TIME_BASE_UNMATCHED, TIME_BASE,
+                              f"{TIME_BASE} comes with {common.size} of {speed.t.size} {SPEED} samples (it must be "
+                              "a signal of the speed's own message): the speed keeps its logged stamps")
+    t = timer_times(common, timer.values[i_t])
+    off = np.abs(t - common) * 1e3
+    order = np.argsort(t, kind="stable")
+    out = Signal.from_samples(speed.name, t[order], speed.values[i_s][order], speed.unit, speed.interp,
+                              speed.labels)
+    return out, Finding(SPEED_RETIMED, SPEED,
+                        f"{SPEED} re-timed from {TIME_BASE}: the logged stamps were off by up to {off.max():.1f} ms "
+                        f"(95th percentile {np.percentile(off, 95):.1f} ms, median {np.median(off):.1f} ms)")
+
+
 def check_log(signals: SignalSet, limits: Limits, params: CheckParams | None = None) -> LogChecks:
     """All checks of the module docstring on ``signals`` (which hold the torque and the motor speed)."""
     p = params or CheckParams()
-    torque, speed = finite_signal(signals[TORQUE]), finite_signal(signals[SPEED])
-    findings = plausibility(torque, speed, limits, p)
-    corr = sign_correlation(torque, speed, p.accel_window_s)
+    findings: list[Finding] = []
     out = signals
+    if TIME_BASE in signals:
+        retimed, said = retimed_speed(finite_signal(signals[SPEED]), signals[TIME_BASE])
+        findings.append(said)
+        out = SignalSet({**signals.signals, SPEED: retimed})
+    torque, speed = finite_signal(out[TORQUE]), finite_signal(out[SPEED])
+    findings += plausibility(torque, speed, limits, p)
+    corr = sign_correlation(torque, speed, p.accel_window_s)
     if np.isfinite(corr) and corr <= -p.min_sign_correlation:
         how = ("analysed with the sign corrected" if p.fix_torque_sign
                else "analysed as decoded, so every tip-in reads as a tip-out")
@@ -220,14 +258,14 @@ def check_log(signals: SignalSet, limits: Limits, params: CheckParams | None = N
                                 f"motor acceleration is {corr:.2f}; {how} (set invert = true for the channel in "
                                 "the signal map)"))
         if p.fix_torque_sign:
-            raw = signals[TORQUE]
-            out = SignalSet({**signals.signals, TORQUE: Signal(raw.name, raw.t, -raw.values, raw.unit, raw.interp,
-                                                               raw.labels)})
+            raw = out[TORQUE]
+            out = SignalSet({**out.signals, TORQUE: Signal(raw.name, raw.t, -raw.values, raw.unit, raw.interp,
+                                                           raw.labels)})
     computed: set[str] = set()
     for name in sorted(signals):
         if (name.startswith(WHEEL_PREFIX) and name.endswith("_rpm")) or name == VEHICLE_SPEED:
-            finding = computed_road_speed(name, finite_signal(signals[name]), speed, p)
-            if finding is not None:
-                findings.append(finding)
+            road = computed_road_speed(name, finite_signal(signals[name]), speed, p)
+            if road is not None:
+                findings.append(road)
                 computed.add(name)
     return LogChecks(out, findings, frozenset(computed), corr)

@@ -166,3 +166,76 @@ def test_cli_refuses_a_speed_scaled_by_the_wrong_factor(demo_blf: Path, tmp_path
     assert err.startswith("lashscope: error [implausible_signal]: motor_speed_rpm reads")
     assert "wrong DBC version or scaling" in err and len(err.strip().splitlines()) == 1
 
+
+def _held(t: np.ndarray) -> np.ndarray:
+    """Logger stamps of frames sampled at ``t``: every second a gateway holds the frames of 120 ms and
+    writes them back-to-back, 0.1 ms apart, when it lets go."""
+    out = t.copy()
+    for k in range(int(t[-1]) + 1):
+        held = np.flatnonzero((t >= k + 0.3) & (t < k + 0.42))
+        out[held] = k + 0.42 + 1e-4 * np.arange(held.size)
+    return out
+
+
+def test_timer_times_recover_the_sampling_times_from_a_wrapping_counter() -> None:
+    """An 8-bit counter stepping every 10 ms (wraps every 2.56 s, starts at 17) on an ECU clock 50 ppm fast
+    puts frames a gateway held for up to 120 ms back within the sampling jitter."""
+    from app.analysis.sampling import timer_times, unwrap_timer
+
+    rng = np.random.default_rng(5)
+    grid = 0.01 * np.arange(2000)
+    t_true = grid + rng.uniform(-3e-4, 3e-4, grid.size)
+    counter = np.mod(np.arange(2000) + 17, 256) * 0.01 * (1 + 50e-6)  # what the payload carries
+    assert np.all(np.diff(unwrap_timer(counter)) > 0)
+    logged = _held(t_true)
+    assert float(np.max(np.abs(logged - t_true))) == pytest.approx(0.12, abs=0.011)
+    fixed = timer_times(logged, counter)
+    assert float(np.max(np.abs(fixed - t_true))) < 6e-4
+
+
+def _with_time_base(tmp_path: Path) -> Path:
+    text = (DBC / "lashscope_ev.map.toml").read_text(encoding="utf-8")
+    out = tmp_path / "timed.map.toml"
+    out.write_text(text + '\n[channels.time_base]\nmessage = "MCU_Speed"\nsignal = "MCU_SpeedAlive"\nunit = "s"\n'
+                   'factor = 0.01\n', encoding="utf-8")
+    return out
+
+
+def test_a_time_base_channel_re_times_speed_stamps_a_gateway_held(tmp_path: Path) -> None:
+    """A BLF whose motor speed frames were held by a gateway (120 ms every second): the speed message's alive
+    counter, mapped as the time base, puts them back within a millisecond of when they were sampled."""
+    from app.demo.build import encode_blf
+    from app.pipeline import VehicleInputs, run_analysis, signal_routes
+
+    channels = measured_channels(PAPER, Scenario(duration_s=12.0))
+    sp = channels["motor_speed_rpm"]
+    held = {**channels, "motor_speed_rpm": Channel(_held(sp.t), sp.values, sp.period_s)}
+    loaded, routes = signal_routes(DBC / "lashscope_ev.dbc", DBC / "lashscope_ev.map.toml")
+    log = tmp_path / "held.blf"
+    encode_blf(log, held, routes, loaded.db)
+    opts = AnalysisOptions(whole_log=False)
+    plain = run_analysis(log, VehicleInputs(PAPER, DBC / "lashscope_ev.dbc", DBC / "lashscope_ev.map.toml"), opts)
+    timed = run_analysis(log, VehicleInputs(PAPER, DBC / "lashscope_ev.dbc", _with_time_base(tmp_path)), opts)
+    assert [f.code for f in plain.findings] == []
+    (finding,) = timed.findings
+    assert (finding.code, finding.channel) == ("speed_retimed", "motor_speed_rpm")
+    assert finding.message.startswith("motor_speed_rpm re-timed from time_base: the logged stamps were off by up "
+                                      "to 11")
+    logged = plain.signals["motor_speed_rpm"].t  # on the log's clock, which starts at its first frame
+    sampled = sp.t - float(np.median(sp.t - logged))
+    got = timed.signals["motor_speed_rpm"].t
+    assert got.size == sp.t.size
+    assert float(np.max(np.abs(got - sampled))) < 6e-4  # the sampling jitter is 0.3 ms
+    assert float(np.max(np.abs(logged - sampled))) > 0.1
+
+
+def test_a_time_base_outside_the_speed_message_is_refused(tmp_path: Path) -> None:
+    from app.errors import SignalMapError
+    from app.pipeline import signal_routes
+
+    smap = tmp_path / "bad.map.toml"
+    smap.write_text((DBC / "lashscope_ev.map.toml").read_text(encoding="utf-8")
+                    + '\n[channels.time_base]\nmessage = "MCU_Torque"\nsignal = "MCU_TorqueAlive"\n', encoding="utf-8")
+    with pytest.raises(SignalMapError, match=r"channel time_base: MCU_Torque.MCU_TorqueAlive must be a signal of the "
+                       r"motor speed's message \(MCU_Speed\)"):
+        signal_routes(DBC / "lashscope_ev.dbc", smap)
