@@ -40,6 +40,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from app.analysis.events import SPEED, TORQUE
 from app.analysis.sampling import timer_times
 from app.analysis.series import FloatArray, finite_signal, moving_mean, quantisation_step
 from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
@@ -47,8 +48,6 @@ from app.errors import ImplausibleSignalError
 from app.signals import Signal, SignalSet
 from sim import Vehicle
 
-TORQUE = "motor_torque_nm"
-SPEED = "motor_speed_rpm"
 TORQUE_SIGN_INVERTED = "torque_sign_inverted"
 IMPLAUSIBLE_SIGNAL = "implausible_signal"
 WHEEL_SPEED_COMPUTED = "wheel_speed_computed"
@@ -138,7 +137,7 @@ def sign_correlation(torque: Signal, speed: Signal, window_s: float) -> float:
     if t.size < 20:
         return float("nan")
     v = moving_mean(t, speed.at(t), window_s)
-    accel = np.gradient(v, t) if np.all(np.diff(t) > 0) else np.gradient(v)
+    accel = np.gradient(v, t)
     tq = moving_mean(t, torque.at(t), window_s)
     ok = np.isfinite(accel) & np.isfinite(tq)
     if ok.sum() < 20 or np.ptp(accel[ok]) == 0 or np.ptp(tq[ok]) == 0:

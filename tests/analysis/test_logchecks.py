@@ -78,6 +78,15 @@ def test_an_inverted_torque_is_named_and_analysed_with_the_sign_corrected(channe
     assert [k for k, _ in _kinds(kept)] == [{"tip_in": "tip_out", "tip_out": "tip_in"}[k] for k, _ in _kinds(clean)]
 
 
+def test_check_thresholds_come_from_the_request_body() -> None:
+    from app.errors import InputError
+
+    opts = AnalysisOptions.from_dict({"checks": {"fix_torque_sign": False, "torque_margin": 2.0}})
+    assert opts.checks == CheckParams(fix_torque_sign=False, torque_margin=2.0)
+    with pytest.raises(InputError, match=r"CheckParams\.min_sign_correlation = 2\.0: must be in \(0, 1\]"):
+        AnalysisOptions.from_dict({"checks": {"min_sign_correlation": 2.0}})
+
+
 def test_a_torque_glitch_is_implausible_and_named_with_value_and_limit(channels: dict[str, Channel]) -> None:
     def glitch(t: np.ndarray, v: np.ndarray) -> np.ndarray:
         return np.where(np.abs(t - 15.0) < 0.025, 3276.7, v)  # a 0x7FFF "not available" decoded as a value
