@@ -11,8 +11,9 @@ events at all) without a word; :func:`check_log` finds them and says so, one
     smoothed over ``accel_window_s``, so the shuffle and the sensor noise average out) is
     below ``-min_sign_correlation``: positive torque slows the motor down. A road load,
     regeneration and grade only shift the torque against the acceleration, they do not turn the
-    relation round. With ``fix_torque_sign`` (the default) the analysis goes on with the
-    torque negated and says so.
+    relation round; the friction brakes can (a creep torque while the car brakes to a stop), so
+    samples near a ``brake*`` channel above ``brake_threshold`` are left out. With
+    ``fix_torque_sign`` (the default) the analysis goes on with the torque negated and says so.
 ``implausible_signal``
     Torque beyond ``torque_margin`` x the motor's peak torque, motor speed beyond the
     vehicle's top motor speed, or mechanical power ``T omega`` beyond ``power_margin`` x the
@@ -36,11 +37,12 @@ events at all) without a word; :func:`check_log` finds them and says so, one
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from app.analysis.events import SPEED, TORQUE
+from app.analysis.events import SPEED, TORQUE, EventParams
 from app.analysis.sampling import timer_times
 from app.analysis.series import FloatArray, finite_signal, moving_mean, quantisation_step
 from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
@@ -66,6 +68,7 @@ class CheckParams:
     fix_torque_sign: bool = True  # analyse an inverted torque channel with its sign corrected
     min_sign_correlation: float = 0.3  # |rank correlation| of torque with acceleration to decide the sign
     accel_window_s: float = 0.2  # torque and speed smoothed over this before the acceleration is taken
+    brake_threshold: float = EventParams.brake_threshold  # a brake* channel above this: not a sign sample
     torque_margin: float = 1.5  # decoded torque allowed up to this x the motor's peak torque
     speed_margin: float = 1.0  # decoded motor speed allowed up to this x the top motor speed
     power_margin: float = 1.5  # decoded T x omega allowed up to this x max_power_kw
@@ -130,9 +133,11 @@ def _rank(x: FloatArray) -> FloatArray:
     return r
 
 
-def sign_correlation(torque: Signal, speed: Signal, window_s: float) -> float:
-    """Rank correlation of the torque with the motor acceleration, both averaged over ``window_s`` (NaN when
-    fewer than 20 common samples or either is constant)."""
+def sign_correlation(torque: Signal, speed: Signal, window_s: float, brakes: Sequence[Signal] = (),
+                     brake_threshold: float = EventParams.brake_threshold) -> float:
+    """Rank correlation of the torque with the motor acceleration, both averaged over ``window_s``, without
+    the samples whose window sees one of ``brakes`` above ``brake_threshold`` (NaN when fewer than 20
+    samples are left or either is constant)."""
     t = speed.t[(speed.t >= torque.t[0]) & (speed.t <= torque.t[-1])] if len(torque) else speed.t[:0]
     if t.size < 20:
         return float("nan")
@@ -140,6 +145,9 @@ def sign_correlation(torque: Signal, speed: Signal, window_s: float) -> float:
     accel = np.gradient(v, t)
     tq = moving_mean(t, torque.at(t), window_s)
     ok = np.isfinite(accel) & np.isfinite(tq)
+    for brake in brakes:
+        pressed = np.nan_to_num(brake.at(t), nan=0.0) > brake_threshold
+        ok &= moving_mean(t, pressed.astype(np.float64), window_s) == 0.0
     if ok.sum() < 20 or np.ptp(accel[ok]) == 0 or np.ptp(tq[ok]) == 0:
         return float("nan")
     return float(np.corrcoef(_rank(tq[ok]), _rank(accel[ok]))[0, 1])
@@ -248,7 +256,8 @@ def check_log(signals: SignalSet, limits: Limits, params: CheckParams | None = N
         out = SignalSet({**signals.signals, SPEED: retimed})
     torque, speed = finite_signal(out[TORQUE]), finite_signal(out[SPEED])
     findings += plausibility(torque, speed, limits, p)
-    corr = sign_correlation(torque, speed, p.accel_window_s)
+    brakes = [out[name] for name in sorted(out) if name.startswith("brake") and len(out[name])]
+    corr = sign_correlation(torque, speed, p.accel_window_s, brakes, p.brake_threshold)
     if np.isfinite(corr) and corr <= -p.min_sign_correlation:
         how = ("analysed with the sign corrected" if p.fix_torque_sign
                else "analysed as decoded, so every tip-in reads as a tip-out")

@@ -78,6 +78,23 @@ def test_an_inverted_torque_is_named_and_analysed_with_the_sign_corrected(channe
     assert [k for k, _ in _kinds(kept)] == [{"tip_in": "tip_out", "tip_out": "tip_in"}[k] for k, _ in _kinds(clean)]
 
 
+def test_the_sign_is_not_judged_while_the_friction_brakes_act(channels: dict[str, Channel]) -> None:
+    """Braking decelerates the car whatever the torque: samples near a brake channel above the threshold do not
+    count. The inverted drive braked after 10 s reads its sign from the first 10 s; braked throughout, the sign
+    is not judged (no finding) rather than judged from the brakes."""
+    from app.analysis.logchecks import sign_correlation
+
+    inverted = _signals(channels, {"motor_torque_nm": lambda t, v: -v})
+    tq, sp = inverted["motor_torque_nm"], inverted["motor_speed_rpm"]
+    first = sign_correlation(tq.window(0.0, 10.0), sp.window(0.0, 10.0), 0.2)
+    late = _signals(channels, {"motor_torque_nm": lambda t, v: -v, "brake": lambda t, v: np.where(t > 10.0, 20.0, 0.0)})
+    checks = check_log(late, Limits.for_vehicle(PAPER))
+    assert checks.sign_correlation == pytest.approx(first, abs=0.03) and first < -0.5
+    always = _signals(channels, {"motor_torque_nm": lambda t, v: -v, "brake": lambda t, v: np.full(t.size, 20.0)})
+    checks = check_log(always, Limits.for_vehicle(PAPER))
+    assert np.isnan(checks.sign_correlation) and checks.findings == []
+
+
 def test_check_thresholds_come_from_the_request_body() -> None:
     from app.errors import InputError
 
