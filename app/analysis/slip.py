@@ -27,8 +27,8 @@ of the motor (:func:`app.analysis.logchecks.computed_road_speed`); such channels
 Without a reference the spin is found from the motor alone (:func:`spin_problem`): with the
 wheels gripping, the motor cannot gain speed faster than the driving torque accelerates the
 whole vehicle, ``T / J`` with ``J`` the vehicle and driveline inertia referred to the motor.
-Over ``[t, t + SLIP_AVERAGE_S]`` the mean gain of speed (in the direction the motor turns) is
-compared with ``spin_margin`` x the mean driving torque over ``J`` plus a road allowance
+Over ``[t, t + SLIP_AVERAGE_S]`` the least-squares slope of the motor speed (in the direction
+it turns) is compared with ``spin_margin`` x the mean driving torque over ``J`` plus a road allowance
 (``SPIN_ROAD_ACCEL_MS2``, a steep downhill); beyond it the event is excluded as wheel spin.
 A braked or locking wheel is not judged this way (brakes decelerate beyond any regeneration
 torque; the brake channels exclude those events).
