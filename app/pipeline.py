@@ -4,7 +4,7 @@
 
     run_analysis(log, VehicleInputs, AnalysisOptions, progress)
       decode     open_log + load_database + load_signal_map + load_signals  -> SignalSet
-      check      time base, torque sign, plausibility, computed road speeds     -> [Finding]
+      check      time base, torque sign, plausibility, computed road speeds -> [Finding]
       events     detect_events                                              -> [Event]
       simulate   sim.simulate per included event window (from the measured speed at its start),
                  and once over the whole log
