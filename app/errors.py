@@ -17,6 +17,7 @@ subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
      |    +-- MissingSignalError (KeyError)(422) required canonical channels absent
      +-- AnalysisError                    (422)
      |    +-- InsufficientDataError       (422)
+     |    +-- ImplausibleSignalError      (422)  most of a channel beyond what the vehicle can do (wrong DBC)
      +-- InputError (ValueError)          (400)  absurd parameters, bad request values
      +-- UploadTooLargeError              (413)
      +-- UploadTimeoutError (TimeoutError)(408)  an upload stalled longer than the idle limit
@@ -112,6 +113,13 @@ class NotIdentifiableError(AnalysisError):
     """The log cannot pin down what was asked of it (a parameter, or anything of the vehicle)."""
 
     code = "not_identifiable"
+
+
+class ImplausibleSignalError(AnalysisError):
+    """Most of a decoded channel is beyond what the vehicle can do: the log was decoded with the wrong DBC
+    version or scaling (:mod:`app.analysis.logchecks`)."""
+
+    code = "implausible_signal"
 
 
 class InputError(AppError, ValueError):

@@ -78,6 +78,7 @@ def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.N
         "metrics": summarize(comparisons) if comparisons else {},
         "resolution": resolution_reasons(comparisons),
         "tracking": res.tracking.to_dict(),
+        "findings": [f.to_dict() for f in res.findings],
         "whole_rms_rpm": res.whole_error.rms_rpm if res.whole_error else None,
         "whole_nrmse": res.whole_error.nrmse if res.whole_error else None,
     }

@@ -4,6 +4,7 @@
 
     run_analysis(log, VehicleInputs, AnalysisOptions, progress)
       decode     open_log + load_database + load_signal_map + load_signals  -> SignalSet
+      check      time base, torque sign, plausibility, computed road speeds -> [Finding]
       events     detect_events                                              -> [Event]
       simulate   sim.simulate per included event window (from the measured speed at its start),
                  and once over the whole log
@@ -27,10 +28,12 @@ import numpy as np
 
 from app.analysis.align import OffsetEstimate, common_time_base, estimate_lag, overlap, shift
 from app.analysis.compare import EventComparison, SpeedError, compare_event, speed_error
+from app.analysis.diagnosis.uncertainty import rigid_inertia
 from app.analysis.events import SPEED, TORQUE, Event, EventParams, find_events
 from app.analysis.lash import LashParams
+from app.analysis.logchecks import CheckParams, Finding, Limits, check_log
 from app.analysis.metrics import MetricParams, ripple_metrics
-from app.analysis.sampling import mean_period
+from app.analysis.sampling import sample_period
 from app.analysis.series import FloatArray, finite_signal
 from app.analysis.slip import Drive, log_ratio_scale
 from app.analysis.tracking import TrackingParams, Verdict, event_verdict, log_verdict
@@ -55,6 +58,7 @@ class AnalysisOptions:
     events: EventParams = field(default_factory=EventParams)
     metrics: MetricParams = field(default_factory=MetricParams)
     tracking: TrackingParams = field(default_factory=TrackingParams)
+    checks: CheckParams = field(default_factory=CheckParams)
     fit_offset: bool = True
     max_offset_s: float = 0.05  # the torque-to-speed offset is searched within ± this
     event_dt_s: float = 0.001  # time base of the per-event aligned series
@@ -70,12 +74,13 @@ class AnalysisOptions:
         ev_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("events", {}).items()}
         mp_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("metrics", {}).items()}
         tr_kw: dict[str, Any] = dict(data.pop("tracking", {}) or {})
+        ck_kw: dict[str, Any] = dict(data.pop("checks", {}) or {})
         try:
             if isinstance(mp_kw.get("lash"), dict):
                 lash_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in mp_kw["lash"].items()}
                 mp_kw["lash"] = LashParams(**lash_kw)
             opts = cls(events=EventParams(**ev_kw), metrics=MetricParams(**mp_kw), tracking=TrackingParams(**tr_kw),
-                       **data)
+                       checks=CheckParams(**ck_kw), **data)
         except (TypeError, ValueError) as exc:
             raise InputError(f"analysis options: {exc}") from exc
         if opts.model not in ("multibody", "two_inertia"):
@@ -126,6 +131,7 @@ class AnalysisResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     tracking: Verdict = field(default_factory=lambda: Verdict("unknown", ["no analysed event to judge"]))
+    findings: list[Finding] = field(default_factory=list)  # problems of the log as decoded (app.analysis.logchecks)
 
 
 def decode_log(log: LogSource, database: Path, signal_map: Path,
@@ -265,18 +271,20 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     for name in REQUIRED:
         if name not in signals:
             raise MissingSignalError(f"the analysis needs channel {name!r}; decoded channels: {sorted(signals)}")
+    checks = check_log(signals, Limits.for_vehicle(vehicle), opts.checks)
+    signals = checks.signals
     torque, speed = finite_signal(signals[TORQUE]), finite_signal(signals[SPEED])
     stage("events", 0.0)
     notes: list[str] = []
     mismatch: list[str] = []  # reasons the comparison is not valid, found before any simulation
-    drive = Drive(vehicle.ratio, vehicle.wheel.radius)
+    drive = Drive(vehicle.ratio, vehicle.wheel.radius, rigid_inertia(vehicle), computed=checks.computed)
     scale = log_ratio_scale(signals, drive, opts.events.slip_min_speed_rpm)
     if scale is not None and abs(scale - 1.0) > opts.events.max_wheel_slip:
         mismatch.append(f"the vehicle does not fit the log: the motor turns {scale:.2f}x the speed the file's ratio "
                         f"{vehicle.ratio:g} and tyre radius {vehicle.wheel.radius:g} m give from the road speed "
                         f"(lower quartile over the log); wheel slip is checked against the log's own ratio "
                         f"{vehicle.ratio * scale:.3g}")
-        drive = Drive(vehicle.ratio * scale, vehicle.wheel.radius)
+        drive = replace(drive, ratio=vehicle.ratio * scale)
     detection = find_events(signals, opts.events, drive)
     events = detection.events
     timings["events"] = time.perf_counter() - clock
@@ -347,7 +355,7 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     whole_err: SpeedError | None = None
     if opts.whole_log:
         t0, t1 = overlap([torque, speed])
-        dt_whole = whole_log_output_dt(t1 - t0, mean_period(speed.t))
+        dt_whole = whole_log_output_dt(t1 - t0, sample_period(speed.t))
         try:
             res = _simulate(vehicle, torque, speed, t0, t1, opts, dt_whole)
             grid = common_time_base(t0, t1, dt_whole)
@@ -362,7 +370,7 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
                           mismatch)
     stage("done", 1.0)
     return AnalysisResult(signals, events, results, offset, whole, whole_err, timings_s=timings, notes=notes,
-                          tracking=verdict)
+                          tracking=verdict, findings=checks.findings)
 
 
 def run_analysis(log_path: LogSource, vehicle: VehicleInputs, options: AnalysisOptions | None = None,

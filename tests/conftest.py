@@ -26,6 +26,16 @@ def shared_file(*parts: str) -> Path:
     return path
 
 
+def edited_map(tmp_path: Path, channel: str, line: str) -> Path:
+    """The reference signal map with ``line`` (``invert = true``, ``factor = 12.0``) added to ``channel``'s table."""
+    text = (REPO / "dbc" / "lashscope_ev.map.toml").read_text(encoding="utf-8")
+    head = f"[channels.{channel}]\n"
+    assert head in text
+    out = tmp_path / "edited.map.toml"
+    out.write_text(text.replace(head, head + line + "\n"), encoding="utf-8")
+    return out
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     if not DATA.is_dir():

@@ -59,3 +59,18 @@ def moving_mean(t: FloatArray, y: FloatArray, window_s: float) -> FloatArray:
     i = np.arange(t.size)
     hi = np.searchsorted(t, t + window_s, side="right")
     return np.asarray((c[hi] - c[i]) / (hi - i), dtype=np.float64)
+
+
+def quantisation_step(values: FloatArray) -> float:
+    """Smallest step (the channel's unit) between distinct sample values, robust to float round-off; 0 if none."""
+    v = np.unique(np.round(np.asarray(values, dtype=np.float64), 9))
+    if v.size < 2:
+        return 0.0
+    steps = np.diff(v)
+    steps = steps[steps > 1e-9]
+    if steps.size == 0:
+        return 0.0
+    q = float(steps.min())
+    # only a quantiser if the other steps are (nearly) integer multiples of the smallest one
+    ratio = steps[: min(steps.size, 2000)] / q
+    return q if float(np.median(np.abs(ratio - np.round(ratio)))) < 0.05 else 0.0

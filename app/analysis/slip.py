@@ -19,6 +19,19 @@ compared with the file's first; beyond ``max_slip`` the pipeline says so and che
 against the log's ratio instead. The average
 spans a few shuffle periods: the shuffle itself swings the motor against the wheels by
 hundreds of rpm for a moment (the half-shafts winding up), a spinning wheel stays away.
+
+A road-speed channel a vehicle control unit computed from the motor speed follows every spin
+of the motor (:func:`app.analysis.logchecks.computed_road_speed`); such channels are named in
+``Drive.computed`` and never used as the reference.
+
+Without a reference the spin is found from the motor alone (:func:`spin_problem`): with the
+wheels gripping, the motor cannot gain speed faster than the driving torque accelerates the
+whole vehicle, ``T / J`` with ``J`` the vehicle and driveline inertia referred to the motor.
+Over ``[t, t + SLIP_AVERAGE_S]`` the least-squares slope of the motor speed (in the direction
+it turns) is compared with ``spin_margin`` x the mean driving torque over ``J`` plus a road allowance
+(``SPIN_ROAD_ACCEL_MS2``, a steep downhill); beyond it the event is excluded as wheel spin.
+A braked or locking wheel is not judged this way (brakes decelerate beyond any regeneration
+torque; the brake channels exclude those events).
 """
 
 from __future__ import annotations
@@ -34,6 +47,8 @@ WHEEL_PREFIX = "wheel_speed_"
 VEHICLE_SPEED = "vehicle_speed_kmh"
 SPEED = "motor_speed_rpm"
 SLIP_AVERAGE_S = 0.5  # s; at least one and a half periods of a 3 Hz shuffle
+TORQUE = "motor_torque_nm"
+SPIN_ROAD_ACCEL_MS2 = 1.5  # m/s^2 the road may add to the torque's acceleration (a 15 % downhill)
 
 
 @dataclass(frozen=True)
@@ -42,6 +57,9 @@ class Drive:
 
     ratio: float
     wheel_radius_m: float | None = None
+    inertia_kgm2: float | None = None  # vehicle and driveline referred to the motor: wheel spin without a reference
+    spin_margin: float = 1.5  # the motor may gain speed this many times faster than torque / inertia
+    computed: frozenset[str] = frozenset()  # road-speed channels computed from the motor speed: not references
 
 
 def road_speed_at_motor(signals: SignalSet, t: FloatArray, drive: Drive) -> tuple[FloatArray, list[str]]:
@@ -49,10 +67,13 @@ def road_speed_at_motor(signals: SignalSet, t: FloatArray, drive: Drive) -> tupl
     refs: list[FloatArray] = []
     used: list[str] = []
     for name in sorted(signals):
+        if name in drive.computed:
+            continue
         if name.startswith(WHEEL_PREFIX) and name.endswith("_rpm") and len(signals[name]):
             refs.append(np.abs(signals[name].at(t)) * drive.ratio)
             used.append(name)
-    if VEHICLE_SPEED in signals and len(signals[VEHICLE_SPEED]) and drive.wheel_radius_m:
+    if (VEHICLE_SPEED in signals and VEHICLE_SPEED not in drive.computed and len(signals[VEHICLE_SPEED])
+            and drive.wheel_radius_m):
         v_ms = np.abs(signals[VEHICLE_SPEED].at(t)) / 3.6
         refs.append(v_ms / drive.wheel_radius_m * 30.0 / np.pi * drive.ratio)
         used.append(VEHICLE_SPEED)
@@ -73,6 +94,8 @@ def slip_problem(signals: SignalSet, t0: float, t1: float, drive: Drive | None, 
     if not w.t.size:
         return None
     ref, used = road_speed_at_motor(signals, w.t, drive)
+    if not used:
+        return spin_problem(signals, t0, t1, drive)
     ok = np.isfinite(ref) & np.isfinite(w.values) & (ref >= min_speed_rpm)
     if not ok.any():
         return None
@@ -87,6 +110,52 @@ def slip_problem(signals: SignalSet, t0: float, t1: float, drive: Drive | None, 
     return (f"wheel slip: motor speed {float(motor[k]):.0f} rpm vs {float(road[k]):.0f} rpm from "
             f"{' / '.join(used)} x ratio {drive.ratio:g} ({100 * s[k]:+.0f} %, limit ±{100 * max_slip:g} %) "
             f"over {tk:.2f}-{tk + SLIP_AVERAGE_S:.2f} s")
+
+
+def _window_slopes(t: FloatArray, y: FloatArray, window_s: float) -> FloatArray:
+    """Least-squares slope of ``y`` over ``[t_i, t_i + window_s]`` for every sample ``i`` (a straight line
+    through a few shuffle periods: the swings at the window's ends do not decide it)."""
+    x = t - t[0]
+    c = [np.concatenate(([0.0], np.cumsum(a))) for a in (np.ones_like(x), x, y, x * x, x * y)]
+    i = np.arange(t.size)
+    hi = np.searchsorted(t, t + window_s, side="right")
+    n, sx, sy, sxx, sxy = (a[hi] - a[i] for a in c)
+    den = n * sxx - sx * sx
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.asarray(np.where(den > 0, (n * sxy - sx * sy) / den, 0.0), dtype=np.float64)
+
+
+def spin_problem(signals: SignalSet, t0: float, t1: float, drive: Drive) -> str | None:
+    """Why ``[t0, t1]`` (s) is spoiled by wheel spin seen from the motor alone, or None (see the module docstring).
+
+    None without ``drive.inertia_kgm2`` or a torque channel.
+    """
+    if not drive.inertia_kgm2 or TORQUE not in signals or not drive.ratio > 0:
+        return None
+    w = signals[SPEED].window(t0, t1)
+    ok = np.isfinite(w.values)
+    tt, v = w.t[ok], w.values[ok]
+    if tt.size < 3:
+        return None
+    tq = signals[TORQUE].at(tt)
+    if not np.isfinite(tq).all():
+        return None
+    i = np.flatnonzero(tt[-1] - tt >= SLIP_AVERAGE_S)
+    if not i.size:
+        return None
+    way = np.sign(v[i])  # the gain of speed in the direction the motor turns
+    gain = way * _window_slopes(tt, v, SLIP_AVERAGE_S)[i]  # rpm/s
+    drive_tq = np.maximum(way * moving_mean(tt, tq, SLIP_AVERAGE_S)[i], 0.0)
+    road = SPIN_ROAD_ACCEL_MS2 / drive.wheel_radius_m * drive.ratio if drive.wheel_radius_m else 0.0  # rad/s^2
+    allowed = (drive.spin_margin * drive_tq / drive.inertia_kgm2 + road) * 30.0 / np.pi
+    k = int(np.argmax(gain - allowed))
+    if gain[k] <= allowed[k]:
+        return None
+    tk = float(tt[i[k]])
+    return (f"wheel spin: the motor gains {gain[k]:.0f} rpm/s over {tk:.2f}-{tk + SLIP_AVERAGE_S:.2f} s; "
+            f"{drive_tq[k]:.0f} N m on {drive.inertia_kgm2:.3g} kg m^2 (the vehicle at the motor) allows at most "
+            f"{allowed[k]:.0f} rpm/s (x{drive.spin_margin:g}, with a {SPIN_ROAD_ACCEL_MS2:g} m/s^2 road allowance); "
+            "no wheel speed to compare with")
 
 
 def log_ratio_scale(signals: SignalSet, drive: Drive, min_speed_rpm: float) -> float | None:

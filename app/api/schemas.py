@@ -173,6 +173,8 @@ class FleetOut(_Open):
     bands: dict[str, Any] = Field(default_factory=dict)
     band_k: float
     interval_level: float
+    poor_tracking: dict[str, Any] = Field(default_factory=dict, description=(
+        "events and logs whose tracking verdict is poor, and whether they are in the figures"))
     units: dict[str, str] = Field(default_factory=dict)
     flagged: list[str] = Field(default_factory=list)
 

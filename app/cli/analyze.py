@@ -97,7 +97,7 @@ def tolerance_table(tol: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.cli.report import events_table, metrics_table, summary_line, tracking_lines
+    from app.cli.report import events_table, finding_lines, metrics_table, summary_line, tracking_lines
 
     doc = analysis_doc(args)
     text = json.dumps(doc, indent=1)
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         print()
         for note in doc.get("notes", []):
             print(f"note: {note}")
-        for line in tracking_lines(doc):
+        for line in (*finding_lines(doc), *tracking_lines(doc)):
             print(line)
         print(metrics_table(doc))
         if "gap_sensitivity" in doc:

@@ -58,9 +58,31 @@ def _pct(iv: dict[str, float] | None) -> str:
     return f"{100 * iv['value']:.0f} % [{100 * iv['lo']:.0f}, {100 * iv['hi']:.0f}]"
 
 
+def _ratio(iv: dict[str, float] | float | None) -> str:
+    value = iv.get("value") if isinstance(iv, dict) else iv
+    return "-" if value is None else f"{value:.2f}x"
+
+
+def _residual_lines(d: dict[str, Any]) -> list[str]:
+    """The held-out residual in rpm beside its ratio to the noise floor, and an event that carries most of it."""
+    before = d.get("residual_rms_rpm_before")
+    if before is None:
+        return []
+    after = d.get("residual_rms_rpm_after")
+    line = (f"held-out residual: {before:.2f} rpm RMS ({_ratio(d.get('residual_to_noise_before'))} the noise floor)"
+            + (f", {after:.2f} rpm after {' + '.join(d['top'])} ({_ratio(d.get('residual_to_noise_after'))})"
+               if after is not None and d.get("top") else ""))
+    one = d.get("dominant_event")
+    if not one:
+        return [line]
+    return [line, f"  event {one['index']} carries {100 * one['share']:.0f} % of the residual above the noise floor; "
+                  f"without it {one['residual_to_noise_without']:.2f}x"]
+
+
 def summary(doc: dict[str, Any]) -> str:
     d = doc["decision"]
-    lines = [f"decision: {d['status'].upper()}" + (f"  top: {' + '.join(d['top'])}" if d["top"] else "")
+    lines = [f"WARNING [{f['code']}]: {f['message']}" for f in doc.get("findings") or []]
+    lines += [f"decision: {d['status'].upper()}" + (f"  top: {' + '.join(d['top'])}" if d["top"] else "")
              + (f"  confusable: {' / '.join(d['confusable'])}" if d.get("confusable") else ""),
              f"  {d['reason']}"]
     sp = doc["split"]
@@ -69,6 +91,7 @@ def summary(doc: dict[str, Any]) -> str:
     nf = doc["noise_floor"]
     lines.append(f"noise floor: {nf['sigma_rpm']:.2f} rpm white, {nf['quant_step_rpm']:g} rpm steps, "
                  f"{1e3 * nf['jitter_s']:.2f} ms jitter, {1e3 * nf['period_s']:.1f} ms period")
+    lines += _residual_lines(d)
     if doc["baseline"]:
         nu = doc["baseline"]["nuisance"]
         lines.append(f"baseline nuisance: offset {1e3 * nu['offset_s']:+.1f} ms, gain {nu['gain']:.3f}, "
@@ -119,8 +142,9 @@ def summary(doc: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict, validate_on
+    from app.analysis.diagnosis import DiagnosisOptions, diagnose_checked, report_dict, validate_on
     from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
+    from app.analysis.logchecks import Limits, check_log
     from app.errors import InputError
     from app.pipeline import decode_log
     from sim.effects import EFFECTS
@@ -137,15 +161,18 @@ def run(args: argparse.Namespace) -> int:
     say = _progress(args.quiet)
     say(0.0, f"decoding {args.log}")
     signals, _ = decode_log(args.log, dbc, smap)
-    result = diagnose_signals(signals, vehicle, options, say, thresholds)
+    result, checked = diagnose_checked(signals, vehicle, options, say, thresholds)
     validation = None
     if args.validate is not None and (result.decision.top or result.decision.details.get("base_parameters")):
         say(0.0, f"decoding {args.validate}")
         other, _ = decode_log(args.validate, dbc, smap)
-        validation = validate_on(result, other, vehicle, progress=say, event_params=thresholds).to_dict()
+        other_checked = check_log(other, Limits.for_vehicle(vehicle))
+        validation = validate_on(result, other_checked.signals, vehicle, progress=say,
+                                 event_params=thresholds).to_dict()
+        validation["findings"] = [f.to_dict() for f in other_checked.findings]
     elif args.validate is not None:
         validation = {"skipped": f"decision {result.decision.status}: no effect to validate"}
-    doc = report_dict(result, validation)
+    doc = report_dict(result, validation, checked.findings)
     if args.plots is not None and result.baseline is not None:
         from app.diagnosis_plots import event_overlay_png, residual_chart_png
 

@@ -19,6 +19,9 @@ def register(sub: Any) -> None:
     p.add_argument("dir", type=Path, help="batch output dir, data dir, or the event store itself")
     p.add_argument("--band-k", type=float, default=3.0, metavar="K", help="band half-width in robust SDs (default 3)")
     p.add_argument("--plot", type=Path, default=None, metavar="PNG", help="plot file (default DIR/fleet.png)")
+    p.add_argument("--include-poor-tracking", action="store_true",
+                   help="also use events of logs whose simulation does not track the measurement (left out by "
+                   "default: their comparison is not valid)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=run)
 
@@ -46,7 +49,16 @@ def table(report: dict[str, Any]) -> str:
         lines.append(f"fleet band {q}: " + ("needs >= 3 vehicles" if band is None else
                                             f"{band['lo']:.3g} .. {band['hi']:.3g} {unit} "
                                             f"(median {band['center']:.3g})"))
+    lines.append(poor_tracking_line(report["poor_tracking"]))
     return "\n".join(lines)
+
+
+def poor_tracking_line(poor: dict[str, Any]) -> str:
+    """How many events of logs that do not track were left out of (or kept in) the figures."""
+    what = f"{poor['events']} events from {poor['logs']} logs whose simulation does not track the measurement"
+    if poor["included"]:
+        return f"{what} are included (--include-poor-tracking)"
+    return f"{what} left out (--include-poor-tracking includes them)"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from app.storage.results import json_safe
 
     root = store_root(args.dir)
-    report = fleet_report(root, k=args.band_k)
+    report = fleet_report(root, k=args.band_k, include_poor=args.include_poor_tracking)
     plot = args.plot or (args.dir / "fleet.png")
     report["plot"] = str(report_png(report, plot))
     if args.json:

@@ -60,6 +60,11 @@ def metrics_table(doc: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def finding_lines(doc: dict[str, Any]) -> list[str]:
+    """One warning per problem of the log as decoded (:mod:`app.analysis.logchecks`), with its code."""
+    return [f"WARNING [{f['code']}]: {f['message']}" for f in doc["summary"].get("findings") or []]
+
+
 def tracking_lines(doc: dict[str, Any]) -> list[str]:
     """A warning above the medians when the simulation does not track the measurement (empty when it does)."""
     tr = doc["summary"].get("tracking") or {}

@@ -14,6 +14,11 @@ From the event store (:mod:`app.fleet.store`), events with metrics only:
   floored at 2 % of the median so identical vehicles do not flag noise). A vehicle whose median
   gap-open time, total lash or ripple lies outside is flagged with the reason. Needs at least
   three vehicles; with fewer no band is drawn and nothing is flagged.
+
+Events of logs whose tracking verdict is ``poor`` (``log_tracking``, :mod:`app.analysis.tracking`:
+the simulation does not follow the measured speed, so the comparison behind the metrics is not
+valid) are left out of every figure unless ``include_poor`` is set; ``poor_tracking`` says how
+many events and logs that was, and each vehicle's ``events_poor_tracking`` its share.
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from app.fleet.store import read_events, weekly_ripple
+from app.fleet.store import read_events, weekly_median
 
 QUANTITIES = {  # report key -> (unit, what)
     "gap_open_time_ms": ("ms", "median measured gap-open time"),
@@ -33,7 +38,8 @@ QUANTITIES = {  # report key -> (unit, what)
 MIN_VEHICLES_FOR_BAND = 3
 MAD_FLOOR = 0.02
 COLUMNS = ("vehicle", "log_hash", "time", "measured_gap_open_time_s", "measured_rise_height_rpm",
-           "measured_fluctuation_rpm")
+           "measured_fluctuation_rpm", "log_tracking")
+POOR = "poor"
 
 
 def median_interval(values: np.ndarray, level: float, rng: np.random.Generator,
@@ -58,11 +64,18 @@ def _band(medians: list[float], k: float) -> dict[str, float] | None:
     return {"center": center, "lo": center - k * spread, "hi": center + k * spread}
 
 
-def fleet_report(root: str | Path, k: float = 3.0, level: float = 0.9, seed: int = 0) -> dict[str, Any]:
+def fleet_report(root: str | Path, k: float = 3.0, level: float = 0.9, seed: int = 0,
+                 include_poor: bool = False) -> dict[str, Any]:
     """Per-vehicle estimates, the fleet bands and the flags (see the module docstring)."""
     frame = read_events(root, columns=COLUMNS)
     frame = frame[np.isfinite(frame["measured_fluctuation_rpm"].to_numpy(dtype=float))]
-    weekly = weekly_ripple(root)
+    poor = (frame["log_tracking"] == POOR).to_numpy(dtype=bool)
+    poor_by_vehicle = frame[poor].groupby("vehicle").size()
+    poor_tracking = {"events": int(poor.sum()), "logs": int(frame.loc[poor, "log_hash"].nunique()),
+                     "included": include_poor}
+    if not include_poor:
+        frame = frame[~poor]
+    weekly = weekly_median(frame)
     rng = np.random.default_rng(seed)
     vehicles: list[dict[str, Any]] = []
     for name, part in sorted(frame.groupby("vehicle"), key=lambda kv: str(kv[0])):
@@ -77,6 +90,7 @@ def fleet_report(root: str | Path, k: float = 3.0, level: float = 0.9, seed: int
         vehicles.append({
             "vehicle": str(name), "events": len(part), "logs": int(part["log_hash"].nunique()),
             "events_with_gap_open_time": int(np.isfinite(gap_s).sum()),
+            "events_poor_tracking": int(poor_by_vehicle.get(name, 0)),
             "first": times.min().isoformat() if len(times) else None,
             "last": times.max().isoformat() if len(times) else None,
             **{q: {"median": m, "lo": lo, "hi": hi} for q, (m, lo, hi) in est.items()},
@@ -94,6 +108,7 @@ def fleet_report(root: str | Path, k: float = 3.0, level: float = 0.9, seed: int
                 v["flags"].append(f"{what} {value:.3g} {unit} {side} the fleet band "
                                   f"[{band['lo']:.3g}, {band['hi']:.3g}] {unit}")
     return {"store": str(root), "vehicles": vehicles, "bands": bands, "band_k": k, "interval_level": level,
+            "poor_tracking": poor_tracking,
             "units": {q: u for q, (u, _) in QUANTITIES.items()},
             "flagged": [v["vehicle"] for v in vehicles if v["flags"]]}
 

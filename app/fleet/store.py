@@ -154,9 +154,13 @@ def read_events(root: str | os.PathLike[str], columns: Iterable[str] | None = No
 def weekly_ripple(root: str | os.PathLike[str], metric: str = "measured_fluctuation_rpm") -> Any:
     """Median ``metric`` per vehicle per ISO week (Monday start) over events with metrics and an
     absolute time: a DataFrame with columns vehicle, week (date of the Monday), events, median."""
+    return weekly_median(read_events(root, columns=["vehicle", "time", metric]), metric)
+
+
+def weekly_median(frame: Any, metric: str = "measured_fluctuation_rpm") -> Any:
+    """:func:`weekly_ripple` of rows already read (a DataFrame with vehicle, time and ``metric``)."""
     import pandas as pd
 
-    frame = read_events(root, columns=["vehicle", "time", metric])
     frame = frame[frame["time"].notna() & frame[metric].notna()]
     if frame.empty:
         return pd.DataFrame({"vehicle": [], "week": [], "events": [], "median": []})

@@ -73,7 +73,7 @@ def analyse_log(source: LogSource, spec: BatchSpec) -> dict[str, Any]:
         diagnosis = None
         if spec.diagnose:
             try:
-                diagnosis = _diagnosis(signals, spec)
+                diagnosis = _diagnosis(result.signals, spec)  # as checked: an inverted torque corrected
             except (AppError, SimError) as exc:  # an undiagnosable log keeps its analysis
                 diagnosis = {"status": "failed", "top": [], "code": getattr(exc, "code", "error"),
                              "message": str(exc)}

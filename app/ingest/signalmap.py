@@ -14,6 +14,12 @@ A map is a TOML file, one table per canonical channel::
     invert = false               # optional: flip the sign (motor mounted backwards)
     bus = 0                      # optional: only frames from this log channel (0-based)
 
+``time_base`` (optional) is a timer or counter the ECU writes into the motor speed's own message
+(an in-payload millisecond timer: ``unit = "ms"``; an alive counter sent every 10 ms:
+``unit = "s"``, ``factor = 0.01``); it must be a signal of the same message as
+``motor_speed_rpm``, and re-times the speed samples when the logger's stamps are off
+(:func:`app.analysis.sampling.timer_times`). Wrap-around is undone from the data.
+
 The physical value becomes ``(-1 if invert else 1) * unit_factor * factor * value + offset`` in
 the channel's canonical unit (:data:`CANONICAL`). Units convert between the spellings in
 :data:`UNIT_FACTORS`; other units raise :class:`~app.errors.SignalMapError` unless ``factor``
@@ -49,7 +55,9 @@ CANONICAL: dict[str, tuple[str, Interp, bool]] = {
     "wheel_speed_rr_rpm": ("rpm", Interp.LINEAR, False),
     "brake": ("", Interp.LINEAR, False),  # pressure or travel, in the DBC's unit
     "brake_pressed": ("", Interp.PREVIOUS, False),  # switch, 0/1
+    "time_base": ("s", Interp.LINEAR, False),  # ECU timer or counter in the motor speed's message
 }
+TIME_BASE = "time_base"
 REQUIRED: tuple[str, ...] = tuple(k for k, (_, _, req) in CANONICAL.items() if req)
 
 _RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
@@ -61,6 +69,7 @@ UNIT_FACTORS: dict[str, dict[str, float]] = {
     "Nm": {"nm": 1.0, "n.m": 1.0, "n*m": 1.0, "n-m": 1.0, "n·m": 1.0, "newtonmeter": 1.0, "knm": 1000.0, "dnm": 0.1},
     "km/h": {"km/h": 1.0, "kph": 1.0, "kmh": 1.0, "kmph": 1.0, "m/s": 3.6, "mph": 1.609344},
     "%": {"%": 1.0, "pct": 1.0, "percent": 1.0},
+    "s": {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6},
 }
 
 
@@ -152,6 +161,14 @@ class SignalMap:
             gain = factor * spec.factor * (-1.0 if spec.invert else 1.0)
             unit = canonical_unit or src_unit
             out[name] = ResolvedChannel(spec, msg, sig, gain, spec.offset, unit, interp)
+        speed = out.get("motor_speed_rpm")
+        timer = out.get(TIME_BASE)
+        if timer is not None and (speed is None or speed.message.frame_id != timer.message.frame_id
+                                  or speed.spec.bus != timer.spec.bus):
+            raise SignalMapError(
+                f"{self.where()}: channel {TIME_BASE}: {timer.message.name}.{timer.signal.name} must be a signal of "
+                f"the motor speed's message ({speed.message.name if speed else 'motor_speed_rpm is not mapped'}): "
+                "its value times each speed sample")
         return out
 
     def routes(self, db: CanDatabase) -> dict[str, tuple[str, str]]:

@@ -113,7 +113,7 @@ def base_ratios(report: dict[str, Any]) -> dict[str, float]:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.analysis.diagnosis import diagnose_signals, report_dict
+    from app.analysis.diagnosis import diagnose_checked, report_dict
     from app.diagnosis_plots import event_overlay_png, residual_chart_png
 
     analysis_id, _, diagnosis_id = job.subject.split("/")
@@ -126,8 +126,9 @@ def run(store: Store, job: JobRecord) -> None:
     progress("decoding", 0.0)
     rec = store.get_analysis(analysis_id)
     signals, vehicle = decode(store, rec.log_id, st["vehicle"]["name"], st["vehicle"]["version"])
-    result = diagnose_signals(signals, vehicle, opts, lambda fraction, message: progress(message, 0.95 * fraction))
-    doc = report_dict(result)
+    result, checked = diagnose_checked(signals, vehicle, opts,
+                                       lambda fraction, message: progress(message, 0.95 * fraction))
+    doc = report_dict(result, findings=checked.findings)
     store.update_job(job.id, 0.97, "saving")
     if result.baseline is not None:
         event_overlay_png(result, d / PLOTS["events"])

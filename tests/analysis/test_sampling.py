@@ -82,3 +82,27 @@ def test_regular_1khz_sampling_resolves_everything() -> None:
     speed = 1500.0 + damped_response(t, 12.0, 0.08, 100.0)
     m = ripple_metrics(t, speed, Signal.from_samples("motor_torque_nm", t, np.where(t < 0, -50.0, 150.0)), 0.0, 1.0)
     assert m.resolution == {} and m.shuffle_freq_hz == pytest.approx(12.0, rel=0.02)
+
+
+def test_analysis_and_diagnosis_take_the_period_by_one_rule() -> None:
+    """The bursty stream's period is its mean spacing for the diagnosis' noise floor as for the analysis (the
+    median of the spacings said 4 ms where the stream delivers one value every 20 ms); a regular stream with
+    drop-outs keeps its nominal period in both."""
+    from app.analysis.diagnosis.noise import estimate_noise_floor
+    from app.analysis.sampling import sample_period
+    from app.pipeline import AnalysisOptions, analyze_signals
+    from sim import load_vehicle
+    from tests.analysis.synthetic import drive
+
+    t = bursty_times(0.0, 60.0)
+    y = 1500.0 + np.random.default_rng(3).normal(0.0, 1.0, t.size)
+    assert sample_period(t) == pytest.approx(spacing(t).mean_s, rel=1e-12) and 0.0195 < sample_period(t) < 0.0205
+    assert estimate_noise_floor(t, y).period_s == sample_period(t)
+    keep = np.random.default_rng(4).random(3000) > 0.05
+    regular = np.arange(0.0, 30.0, 0.01)[keep]
+    assert spacing(regular).mean_s == pytest.approx(0.0105, abs=0.0003)
+    assert sample_period(regular) == pytest.approx(0.01)
+    ss = drive(speed_gap=(6.0, 6.02))  # one drop-out
+    res = analyze_signals(ss, load_vehicle("paper"), AnalysisOptions())
+    assert res.whole is not None
+    assert float(res.whole.t[1] - res.whole.t[0]) == pytest.approx(sample_period(ss["motor_speed_rpm"].t)) == 0.01

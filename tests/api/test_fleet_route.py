@@ -24,10 +24,13 @@ def test_analysis_rows_reach_the_fleet_report(server: Server, demo_log: Path) ->
         assert r.status_code == 200, r.text
         report = r.json()
         assert client.get("/fleet", params={"band_k": 0}).status_code == 422
+        kept = client.get("/fleet", params={"include_poor_tracking": True}).json()
     frame = read_events(server.data_dir / "events")
     assert len(frame) == len(events) and set(frame["source"]) == {"service"}
     (vehicle,) = report["vehicles"]
     assert vehicle["logs"] == 1 and report["band_k"] == 2.5 and report["bands"]["ripple_rpm"] is None
+    assert report["poor_tracking"] == {"events": 0, "logs": 0, "included": False}  # the demo drive tracks
+    assert kept["poor_tracking"]["included"] is True and kept["vehicles"] == report["vehicles"]
     with_metrics = frame[frame["measured_fluctuation_rpm"].notna()]
     assert vehicle["events"] == len(with_metrics) >= 4
     assert vehicle["ripple_rpm"]["median"] == with_metrics["measured_fluctuation_rpm"].median()

@@ -74,6 +74,8 @@ def test_diagnosis_lifecycle(client: TestClient) -> None:
     assert rep["schema"] == "lashscope.diagnosis/1"
     assert rep["decision"]["status"] == "explained" and rep["decision"]["top"] == ["torque_lag"]
     assert rep["split"]["seed"] == 3
+    assert rep["findings"] == []  # the log checks ran and found nothing wrong with the log
+    assert rep["decision"]["residual_rms_rpm_before"] > rep["decision"]["residual_rms_rpm_after"] > 0
     for name in ("events", "residual"):
         png = client.get(f"/diagnoses/{did}/plots/{name}")
         assert png.status_code == 200 and png.content[:4] == b"\x89PNG"

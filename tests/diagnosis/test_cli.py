@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from tests.conftest import REPO
+from tests.conftest import REPO, edited_map
 from tests.diagnosis.conftest import drive_signals
 
 DBC, MAP = REPO / "dbc" / "lashscope_ev.dbc", REPO / "dbc" / "lashscope_ev.map.toml"
@@ -41,6 +41,10 @@ def test_cli_diagnoses_a_blf_log_and_validates_on_another(tmp_path: Path, capsys
     doc = json.loads(capsys.readouterr().out)
     assert doc["decision"]["status"] == "explained" and doc["decision"]["top"] == ["torque_lag"]
     assert doc["validation"]["shrink"]["value"] > 0.7
+    d = doc["decision"]
+    assert d["residual_rms_rpm_before"] > 5.0 > 1.5 > d["residual_rms_rpm_after"] and d["dominant_event"] is None
+    (lag,) = [c for c in doc["candidates"] if c["id"] == "torque_lag"]
+    assert lag["heldout"]["residual_rms_rpm"] == d["residual_rms_rpm_after"]
     assert all(Path(p).stat().st_size > 1000 for p in doc["plots"])
 
 
@@ -49,11 +53,29 @@ def test_cli_summary_and_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture
     assert main(["diagnose", str(log), "--vehicle", "paper", "--candidates", "torque_lag", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "decision: EXPLAINED  top: torque_lag" in out and "held-out shrink" in out
+    # the residual in rpm beside its ratio to the noise floor, before and after the effect
+    assert "held-out residual: 10.31 rpm RMS (30.91x the noise floor), 1.08 rpm after torque_lag (0.93x)" in out
     assert main(["diagnose", str(log), "--vehicle", "paper", "--candidates", "gremlins", "--quiet"]) == 2
     assert "gremlins" in capsys.readouterr().err
     assert main(["diagnose", str(log), "--vehicle", "paper", "--model-form-tolerance", "2", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "model_form_rel = 2.0: must be within 0..1" in err and "Traceback" not in err
+
+
+def test_cli_diagnoses_an_inverted_torque_channel_with_the_sign_corrected_and_says_so(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log = write_log(tmp_path / "a.blf", 31)
+    smap = edited_map(tmp_path, "motor_torque_nm", "invert = true")
+    args = ["diagnose", str(log), "--vehicle", "paper", "--candidates", "torque_lag", "--quiet", "--signal-map",
+            str(smap)]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("WARNING [torque_sign_inverted]: motor_torque_nm is inverted relative to the motor "
+                          "speed")
+    assert "decision: EXPLAINED  top: torque_lag" in out  # the same answer as with the map's own sign
+    assert main([*args, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert [f["code"] for f in doc["findings"]] == ["torque_sign_inverted"]
 
 
 def test_cli_validate_after_a_decision_without_an_effect(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

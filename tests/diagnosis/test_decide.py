@@ -52,6 +52,32 @@ def test_no_significant_gap_when_the_baseline_sits_on_the_noise_floor() -> None:
     assert run([cand("drag", base, 0.5)], base=base)[0] == "no_significant_gap"
 
 
+def test_one_event_carrying_most_of_the_residual_does_not_make_a_gap_alone() -> None:
+    """A logger that buffered one reversal's frames: one event 20x the noise floor, the others 1.3x. The
+    plain ratio and its bootstrap interval call it a gap (the lower bound stays above 1.15x while most
+    resamples hold the event); without that event it is 1.30x."""
+    from app.analysis.diagnosis.decide import dominant_event
+
+    base = N * np.array([1.3, 1.25, 1.35, 20.0, 1.3, 1.28, 1.32, 1.3])
+    d = decide(base, N, [cand("drag", base, 0.5)], [], bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d.gap_ratio is not None and d.gap_ratio.value == pytest.approx(3.64, abs=0.01)
+    assert d.gap_ratio.lo > RULES.min_gap_ratio_lo
+    assert d.status == "no_significant_gap"
+    assert d.reason == ("baseline residual is 3.64x the noise floor, but one held-out event carries 90 % of the "
+                        "residual above it; without that event it is 1.30x: a gap needs at least 1.5x without any "
+                        "single event")
+    assert d.to_dict()["remainder"]["ratio_to_noise"] == pytest.approx(1.3, abs=1e-3)
+    position, share, without = dominant_event(base, N, RULES) or (0, 0.0, 0.0)
+    assert position == 3 and share == pytest.approx(0.9, abs=0.005) and without == pytest.approx(1.3, abs=1e-3)
+    # one large event on top of a gap every event shows is reported, but the gap stands on the others
+    wide = BASE.copy()
+    wide[3] = 100.0 * N[3]
+    one = dominant_event(wide, N, RULES)
+    assert one is not None and one[0] == 3 and one[2] > RULES.min_gap_ratio
+    status, top, _ = run([cand("torque_lag", wide, 0.03)], base=wide)
+    assert status != "no_significant_gap" and top == ("torque_lag",)
+
+
 def test_none_of_candidates_when_nothing_removes_a_significant_share() -> None:
     assert run([cand("drag", BASE, 0.95), cand("backlash", BASE, 1.02, seed=3)])[0] == "none_of_candidates"
 

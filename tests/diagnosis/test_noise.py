@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from app.analysis.diagnosis.forward import DiagEvent
-from app.analysis.diagnosis.noise import estimate_noise_floor, quantisation_step
+from app.analysis.diagnosis.noise import estimate_noise_floor
 from app.analysis.diagnosis.uncertainty import torque_quantisation_variance
+from app.analysis.series import quantisation_step
 
 
 @pytest.mark.parametrize(("sigma", "q", "jitter"), [(0.5, 1.0, 0.0002), (1.5, 0.25, 0.0005), (0.3, 0.0, 0.0)])

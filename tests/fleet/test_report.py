@@ -64,6 +64,41 @@ def test_outlier_vehicle_is_flagged_with_its_estimates(store: Path, tmp_path: Pa
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_logs_that_do_not_track_are_left_out_of_the_figures_and_counted(store: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """Three logs of ev-01 whose simulation did not track read a 2000 rpm ripple: by default they are not in
+    its figures (which then equal the store without them), the report says how many were left out, and
+    ``include_poor`` (``--include-poor-tracking``) takes them in."""
+    from app.cli import main
+
+    clean = fleet_report(store)
+    start = datetime(2025, 5, 6, 8, tzinfo=UTC)
+    for k in range(3):
+        t = start + timedelta(hours=k)
+        rows = [{"vehicle": "ev-01", "date": t.date().isoformat(), "log_hash": f"poor-{k}", "time": t,
+                 "event_index": i, "kind": "tip_in", "included": True, "time_is_absolute": True,
+                 "measured_gap_open_time_s": 0.05, "measured_rise_height_rpm": 900.0,
+                 "measured_fluctuation_rpm": 2000.0, "log_tracking": "poor", "tracking": "poor"} for i in range(4)]
+        write_rows(store, rows, source="batch", log_hash=f"poor-{k}")
+    report = fleet_report(store)
+    assert report["poor_tracking"] == {"events": 12, "logs": 3, "included": False}
+    by, before = {v["vehicle"]: v for v in report["vehicles"]}, {v["vehicle"]: v for v in clean["vehicles"]}
+    assert by["ev-01"]["events_poor_tracking"] == 12 and by["ev-02"]["events_poor_tracking"] == 0
+    for q in ("gap_open_time_ms", "total_lash_deg", "ripple_rpm"):
+        assert by["ev-01"][q] == before["ev-01"][q]
+    assert by["ev-01"]["weekly_ripple_rpm"] == before["ev-01"]["weekly_ripple_rpm"]
+    assert report["flagged"] == clean["flagged"] == ["ev-05"]
+    kept = fleet_report(store, include_poor=True)
+    v1 = {v["vehicle"]: v for v in kept["vehicles"]}["ev-01"]
+    assert kept["poor_tracking"]["included"] is True and v1["events"] == 32
+    assert v1["ripple_rpm"]["median"] > by["ev-01"]["ripple_rpm"]["median"]
+    assert [w["events"] for w in v1["weekly_ripple_rpm"]] == [26, 6]
+    assert main(["fleet", str(store), "--plot", str(store.parent / "f.png")]) == 0
+    out = capsys.readouterr().out
+    assert ("12 events from 3 logs whose simulation does not track the measurement left out "
+            "(--include-poor-tracking includes them)") in out
+
+
 def test_hook_writes_service_rows_only_when_enabled(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                     fleet_logs: dict[str, Path]) -> None:
     from app.fleet.hook import ENV

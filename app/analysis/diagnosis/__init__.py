@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # the real names for the type checker; at run time they resol
         Validation,
         augmented_vehicle,
         chosen_effects,
+        diagnose_checked,
         diagnose_signals,
         validate_effects,
         validate_on,
@@ -40,11 +41,13 @@ _EXPORTS = {
     "STATUSES": "decide", "Decision": "decide", "DecisionRules": "decide",
     "DiagnosisOptions": "select", "DiagnosisResult": "select", "Progress": "select", "run_diagnosis": "select",
     "Validation": "validate", "augmented_vehicle": "validate", "chosen_effects": "validate",
-    "diagnose_signals": "validate", "validate_effects": "validate", "validate_on": "validate",
+    "diagnose_checked": "validate", "diagnose_signals": "validate", "validate_effects": "validate",
+    "validate_on": "validate",
 }
 __all__ = [
     "SCHEMA_VERSION", "STATUSES", "Decision", "DecisionRules", "DiagnosisOptions", "DiagnosisResult", "Progress",
-    "Validation", "augmented_vehicle", "chosen_effects", "diagnose_signals", "report_dict", "run_diagnosis",
+    "Validation", "augmented_vehicle", "chosen_effects", "diagnose_checked", "diagnose_signals", "report_dict",
+    "run_diagnosis",
     "validate_effects", "validate_on",
 ]
 

@@ -10,7 +10,10 @@ remainder statistics of :mod:`.structure`). The rules, in order (thresholds in
 1. ``insufficient_data`` -- fewer than ``min_events_per_side`` calibration or held-out events;
 2. ``no_significant_gap`` -- the calibrated baseline's residual is not clearly above the
    model-free noise floor (ratio ``chi2 / n`` below ``min_gap_ratio`` or its bootstrap lower
-   bound below ``min_gap_ratio_lo``);
+   bound below ``min_gap_ratio_lo``), or it is only above it because of one event: a held-out
+   event carrying more than ``max_event_share`` of the residual above the noise floor
+   (:func:`dominant_event`; a logger that buffered frames through one reversal, a wheel that
+   spun once) does not make a gap alone, the ratio without it must reach ``min_gap_ratio`` too;
 3. ``none_of_candidates`` -- no candidate removes a significant share of the residual above the
    noise floor (share below ``min_explained`` or its interval touching zero, or fewer than half
    the held-out events improved);
@@ -74,6 +77,7 @@ class DecisionRules:
     pair_remainder_gain: float = 0.4
     n_boot: int = 2000
     level: float = 0.9
+    max_event_share: float = 0.5  # one held-out event with more of the baseline's excess does not decide rule 2
 
     def to_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -164,6 +168,22 @@ def has_gap(ratio: Interval, rules: DecisionRules) -> bool:
     return bool(ratio.value >= rules.min_gap_ratio and ratio.lo >= rules.min_gap_ratio_lo)
 
 
+def dominant_event(base: FloatArray, n: FloatArray, rules: DecisionRules) -> tuple[int, float, float] | None:
+    """The held-out event carrying more than ``max_event_share`` of the residual above the noise floor:
+    ``(its position, its share, residual-to-noise ratio of the others)``; None when no event does or there
+    are no more events than ``min_events_per_side``."""
+    excess = np.maximum(base - n, 0.0)
+    total = float(excess.sum())
+    if total <= 0 or base.size <= rules.min_events_per_side:
+        return None
+    k = int(np.argmax(excess))
+    share = float(excess[k]) / total
+    if share <= rules.max_event_share:
+        return None
+    others = np.arange(base.size) != k
+    return k, share, float(base[others].sum() / max(float(n[others].sum()), 1.0))
+
+
 def score_candidate(cid: str, effects: tuple[str, ...], base: FloatArray, cand: FloatArray, n: FloatArray,
                     draws: npt.NDArray[np.int64], rules: DecisionRules,
                     rem: Remainder | None = None) -> CandidateScore:
@@ -224,6 +244,13 @@ def decide(
             f"{n_calibration} calibration and {n_ho} held-out events; at least {rules.min_events_per_side} "
             f"usable events are needed on each side"))
     ratio = gap_ratio(base, n, draws, rules.level)
+    one = dominant_event(base, n, rules)
+    if one is not None and has_gap(ratio, rules) and one[2] < rules.min_gap_ratio:
+        return Decision("no_significant_gap", gap_ratio=ratio, details={
+            "remainder": remainder_field([], one[2], explained=None)}, reason=(
+            f"baseline residual is {ratio.value:.2f}x the noise floor, but one held-out event carries "
+            f"{100 * one[1]:.0f} % of the residual above it; without that event it is {one[2]:.2f}x: a gap needs "
+            f"at least {rules.min_gap_ratio:g}x without any single event"))
     if not has_gap(ratio, rules):
         return Decision("no_significant_gap", gap_ratio=ratio, details={
             "remainder": remainder_field([], ratio.value, explained=None)}, reason=(

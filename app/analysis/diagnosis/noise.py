@@ -4,7 +4,8 @@ The diagnosis must know how much of the residual *no* model could ever explain: 
 DBC quantisation and timestamp jitter. All three are estimated from the measured data alone,
 without any simulation, so the floor cannot be bent by a fit:
 
-- **sample period and jitter** from the timestamp differences: with ``t_k = kT + j_k`` the
+- **sample period and jitter** from the timestamp differences (the period by
+  :func:`app.analysis.sampling.sample_period`, the rule the analysis uses as well): with ``t_k = kT + j_k`` the
   differences are ``T + j_{k+1} - j_k``, so their robust spread is ``sqrt(2)`` times the jitter;
   dropped frames (differences near ``2T``, ``3T``...) are folded back onto ``T`` first;
 - **white noise** from second differences on quiet samples (away from events):
@@ -33,6 +34,8 @@ import numpy as np
 import numpy.typing as npt
 
 from app.analysis.diagnosis.orders import OrderTone, find_order_tones
+from app.analysis.sampling import sample_period
+from app.analysis.series import quantisation_step
 from app.errors import InsufficientDataError
 
 FloatArray = npt.NDArray[np.float64]
@@ -83,18 +86,6 @@ class NoiseFloor:
         return asdict(self)
 
 
-def sample_period(t: FloatArray) -> float:
-    """Nominal sample period (s): the median of the timestamp differences that are not drop-outs."""
-    d = np.diff(np.asarray(t, dtype=np.float64))
-    d = d[d > 0]
-    if d.size == 0:
-        raise InsufficientDataError("speed channel has fewer than two distinct timestamps")
-    first = float(np.median(d))
-    # drop-outs double the difference; the median of the single-period ones is the period
-    single = d[d < 1.5 * first]
-    return float(np.median(single)) if single.size else first
-
-
 def timestamp_jitter(t: FloatArray, period_s: float) -> float:
     """Jitter standard deviation (s) from timestamp differences folded onto the nominal period."""
     d = np.diff(np.asarray(t, dtype=np.float64))
@@ -105,21 +96,6 @@ def timestamp_jitter(t: FloatArray, period_s: float) -> float:
     # a slow clock-rate mismatch shifts every difference equally; the median removes it
     dev = dev - np.median(dev)
     return float(_MAD_TO_SIGMA * np.median(np.abs(dev)) / np.sqrt(2.0))
-
-
-def quantisation_step(values: FloatArray) -> float:
-    """Smallest step (rpm) between distinct sample values, robust to float round-off; 0 if none."""
-    v = np.unique(np.round(np.asarray(values, dtype=np.float64), 9))
-    if v.size < 2:
-        return 0.0
-    steps = np.diff(v)
-    steps = steps[steps > 1e-9]
-    if steps.size == 0:
-        return 0.0
-    q = float(steps.min())
-    # only a quantiser if the other steps are (nearly) integer multiples of the smallest one
-    ratio = steps[: min(steps.size, 2000)] / q
-    return q if float(np.median(np.abs(ratio - np.round(ratio)))) < 0.05 else 0.0
 
 
 def estimate_noise_floor(t: FloatArray, values: FloatArray, quiet: npt.NDArray[np.bool_] | None = None) -> NoiseFloor:

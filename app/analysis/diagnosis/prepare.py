@@ -21,12 +21,12 @@ from app.analysis.diagnosis.noise import (
     NoiseFloor,
     estimate_noise_floor,
     measured_slope,
-    quantisation_step,
-    sample_period,
     white_noise_sigma,
 )
 from app.analysis.diagnosis.retime import Retimed, retime_bursts
 from app.analysis.events import SPEED, TORQUE, Event, EventParams
+from app.analysis.sampling import sample_period
+from app.analysis.series import quantisation_step
 from app.errors import InsufficientDataError, MissingSignalError
 from app.signals import SignalSet
 

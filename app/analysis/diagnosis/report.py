@@ -16,6 +16,10 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                        "top": [effect ids], "confusable": [id, id] | null, "reason": str,
                        "residual_to_noise_before": interval, "explained_share": interval,
                        "heldout_shrink": interval, "residual_to_noise_after": float,
+                       "residual_rms_rpm_before", "residual_rms_rpm_after": held-out residual RMS (rpm) of the
+                       baseline and of the chosen candidate, beside "noise_floor.sigma_rpm",
+                       "dominant_event": {"index", "share", "residual_to_noise_without"} | null (a held-out
+                                         event carrying most of the baseline's residual above noise, .decide),
                        "remainder_to_noise": {"overall": interval, "impact": interval, "phases": {phase: interval},
                                               "locked": {"value", "p_value", "null_95"}},
                        "remainder_above_noise": [names of the remainder statistics above noise],
@@ -41,7 +45,8 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
     candidates        [{"id", "effects", "title", "fit": {"params": {effect: {name: value}},
                         "nuisance": {...}, "at_bound": [...], "trade_offs": [{"params", "correlation"}]},
                         "heldout": {"shrink", "explained_share",
-                        "improved_fraction", "significant", "residual_to_noise", "remainder_to_noise"},
+                        "improved_fraction", "significant", "residual_to_noise", "residual_rms_rpm",
+                        "remainder_to_noise"},
                         "phases": {phase: shrink interval}, "bands": {band: shrink interval}}]
     pairs             same shape, greedy pairs (first = best single effect)
     localisation      {"events": [{"index", "kind", "role", "t_event_s", "rms_rpm", "energy_share",
@@ -58,6 +63,8 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                         "residual_to_noise_nominal", ...} -- app.identify on the calibration events,
                         scored on the held-out ones against the file's vehicle
     fit_log           ["<fit>: [calibration event indices]"] -- every fit and the events it saw
+    findings          [{"code", "channel", "message"}] -- problems of the log as decoded
+                      (:mod:`app.analysis.logchecks`; empty when the log was not checked)
     elapsed_s
 
 ``localisation`` is computed on held-out events with the calibrated baseline.
@@ -69,10 +76,11 @@ from typing import Any
 
 import numpy as np
 
-from app.analysis.diagnosis.decide import CandidateScore
+from app.analysis.diagnosis.decide import CandidateScore, dominant_event
 from app.analysis.diagnosis.localise import coherence_by_band, residual_torque_lag, uniform
 from app.analysis.diagnosis.score import BAND_NAMES, PHASES, EventScore, shrink_interval
 from app.analysis.diagnosis.select import DiagnosisResult, Evaluation
+from app.analysis.logchecks import Finding
 from app.analysis.metrics import ripple_metrics
 from app.errors import AppError
 from app.signals import Signal
@@ -84,6 +92,12 @@ FEATURES = ("rise_height_rpm", "first_overshoot_rpm", "fluctuation_rpm", "shuffl
 
 def _f(x: float, nd: int = 4) -> float | None:
     return round(float(x), nd) if np.isfinite(x) else None
+
+
+def rms_rpm(scores: list[EventScore]) -> float | None:
+    """Residual RMS (rpm) over the samples of ``scores``: the residual in the speed's own unit."""
+    n = sum(s.n for s in scores)
+    return _f(float(np.sqrt(sum(s.sse_rpm2 for s in scores) / n)), 3) if n else None
 
 
 def _phase_arrays(scores: list[EventScore], phase: str) -> np.ndarray:
@@ -118,6 +132,7 @@ def _candidate(res: DiagnosisResult, sc: CandidateScore) -> dict[str, Any]:
             "improved_fraction": round(sc.improved_fraction, 4),
             "significant": sc.significant,
             "residual_to_noise": _f(sum(s.chi2 for s in cand) / max(n, 1)),
+            "residual_rms_rpm": rms_rpm(cand),
             "remainder_to_noise": sc.remainder.to_dict() if sc.remainder is not None else None,
         },
         "phases": phases,
@@ -196,12 +211,23 @@ def _identification(res: DiagnosisResult) -> dict[str, Any] | None:
     return out
 
 
-def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The JSON-ready report of a diagnosis (see the module docstring for the schema)."""
+def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None,
+                findings: list[Finding] | None = None) -> dict[str, Any]:
+    """The JSON-ready report of a diagnosis (see the module docstring for the schema); ``findings``: the log
+    checks' (:func:`app.analysis.diagnosis.validate.diagnose_checked`)."""
     decision = res.decision.to_dict()
     if res.decision.best is not None and res.baseline is not None:
         n = sum(res.baseline.scores[i].n for i in res.heldout())  # the same samples for every model
         decision["residual_to_noise_after"] = _f(float(res.decision.best.chi2.sum()) / max(n, 1))
+        chosen = res.candidates.get(res.decision.best.id)
+        decision["residual_rms_rpm_after"] = rms_rpm([chosen.scores[i] for i in res.heldout()]) if chosen else None
+    if res.baseline is not None:
+        base = [res.baseline.scores[i] for i in res.heldout()]
+        decision["residual_rms_rpm_before"] = rms_rpm(base)
+        one = dominant_event(np.array([s.chi2 for s in base]), np.array([float(s.n) for s in base]),
+                             res.options.rules)
+        decision["dominant_event"] = None if one is None else {
+            "index": base[one[0]].index, "share": _f(one[1]), "residual_to_noise_without": _f(one[2])}
     doc: dict[str, Any] = {
         "schema": SCHEMA_VERSION,
         "vehicle": res.vehicle_name,
@@ -218,6 +244,7 @@ def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None) 
         "localisation": _localisation(res) if res.baseline else None,
         "identification": _identification(res),
         "fit_log": list(res.fit_order),
+        "findings": [f.to_dict() for f in findings or []],
         "candidates_not_applicable": dict(res.not_applicable),
         "elapsed_s": round(res.elapsed_s, 3),
     }

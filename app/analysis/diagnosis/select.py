@@ -283,8 +283,9 @@ def run_diagnosis(
         if outcome.stop is not None:
             decision = with_tones(outcome.stop, noise.tones)
             say(1.0, f"decision: {decision.status}")
-            return result(decision, baseline=base_eval, phases=phases, draws=draws, fit_order=fit_order,
-                          not_applicable=not_applicable, identification=ident, identified_score=ident_score,
+            return result(decision, baseline=base_eval, candidates={BASE_ID: id_eval}, phases=phases, draws=draws,
+                          fit_order=fit_order, not_applicable=not_applicable, identification=ident,
+                          identified_score=ident_score,
                           nominal_gap=nominal_gap, identification_note=ident_note)
         if outcome.use:  # the candidates explain only what the identified vehicle cannot
             rebased = ident
@@ -377,6 +378,7 @@ def run_diagnosis(
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     if rebased is not None and ident_score is not None and decision.status == "none_of_candidates":
         decision = base_only(decision, rebased, ident_score, nominal_gap)
+        evals[BASE_ID] = evaluate(nominal, rebased.fit, ho, opts.model, phases, period)
     elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
         ident = joint_ident.get("+".join(decision.top), ident)
         decision = with_base(decision, ident)

@@ -29,6 +29,7 @@ from app.analysis.diagnosis.select import (
 from app.analysis.diagnosis.split import Split
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.analysis.events import EventParams, detect_events
+from app.analysis.logchecks import CheckParams, Limits, LogChecks, check_log
 from app.errors import AnalysisError, InsufficientDataError
 from app.identify.base import with_base
 from app.signals import SignalSet
@@ -43,6 +44,15 @@ def diagnose_signals(signals: SignalSet, vehicle: Vehicle, options: DiagnosisOpt
     events = detect_events(signals, event_params or DIAGNOSIS_EVENTS)
     prepared, noise, skipped = prepare(signals, events, window)
     return run_diagnosis(prepared, noise, vehicle, options, progress, skipped)
+
+
+def diagnose_checked(signals: SignalSet, vehicle: Vehicle, options: DiagnosisOptions | None = None,
+                     progress: Progress | None = None, event_params: EventParams | None = None,
+                     checks: CheckParams | None = None) -> tuple[DiagnosisResult, LogChecks]:
+    """:func:`diagnose_signals` on a decoded log after the checks of :mod:`app.analysis.logchecks` (the
+    analysis' own: an inverted torque corrected, a log decoded with the wrong DBC refused), and the checks."""
+    checked = check_log(signals, Limits.for_vehicle(vehicle), checks)
+    return diagnose_signals(checked.signals, vehicle, options, progress, event_params), checked
 
 
 def chosen_effects(result: DiagnosisResult) -> dict[str, dict[str, float]]:

@@ -19,7 +19,8 @@ router = APIRouter(tags=["fleet"], responses=ERRORS)
 
 @router.get("/fleet", response_model=FleetOut,
             summary="Per-vehicle lash estimate and ripple over time from the event store; outliers flagged")
-def fleet(settings: SettingsDep, band_k: Annotated[float, Query(gt=0, le=20)] = 3.0) -> dict[str, Any]:
+def fleet(settings: SettingsDep, band_k: Annotated[float, Query(gt=0, le=20)] = 3.0,
+          include_poor_tracking: bool = False) -> dict[str, Any]:
     from app.errors import NotFoundError
     from app.fleet.hook import store_dir
     from app.fleet.report import fleet_report
@@ -27,7 +28,7 @@ def fleet(settings: SettingsDep, band_k: Annotated[float, Query(gt=0, le=20)] = 
 
     root = store_dir() or settings.data_dir / "events"
     try:
-        report = fleet_report(root, k=band_k)
+        report = fleet_report(root, k=band_k, include_poor=include_poor_tracking)
     except NotFoundError as exc:  # its message names the server path
         raise NotFoundError("no events stored yet: each finished analysis adds its events",
                             code="no_event_store") from exc
