@@ -101,7 +101,8 @@ def summary(doc: dict[str, Any]) -> str:
         lines += ["", f"{'candidate':34s} {'held-out shrink':>22s} {'explained share':>22s} {'improved':>9s}  params"]
         for c in doc["candidates"] + doc["pairs"]:
             h = c["heldout"]
-            params = "; ".join(f"{k}={v:.4g}" for vals in c["fit"]["params"].values() for k, v in vals.items())
+            params = "; ".join(f"{k}={v:.4g}" if eff in c["effects"] else f"{eff}.{k}={v:.4g}"
+                               for eff, vals in c["fit"]["params"].items() for k, v in vals.items())
             lines.append(f"{c['id']:34s} {_pct(h['shrink']):>22s} {_pct(h['explained_share']):>22s} "
                          f"{100 * h['improved_fraction']:8.0f}%  {params}")
     ident = doc.get("identification")

@@ -130,10 +130,14 @@ def base_only(decision: Decision, ident: Identification, score: CandidateScore, 
                             "residual_to_noise_identified": round(left, 4)})
 
 
-def with_base(decision: Decision, ident: Identification) -> Decision:
-    """``decision`` (made on the identified vehicle) saying which base parameters were corrected first."""
+def with_base(decision: Decision, ident: Identification, nominal_gap: Any = None) -> Decision:
+    """``decision`` (made on the identified vehicle) saying which base parameters were corrected first.
+
+    Its residual "before" is the file's vehicle's (``nominal_gap``) when the candidates were fitted on the
+    identified one."""
+    gap = nominal_gap if nominal_gap is not None else decision.gap_ratio
     items = base_items(ident)
     if not items:
-        return decision
+        return replace(decision, gap_ratio=gap)
     reason = f"after identifying the vehicle ({sentence(ident)}): {decision.reason}"
-    return replace(decision, reason=reason, details={**decision.details, "base_parameters": items})
+    return replace(decision, reason=reason, gap_ratio=gap, details={**decision.details, "base_parameters": items})

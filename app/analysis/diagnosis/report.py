@@ -223,7 +223,9 @@ def report_dict(res: DiagnosisResult, validation: dict[str, Any] | None = None,
         decision["residual_rms_rpm_after"] = rms_rpm([chosen.scores[i] for i in res.heldout()]) if chosen else None
     if res.baseline is not None:
         base = [res.baseline.scores[i] for i in res.heldout()]
-        decision["residual_rms_rpm_before"] = rms_rpm(base)
+        # before: the file's vehicle, also when the candidates were fitted on the identified one
+        decision["residual_rms_rpm_before"] = rms_rpm([(res.file_baseline or res.baseline).scores[i]
+                                                       for i in res.heldout()])
         one = dominant_event(np.array([s.chi2 for s in base]), np.array([float(s.n) for s in base]),
                              res.options.rules)
         decision["dominant_event"] = None if one is None else {

@@ -138,6 +138,7 @@ class DiagnosisResult:
     identified_score: CandidateScore | None = None  # the identified base on held-out events, against the file's
     nominal_gap: Interval | None = None  # held-out residual-to-noise ratio of the file's vehicle
     identification_note: str = ""  # what the identification meant for the diagnosis, or why there is none
+    file_baseline: Evaluation | None = None  # the file's vehicle calibrated, when the identified one is the baseline
 
     def heldout(self) -> list[int]:
         return list(self.split.heldout)
@@ -264,7 +265,7 @@ def run_diagnosis(
                       not_applicable=not_applicable)
     nominal_gap = gap_ratio(b, n, draws, rules.level)
     nominal = vehicle
-    ident, ident_score, rebased, ident_note = None, None, None, ""
+    ident, ident_score, rebased, ident_note, file_eval = None, None, None, "", None
     joint_ident: dict[str, Identification] = {}  # candidate -> the base parameters identified jointly with it
     say(step[0] / n_steps, "identifying the vehicle's base parameters on calibration events")
     try:
@@ -288,7 +289,7 @@ def run_diagnosis(
                           identified_score=ident_score,
                           nominal_gap=nominal_gap, identification_note=ident_note)
         if outcome.use:  # the candidates explain only what the identified vehicle cannot
-            rebased = ident
+            rebased, file_eval = ident, base_eval
             vehicle = ident.vehicle
             base_fit = nuisance_only(ident)
             base_eval = evaluate(vehicle, base_fit, events, opts.model, None, period)
@@ -381,9 +382,10 @@ def run_diagnosis(
         evals[BASE_ID] = evaluate(nominal, rebased.fit, ho, opts.model, phases, period)
     elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
         ident = joint_ident.get("+".join(decision.top), ident)
-        decision = with_base(decision, ident)
+        decision = with_base(decision, ident, nominal_gap if rebased is not None else None)
     decision = with_tones(decision, noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
                   draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=ident,
-                  identified_score=ident_score, nominal_gap=nominal_gap, identification_note=ident_note)
+                  identified_score=ident_score, nominal_gap=nominal_gap, identification_note=ident_note,
+                  file_baseline=file_eval)
