@@ -327,7 +327,8 @@ def test_the_api_key_goes_with_every_request(page: Any, server: Server) -> None:
         page.click("#key-form button")
     finally:
         _keys(server, "revoke", key_id)
-        time.sleep(1.2)  # open again for the other tests (no key left)
+        time.sleep(1.2)
+    assert httpx.get(f"{server.url}/logs").status_code == 401  # the last key revoked: the server stays closed
 
 
 def test_docs_work_offline(page: Any, server: Server) -> None:
