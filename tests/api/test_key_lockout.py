@@ -3,12 +3,20 @@ client and leave nothing behind in the server's memory."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import httpx
 
 from app.api.security import KEYS_RECHECK_S, RequestGuard
 from app.storage.keys import MAX_TOKEN_CHARS
 from tests.api.inprocess import TestClient, in_process
+
+if TYPE_CHECKING:  # imported at run time, Server would mark every test here slow (tests/conftest.py)
+    from tests.api.conftest import Server
 
 
 def _guard(client: TestClient) -> RequestGuard:
@@ -84,3 +92,27 @@ def test_malformed_authorization_counts_as_a_failure(tmp_path: Path) -> None:
         codes = [c.get("/logs", headers={"Authorization": header}).status_code
                  for header in ("Basic abc", "Bearer", "Bearer ", "Token x", "Basic abc")]
         assert codes[:2] == [401, 401] and codes[-1] == 429
+
+
+def test_a_real_server_stays_closed_after_revoke_and_answers_head(server: Server) -> None:
+    """``lashscope keys`` in another process against a running server; HEAD through uvicorn, a live
+    event stream included (headers only, not held open)."""
+    def keys(*args: str) -> str:
+        return subprocess.run([sys.executable, "-m", "app", "keys", *args, "--data-dir", str(server.data_dir)],
+                              capture_output=True, text=True, timeout=120, check=True).stdout
+
+    with httpx.Client(base_url=server.url, timeout=30.0) as c:
+        r = c.post("/live/sessions", json={"database": "lashscope_ev.dbc", "interface": "virtual", "channel": "h"})
+        assert r.status_code == 201, r.text
+        stream = f"/live/sessions/{r.json()['id']}/stream"
+        t0 = time.monotonic()
+        head = c.head(stream)
+        assert head.status_code == 200 and head.content == b"" and time.monotonic() - t0 < 10
+        assert head.headers["content-type"].startswith("text/event-stream")
+        assert c.head("/logs").status_code == 200 and c.head("/logs").content == b""
+        token = keys("create", "--scope", "admin").splitlines()[0].strip()
+        keys("revoke", token[4:16])
+        time.sleep(KEYS_RECHECK_S + 0.2)
+        for r in (c.get("/logs"), c.head("/logs"), c.post("/vehicles", data={"name": "ev", "preset": "paper"})):
+            assert r.status_code == 401, r.text
+        assert c.get("/health").status_code == 200
