@@ -18,9 +18,10 @@ turns them into JSON + arrays for storage.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -46,6 +47,8 @@ from sim.metrics import unloaded_time
 ProgressFn = Callable[[str, float], None]
 REQUIRED = (TORQUE, SPEED)
 RPM_PER_RAD_S = 30.0 / np.pi
+MAX_OPTION_S = 10.0  # a duration option beyond this is a mistake: windows and arrays are sized by it
+RATE_SUFFIXES = ("_nm_s", "_rpm_s")  # fields ending in _s that are rates (min_rate_nm_s), not durations
 
 
 def _no_progress(stage: str, fraction: float) -> None:
@@ -87,7 +90,25 @@ class AnalysisOptions:
             raise InputError(f"analysis options: model = {opts.model!r}; use 'multibody' or 'two_inertia'")
         if not 0 <= opts.max_offset_s <= 1.0 or not 1e-4 <= opts.event_dt_s <= 0.05:
             raise InputError("analysis options: max_offset_s must be in [0, 1] s and event_dt_s in [1e-4, 0.05] s")
+        _check_ranges(opts, "")
         return opts
+
+
+def _check_ranges(params: Any, prefix: str) -> None:
+    """Every number of ``params`` (and of the parameter sets inside it) finite, every duration (a field
+    ending in ``_s``, rates aside) within ±``MAX_OPTION_S``: otherwise :class:`InputError` naming the field."""
+    for f in fields(params):
+        value = getattr(params, f.name)
+        if is_dataclass(value):
+            _check_ranges(value, f"{prefix}{f.name}.")
+            continue
+        numbers = [v for v in (value if isinstance(value, tuple) else (value,))
+                   if isinstance(v, int | float) and not isinstance(v, bool)]
+        if any(not math.isfinite(v) for v in numbers):
+            raise InputError(f"analysis options: {prefix}{f.name} = {value!r}: must be a finite number")
+        if f.name.endswith("_s") and not f.name.endswith(RATE_SUFFIXES) and any(abs(v) > MAX_OPTION_S for v in numbers):
+            raise InputError(f"analysis options: {prefix}{f.name} = {value!r}: durations are at most "
+                             f"{MAX_OPTION_S:g} s")
 
 
 @dataclass(frozen=True)

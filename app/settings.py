@@ -19,13 +19,18 @@
                               shared by several servers, its files in ``?files=DIR`` or the data directory);
                               default: the data directory's SQLite
 ``LASHSCOPE_ALLOWED_HOSTS``     Host header names accepted besides the loopback names (comma-separated; ``*``: any)
-``LASHSCOPE_INSECURE``          serve on a non-loopback address without API keys (default off: refused)
+``LASHSCOPE_INSECURE``          serve without API keys on a non-loopback address, or after every key was revoked
+                              (default off: refused, and closed)
 ``LASHSCOPE_MAX_JSON_KB``       body cap of every request but the uploads, in KiB (default 1024); past it 413
 ``LASHSCOPE_UPLOAD_IDLE_S``     an upload that sends nothing for this long is dropped (408, partial file removed)
 ``LASHSCOPE_MAX_QUEUED_JOBS``   new jobs are refused (429 ``queue_full``) while this many wait (default 32)
 ``LASHSCOPE_KEY_RATE_PER_S``    requests a second per API key (bursts of two seconds' worth); past it 429 (0: off)
 ``LASHSCOPE_CLIENT_RATE_PER_S`` requests a second per client address for requests without a key (default 200; 0: off)
-``LASHSCOPE_LIVE_CHANNELS``     live buses a client may open, ``interface:channel`` or ``interface:*`` (comma-separated)
+``LASHSCOPE_AUTH_FAILURE_RATE_PER_S``  failed authentications a second per client address (default 2; 0: off); past
+                              it 429, and that client's keys are not even checked until its bucket refills
+``LASHSCOPE_LIVE_CHANNELS``     live buses a client may open, ``interface:channel`` or ``interface:*`` (comma-separated;
+                              default ``virtual:*,tcp_loopback:127.0.0.1:29536,socketcan:*``: of the loopback
+                              hubs only the one on the default port, so a client cannot probe local ports)
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 SOURCE_ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_HUB_PORT = 29536  # app.live.loopback.DEFAULT_PORT, without importing python-can for the settings
 
 
 def default_dbc_dir() -> Path:
@@ -75,8 +81,9 @@ class Settings(BaseSettings):
     max_queued_jobs: int = Field(default=32, ge=1)
     key_rate_per_s: float = Field(default=100.0, ge=0)  # per API key; 0: no limit
     client_rate_per_s: float = Field(default=200.0, ge=0)  # per client address, requests without a key; 0: off
+    auth_failure_rate_per_s: float = Field(default=2.0, ge=0)  # wrong keys per client address; 0: off
     live_channels: Annotated[list[str], NoDecode] = Field(
-        default_factory=lambda: ["virtual:*", "tcp_loopback:*", "socketcan:*"])
+        default_factory=lambda: ["virtual:*", f"tcp_loopback:127.0.0.1:{DEFAULT_HUB_PORT}", "socketcan:*"])
 
     @field_validator("cors_origins", "allowed_hosts", "live_channels", mode="before")
     @classmethod

@@ -7,6 +7,9 @@ Targets (issue 12): 0 responses 500 in >= 10 000 fuzzed requests (multipart, dri
 JSON bodies, query parameters; ``tests/api/fuzzing.py``, replayable by seed); 0 files left in
 ``tmp/`` and 0 server handles open on them after the abuse; read p95 <= 150 ms with 30 clients
 while a job runs (next to the same reads with no job: the ratio is the job's cost to readers).
+First, on a server of its own, the key and method attacks of ``bench/attacks_keys.py`` (every
+method on every route, wrong-key floods, a revoked last key), each with the server's peak RSS,
+open handles, temp files and CPU seconds (``--keys-only``: those alone).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ sys.path.insert(0, str(REPO))
 from app.demo.build import build_demo_log  # noqa: E402
 from app.demo.scenario import Scenario  # noqa: E402
 from app.settings import default_dbc_dir  # noqa: E402
+from bench import attacks_keys  # noqa: E402
 from bench.api import hammer, pct  # noqa: E402
 from sim import dump_toml, load_vehicle  # noqa: E402
 from tests.api.conftest import Server, create_vehicle, upload, wait_for  # noqa: E402
@@ -160,8 +164,15 @@ def main() -> int:
     ap.add_argument("--per-client", type=int, default=20, help="reads per client in each read measurement")
     ap.add_argument("--reads-only", action="store_true",
                     help="only the read p95 with and without a job (no fuzzing, stalled uploads or guard timing)")
+    ap.add_argument("--flood", type=int, default=6000, help="wrong keys in the wrong-key flood")
+    ap.add_argument("--huge", type=int, default=300, help="1 MiB wrong keys in the huge-token flood")
+    ap.add_argument("--keys-only", action="store_true", help="only the key and method attacks")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="lashscope-fuzz-"))
+    if not args.reads_only:
+        failed = attacks_keys.run(work, args.flood, args.huge)
+        if args.keys_only:
+            return 1 if failed else 0
     if not args.reads_only:
         for line in guard_cost(work / "guard"):
             print(line)

@@ -8,7 +8,14 @@
 
 from __future__ import annotations
 
+import reprlib
 from typing import Any
+
+#: How much of a value an error message quotes: a field given half a million keys, or a string of
+#: megabytes, is named with its first few items or characters, not in full.
+_SHORT = reprlib.Repr()
+_SHORT.maxlevel, _SHORT.maxstring, _SHORT.maxother, _SHORT.maxlong = 3, 200, 200, 100
+_SHORT.maxdict = _SHORT.maxlist = _SHORT.maxtuple = _SHORT.maxset = _SHORT.maxfrozenset = 12
 
 
 class SimError(Exception):
@@ -33,8 +40,9 @@ def plain(value: Any) -> Any:
 
 
 def fmt(value: Any) -> str:
-    """Plain text of a value for an error message: ``0.5``, ``1e+30``, ``'abc'``, ``[0.1, 0.2]``."""
-    return repr(plain(value))
+    """Plain text of a value for an error message: ``0.5``, ``1e+30``, ``'abc'``, ``[0.1, 0.2]`` (a long
+    one shortened, ``{'k0': 1, ..., ...}``)."""
+    return _SHORT.repr(plain(value))
 
 
 class ParameterError(SimError, ValueError):
@@ -42,7 +50,7 @@ class ParameterError(SimError, ValueError):
 
     def __init__(self, field: str, value: object, reason: str) -> None:
         value = plain(value)
-        super().__init__(f"{field} = {value!r}: {reason}")
+        super().__init__(f"{field} = {fmt(value)}: {reason}")
         self.field = field
         self.value = value
         self.reason = reason

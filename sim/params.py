@@ -142,6 +142,10 @@ class Gaps:
         return tuple(getattr(self, n).nominal for n in GAP_NAMES)
 
 
+MAX_NAME_CHARS = 200
+MAX_DESCRIPTION_CHARS = 4000  # a note for people; a vehicle's summary (and every listing of vehicles) carries it
+
+
 @dataclass(frozen=True, kw_only=True)
 class Vehicle:
     """A complete driveline description. Build with :func:`sim.load_vehicle` or :meth:`from_dict`."""
@@ -173,6 +177,10 @@ class Vehicle:
                     raise ParameterError(name, None, "required field missing (or describe the driveline as "
                                          "[[stage]] tables)")
         validate(self, "", _cross_checks)
+        for text, limit in (("name", MAX_NAME_CHARS), ("description", MAX_DESCRIPTION_CHARS)):
+            value = getattr(self, text)
+            if not isinstance(value, str) or len(value) > limit:
+                raise ParameterError(text, value, f"must be text of at most {limit} characters")
         if self.stages:
             from sim.layout import stage_checks
 

@@ -2,7 +2,8 @@
 
 Handlers are looked up by the exception's MRO, so one handler for :class:`AppError` covers
 the whole tree; simulator errors map to 422; anything unexpected is logged and becomes a
-500 without a traceback in the response.
+500 without a traceback in the response. A message is cut to :data:`MAX_DETAIL_CHARS` (an error
+that quotes what it was given -- a listing of half a million unknown keys, say -- stays small).
 """
 
 from __future__ import annotations
@@ -21,12 +22,20 @@ from sim.errors import SimError
 log = logging.getLogger("lashscope.api")
 
 FULL_DISK = frozenset({errno.ENOSPC, errno.EDQUOT})
+MAX_DETAIL_CHARS = 2000
 HTTP_CODES = {400: "bad_request", 404: "not_found", 405: "method_not_allowed", 413: "body_too_large",
               415: "unsupported_media_type", 422: "invalid_input"}
 
 
+def short_detail(detail: str) -> str:
+    """``detail`` cut to ``MAX_DETAIL_CHARS``, saying how much was left out."""
+    if len(detail) <= MAX_DETAIL_CHARS:
+        return detail
+    return f"{detail[:MAX_DETAIL_CHARS]}... ({len(detail) - MAX_DETAIL_CHARS} more characters left out)"
+
+
 def error_response(status: int, detail: str, code: str) -> JSONResponse:
-    return JSONResponse({"detail": detail, "code": code}, status_code=status)
+    return JSONResponse({"detail": short_detail(detail), "code": code}, status_code=status)
 
 
 async def _app_error(request: Request, exc: Exception) -> JSONResponse:

@@ -6,8 +6,9 @@ same-origin writes, body cap: :mod:`app.api.security`), CORS and the error handl
 includes every router in :data:`ROUTERS` -- append a module's ``router`` there to add a resource.
 ``format=csv`` on a route without a CSV form is refused with 406 (:mod:`app.api.formats`); the
 dashboard and the offline ``/docs`` are mounted last (:mod:`app.web`). Answers of 1 KiB and more
-are gzip-compressed for clients that accept it, and every answer says the service's time on it
-(``Server-Timing``, :mod:`app.api.timing`). When an analysis finishes, its results are opened and
+are gzip-compressed for clients that accept it, ``HEAD`` is answered on every ``GET`` route
+(:mod:`app.api.head`), and every answer says the service's time on it (``Server-Timing``,
+:mod:`app.api.timing`). When an analysis finishes, its results are opened and
 their series' block extremes built in the runner thread (:func:`app.api.routes.series.warm`), so the
 first dashboard view after it does not pay for them.
 
@@ -32,6 +33,7 @@ from fastapi.middleware.gzip import GZipMiddleware
 from app import __version__
 from app.api import errors
 from app.api.formats import FormatGuard
+from app.api.head import HeadAsGet
 from app.api.routes import (
     analyses,
     batches,
@@ -132,6 +134,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # gzip for answers of 1 KiB and more when the client accepts it (level 1: most of the size gone for a
     # few ms per MB, bench/dashboard.py prints both); the dashboard's files come compressed already
     app.add_middleware(GZipMiddleware, minimum_size=GZIP_MIN_BYTES, compresslevel=GZIP_LEVEL)
+    app.add_middleware(HeadAsGet)  # HEAD runs as GET, answered with the headers only
     app.add_middleware(ServerTiming)  # outermost: the whole of the service's time on a request
     errors.install(app)
     for router in ROUTERS:

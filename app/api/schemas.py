@@ -38,6 +38,9 @@ class LogOut(BaseModel):
                    issues=r.issues, duplicate=duplicate)
 
 
+LIST_DESCRIPTION_CHARS = 200
+
+
 class VehicleOut(BaseModel):
     name: str
     version: int
@@ -48,8 +51,14 @@ class VehicleOut(BaseModel):
     unchanged: bool = False
 
     @classmethod
-    def of(cls, r: VehicleRecord, unchanged: bool = False) -> VehicleOut:
-        return cls(name=r.name, version=r.version, created_at=r.created_at, sha256=r.sha256, summary=r.summary,
+    def of(cls, r: VehicleRecord, unchanged: bool = False, brief: bool = False) -> VehicleOut:
+        """``brief`` (the listings): the description is cut to ``LIST_DESCRIPTION_CHARS``; one vehicle's
+        own answer carries it whole."""
+        summary = r.summary
+        text = summary.get("description")
+        if brief and isinstance(text, str) and len(text) > LIST_DESCRIPTION_CHARS:
+            summary = {**summary, "description": text[:LIST_DESCRIPTION_CHARS] + "..."}
+        return cls(name=r.name, version=r.version, created_at=r.created_at, sha256=r.sha256, summary=summary,
                    files={"driveline": r.driveline_path.name, "database": r.database_path.name,
                           "signal_map": r.signal_map_path.name}, unchanged=unchanged)
 

@@ -7,8 +7,9 @@ before any route runs:
    the address the server is bound to, or one of ``LASHSCOPE_ALLOWED_HOSTS`` (``*``: any); otherwise
    400 ``host_not_allowed``. A web page that rebinds its own DNS name to 127.0.0.1 sends its
    own name and is refused (DNS rebinding).
-2. **Keys.** When the store holds an active API key -- or the server listens on a non-loopback
-   address without ``--insecure`` -- every request but ``/health`` and the API docs needs
+2. **Keys.** When the store holds an active API key, or ever held one (every key revoked: the
+   server stays closed; ``--insecure`` opens it), or the server listens on a non-loopback address
+   without ``--insecure``, every request but ``/health`` and the API docs needs
    ``Authorization: Bearer <key>``: none 401 ``auth_required``, unknown or revoked 401
    ``invalid_key``, too small a scope 403 ``insufficient_scope``. Reads need ``read``; creating
    things (POST, PUT, PATCH) ``write``; deleting ``admin``. Each key gets
@@ -16,7 +17,10 @@ before any route runs:
    past that 429 ``rate_limited`` with ``Retry-After``. A request without a key counts against
    its client address instead (``LASHSCOPE_CLIENT_RATE_PER_S``, the same kind of bucket), so an
    open server cannot be flooded from one address either. (Behind a reverse proxy every request
-   comes from the proxy's address: limit there, or raise this.)
+   comes from the proxy's address: limit there, or raise this.) A wrong key costs its client
+   address a token of a third bucket (``LASHSCOPE_AUTH_FAILURE_RATE_PER_S``); while that is empty
+   the address gets 429 before any key it sends is looked at, so keys cannot be guessed at speed.
+   A token longer than :data:`~app.storage.keys.MAX_TOKEN_CHARS` is refused unhashed.
 3. **Same origin.** Without keys (a workstation on loopback) reads stay open, but a
    state-changing request from a browser must come from the service's own origin or a
    ``--cors-origin``: a foreign ``Origin`` or ``Sec-Fetch-Site: cross-site``/``same-site`` gets 403
@@ -28,7 +32,8 @@ before any route runs:
 
 Which keys exist, and what a presented key is, are re-read from the store at most once a second,
 so ``lashscope keys create`` or ``revoke`` in another process takes effect on a running server
-within a second, and a request costs no database read.
+within a second, and a request costs no database read. Only keys that verified are remembered
+(by the SHA-256 of the token, never the token), so wrong keys cost no memory.
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
 
 from app.settings import Settings
-from app.storage.keys import scope_allows
+from app.storage.keys import MAX_TOKEN_CHARS, ApiKey, scope_allows, token_digest
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -56,6 +61,8 @@ UPLOAD_ROUTES = frozenset({("POST", "/logs"), ("POST", "/vehicles")})
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 KEYS_RECHECK_S = 1.0
 MAX_BUCKETS = 4096  # rate buckets kept before idle ones are dropped
+MAX_VERIFIED = 1024  # verified keys remembered (one per token in use: only valid ones get in)
+CHALLENGE = {"WWW-Authenticate": 'Bearer realm="lashscope"'}
 
 
 def is_loopback(host: str) -> bool:
@@ -106,15 +113,22 @@ class RequestGuard:
         self.hosts = LOOPBACK_NAMES | {h.lower() for h in settings.allowed_hosts} | set(bound)
         self.open_network = not is_loopback(settings.host) and not settings.insecure
         self._keys_at = -1e9
-        self._have_keys = False
+        self._key_counts = (0, 0)  # (active, issued), re-read once a second
         self._buckets: dict[str, tuple[float, float]] = {}  # key or client -> (tokens, monotonic time)
-        self._verified: dict[str, tuple[Any, float]] = {}  # token -> (ApiKey or None, monotonic time)
+        self._verified: dict[str, tuple[ApiKey, float]] = {}  # SHA-256 of a valid token -> (key, monotonic time)
 
-    def _keys_exist(self, store: Any) -> bool:
+    def _keys(self, store: Any) -> tuple[int, int]:
+        """``(active, issued)`` keys of the store, re-read at most once a second ((0, 0) before it is open)."""
         now = time.monotonic()
-        if now - self._keys_at > KEYS_RECHECK_S:
-            self._have_keys, self._keys_at = store.active_keys() > 0, now
-        return self._have_keys
+        if store is not None and now - self._keys_at > KEYS_RECHECK_S:
+            self._key_counts, self._keys_at = store.key_counts(), now
+        return self._key_counts
+
+    def _closed(self, store: Any) -> bool:
+        """Whether a request needs a key: keys are active, or were issued and all revoked (unless the
+        operator said ``--insecure``), or the server is on the network without ``--insecure``."""
+        active, issued = self._keys(store)
+        return self.open_network or active > 0 or (issued > 0 and not self.cfg.insecure)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -143,46 +157,66 @@ class RequestGuard:
         store = getattr(scope["app"].state, "store", None) if "app" in scope else None
         auth = headers.get("authorization", "")
         need = required_scope(method)
-        if auth or self.open_network or (store is not None and self._keys_exist(store)):
-            self._authorise(store, auth, need)
-            return
         client = scope.get("client")
-        self._spend(f"client {client[0] if client else 'unknown'}", self.cfg.client_rate_per_s,
-                    "LASHSCOPE_CLIENT_RATE_PER_S")
+        who = f"client {client[0] if client else 'unknown'}"
+        if auth or self._closed(store):
+            self._authorise(store, auth, need, who)
+            return
+        self._spend(who, self.cfg.client_rate_per_s, "LASHSCOPE_CLIENT_RATE_PER_S")
         if method not in SAFE_METHODS:
             self._same_origin(scope, headers)
 
-    def _authorise(self, store: Any, auth: str, need: str) -> None:
-        challenge = {"WWW-Authenticate": 'Bearer realm="lashscope"'}
+    def _authorise(self, store: Any, auth: str, need: str, who: str) -> None:
         kind, _, token = auth.partition(" ")
+        token = token.strip()
         if not auth:
-            raise _Deny(401, "auth_required", f"this request needs an API key with scope {need!r}: send "
-                        "'Authorization: Bearer <key>' (create one with 'lashscope keys create')", challenge)
-        if kind.lower() != "bearer" or not token.strip():
-            raise _Deny(401, "invalid_key", "the Authorization header must read 'Bearer <key>'", challenge)
-        key = self._verify(store, token.strip())
+            active, issued = self._keys(store)
+            revoked = "every API key of this server has been revoked (the server stays closed; --insecure " \
+                "opens it); " if issued and not active else ""
+            raise _Deny(401, "auth_required", f"this request needs an API key with scope {need!r}: {revoked}send "
+                        "'Authorization: Bearer <key>' (create one with 'lashscope keys create')", CHALLENGE)
+        failures = (f"{who} (failed authentications)", self.cfg.auth_failure_rate_per_s,
+                    "LASHSCOPE_AUTH_FAILURE_RATE_PER_S")
+        self._spend(*failures, take=0)  # a client guessing keys is turned away before anything is hashed
+        bearer = kind.lower() == "bearer" and bool(token)
+        key = self._verify(store, token) if bearer else None
         if key is None:
-            raise _Deny(401, "invalid_key", "the API key is unknown or revoked", challenge)
+            self._spend(*failures)
+            raise _Deny(401, "invalid_key", "the API key is unknown or revoked" if bearer else
+                        "the Authorization header must read 'Bearer <key>'", CHALLENGE)
         if not scope_allows(key.scope, need):
             raise _Deny(403, "insufficient_scope", f"this request needs scope {need!r}; key {key.id} has "
                         f"{key.scope!r}")
         self._spend(f"key {key.id}", self.cfg.key_rate_per_s, "LASHSCOPE_KEY_RATE_PER_S")
 
-    def _verify(self, store: Any, token: str) -> Any:
-        """``store.verify_key`` remembered for a second (a database read per request otherwise)."""
+    def _verify(self, store: Any, token: str) -> ApiKey | None:
+        """``store.verify_key`` of a valid key remembered for a second (a database read per request otherwise).
+
+        Only keys that verified are remembered, by the SHA-256 of the token: wrong keys, however many
+        and however long, leave nothing behind. A token over ``MAX_TOKEN_CHARS`` is not even hashed.
+        """
+        if len(token) > MAX_TOKEN_CHARS or store is None:
+            return None
         now = time.monotonic()
-        hit = self._verified.get(token)
+        digest = token_digest(token)
+        hit = self._verified.get(digest)
         if hit is not None and now - hit[1] <= KEYS_RECHECK_S:
             return hit[0]
-        key = store.verify_key(token) if store is not None else None
-        if len(self._verified) >= 4096:  # unknown tokens must not grow this without bound
-            self._verified.clear()
-        self._verified[token] = (key, now)
+        key: ApiKey | None = store.verify_key(token)
+        if key is None:
+            self._verified.pop(digest, None)
+            return None
+        if len(self._verified) >= MAX_VERIFIED:
+            self._verified = {d: v for d, v in self._verified.items() if now - v[1] <= KEYS_RECHECK_S}
+            if len(self._verified) >= MAX_VERIFIED:
+                self._verified.clear()
+        self._verified[digest] = (key, now)
         return key
 
-    def _spend(self, who: str, rate: float, setting: str) -> None:
-        """Take one token from ``who``'s bucket (a key or a client address; refilled at ``rate`` a second,
-        two seconds deep). Idle buckets are dropped once there are many (a full bucket holds no state)."""
+    def _spend(self, who: str, rate: float, setting: str, take: float = 1.0) -> None:
+        """Take ``take`` tokens from ``who``'s bucket (a key or a client address; refilled at ``rate`` a second,
+        two seconds deep); 429 when it holds less than one (``take=0`` only checks that). Idle buckets are
+        dropped once there are many (a full bucket holds no state)."""
         if rate <= 0:
             return
         now = time.monotonic()
@@ -195,7 +229,7 @@ class RequestGuard:
             wait = (1 - tokens) / rate
             raise _Deny(429, "rate_limited", f"{who} is over {rate:g} requests/s ({setting})",
                         {"Retry-After": str(max(1, round(wait + 0.5)))})
-        self._buckets[who] = (tokens - 1, now)
+        self._buckets[who] = (tokens - take, now)
 
     def _same_origin(self, scope: Scope, headers: dict[str, str]) -> None:
         site = headers.get("sec-fetch-site")

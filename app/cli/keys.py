@@ -3,7 +3,8 @@
 The key is printed once, by ``create``; the store keeps only its SHA-256, so a lost key is
 revoked and replaced, never recovered. The server re-reads the keys within a second, so this
 works on a store a running server uses. Creating the first key switches the server from open
-(loopback only) to keys-required for every request but ``/health``.
+(loopback only) to keys-required for every request but ``/health``; revoking the last one leaves it
+closed (``serve --insecure`` opens it again).
 """
 
 from __future__ import annotations

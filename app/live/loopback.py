@@ -50,11 +50,12 @@ import can
 from app.errors import InputError
 from app.ingest.frames import FrameFlag
 from app.live.convert import message_flags
+from app.settings import DEFAULT_HUB_PORT
 
 GREETING = b"LSB1"
 RECORD = struct.Struct("<HdIBB")  # len, timestamp s, arb_id, flags, dlc
 _BODY_FIXED = RECORD.size - 2
-DEFAULT_PORT = 29536
+DEFAULT_PORT = DEFAULT_HUB_PORT
 MAX_CLIENT_BACKLOG = 4 * 1024 * 1024  # bytes queued per slow client before frames are dropped for it
 
 
@@ -166,9 +167,9 @@ class LoopbackBus(can.BusABC):
             greeting = sock.recv(len(GREETING))
         except OSError as exc:
             raise can.CanInitializationError(f"no loopback hub at {addr}:{port}: {exc}") from exc
-        if greeting != GREETING:
+        if greeting != GREETING:  # whatever the port answered is not repeated to whoever asked
             sock.close()
-            raise can.CanInitializationError(f"{addr}:{port} is not a lashscope loopback hub (greeting {greeting!r})")
+            raise can.CanInitializationError(f"{addr}:{port} is not a lashscope loopback hub")
         sock.settimeout(None)
         self._sock = sock
         self._send_lock = threading.Lock()

@@ -365,6 +365,6 @@ class LiveSession:
             "unknown_ids": {f"0x{k:X}": v for k, v in sorted(c.unknown_ids.items())},
             "latency_ms": {"p50": p50, "p99": p99},
             "events": len(self.events),
-            "recording": str(self.record_path) if self.record_path else None,
+            "recording": self.record_path.name if self.record_path else None,  # a name: where is the server's
             "stream_subscribers": self.hub.subscribers,
         }

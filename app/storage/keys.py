@@ -7,6 +7,9 @@ one in constant time (``hmac.compare_digest``), so neither a timing difference n
 database gives a usable key away.
 
 Scopes are ordered: ``read`` < ``write`` < ``admin``; a key grants its scope and every lower one.
+
+A revoked key keeps its row, so the store remembers that keys were ever issued
+(:meth:`KeyTable.key_counts`): the server stays closed after its last key is revoked.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from app.storage.dialect import Connection
 
 SCOPES = ("read", "write", "admin")
 PREFIX = "lsk_"
+MAX_TOKEN_CHARS = 128  # a key is 60 characters; anything much longer is refused before it is hashed
 
 
 def scope_allows(have: str, need: str) -> bool:
@@ -31,7 +35,8 @@ def scope_allows(have: str, need: str) -> bool:
     return SCOPES.index(have) >= SCOPES.index(need)
 
 
-def _digest(token: str) -> str:
+def token_digest(token: str) -> str:
+    """The SHA-256 (hex) of a presented token: what the store keeps and what the server caches by."""
     return hashlib.sha256(token.encode("utf-8", "replace")).hexdigest()
 
 
@@ -68,15 +73,17 @@ class KeyTable:
         created = datetime.now(UTC).isoformat(timespec="milliseconds")
         with self._tx() as db:
             db.execute("INSERT INTO api_keys (id, name, scope, sha256, created_at) VALUES (?,?,?,?,?)",
-                       (key_id, name, scope, _digest(token), created))
+                       (key_id, name, scope, token_digest(token), created))
         return ApiKey(key_id, name, scope, created), token
 
     def verify_key(self, token: str) -> ApiKey | None:
-        """The active key ``token`` belongs to, or None (unknown, malformed or revoked)."""
+        """The active key ``token`` belongs to, or None (unknown, malformed, too long or revoked)."""
+        if len(token) > MAX_TOKEN_CHARS:
+            return None
         key_id = token[len(PREFIX):len(PREFIX) + 12] if token.startswith(PREFIX) else ""
         row = self._conn().execute("SELECT * FROM api_keys WHERE id = ?", (key_id,)).fetchone()
         stored = row["sha256"] if row is not None else "0" * 64
-        same = hmac.compare_digest(stored, _digest(token))  # compared even for an unknown id
+        same = hmac.compare_digest(stored, token_digest(token))  # compared even for an unknown id
         if row is None or not same or row["revoked_at"] is not None:
             return None
         return self._key(row)
@@ -97,5 +104,14 @@ class KeyTable:
         return self._key(row)
 
     def active_keys(self) -> int:
-        """How many keys are not revoked (0: the service runs without authentication where that is allowed)."""
-        return int(self._conn().execute("SELECT COUNT(*) FROM api_keys WHERE revoked_at IS NULL").fetchone()[0])
+        """How many keys are not revoked."""
+        return self.key_counts()[0]
+
+    def key_counts(self) -> tuple[int, int]:
+        """``(active, issued)``: keys not revoked, and keys ever created (revoked ones keep their row).
+
+        ``issued > 0`` with ``active == 0`` means every key was revoked: the server stays closed then,
+        unless its operator opens it explicitly (``--insecure``).
+        """
+        row = self._conn().execute("SELECT COUNT(*) - COUNT(revoked_at), COUNT(*) FROM api_keys").fetchone()
+        return int(row[0]), int(row[1])

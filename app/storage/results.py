@@ -28,6 +28,25 @@ from app.errors import NotFoundError, StorageError, StorageFullError
 
 DOC = "result.json"
 T = TypeVar("T")
+FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
+NEARLY_FULL_BYTES = 1 << 20  # a short write with less than this left on the volume is a full volume
+
+
+def write_failure(exc: OSError, what: str, directory: Path) -> StorageError:
+    """The typed error of a failed write into ``directory``: :class:`StorageFullError` (507) when the
+    volume is full, else :class:`StorageError`; the message names ``what``, never a path.
+
+    numpy writes arrays in C and reports a short write as ``OSError("N requested and M written")``
+    without an errno, so a write failing without one counts as full when the volume has (next to)
+    nothing left.
+    """
+    full = exc.errno in FULL_ERRNOS
+    if exc.errno is None:
+        with contextlib.suppress(OSError):
+            full = shutil.disk_usage(directory).free < NEARLY_FULL_BYTES
+    if full:
+        return StorageFullError(f"cannot write {what}: the server's data volume is full")
+    return StorageError(f"cannot write {what}: {exc.strerror or 'the write was cut short'}")
 
 
 def json_safe(obj: Any) -> Any:
@@ -64,9 +83,7 @@ def write_result(directory: Path, doc: Mapping[str, Any], arrays: Mapping[str, n
         os.replace(tmp / "arrays", directory / "arrays")
         os.replace(tmp / DOC, directory / DOC)
     except OSError as exc:
-        full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
-        raise (StorageFullError if full else StorageError)(
-            f"cannot write results ({directory.name}): {exc.strerror}") from exc
+        raise write_failure(exc, f"results ({directory.name})", directory) from exc
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(old, ignore_errors=True)

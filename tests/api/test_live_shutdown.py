@@ -22,7 +22,7 @@ from app.live.bus import BusConfig, BusLink
 from app.live.loopback import LoopbackHub
 from app.live.replay import Replayer
 from app.settings import default_dbc_dir
-from tests.api.conftest import Server, create_vehicle, wait_for
+from tests.api.conftest import Server, create_vehicle, free_port, wait_for
 
 
 def _hold_stream(url: str, lines: list[str]) -> None:
@@ -42,13 +42,15 @@ def drive_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def test_sigterm_stores_the_live_recording_and_its_analysis_runs_after_restart(tmp_path: Path,
-                                                                              drive_log: Path) -> None:
+def test_sigterm_stores_the_live_recording_and_its_analysis_runs_after_restart(
+        tmp_path: Path, drive_log: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     data = tmp_path / "data"
     frames = sum(len(c) for c in open_log(drive_log).chunks())
+    port = free_port()
+    monkeypatch.setenv("LASHSCOPE_LIVE_CHANNELS", f"tcp_loopback:127.0.0.1:{port}")  # the hub's port, allowed
     srv = Server(data).start()
     try:
-        with LoopbackHub() as hub, httpx.Client(base_url=srv.url, timeout=30.0) as c:
+        with LoopbackHub(port=port) as hub, httpx.Client(base_url=srv.url, timeout=30.0) as c:
             create_vehicle(c)
             r = c.post("/live/sessions", json={"interface": "tcp_loopback", "channel": hub.channel, "vehicle": "ev"})
             assert r.status_code == 201, r.text

@@ -17,7 +17,7 @@ from typing import Any
 import httpx
 import pytest
 
-from tests.api.conftest import Server, create_vehicle
+from tests.api.conftest import Server, create_vehicle, free_port
 from tests.conftest import REPO
 
 ARTIFACTS = REPO / "tests" / "artifacts"
@@ -51,8 +51,16 @@ def browser() -> Iterator[Any]:
 
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    srv = Server(tmp_path_factory.mktemp("web") / "data", max_upload_mb=64.0).start()
+def hub_port() -> int:
+    """The port of the loopback hub the live page test replays onto (the server allows that one)."""
+    return free_port()
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory, hub_port: int) -> Iterator[Server]:
+    with pytest.MonkeyPatch.context() as env:
+        env.setenv("LASHSCOPE_LIVE_CHANNELS", f"tcp_loopback:127.0.0.1:{hub_port}")
+        srv = Server(tmp_path_factory.mktemp("web") / "data", max_upload_mb=64.0).start()
     with httpx.Client(base_url=srv.url, timeout=30.0) as c:
         create_vehicle(c, "ev")
     yield srv

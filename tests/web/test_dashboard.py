@@ -257,11 +257,11 @@ def test_vehicles_page_compares_two_versions_field_by_field(page: Any, server: S
     screenshot(page, "vehicles-compare")
 
 
-def test_live_page_shows_frames_arriving(page: Any, server: Server, tmp_path: Path) -> None:
+def test_live_page_shows_frames_arriving(page: Any, server: Server, hub_port: int, tmp_path: Path) -> None:
     drive = tmp_path / "live.blf"
     dbc = default_dbc_dir()
     build_demo_log(drive, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml", Scenario(duration_s=12.0))
-    with LoopbackHub() as hub:
+    with LoopbackHub(port=hub_port) as hub:
         r = httpx.post(f"{server.url}/live/sessions", json={"interface": "tcp_loopback", "channel": hub.channel,
                                                             "vehicle": "ev"}, timeout=30.0)
         assert r.status_code == 201, r.text
@@ -327,7 +327,8 @@ def test_the_api_key_goes_with_every_request(page: Any, server: Server) -> None:
         page.click("#key-form button")
     finally:
         _keys(server, "revoke", key_id)
-        time.sleep(1.2)  # open again for the other tests (no key left)
+        time.sleep(1.2)
+    assert httpx.get(f"{server.url}/logs").status_code == 401  # the last key revoked: the server stays closed
 
 
 def test_docs_work_offline(page: Any, server: Server) -> None:

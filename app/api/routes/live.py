@@ -11,9 +11,10 @@ returns the stored log and its analysis.
 Interfaces that reach the network (``udp_multicast``, ``socketcand``) are off unless listed in
 ``LASHSCOPE_LIVE_INTERFACES`` (comma-separated), which replaces the default set. Which bus a client
 may open is the operator's choice too: ``LASHSCOPE_LIVE_CHANNELS`` lists ``interface:channel`` pairs
-or ``interface:*`` (default ``virtual:*,tcp_loopback:*,socketcan:*``: socketcan channels are kernel
-interface names). Anything else -- e.g. a serial device path for ``slcan`` -- is 403
-``live_channel_not_allowed``, and option values that look like file paths are refused the same way.
+or ``interface:*`` (default ``virtual:*,tcp_loopback:127.0.0.1:29536,socketcan:*``: socketcan channels
+are kernel interface names; of the loopback hubs only the one on its default port). Anything else --
+e.g. a serial device path for ``slcan``, or another local port -- is 403 ``live_channel_not_allowed``,
+and option values that look like file paths are refused the same way.
 """
 
 from __future__ import annotations
@@ -32,8 +33,9 @@ from pydantic import BaseModel, Field
 from app.api.deps import SettingsDep
 from app.api.schemas import ERRORS, LiveEventsOut, LiveSessionOut
 from app.errors import ForbiddenError, InputError
-from app.live.bus import BusConfig
+from app.live.bus import LOOPBACK_INTERFACE, BusConfig
 from app.live.decoding import source_for
+from app.live.loopback import parse_endpoint, require_loopback
 from app.live.manager import LiveManager, StartRequest
 from app.live.session import LiveSession
 from app.live.stream import sse_format
@@ -95,10 +97,23 @@ def _database(settings: Settings, name: str) -> Any:
     return path
 
 
+def _bus_name(interface: str, channel: str | None) -> str:
+    """``interface:channel``, a loopback hub's channel as ``address:port`` (``localhost`` -> ``127.0.0.1``,
+    no port -> the default), so one hub has one name however it is written."""
+    if interface != LOOPBACK_INTERFACE:
+        return f"{interface}:{channel or ''}"
+    host, port = parse_endpoint(channel)
+    return f"{interface}:{require_loopback(host)}:{port}"
+
+
 def _channel_allowed(settings: Settings, body: LiveStart) -> None:
-    """The operator's allow-list decides which bus a client may open, never the client."""
-    pair = f"{body.interface}:{body.channel or ''}"
-    if f"{body.interface}:*" not in settings.live_channels and pair not in settings.live_channels:
+    """The operator's allow-list decides which bus a client may open, never the client. A loopback hub
+    is allowed by its port too (``tcp_loopback:127.0.0.1:29536``): connecting to any local port would
+    let a client find out which are open."""
+    pair = _bus_name(body.interface, body.channel)
+    allowed = {entry if entry.endswith(":*") else _bus_name(*entry.split(":", 1))
+               for entry in settings.live_channels if ":" in entry}
+    if f"{body.interface}:*" not in allowed and pair not in allowed:
         raise ForbiddenError(f"live bus {pair!r} is not allowed on this server (LASHSCOPE_LIVE_CHANNELS: "
                              f"{', '.join(settings.live_channels) or 'none'})", code="live_channel_not_allowed")
     for key, value in body.options.items():

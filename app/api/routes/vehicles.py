@@ -88,7 +88,7 @@ def _preset_toml(name: str) -> str:
 
 @router.get("", response_model=list[VehicleOut], summary="Vehicles (latest version of each)")
 def list_vehicles(store: StoreDep) -> list[VehicleOut]:
-    return [VehicleOut.of(v) for v in store.list_vehicles()]
+    return [VehicleOut.of(v, brief=True) for v in store.list_vehicles()]
 
 
 @router.get("/{name}", response_model=VehicleOut, summary="Latest version of a vehicle")
@@ -98,7 +98,7 @@ def get_vehicle(name: str, store: StoreDep) -> VehicleOut:
 
 @router.get("/{name}/versions", response_model=list[VehicleOut], summary="Every version of a vehicle")
 def vehicle_versions(name: str, store: StoreDep) -> list[VehicleOut]:
-    return [VehicleOut.of(v) for v in store.vehicle_versions(name)]
+    return [VehicleOut.of(v, brief=True) for v in store.vehicle_versions(name)]
 
 
 @router.get("/{name}/versions/{version}", response_model=VehicleOut, summary="One version of a vehicle")
