@@ -23,8 +23,10 @@
 ``LASHSCOPE_MAX_JSON_KB``       body cap of every request but the uploads, in KiB (default 1024); past it 413
 ``LASHSCOPE_UPLOAD_IDLE_S``     an upload that sends nothing for this long is dropped (408, partial file removed)
 ``LASHSCOPE_MAX_QUEUED_JOBS``   new jobs are refused (429 ``queue_full``) while this many wait (default 32)
-``LASHSCOPE_KEY_RATE_PER_S``    requests a second per API key (bursts of two seconds' worth); past it 429 (0: off)
+``LASHSCOPE_KEY_RATE_PER_S``    requests a second per API key; past it 429 (0: off)
 ``LASHSCOPE_CLIENT_RATE_PER_S`` requests a second per client address for requests without a key (default 200; 0: off)
+``LASHSCOPE_RATE_BURST_S``      both rates allow bursts of this many seconds' worth (default 10: a dashboard opening
+                              views for many viewers at once), then hold to the rate
 ``LASHSCOPE_MAX_URL_KB``        request URL cap in KiB (default 8); past it 414 ``url_too_long``
 ``LASHSCOPE_MAX_HEADER_KB``     cap of a request's line and headers together, in KiB (default 64); past it 431
 ``LASHSCOPE_MAX_HEADERS``       header lines a request may have (default 100); past it 431 ``too_many_headers``
@@ -101,6 +103,7 @@ class Settings(BaseSettings):
     max_queued_jobs: int = Field(default=32, ge=1)
     key_rate_per_s: float = Field(default=100.0, ge=0)  # per API key; 0: no limit
     client_rate_per_s: float = Field(default=200.0, ge=0)  # per client address, requests without a key; 0: off
+    rate_burst_s: float = Field(default=10.0, gt=0)  # bucket depth of both rates, in seconds' worth
     max_url_kb: float = Field(default=8.0, gt=0)
     max_header_kb: float = Field(default=64.0, gt=0)
     max_headers: int = Field(default=100, ge=1)

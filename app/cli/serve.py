@@ -86,10 +86,23 @@ def settings_from(args: argparse.Namespace) -> Any:
         raise InputError(f"invalid setting: {problems}", code="invalid_setting") from None
 
 
+def uvicorn_options(settings: Any) -> dict[str, Any]:
+    """uvicorn's options for ``settings``: the limited protocol, keep-alive, forwarded headers, shutdown grace."""
+    from app.api.connections import protocol_class
+
+    # Without a grace limit uvicorn waits for every open response before the lifespan shutdown, and a
+    # server-sent-event stream of a live session stays open until that very shutdown stops the session.
+    # Forwarded addresses are believed only from the trusted proxies (uvicorn's default trusts 127.0.0.1, so
+    # any local process, or a proxy passing the header through, could pose as any client).
+    return {"http": protocol_class(settings), "timeout_keep_alive": settings.keep_alive_s,
+            "timeout_graceful_shutdown": settings.shutdown_grace_s, "proxy_headers": bool(settings.trusted_proxies),
+            "forwarded_allow_ips": settings.trusted_proxies or None}
+
+
 def run(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from app.api.connections import fit_to_file_limit, protocol_class
+    from app.api.connections import fit_to_file_limit
     from app.api.main import create_app
 
     settings = settings_from(args)
@@ -105,12 +118,6 @@ def run(args: argparse.Namespace) -> int:
     enable_for_service(settings.data_dir)  # the analyses' events also go to <data dir>/events (Parquet)
     print(f"lashscope: serving on http://{settings.host}:{settings.port} (store {redact(settings.store_location)}; "
           f"API docs at /docs)", flush=True)
-    # Without a grace limit uvicorn waits for every open response before the lifespan shutdown, and a
-    # server-sent-event stream of a live session stays open until that very shutdown stops the session.
-    # Forwarded addresses are believed only from the trusted proxies (uvicorn's default trusts 127.0.0.1, so
-    # any local process, or a proxy passing the header through, could pose as any client).
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level=args.log_level,
-                timeout_graceful_shutdown=settings.shutdown_grace_s, http=protocol_class(settings),
-                timeout_keep_alive=settings.keep_alive_s, proxy_headers=bool(settings.trusted_proxies),
-                forwarded_allow_ips=settings.trusted_proxies or None)
+                **uvicorn_options(settings))
     return 0
