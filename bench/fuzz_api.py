@@ -1,5 +1,6 @@
 """Abuse benchmark: >= 10 000 fuzzed requests, stalled uploads and reads under a running job,
-against a real ``lashscope serve`` on a loopback port.
+against a real ``lashscope serve`` on a loopback port; first the connection-level attacks of
+``bench/attacks_conn.py`` on a server of their own (``--conn-only``: only those; ``--no-conn``: without).
 
 Run: ``.venv/bin/python bench/fuzz_api.py [--n 10000] [--seed 0]`` (several minutes on 2 cores).
 
@@ -30,6 +31,7 @@ sys.path.insert(0, str(REPO))
 from app.demo.build import build_demo_log  # noqa: E402
 from app.demo.scenario import Scenario  # noqa: E402
 from app.settings import default_dbc_dir  # noqa: E402
+from bench import attacks_conn  # noqa: E402
 from bench.api import hammer, pct  # noqa: E402
 from sim import dump_toml, load_vehicle  # noqa: E402
 from tests.api.conftest import Server, create_vehicle, upload, wait_for  # noqa: E402
@@ -160,18 +162,21 @@ def main() -> int:
     ap.add_argument("--per-client", type=int, default=20, help="reads per client in each read measurement")
     ap.add_argument("--reads-only", action="store_true",
                     help="only the read p95 with and without a job (no fuzzing, stalled uploads or guard timing)")
+    attacks_conn.add_arguments(ap)
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="lashscope-fuzz-"))
-    if not args.reads_only:
+    if not args.reads_only and not args.conn_only:
         for line in guard_cost(work / "guard"):
             print(line)
     log = work / "drive.blf"
     dbc = default_dbc_dir()
     build_demo_log(log, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml", Scenario(duration_s=40.0))
+    if not args.no_conn and not args.reads_only:
+        conn_ok = attacks_conn.run(args, work, log)
+        if args.conn_only:
+            return 0 if conn_ok else 1
     os.environ["LASHSCOPE_UPLOAD_IDLE_S"] = str(IDLE_S)
     os.environ["LASHSCOPE_MAX_QUEUED_JOBS"] = "4"  # fuzzed analyses must not queue the run into the next hour
-    # the 30 readers share one address: measure the read path, not the per-client limit (tests/api/test_security.py)
-    os.environ["LASHSCOPE_CLIENT_RATE_PER_S"] = "0"
     srv = Server(work / "data", max_upload_mb=16.0).start()
     try:
         with httpx.Client(base_url=srv.url, timeout=120.0) as c:
