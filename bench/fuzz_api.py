@@ -61,8 +61,9 @@ def stalled_uploads(url: str, count: int) -> int:
     """``count`` uploads that send 1 KiB of a declared 10 MiB and then nothing; returns how many got 408."""
     parts = urlsplit(url)
     socks = []
-    for _ in range(count):
-        s = socket.create_connection((parts.hostname or "127.0.0.1", parts.port or 80), timeout=IDLE_S + 30)
+    for i in range(count):  # from many loopback addresses: one address holds at most 64 connections
+        s = socket.create_connection((parts.hostname or "127.0.0.1", parts.port or 80), timeout=IDLE_S + 30,
+                                     source_address=(f"127.0.8.{i % 250 + 1}", 0))
         s.sendall(b"POST /logs?filename=stall.blf HTTP/1.1\r\nHost: 127.0.0.1\r\n"
                   b"Content-Type: application/octet-stream\r\nContent-Length: 10485760\r\n\r\n" + b"\0" * 1024)
         socks.append(s)
