@@ -299,7 +299,8 @@ def legit_load(srv: Server, c: httpx.Client, analysis_id: str, clients: int, per
 
     errors: Counter[int] = Counter()
     lat, _ = hammer(f"{srv.url}/analyses/{analysis_id}/speed", clients, per_client, window, errors)
-    status = c.get(f"/diagnoses/{did}").json()["status"]
+    r = c.get(f"/diagnoses/{did}")
+    status = r.json()["status"] if r.status_code == 200 else f"unknown, {r.status_code}"
     p95 = pct(lat, 95)
     print(f"legitimate load: {clients} clients x {per_client} reads at the default limits while a diagnosis "
           f"runs (still {status} at the end): p95 {p95:.1f} ms, errors {sum(errors.values())} "
