@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+import resource
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -12,6 +13,7 @@ from pathlib import Path
 import httpx
 import pytest
 
+from app.api.connections import HANDLE_RESERVE, client_key, fit_to_file_limit
 from app.cli import main
 from tests.api.sockets import connect, exchange, get, read_all, serving, status_of
 
@@ -114,6 +116,34 @@ def test_connections_in_total_make_room(capped: int) -> None:
     finally:
         for s in held:
             s.close()
+
+
+def test_a_server_busy_with_requests_refuses_new_connections(tmp_path: Path) -> None:
+    with serving(tmp_path / "data", max_connections=2) as srv:
+        uploads = [connect(srv.port, f"127.0.3.{i}") for i in range(2)]
+        try:
+            for s in uploads:  # uploads under way: requests in progress, nothing to close for a newcomer
+                s.sendall(b"POST /logs?filename=a.blf HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                          b"Content-Type: application/octet-stream\r\nContent-Length: 100000\r\n\r\n" + b"\0" * 1000)
+            time.sleep(0.2)
+            detail = _error(exchange(srv.port, get()), 503, "server_busy")
+            assert "LASHSCOPE_MAX_CONNECTIONS" in detail
+        finally:
+            for s in uploads:
+                s.close()
+        time.sleep(0.2)
+        assert status_of(exchange(srv.port, get())) == 200
+
+
+def test_client_keys_and_the_file_limit() -> None:
+    assert client_key("192.0.2.7") == "192.0.2.7"
+    assert client_key("2001:db8::1") == client_key("2001:db8::ffff") == "2001:db8::/64"  # one subscriber's prefix
+    assert client_key("2001:db8:0:1::1") != client_key("2001:db8::1")
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    assert fit_to_file_limit(100) == 100
+    huge = fit_to_file_limit(10**9)  # never more connections than the process may open handles
+    assert huge <= resource.getrlimit(resource.RLIMIT_NOFILE)[0] - HANDLE_RESERVE
+    resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
 
 
 def test_forwarded_addresses_only_from_trusted_proxies(tmp_path: Path) -> None:
