@@ -114,6 +114,7 @@ class ConnectionTable:
         self.per_client: dict[str, int] = {}
         self.waiting: dict[LimitedHttpProtocol, None] = {}  # insertion-ordered: the first waited longest
         self.total = 0
+        self.refusing = False  # a limit has just stopped the parser (see QuietRefusals)
 
     def admit(self, conn: LimitedHttpProtocol, host: str) -> Refusal | None:
         """Count ``conn`` in, or say why it is refused; may close the longest-waiting connection to make room."""
@@ -147,6 +148,18 @@ class ConnectionTable:
         self.waiting.pop(conn, None)
         if waiting:
             self.waiting[conn] = None
+
+
+class QuietRefusals(logging.Filter):
+    """uvicorn logs every stop of its parser as "Invalid HTTP request received."; a limit of ours stopping it
+    is not that, and a flood of refused heads would flood the log. Passes everything else."""
+
+    def __init__(self, table: ConnectionTable) -> None:
+        super().__init__()
+        self.table = table
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not self.table.refusing
 
 
 class Refusal(Exception):
@@ -212,6 +225,7 @@ class LimitedHttpProtocol(HttpToolsProtocol):
 
     def send_400_response(self, msg: str) -> None:
         refusal, self._refusal = self._refusal, None
+        self.table.refusing = False
         self._refuse(refusal or Refusal(400, "invalid_http", "the request is not valid HTTP/1.1"))
 
     def evict(self) -> None:
@@ -272,6 +286,7 @@ class LimitedHttpProtocol(HttpToolsProtocol):
     def _stop(self, refusal: Refusal) -> None:
         """Stop parsing (the parser wraps the exception into an error that lands in send_400_response)."""
         self._refusal = refusal
+        self.table.refusing = True  # until send_400_response, right after uvicorn's warning
         raise refusal
 
     def _head_expired(self) -> None:
@@ -318,4 +333,5 @@ def protocol_class(settings: Settings) -> type[LimitedHttpProtocol]:
 
     BoundProtocol.limits = limits
     BoundProtocol.table = ConnectionTable(limits)
+    logging.getLogger("uvicorn.error").addFilter(QuietRefusals(BoundProtocol.table))
     return BoundProtocol

@@ -28,7 +28,7 @@ def _error(reply: bytes, status: int, code: str) -> str:
     return detail
 
 
-def test_request_heads_are_bounded(tmp_path: Path) -> None:
+def test_request_heads_are_bounded(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     with serving(tmp_path / "data", max_header_kb=8, max_headers=20, max_url_kb=1) as srv:
         port = srv.port
         ok = exchange(port, get(headers="".join(f"X-H{i}: {'v' * 300}\r\n" for i in range(18))))
@@ -40,7 +40,9 @@ def test_request_heads_are_bounded(tmp_path: Path) -> None:
         endless = b"GET /health HTTP/1.1\r\nHost: 127.0.0.1\r\nX-A: " + b"b" * 20_000
         assert "LASHSCOPE_MAX_HEADER_KB" in _error(exchange(port, endless), 431, "headers_too_large")
         _error(exchange(port, get("/health?" + "q" * 2000)), 414, "url_too_long")
+        assert "Invalid HTTP request" not in caplog.text  # a refusal is not logged as a malformed request
         _error(exchange(port, b"NOT HTTP AT ALL\r\n\r\n"), 400, "invalid_http")
+        assert "Invalid HTTP request" in caplog.text
         assert httpx.get(f"{srv.url}/health").json()["status"] == "ok"
 
 
