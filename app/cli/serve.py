@@ -89,14 +89,17 @@ def settings_from(args: argparse.Namespace) -> Any:
 def uvicorn_options(settings: Any) -> dict[str, Any]:
     """uvicorn's options for ``settings``: the limited protocol, keep-alive, forwarded headers, shutdown grace."""
     from app.api.connections import protocol_class
+    from app.settings import parse_networks
 
     # Without a grace limit uvicorn waits for every open response before the lifespan shutdown, and a
     # server-sent-event stream of a live session stays open until that very shutdown stops the session.
     # Forwarded addresses are believed only from the trusted proxies (uvicorn's default trusts 127.0.0.1, so
-    # any local process, or a proxy passing the header through, could pose as any client).
+    # any local process, or a proxy passing the header through, could pose as any client). They go to uvicorn
+    # normalised (10.0.0.1/8 -> 10.0.0.0/8), which it would otherwise take for a name that never matches.
+    proxies = [str(net) for net in parse_networks(settings.trusted_proxies)]
     return {"http": protocol_class(settings), "timeout_keep_alive": settings.keep_alive_s,
-            "timeout_graceful_shutdown": settings.shutdown_grace_s, "proxy_headers": bool(settings.trusted_proxies),
-            "forwarded_allow_ips": settings.trusted_proxies or None}
+            "timeout_graceful_shutdown": settings.shutdown_grace_s, "proxy_headers": bool(proxies),
+            "forwarded_allow_ips": proxies or None}
 
 
 def run(args: argparse.Namespace) -> int:

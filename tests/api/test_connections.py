@@ -168,7 +168,7 @@ def test_forwarded_addresses_only_from_trusted_proxies(tmp_path: Path) -> None:
             assert "client 127.0.0.1 " in _error(limited, 429, "rate_limited")
         assert records and all(r.startswith("127.0.0.1:") for r in records), records[:3]
         records.clear()
-        with serving(tmp_path / "trusted", client_rate_per_s=1, rate_burst_s=2, trusted_proxies=["127.0.0.0/8"]) as srv:
+        with serving(tmp_path / "trusted", client_rate_per_s=1, rate_burst_s=2, trusted_proxies=["127.0.0.1/8"]) as srv:
             access.setLevel(logging.INFO)
             codes = [status_of(exchange(srv.port, get("/logs", f"X-Forwarded-For: 198.51.100.{i}\r\n")))
                      for i in range(10)]
