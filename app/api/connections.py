@@ -188,7 +188,7 @@ class LimitedHttpProtocol(HttpToolsProtocol):
         self.client_key: str | None = None
         self._counted = False
         self._in_head = False  # between a request's first byte and the end of its headers
-        self._head_bytes = 0  # raw bytes received for a head still incomplete
+        self._head_bytes = 0  # bytes received for a head still incomplete
         self._head_counted = 0  # bytes of the parsed request line and header lines
         self._header_lines = 0
         self._refusal: Refusal | None = None
@@ -219,7 +219,9 @@ class LimitedHttpProtocol(HttpToolsProtocol):
         fresh = not self._in_head
         super().data_received(data)  # parses; the callbacks below raise a Refusal through send_400_response
         if self._in_head and not self.transport.is_closing():
-            self._head_bytes = len(data) if fresh else self._head_bytes + len(data)
+            # A head begun in this chunk counts its parsed lines (the chunk may end a previous request), then
+            # every chunk in full: the parser holds at most the cap plus one read
+            self._head_bytes = self._head_counted if fresh else self._head_bytes + len(data)
             if self._head_bytes > self.limits.max_head:
                 self._refuse(self._head_too_large())
 
