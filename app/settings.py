@@ -24,10 +24,25 @@
 ``LASHSCOPE_MAX_JSON_KB``       body cap of every request but the uploads, in KiB (default 1024); past it 413
 ``LASHSCOPE_UPLOAD_IDLE_S``     an upload that sends nothing for this long is dropped (408, partial file removed)
 ``LASHSCOPE_MAX_QUEUED_JOBS``   new jobs are refused (429 ``queue_full``) while this many wait (default 32)
-``LASHSCOPE_KEY_RATE_PER_S``    requests a second per API key (bursts of two seconds' worth); past it 429 (0: off)
+``LASHSCOPE_KEY_RATE_PER_S``    requests a second per API key; past it 429 (0: off)
 ``LASHSCOPE_CLIENT_RATE_PER_S`` requests a second per client address for requests without a key (default 200; 0: off)
 ``LASHSCOPE_AUTH_FAILURE_RATE_PER_S``  failed authentications a second per client address (default 2; 0: off); past
                               it 429, and that client's keys are not even checked until its bucket refills
+``LASHSCOPE_RATE_BURST_S``      both rates allow bursts of this many seconds' worth (default 10: a dashboard opening
+                              views for many viewers at once), then hold to the rate
+``LASHSCOPE_MAX_URL_KB``        request URL cap in KiB (default 8); past it 414 ``url_too_long``
+``LASHSCOPE_MAX_HEADER_KB``     cap of a request's line and headers together, in KiB (default 64); past it 431
+``LASHSCOPE_MAX_HEADERS``       header lines a request may have (default 100); past it 431 ``too_many_headers``
+``LASHSCOPE_HEADER_TIMEOUT_S``  a request's head must arrive within this (default 10 s); then 408 ``header_timeout``
+``LASHSCOPE_BODY_TIMEOUT_S``    a request's body must arrive within this of its head, however slowly it comes
+                              (default 900 s: 1 GiB at 1.2 MB/s); then 408 ``body_timeout``
+``LASHSCOPE_KEEP_ALIVE_S``      an idle kept-alive connection is closed after this (default 5 s)
+``LASHSCOPE_MAX_CONNECTIONS``   connections open at once (default 1000; the longest waiting without a request makes
+                              room for a new one)
+``LASHSCOPE_MAX_CLIENT_CONNECTIONS``  connections per client address (default 64; past it 429
+                                    ``too_many_connections``); trusted proxies are exempt
+``LASHSCOPE_TRUSTED_PROXIES``   reverse proxies (addresses or networks, comma-separated) whose ``X-Forwarded-For`` and
+                              ``X-Forwarded-Proto`` are believed; from anyone else they are ignored (default none)
 ``LASHSCOPE_LIVE_CHANNELS``     live buses a client may open, ``interface:channel`` or ``interface:*`` (comma-separated;
                               default ``virtual:*,tcp_loopback:127.0.0.1:29536,socketcan:*``: of the loopback
                               hubs only the one on the default port, so a client cannot probe local ports)
@@ -35,6 +50,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 from functools import lru_cache
 from pathlib import Path
 from typing import Annotated
@@ -44,6 +60,19 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 SOURCE_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_HUB_PORT = 29536  # app.live.loopback.DEFAULT_PORT, without importing python-can for the settings
+
+IPNetwork = ipaddress.IPv4Network | ipaddress.IPv6Network
+
+
+def parse_networks(entries: list[str]) -> tuple[IPNetwork, ...]:
+    """Addresses and networks (``10.0.0.5``, ``10.0.0.0/8``, ``::1``) as networks; ``ValueError`` names a bad one."""
+    nets = []
+    for entry in entries:
+        try:
+            nets.append(ipaddress.ip_network(entry, strict=False))
+        except ValueError:
+            raise ValueError(f"{entry!r} is not an IP address or network (e.g. 10.0.0.5 or 10.0.0.0/8)") from None
+    return tuple(nets)
 
 
 def default_dbc_dir() -> Path:
@@ -82,14 +111,30 @@ class Settings(BaseSettings):
     key_rate_per_s: float = Field(default=100.0, ge=0)  # per API key; 0: no limit
     client_rate_per_s: float = Field(default=200.0, ge=0)  # per client address, requests without a key; 0: off
     auth_failure_rate_per_s: float = Field(default=2.0, ge=0)  # wrong keys per client address; 0: off
+    rate_burst_s: float = Field(default=10.0, gt=0)  # bucket depth of both rates, in seconds' worth
+    max_url_kb: float = Field(default=8.0, gt=0)
+    max_header_kb: float = Field(default=64.0, gt=0)
+    max_headers: int = Field(default=100, ge=1)
+    header_timeout_s: float = Field(default=10.0, gt=0)
+    body_timeout_s: float = Field(default=900.0, gt=0)
+    keep_alive_s: int = Field(default=5, ge=1)
+    max_connections: int = Field(default=1000, ge=1)
+    max_client_connections: int = Field(default=64, ge=1)
+    trusted_proxies: Annotated[list[str], NoDecode] = Field(default_factory=list)
     live_channels: Annotated[list[str], NoDecode] = Field(
         default_factory=lambda: ["virtual:*", f"tcp_loopback:127.0.0.1:{DEFAULT_HUB_PORT}", "socketcan:*"])
 
-    @field_validator("cors_origins", "allowed_hosts", "live_channels", mode="before")
+    @field_validator("cors_origins", "allowed_hosts", "live_channels", "trusted_proxies", mode="before")
     @classmethod
     def _split_origins(cls, v: object) -> object:
         if isinstance(v, str):
             return [o.strip() for o in v.split(",") if o.strip()]
+        return v
+
+    @field_validator("trusted_proxies")
+    @classmethod
+    def _networks(cls, v: list[str]) -> list[str]:
+        parse_networks(v)
         return v
 
     @property

@@ -23,6 +23,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlencode, urlsplit
@@ -43,12 +44,14 @@ def pct(values: list[float], q: float) -> float:
     return s[min(len(s) - 1, round(q / 100 * (len(s) - 1)))]
 
 
-def hammer(url: str, clients: int, per_client: int, params_for: object) -> tuple[list[float], float]:
+def hammer(url: str, clients: int, per_client: int, params_for: object,
+           errors: Counter[int] | None = None) -> tuple[list[float], float]:
     """``clients`` threads, each with its own keep-alive connection, ``per_client`` GETs.
 
     The client is the standard library's ``http.client``: its per-request cost is a small
     fraction of httpx's, so the figures are the server's and not the load generator's (both
-    share the same two cores). Returns latencies (ms) and the wall time (s).
+    share the same two cores). Returns latencies (ms) and the wall time (s). An answer other than 200
+    raises, or is counted in ``errors`` by status when given.
     """
     parsed = urlsplit(url)
     lat: list[float] = []
@@ -70,7 +73,10 @@ def hammer(url: str, clients: int, per_client: int, params_for: object) -> tuple
             resp = conn.getresponse()
         resp.read()
         if resp.status != 200:
-            raise RuntimeError(f"GET {parsed.path} {params}: {resp.status}")
+            if errors is None:
+                raise RuntimeError(f"GET {parsed.path} {params}: {resp.status}")
+            with lock:
+                errors[resp.status] += 1
         return conn
 
     def worker(k: int) -> None:

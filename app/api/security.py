@@ -13,14 +13,15 @@ before any route runs:
    ``Authorization: Bearer <key>``: none 401 ``auth_required``, unknown or revoked 401
    ``invalid_key``, too small a scope 403 ``insufficient_scope``. Reads need ``read``; creating
    things (POST, PUT, PATCH) ``write``; deleting ``admin``. Each key gets
-   ``LASHSCOPE_KEY_RATE_PER_S`` requests a second (a token bucket holding two seconds' worth);
+   ``LASHSCOPE_KEY_RATE_PER_S`` requests a second (a token bucket holding ``LASHSCOPE_RATE_BURST_S`` worth);
    past that 429 ``rate_limited`` with ``Retry-After``. A request without a key counts against
    its client address instead (``LASHSCOPE_CLIENT_RATE_PER_S``, the same kind of bucket), so an
-   open server cannot be flooded from one address either. (Behind a reverse proxy every request
-   comes from the proxy's address: limit there, or raise this.) A wrong key costs its client
-   address a token of a third bucket (``LASHSCOPE_AUTH_FAILURE_RATE_PER_S``); while that is empty
-   the address gets 429 before any key it sends is looked at, so keys cannot be guessed at speed.
-   A token longer than :data:`~app.storage.keys.MAX_TOKEN_CHARS` is refused unhashed.
+   open server cannot be flooded from one address either. (Behind a reverse proxy the address is the
+   one it forwards, when it is one of ``LASHSCOPE_TRUSTED_PROXIES``: :mod:`app.api.connections`.)
+   A wrong key costs its client address a token of a third bucket
+   (``LASHSCOPE_AUTH_FAILURE_RATE_PER_S``); while that is empty the address gets 429 before any key
+   it sends is looked at, so keys cannot be guessed at speed. A token longer than
+   :data:`~app.storage.keys.MAX_TOKEN_CHARS` is refused unhashed.
 3. **Same origin.** Without keys (a workstation on loopback) reads stay open, but a
    state-changing request from a browser must come from the service's own origin or a
    ``--cors-origin``: a foreign ``Origin`` or ``Sec-Fetch-Site: cross-site``/``same-site`` gets 403
@@ -215,15 +216,16 @@ class RequestGuard:
 
     def _spend(self, who: str, rate: float, setting: str, take: float = 1.0) -> None:
         """Take ``take`` tokens from ``who``'s bucket (a key or a client address; refilled at ``rate`` a second,
-        two seconds deep); 429 when it holds less than one (``take=0`` only checks that). Idle buckets are
+        ``rate_burst_s`` deep); 429 when it holds less than one (``take=0`` only checks that). Idle buckets are
         dropped once there are many (a full bucket holds no state)."""
         if rate <= 0:
             return
         now = time.monotonic()
         if len(self._buckets) >= MAX_BUCKETS:
-            self._buckets = {k: v for k, v in self._buckets.items() if now - v[1] < 2.0}
-        tokens, then = self._buckets.get(who, (2 * rate, now))
-        tokens = min(2 * rate, tokens + (now - then) * rate)
+            self._buckets = {k: v for k, v in self._buckets.items() if now - v[1] < self.cfg.rate_burst_s}
+        depth = self.cfg.rate_burst_s * rate
+        tokens, then = self._buckets.get(who, (depth, now))
+        tokens = min(depth, tokens + (now - then) * rate)
         if tokens < 1:
             self._buckets[who] = (tokens, now)
             wait = (1 - tokens) / rate

@@ -100,7 +100,7 @@ def test_each_key_has_its_rate(tmp_path: Path) -> None:
         time.sleep(KEYS_RECHECK_S + 0.1)
         replies = [c.get("/logs", headers={"Authorization": f"Bearer {first}"}) for _ in range(20)]
         codes = [r.status_code for r in replies]
-        assert codes[:2] == [200, 200]  # the bucket holds two seconds' worth
+        assert codes[:2] == [200, 200]  # the bucket holds LASHSCOPE_RATE_BURST_S' worth
         assert 429 in codes  # 20 requests take far less than the 18 s the rate would allow them
         limited = replies[codes.index(429)]
         assert limited.json()["code"] == "rate_limited" and int(limited.headers["retry-after"]) >= 1
@@ -110,7 +110,7 @@ def test_each_key_has_its_rate(tmp_path: Path) -> None:
 def test_each_client_address_has_its_rate_without_a_key(tmp_path: Path) -> None:
     with in_process(tmp_path / "data", client_rate_per_s=1) as c:
         codes = [c.get("/logs").status_code for _ in range(20)]
-        assert codes[:2] == [200, 200] and 429 in codes  # the bucket holds two seconds' worth
+        assert codes[:2] == [200, 200] and 429 in codes  # the bucket holds LASHSCOPE_RATE_BURST_S' worth
         limited = c.get("/logs")
         assert limited.json()["code"] == "rate_limited" and "client testclient" in limited.json()["detail"]
         assert "LASHSCOPE_CLIENT_RATE_PER_S" in limited.json()["detail"]
