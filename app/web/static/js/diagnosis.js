@@ -40,7 +40,7 @@ export async function render(main, id) {
         h("dt", {}, "held-out shrink"), h("dd", {}, interval(d.heldout_shrink)),
         h("dt", {}, "split"), h("dd", {}, `${r.split.calibration.length} calibration, ${r.split.heldout.length} held-out events (seed ${r.split.seed})`),
         h("dt", {}, "noise floor"), h("dd", {}, `${fmt(r.noise_floor.sigma_rpm, 2)} rpm`))),
-    baseParameters(d), identification(r.identification), remainder(d), actions(id, d, doc, ctrl), candidates(r),
+    baseParameters(d), identification(r.identification, d.reason), remainder(d), actions(id, d, doc, ctrl), candidates(r),
     where(r));
   main.dataset.state = "ready";
   return () => ctrl.abort();
@@ -61,13 +61,14 @@ function baseParameters(d) {
       "new vehicle version; the Identify page fits them on several logs, with a withheld drive.") : null);
 }
 
-// What the identification run inside the diagnosis found (on the calibration events), compactly.
-function identification(ident) {
+// What the identification run inside the diagnosis found (on the calibration events), compactly; its note
+// when the decision's reason does not already say it.
+function identification(ident, reason) {
   if (!ident) return null;
   const card = h("section", { class: "card", id: "diagnosis-identification" }, h("h2", {}, "Base parameters identified first"));
   if (ident.skipped) card.append(h("p", { class: "muted" }, `skipped: ${ident.skipped}`));
   else {
-    if (ident.note) card.append(h("p", {}, ident.note));
+    if (ident.note && ident.note !== reason) card.append(h("p", {}, ident.note));
     card.append(h("div", { class: "scroll" }, paramTable(Object.values(ident.params || {}), "diagnosis-identification-params")));
   }
   return card;

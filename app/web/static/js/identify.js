@@ -179,8 +179,8 @@ export function paramTable(rows, id = "identify-params") {
 
 // One row per parameter: the interval as a bar, the value as a dot, a line at 1.0 (the file's value).
 function ratioChart(rows) {
-  const W = 600;
-  const left = 230;
+  const W = 680;
+  const left = 290;
   const right = 20;
   const rowH = 30;
   const top = 10;
@@ -193,7 +193,7 @@ function ratioChart(rows) {
   for (let t = Math.ceil(lo * 4) / 4; t <= hi + 1e-9; t += 0.25) ticks.push(t);
   const plot = svg("svg", { id: "identify-chart", viewBox: `0 0 ${W} ${H}`, width: "100%", role: "img",
     "aria-label": "identified value as a ratio to the vehicle file, with its 90 % interval" },
-  ticks.map((t) => [svg("line", { x1: x(t), x2: x(t), y1: top, y2: H - 24, class: "grid-line" }),
+  ticks.flatMap((t) => [svg("line", { x1: x(t), x2: x(t), y1: top, y2: H - 24, class: "grid-line" }),
     svg("text", { x: x(t), y: H - 8, "text-anchor": "middle", class: "tick" }, `${fmt(t, 2)}x`)]),
   svg("line", { x1: x(1), x2: x(1), y1: top - 4, y2: H - 24, class: "file-line" }),
   rows.map((p, i) => {
