@@ -48,7 +48,7 @@ async function start(main) {
   const roles = logs.map((l, i) => ({ log: l, choice: (role) => h("label", {}, h("input", { type: "radio",
     name: `role-${i}`, value: role, checked: role === "none" }), ` ${role === "none" ? "not used" : role}`) }));
   const table = h("table", { id: "identify-logs" },
-    h("thead", {}, h("tr", {}, ["log", "duration", "uploaded", "use"].map((c) => h("th", {}, c)))),
+    h("thead", {}, h("tr", {}, ["log", "duration", "uploaded", "use"].map((c) => h("th", { class: c === "duration" ? "num" : null }, c)))),
     h("tbody", {}, roles.map(({ log, choice }) => h("tr", { dataset: { log: log.id } },
       h("td", {}, h("strong", {}, log.filename), h("div", { class: "muted" }, log.id)),
       h("td", { class: "num" }, log.duration_s == null ? "-" : `${fmt(log.duration_s, 1)} s`),
@@ -103,6 +103,7 @@ async function result(main, id) {
   try {
     for (;;) {
       doc = await api(`/identifications/${encodeURIComponent(id)}`, { signal: ctrl.signal });
+      if (!head.isConnected) return null; // the user went to another page while this one polled
       if (!["queued", "running"].includes(doc.status) || ctrl.signal.aborted) break;
       head.replaceChildren(h("p", {}, badge(doc.status), ` ${doc.vehicle} v${doc.vehicle_version}: ${doc.stage}`),
         progressBar(doc.progress, `${doc.stage || doc.status}: ${Math.round(100 * doc.progress)} %`));
