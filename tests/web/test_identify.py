@@ -81,7 +81,7 @@ def test_identify_page_finds_the_file_off_and_applies_it(page: Any, server: Serv
     page.click("#identify-start")
     page.wait_for_url(re.compile(r"#/identify/id_[0-9a-f]{16}$"))
     iid = page.url.rsplit("/", 1)[1]
-    page.wait_for_selector("#identify-head .progress, main[data-state='ready']")
+    page.wait_for_selector("#identify-head .progress")  # queued or running: a progress bar, as a diagnosis shows
     page.wait_for_selector("main[data-state='ready']", timeout=600_000)
     doc = api(server, f"/identifications/{iid}")
     assert doc["status"] == "done", doc
@@ -168,9 +168,12 @@ def test_diagnosis_shows_the_vehicle_file_off(page: Any, server: Server, drives:
     ident = doc["report"]["identification"]
     assert len(page.query_selector_all("#diagnosis-identification-params tbody tr")) == len(ident["params"])
     assert "stiffness" in (page.text_content("#diagnosis-identification") or "")
-    assert page.query_selector("#apply")  # the identified values can be stored as a version from here too
     assert not page.query_selector("#identify-first")
     screenshot(page, "diagnosis-base-parameters", full_page=True)
+    versions = len(api(server, "/vehicles/ev/versions"))  # the identified values stored as a version from here too
+    page.click("#apply")
+    page.wait_for_selector("#actions-result >> text=stored ev")
+    assert len(api(server, "/vehicles/ev/versions")) == versions + 1
 
     # a parameter on a prior bound: the page says to identify the vehicle first, and offers nothing to apply
     bound = {**doc, "report": {**doc["report"], "decision": {**decision, "identify_first": True}}}
