@@ -1,4 +1,4 @@
-// The dashboard's router: #/logs, #/analysis/<id>, #/diagnosis/<id>, #/vehicles, #/live[/<session>].
+// The dashboard's router: #/logs, #/analysis/<id>, #/diagnosis/<id>, #/identify[/<id>], #/vehicles, #/live[/<session>].
 // Each page module exports render(main, ...params) and may return a cleanup function.
 import { apiKey, setApiKey } from "./api.js";
 import { errorBox } from "./util.js";
@@ -7,6 +7,7 @@ const PAGES = {
   logs: () => import("./logs.js"),
   analysis: () => import("./analysis.js"),
   diagnosis: () => import("./diagnosis.js"),
+  identify: () => import("./identify.js"),
   vehicles: () => import("./vehicles.js"),
   live: () => import("./live.js"),
 };
@@ -24,6 +25,7 @@ async function route() {
   const main = document.getElementById("view");
   main.replaceChildren();
   main.dataset.page = name;
+  delete main.dataset.state; // set again by the page once it has drawn
   try {
     performance.mark("route");
     const mod = await load();

@@ -1,8 +1,10 @@
 // Diagnosis view: progress, then the decision in words, where the gap lies (events, phases,
 // bands), the candidates with their held-out scores and fitted parameters, the remainder;
-// apply the effect as a new vehicle version, validate it on another log.
+// apply the effect as a new vehicle version, validate it on another log. When the log says the vehicle
+// file itself is off (base parameters identified first), a card lists them with their ratios to the file.
 import { api } from "./api.js";
-import { badge, errorBox, fmt, h, progressBar, sleep } from "./util.js";
+import { paramTable } from "./identify.js";
+import { badge, errorBox, fmt, h, jobError, progressBar, ratioWords, sleep } from "./util.js";
 
 const interval = (iv, k = 100, unit = " %") => (iv && iv.value != null
   ? `${fmt(iv.value * k, 1)}${unit} [${fmt(iv.lo * k, 1)}, ${fmt(iv.hi * k, 1)}]` : "-");
@@ -22,8 +24,7 @@ export async function render(main, id) {
     await sleep(1500);
   }
   if (doc.status !== "done") {
-    head.replaceChildren(badge(doc.status), errorBox(new Error(doc.error ? `${doc.error.detail} [${doc.error.code}]`
-      : `diagnosis is ${doc.status}`)));
+    head.replaceChildren(badge(doc.status), jobError(doc.error, `diagnosis is ${doc.status}`));
     return () => ctrl.abort();
   }
   const r = doc.report;
@@ -39,9 +40,38 @@ export async function render(main, id) {
         h("dt", {}, "held-out shrink"), h("dd", {}, interval(d.heldout_shrink)),
         h("dt", {}, "split"), h("dd", {}, `${r.split.calibration.length} calibration, ${r.split.heldout.length} held-out events (seed ${r.split.seed})`),
         h("dt", {}, "noise floor"), h("dd", {}, `${fmt(r.noise_floor.sigma_rpm, 2)} rpm`))),
-    remainder(d), actions(id, d, doc, ctrl), candidates(r), where(r));
+    baseParameters(d), identification(r.identification, d.reason), remainder(d), actions(id, d, doc, ctrl), candidates(r),
+    where(r));
   main.dataset.state = "ready";
   return () => ctrl.abort();
+}
+
+// The vehicle file's base parameters the log says are off (ratios to the file's values, 90 % intervals).
+function baseParameters(d) {
+  const items = d.base_parameters || [];
+  if (!items.length && !d.identify_first) return null;
+  const unit = (x, u) => `${+x.toPrecision(4)}${u && u !== "-" ? ` ${u}` : ""}`;
+  return h("section", { class: "card", id: "base-parameters" }, h("h2", {}, "Vehicle file off"),
+    d.identify_first ? h("p", { class: "note", id: "identify-first" }, "Identify the vehicle first: a base parameter ",
+      "rests on the bound of what this log can say, so no effect is attributed until the vehicle file is corrected. ",
+      h("a", { href: "#/identify" }, "Identify it from its logs"), ".") : null,
+    h("ul", {}, items.map((p) => h("li", { dataset: { param: p.name } }, ratioWords(p.label, p.ratio, p.lo, p.hi),
+      h("span", { class: "muted" }, ` (${unit(p.value, p.unit)}; file ${unit(p.nominal, p.unit)})`)))),
+    items.length && !d.identify_first ? h("p", { class: "muted" }, "Applying this diagnosis stores these values as a ",
+      "new vehicle version; the Identify page fits them on several logs, with a withheld drive.") : null);
+}
+
+// What the identification run inside the diagnosis found (on the calibration events), compactly; its note
+// when the decision's reason does not already say it.
+function identification(ident, reason) {
+  if (!ident) return null;
+  const card = h("section", { class: "card", id: "diagnosis-identification" }, h("h2", {}, "Base parameters identified first"));
+  if (ident.skipped) card.append(h("p", { class: "muted" }, `skipped: ${ident.skipped}`));
+  else {
+    if (ident.note && ident.note !== reason) card.append(h("p", {}, ident.note));
+    card.append(h("div", { class: "scroll" }, paramTable(Object.values(ident.params || {}), "diagnosis-identification-params")));
+  }
+  return card;
 }
 
 function remainder(d) {
@@ -109,7 +139,7 @@ function validationText(v) {
 function actions(id, d, doc, ctrl) {
   const out = h("div", { id: "actions-result" });
   const card = h("section", { class: "card" }, h("h2", {}, "Apply and validate"));
-  if (!["explained", "partial", "ambiguous"].includes(d.status)) {
+  if (!["explained", "partial", "ambiguous"].includes(d.status) && !(d.status === "base_parameters" && !d.identify_first)) {
     card.append(h("p", { class: "muted" }, `The decision is ${d.status}: there is no effect to apply.`));
     return card;
   }
@@ -136,7 +166,7 @@ function actions(id, d, doc, ctrl) {
           return;
         }
         if (v.status === "failed") {
-          out.append(errorBox(new Error(v.error ? `${v.error.detail} [${v.error.code}]` : "validation failed")));
+          out.append(jobError(v.error, "validation failed"));
           return;
         }
         await sleep(2000);

@@ -2,7 +2,15 @@
 
 // h("td", {class: "num"}, "12.3") -> element; attributes starting with "on" become listeners.
 export function h(tag, attrs = {}, ...children) {
-  const el = document.createElement(tag);
+  return fill(document.createElement(tag), attrs, children);
+}
+
+// svg("line", {x1: 0, ...}) -> an SVG element, built as h() builds HTML ones.
+export function svg(tag, attrs = {}, ...children) {
+  return fill(document.createElementNS("http://www.w3.org/2000/svg", tag), attrs, children);
+}
+
+function fill(el, attrs, children) {
   for (const [k, v] of Object.entries(attrs || {})) {
     if (v === undefined || v === null || v === false) continue;
     if (k.startsWith("on")) el.addEventListener(k.slice(2), v);
@@ -58,8 +66,18 @@ export function utc(iso) {
   return s ? `${new Date(s.ms).toISOString().replace("T", " ").slice(0, 19)} UTC` : iso;
 }
 
+// "torsional stiffness at the motor 0.75x the file [0.72, 0.78]": a ratio to the vehicle file's value.
+export function ratioWords(label, ratio, lo, hi) {
+  return `${label} ${fmt(ratio, 2)}x the file [${fmt(lo, 2)}, ${fmt(hi, 2)}]`;
+}
+
 export function badge(status) {
   return h("span", { class: `badge ${status}` }, status);
+}
+
+// A failed job's error as the API gives it ({detail, code}), or `fallback` when it has none.
+export function jobError(error, fallback) {
+  return errorBox(new Error(error ? `${error.detail} [${error.code}]` : fallback));
 }
 
 export function errorBox(err) {
