@@ -5,7 +5,7 @@ torque and motor speed pins down far fewer numbers. What the tip-in and tip-out 
 
 ``stiffness``
     the series torsional stiffness of the chain referred to the rotor (it sets the first mode with
-    the rotor inertia); fitted as one scale on every stage's stiffness, reported as the effective
+    the rotor inertia); fitted as one scale (log2) on every stage's stiffness, reported as the effective
     stiffness at the motor (N m/rad) -- a half-shaft 0.7x softer than its data sheet and a chain
     0.7x softer give the same log;
 ``damping``
@@ -64,8 +64,8 @@ def _gaps(vehicle: Vehicle) -> tuple[str, ...]:
 
 STIFFNESS = Effect(
     id="base_stiffness", title="Torsional stiffness of the chain off its data sheet",
-    params=(ParamSpec("scale", "-", 0.35, 2.5, 1.0, "every stage's stiffness x the file's"),),
-    vehicle_change=_scaled(lambda v: stage_paths(v, "stiffness"), "scale"),
+    params=(ParamSpec("log2_scale", "-", -3.3, 1.6, 0.0, "every stage's stiffness x 2^value (0.1x to 3x)"),),
+    vehicle_change=_scaled(lambda v: stage_paths(v, "stiffness"), "log2_scale", log2=True),
 )
 DAMPING = Effect(
     id="base_damping", title="Damping of the chain off its data sheet",
@@ -85,9 +85,17 @@ LASH = Effect(
 BASE_EFFECTS: dict[str, Effect] = {"stiffness": STIFFNESS, "damping": DAMPING, "mass": MASS, "lash": LASH}
 
 
+LOG2 = ("stiffness", "damping")  # fitted as log2 of the scale: data sheets are off by factors, steps are relative
+
+
 def ratio_of(name: str, value: float) -> float:
-    """The fitted parameter as a ratio to the file's value (the damping parameter is a log2)."""
-    return float(2.0 ** value) if name == "damping" else float(value)
+    """The fitted parameter as a ratio to the file's value (stiffness and damping are fitted as log2)."""
+    return float(2.0 ** value) if name in LOG2 else float(value)
+
+
+def value_of(name: str, ratio: float) -> float:
+    """The fitted parameter's value for a ratio to the file's (inverse of :func:`ratio_of`)."""
+    return float(np.log2(ratio)) if name in LOG2 else float(ratio)
 
 
 def with_base(vehicle: Vehicle, ratios: Mapping[str, float]) -> Vehicle:
@@ -96,8 +104,7 @@ def with_base(vehicle: Vehicle, ratios: Mapping[str, float]) -> Vehicle:
     for name, r in ratios.items():
         eff = BASE_EFFECTS[name]
         key = eff.params[0].name
-        changes.update(eff.vehicle_change(vehicle, {key: float(np.log2(r)) if name == "damping" else float(r)})
-                       if eff.vehicle_change is not None else {})
+        changes.update(eff.vehicle_change(vehicle, {key: value_of(name, r)}) if eff.vehicle_change is not None else {})
     return vehicle.with_changes(changes) if changes else vehicle
 
 

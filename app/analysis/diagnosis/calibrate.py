@@ -39,7 +39,9 @@ FloatArray = npt.NDArray[np.float64]
 
 GAIN_BOUNDS = (0.85, 1.15)
 GRADE_BOUNDS_PCT = (-4.0, 4.0)
-OFFSET_PERIODS = 2.0  # time offset bounded to +-2 sample periods of the speed channel
+OFFSET_PERIODS = 2.0  # time offset bounded to +-2 sample periods of the speed channel ...
+OFFSET_MIN_S = 0.02  # ... or +-20 ms, whichever is wider: a logger's torque-to-speed offset does not shrink with the
+# sampling period (a 1 kHz log offset by 10 ms had its delay taken by the stiffness and the mass)
 _PENALTY = 1e3  # residual (noise units) returned for a parameter set the simulator rejects
 TRADE_OFF_CORR = 0.9  # |correlation| of two fitted effect parameters above which the data do not separate them
 PASSES_PER_PARAM = 12  # a refinement's simulator passes: this x (parameters + 1), finite-difference Jacobians included
@@ -56,7 +58,7 @@ class Bounds:
 
     @classmethod
     def for_period(cls, period_s: float) -> Bounds:
-        half = OFFSET_PERIODS * max(period_s, 0.001)
+        half = max(OFFSET_PERIODS * period_s, OFFSET_MIN_S)
         return cls((-half, half))
 
     def specs(self) -> tuple[ParamSpec, ...]:
