@@ -37,6 +37,19 @@ from app.storage.keys import KeyTable
 from app.storage.records import AnalysisRecord, JobStatus, LogRecord, VehicleRecord
 
 VEHICLE_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789-_")
+MAX_VEHICLE_NAME = 64
+
+
+def check_vehicle_name(name: str) -> str:
+    """``name`` if it can name a vehicle, else 400 ``invalid_vehicle_name``.
+
+    A vehicle's name becomes a directory (``vehicles/<name>/``) and part of file names, so every
+    route checks it before it writes anything: no separators, dots, NULs or upper case can reach a path.
+    """
+    if not name or len(name) > MAX_VEHICLE_NAME or not set(name) <= VEHICLE_NAME_CHARS:
+        raise InputError(f"vehicle name {name[:80]!r}: use 1-{MAX_VEHICLE_NAME} of a-z, 0-9, '-' and '_'",
+                         code="invalid_vehicle_name")
+    return name
 
 
 def file_sha256(*paths: Path) -> str:
@@ -206,8 +219,7 @@ class SQLStore(JobTable, KeyTable):
     def add_vehicle(self, name: str, *, driveline: Path, database: Path, signal_map: Path,
                     summary: dict[str, Any]) -> tuple[VehicleRecord, bool]:
         """Store a new version of vehicle ``name`` (files are copied); identical content returns the latest."""
-        if not name or len(name) > 64 or not set(name) <= VEHICLE_NAME_CHARS:
-            raise InputError(f"vehicle name {name!r}: use 1-64 of a-z, 0-9, '-' and '_'")
+        check_vehicle_name(name)
         digest = file_sha256(driveline, database, signal_map)
         with self._tx() as db:
             self.dialect.serialise(db, f"vehicle {name}")  # two uploads never both take the next version

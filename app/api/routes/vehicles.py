@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -15,6 +16,7 @@ from app.api.upload import check_toml, receive_upload, user_file_names
 from app.errors import InputError
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity
 from app.storage.results import json_safe
+from app.storage.sqlstore import check_vehicle_name
 from sim import load_vehicle, preset_names
 
 router = APIRouter(prefix="/vehicles", tags=["vehicles"], responses=ERRORS)
@@ -46,10 +48,16 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
                               idle_s=settings.upload_idle_s)
     files = {f.field_name: f.path for f in up.files}
     names = {f.path: f.filename for f in up.files}
+    written = [f.path for f in up.files]  # every part received, a repeated field's too: all removed below
     try:
         name = up.fields.get("name", "").strip()
         if not name:
             raise InputError("form field 'name' is required")
+        check_vehicle_name(name)
+        repeated = sorted(k for k, n in Counter(f.field_name for f in up.files).items() if n > 1)
+        if repeated:
+            raise InputError(f"file fields {repeated} given more than once; send each file once",
+                             code="repeated_field")
         unknown = set(files) - {"driveline", "dbc", "signal_map"}
         if unknown:
             raise InputError(f"unexpected file fields {sorted(unknown)}; use driveline, dbc, signal_map")
@@ -59,6 +67,7 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
             if preset not in preset_names():
                 raise InputError(f"give a driveline TOML file or a preset; presets: {preset_names()}")
             driveline = store.temp_path(".toml")
+            written.append(driveline)
             driveline.write_text(_preset_toml(preset), encoding="utf-8")
             names[driveline] = f"preset {preset}"
             files["driveline"] = driveline
@@ -73,7 +82,7 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
         rec, created = await run_in_threadpool(store.add_vehicle, name, driveline=driveline, database=dbc,
                                                signal_map=smap, summary=summary)
     finally:
-        for p in files.values():
+        for p in written:
             p.unlink(missing_ok=True)
     if not created:
         response.status_code = status.HTTP_200_OK
