@@ -41,6 +41,7 @@ from app.ingest.readers import mf4_native as native
 from app.ingest.readers._base import BaseReader
 from app.ingest.readers._source import StreamDamage
 from app.ingest.readers.mf4_blocks import Damaged, MdfFile, Unsupported
+from app.tempfiles import owner_tag
 
 EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFlag.FD, FrameFlag.ERROR,
                                                     FrameFlag.REMOTE, FrameFlag.BRS, FrameFlag.ESI, FrameFlag.TX))
@@ -249,7 +250,7 @@ class MF4Reader(BaseReader):
 
     def _inflate(self, cap: int) -> str:
         """Copy the (decompressed) stream to a temporary file, block by block, refusing more than ``cap`` bytes."""
-        fd, name = tempfile.mkstemp(prefix="lashscope-", suffix=".mf4")
+        fd, name = tempfile.mkstemp(prefix=owner_tag(), suffix=".mf4")  # under the server: <data>/tmp
         written = 0
         try:
             with os.fdopen(fd, "wb") as out:
