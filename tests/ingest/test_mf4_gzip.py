@@ -15,7 +15,7 @@ import pytest
 
 from app.errors import InflatedTooLargeError
 from app.ingest.frames import FrameChunk
-from app.ingest.readers import mf4 as mf4_module
+from app.ingest.readers import _source as source_module
 from app.ingest.readers import open_log
 from app.tempfiles import owner_tag
 from tests.conftest import DATA, REPO
@@ -57,7 +57,7 @@ def test_gzipped_mf4_reads_like_the_plain_file(path: Path, tmp_path: Path, spool
 
 
 def test_gzip_bomb_stops_at_the_cap(tmp_path: Path, spool_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(mf4_module, "MAX_INFLATED_BYTES", 1 << 20)
+    monkeypatch.setattr(source_module, "MAX_INFLATED_BYTES", 1 << 20)
     bomb = tmp_path / "drive.mf4.gz"
     bomb.write_bytes(_bomb(8 << 20))
     assert bomb.stat().st_size < 20_000
@@ -76,6 +76,6 @@ def test_gzip_bomb_on_the_command_line(tmp_path: Path) -> None:
                          capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
     assert out.returncode == 2
     assert out.stderr.strip() == ("lashscope: error [inflated_too_large]: drive.mf4.gz: decompresses to more than "
-                                  "the 1 MiB cap for compressed MF4 logs (LASHSCOPE_MAX_INFLATED_MB); decompress it "
+                                  "the 1 MiB cap for compressed logs (LASHSCOPE_MAX_INFLATED_MB); decompress it "
                                   "yourself or raise the cap")
     assert "Traceback" not in out.stderr
