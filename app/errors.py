@@ -17,6 +17,7 @@ subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
      |    +-- MissingSignalError (KeyError)(422) required canonical channels absent
      +-- AnalysisError                    (422)
      |    +-- InsufficientDataError       (422)
+     |    +-- WorkLimitError              (422)  a request would cost more than its limit (decided before the work)
      +-- InputError (ValueError)          (400)  absurd parameters, bad request values
      +-- UploadTooLargeError              (413)
      +-- UploadTimeoutError (TimeoutError)(408)  an upload stalled longer than the idle limit
@@ -106,6 +107,12 @@ class AnalysisError(AppError):
 
 class InsufficientDataError(AnalysisError):
     code = "insufficient_data"
+
+
+class WorkLimitError(AnalysisError):
+    """The work a request asks for, estimated before it starts, is past its limit (the message names it)."""
+
+    code = "work_limit"
 
 
 class InputError(AppError, ValueError):
