@@ -9,15 +9,11 @@ exercised on its own.
 from __future__ import annotations
 
 import json
-import signal
-import socket
-import time
 from pathlib import Path
 
 import pytest
 
 from app.jobkinds.diagnosis import REPORT, SEP, STATUS, directory, write_json
-from tests.api.conftest import Server
 from tests.api.inprocess import TestClient, in_process
 from tests.conftest import REPO
 
@@ -106,22 +102,13 @@ def test_vehicle_upload_refuses_a_bad_name_before_checking_files(tmp_path: Path,
         assert sorted(p.name for p in (data / "vehicles").iterdir()) == []
 
 
-@pytest.mark.slow
-def test_an_upload_cut_by_kill_9_is_swept_at_restart(tmp_path: Path) -> None:
-    server = Server(tmp_path / "data").start()
-    try:
-        host, port = server.url.removeprefix("http://").split(":")
-        with socket.create_connection((host, int(port))) as sock:
-            sock.sendall(b"POST /logs?filename=drive.log HTTP/1.1\r\nHost: 127.0.0.1\r\n"
-                         b"Content-Type: application/octet-stream\r\nContent-Length: 3000000\r\n\r\n")
-            sock.sendall(b"(0.000000) can0 123#00\n" * 40_000)
-            deadline = time.monotonic() + 30
-            while not any((server.data_dir / "tmp").iterdir()) and time.monotonic() < deadline:
-                time.sleep(0.1)
-            assert len(leftovers(server.data_dir)) == 1  # the partial upload, while it arrives
-            server.stop(signal.SIGKILL)
-        assert len(leftovers(server.data_dir)) == 1
-        server.start()
-        assert leftovers(server.data_dir) == []
-    finally:
-        server.stop()
+def test_a_log_upload_with_a_second_file_is_refused_as_it_arrives(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    log = b"(0.000000) can0 123#00\n" * 1000
+    with in_process(data) as client:
+        for files, code in (([("file", ("a.log", log)), ("file", ("b.log", log))], "repeated_field"),
+                            ([("file", ("a.log", log)), ("other", ("b.log", log))], "too_many_files")):
+            r = client.post("/logs", files=files)
+            assert r.status_code == 400 and r.json()["code"] == code, r.text
+            assert leftovers(data) == []
+        assert client.get("/logs").json() == []

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from collections import Counter
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -50,19 +49,15 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
     naming the suspect field), the database must load, and the signal map must fit the database.
     Identical content to the latest version returns that version (200, ``unchanged: true``)."""
     up = await receive_upload(request, store.temp_path, max(MAX_FILE_BYTES.values()), 0, urlencoded_form=True,
-                              idle_s=settings.upload_idle_s)
+                              idle_s=settings.upload_idle_s, max_files=len(MAX_FILE_BYTES))
     files = {f.field_name: f.path for f in up.files}
     names = {f.path: f.filename for f in up.files}
-    written = [f.path for f in up.files]  # every part received, a repeated field's too: all removed below
+    written = [f.path for f in up.files]  # every file received: all removed below
     try:
         name = up.fields.get("name", "").strip()
         if not name:
             raise InputError("form field 'name' is required")
         check_vehicle_name(name)
-        repeated = sorted(k for k, n in Counter(f.field_name for f in up.files).items() if n > 1)
-        if repeated:
-            raise InputError(f"file fields {repeated} given more than once; send each file once",
-                             code="repeated_field")
         unknown = set(files) - set(MAX_FILE_BYTES)
         if unknown:
             raise InputError(f"unexpected file fields {sorted(unknown)}; use driveline, dbc, signal_map")
