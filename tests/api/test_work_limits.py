@@ -3,6 +3,7 @@ decided before (or bounded during) the work, and leaves no temporary file."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -13,7 +14,7 @@ from tests.api.inprocess import TestClient, in_process
 
 
 @pytest.fixture
-def client(tmp_path: Path) -> TestClient:
+def client(tmp_path: Path) -> Iterator[TestClient]:
     with in_process(tmp_path / "data") as c:
         yield c
         assert list((tmp_path / "data" / "tmp").iterdir()) == []

@@ -20,7 +20,7 @@ from sim import load_vehicle, preset_names
 
 router = APIRouter(prefix="/vehicles", tags=["vehicles"], responses=ERRORS)
 # bytes each file may have (checked before it is read): a driveline of 24 stages or a signal map is a few kB;
-# the largest production DBC we know (Model 3, 148 messages) is 375 KiB and loads in 1.3 s per MiB
+# the largest production DBC we know (Model 3, 148 messages) is 375 KiB and loads in 1.3 s
 MAX_FILE_BYTES = {"driveline": 256 * 2**10, "signal_map": 256 * 2**10, "dbc": 4 * 2**20}
 
 FORM_DOC = {
@@ -52,7 +52,6 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
                               idle_s=settings.upload_idle_s, max_files=len(MAX_FILE_BYTES))
     files = {f.field_name: f.path for f in up.files}
     names = {f.path: f.filename for f in up.files}
-    written = [f.path for f in up.files]  # every file received: all removed below
     try:
         name = up.fields.get("name", "").strip()
         if not name:
@@ -72,7 +71,6 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
             if preset not in preset_names():
                 raise InputError(f"give a driveline TOML file or a preset; presets: {preset_names()}")
             driveline = store.temp_path(".toml")
-            written.append(driveline)
             driveline.write_text(_preset_toml(preset), encoding="utf-8")
             names[driveline] = f"preset {preset}"
             files["driveline"] = driveline
@@ -87,7 +85,7 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
         rec, created = await run_in_threadpool(store.add_vehicle, name, driveline=driveline, database=dbc,
                                                signal_map=smap, summary=summary)
     finally:
-        for p in written:
+        for p in files.values():
             p.unlink(missing_ok=True)
     if not created:
         response.status_code = status.HTTP_200_OK
