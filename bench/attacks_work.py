@@ -37,7 +37,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from app.tempfiles import owner_tag  # noqa: E402
-from tests.api.attacks import gzip_bomb, many_stage_driveline, overlapping_dbc  # noqa: E402
+from tests.api.attacks import blf_bomb, gzip_bomb, many_stage_driveline, overlapping_dbc  # noqa: E402
 from tests.api.conftest import Server  # noqa: E402
 
 BOMB_BYTES = 1 << 30  # what each compression bomb inflates to uncapped (twice that for candump)
@@ -167,6 +167,9 @@ def attacks(url: str) -> list[tuple[str, Callable[[httpx.Client], str]]]:
     for fmt, bomb in bombs.items():
         listing.append((f"gzip bomb {fmt}, {len(bomb) / 2**20:.1f} MiB gzipped",
                         partial(upload, name=f"drive.{fmt}.gz", body=bomb)))
+    blf = blf_bomb(3_000_000)
+    listing.append((f"BLF of zlib containers, {len(blf) / 2**20:.1f} MiB (144 MB of frames)",
+                    partial(upload, name="drive.blf", body=blf)))
     listing.append(("3 mf4 gzip bombs at once", lambda c: concurrent_bombs(url, bombs["mf4"], 3)))
     return listing
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import gzip
 import io
+import tempfile
+from pathlib import Path
 
 from tests.conftest import REPO
 
@@ -32,6 +34,20 @@ def gzip_bomb(fmt: str, inflated: int) -> bytes:
         for _ in range(inflated // len(block) + 1):
             f.write(block)
     return out.getvalue()
+
+
+def blf_bomb(frames: int) -> bytes:
+    """A BLF of ``frames`` identical frames at one timestamp: its zlib containers inflate about 280x."""
+    import can
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "bomb.blf"
+        writer = can.BLFWriter(path, compression_level=9)
+        msg = can.Message(arbitration_id=0x123, data=bytes(8), timestamp=1.0)
+        for _ in range(frames):
+            writer.on_message_received(msg)
+        writer.stop()
+        return path.read_bytes()
 
 
 def overlapping_dbc(signals: int, filler_messages: int = 0) -> bytes:

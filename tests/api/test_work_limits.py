@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from app.ingest import database
-from tests.api.attacks import BOMB_LINES, gzip_bomb, many_stage_driveline, overlapping_dbc
+from tests.api.attacks import BOMB_LINES, blf_bomb, gzip_bomb, many_stage_driveline, overlapping_dbc
 from tests.api.inprocess import TestClient, in_process
 
 
@@ -94,3 +94,12 @@ def test_validating_an_upload_stops_at_its_cpu_limit(tmp_path: Path) -> None:
         r = client.post("/logs", params={"filename": "drive.log"}, content=log,
                         headers={"content-type": "application/octet-stream"})
         assert r.status_code == 201 and r.json()["frames"] == 400_000, r.text
+
+
+def test_a_blf_of_compressible_containers_stops_at_the_ratio_cap(client: TestClient) -> None:
+    bomb = blf_bomb(800_000)  # 38 MB of frame objects in about 140 kB
+    r = client.post("/logs", params={"filename": "drive.blf"}, content=bomb,
+                    headers={"content-type": "application/octet-stream"})
+    assert r.status_code == 413 and r.json()["code"] == "inflated_too_large", r.text
+    assert r.json()["detail"] == ("drive.blf: decompresses to more than the 32 MiB cap for compressed logs (32x its "
+                                  "compressed size); decompress it yourself or raise the cap")
