@@ -9,6 +9,7 @@ exercised on its own.
 from __future__ import annotations
 
 import json
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -112,3 +113,11 @@ def test_a_log_upload_with_a_second_file_is_refused_as_it_arrives(tmp_path: Path
             assert r.status_code == 400 and r.json()["code"] == code, r.text
             assert leftovers(data) == []
         assert client.get("/logs").json() == []
+
+
+def test_the_server_keeps_every_temporary_file_in_the_data_directory(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    before = tempfile.gettempdir()
+    with in_process(data):
+        assert Path(tempfile.gettempdir()) == (data / "tmp").resolve()  # inflated MF4s, libraries' files
+    assert tempfile.gettempdir() == before
