@@ -18,6 +18,7 @@ subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
      +-- AnalysisError                    (422)
      |    +-- InsufficientDataError       (422)
      |    +-- ImplausibleSignalError      (422)  most of a channel beyond what the vehicle can do (wrong DBC)
+     |    +-- WorkLimitError              (422)  a request would cost more than its limit (decided before the work)
      +-- InputError (ValueError)          (400)  absurd parameters, bad request values
      +-- UploadTooLargeError              (413)
      +-- UploadTimeoutError (TimeoutError)(408)  an upload stalled longer than the idle limit
@@ -120,6 +121,12 @@ class ImplausibleSignalError(AnalysisError):
     version or scaling (:mod:`app.analysis.logchecks`)."""
 
     code = "implausible_signal"
+
+
+class WorkLimitError(AnalysisError):
+    """The work a request asks for, estimated before it starts, is past its limit (the message names it)."""
+
+    code = "work_limit"
 
 
 class InputError(AppError, ValueError):

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import multiprocessing
 import os
 import socket
@@ -220,7 +221,11 @@ class JobRunner:
                 return
             proc.start()
             self._procs[job.id] = proc
-        if not self._supervise(job, proc):
+        try:
+            supervised = self._supervise(job, proc)
+        finally:
+            self.store.clean_temp(math.inf)  # what the worker left if it was killed (its process is gone now)
+        if not supervised:
             return
         with self._lock:
             closed = self._closed
@@ -233,6 +238,7 @@ class JobRunner:
 def worker_main(url: str, job_id: str, parent: int | None = None) -> None:
     """Entry point of a worker process: run one job against the store at ``url``; dies with ``parent``."""
     from app.storage.url import open_store
+    from app.tempfiles import temp_dir_of
     from app.worker import die_with_parent
 
     if parent is not None:
@@ -241,7 +247,8 @@ def worker_main(url: str, job_id: str, parent: int | None = None) -> None:
             os.nice(WORKER_NICE)
     store = open_store(url)
     try:
-        execute(store, store.get_job(job_id))
+        with temp_dir_of(store.root):
+            execute(store, store.get_job(job_id))
     finally:
         store.close()
 

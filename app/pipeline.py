@@ -410,19 +410,26 @@ def run_analysis(log_path: LogSource, vehicle: VehicleInputs, options: AnalysisO
     return result
 
 
-def inspect_log(path: Path, progress: ProgressFn = _no_progress) -> dict[str, Any]:
+def inspect_log(path: Path, progress: ProgressFn = _no_progress, cpu_s: float | None = None) -> dict[str, Any]:
     """Read a whole log once (salvaging) to count frames and collect what was damaged.
 
     Raises the reader's typed errors (UnsupportedFormatError, LogFormatError) when nothing
-    usable is there.
+    usable is there, and :class:`~app.errors.WorkLimitError` (``validation_limit``) once reading
+    has taken more than ``cpu_s`` seconds of this thread's CPU (checked after each chunk).
     """
+    from app.errors import WorkLimitError
     from app.ingest.readers import open_log
 
     frames = 0
     t_first: int | None = None
     t_last = 0
+    started = time.thread_time()
     with open_log(path) as reader:
         for chunk in reader.chunks():
+            if cpu_s is not None and time.thread_time() - started > cpu_s:
+                raise WorkLimitError(f"{path.name}: reading it took more than {cpu_s:g} s of CPU "
+                                     f"(LASHSCOPE_VALIDATE_CPU_S) and {frames} frames were read by then; "
+                                     "split the log or raise the limit", code="validation_limit")
             if len(chunk):
                 frames += len(chunk)
                 t_first = int(chunk.t_ns[0]) if t_first is None else min(t_first, int(chunk.t_ns[0]))
@@ -442,6 +449,25 @@ def inspect_log(path: Path, progress: ProgressFn = _no_progress) -> dict[str, An
 
 
 GAP_SENSITIVITY_FORMAT = 2  # 2: units stated, per-mm and per-rad values side by side
+# stage-steps (cases x integrator steps per simulated second x stages) a gap sensitivity may cost: ~10-25 ns
+# each, so about 5 s of CPU; the paper preset needs 1e6, a 24-stage chain of soft stages 2e7
+MAX_GAP_SENSITIVITY_WORK = 4e8
+
+
+def gap_sensitivity_work(vehicle: Vehicle) -> float:
+    """What :func:`gap_sensitivity` will cost, in stage-steps, from the vehicle alone (no simulation).
+
+    Raises :class:`~app.errors.WorkLimitError` past :data:`MAX_GAP_SENSITIVITY_WORK`, before any work."""
+    from app.errors import WorkLimitError
+    from app.vehicle_check import steps_per_second
+
+    chain = vehicle.chain
+    work = (2 + 2 * len(vehicle.gap_names)) * steps_per_second(vehicle) * len(chain)
+    if work > MAX_GAP_SENSITIVITY_WORK:
+        raise WorkLimitError(f"the gap sensitivity of {vehicle.name} would take {work:.3g} stage-steps "
+                             f"({len(vehicle.gap_names)} gaps, {len(chain)} stages), more than the limit of "
+                             f"{MAX_GAP_SENSITIVITY_WORK:g}: fewer or softer stages")
+    return work
 
 
 def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> dict[str, Any]:
@@ -462,6 +488,7 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
     from sim.layout import shaft_gap
     from sim.paper import run_case, sensitivities, sensitivity_unit
 
+    gap_sensitivity_work(vehicle)  # past its limit: refused before any simulation
     names = vehicle.gap_names  # the classic five, or the stage chain's gaps
 
     cases = {"nominal": run_case(vehicle, "nominal"), "zero_gaps": run_case(vehicle, "zero_gaps",

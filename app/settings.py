@@ -2,8 +2,10 @@
 
 ``LASHSCOPE_DATA_DIR``          where SQLite and the files live (default ``./lashscope-data``)
 ``LASHSCOPE_MAX_UPLOAD_MB``     upload size cap in MiB (default 1024); larger uploads get 413
-``LASHSCOPE_MAX_INFLATED_MB``   a gzipped MF4 is inflated to a temporary file up to this many MiB (default 4096);
-                              past it the log is refused (code ``inflated_too_large``, 413)
+``LASHSCOPE_MAX_INFLATED_MB``   a gzipped log inflates to at most this many MiB (default 4096) and 32x its compressed
+                              size; past it the log is refused (code ``inflated_too_large``, 413)
+``LASHSCOPE_VALIDATE_CPU_S``    an uploaded log is read once to validate it; past this many CPU seconds it is refused
+                              (422 ``validation_limit``; default 8: BLF/MF4 of several GB, text logs of ~80 MB)
 ``LASHSCOPE_CORS_ORIGINS``      comma-separated origins allowed by CORS (default none)
 ``LASHSCOPE_ANALYSIS_WORKERS``  background analyses run at the same time (default 1)
 ``LASHSCOPE_JOB_MAX_ATTEMPTS``  a job cut off by a crash is re-run until it has started this often
@@ -88,6 +90,7 @@ class Settings(BaseSettings):
     data_dir: Path = Path("lashscope-data")
     max_upload_mb: float = Field(default=1024.0, gt=0)
     max_inflated_mb: float = Field(default=4096.0, gt=0)
+    validate_cpu_s: float = Field(default=8.0, gt=0)  # CPU seconds the server spends validating one upload
     upload_drain_mb: float = Field(default=64.0, ge=0)  # read and discard this much of an oversized body before 413
     cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
     analysis_workers: int = Field(default=1, ge=1, le=16)

@@ -4,6 +4,10 @@ against a real ``lashscope serve`` on a loopback port; first the connection-leve
 
 Run: ``.venv/bin/python bench/fuzz_api.py [--n 10000] [--seed 0]`` (several minutes on 2 cores).
 
+The work attacks of ``bench/attacks_work.py`` (compression bombs of each format, pathological
+DBCs and drivelines, repeated fields) run after the fuzzed requests; kill -9 mid-upload only when
+it runs alone.
+
 Targets (issue 12): 0 responses 500 in >= 10 000 fuzzed requests (multipart, driveline TOML,
 JSON bodies, query parameters; ``tests/api/fuzzing.py``, replayable by seed); 0 files left in
 ``tmp/`` and 0 server handles open on them after the abuse; read p95 <= 150 ms with 30 clients
@@ -34,7 +38,7 @@ sys.path.insert(0, str(REPO))
 from app.demo.build import build_demo_log  # noqa: E402
 from app.demo.scenario import Scenario  # noqa: E402
 from app.settings import default_dbc_dir  # noqa: E402
-from bench import attacks_conn, attacks_keys  # noqa: E402
+from bench import attacks_conn, attacks_keys, attacks_work  # noqa: E402
 from bench.api import hammer, pct  # noqa: E402
 from sim import dump_toml, load_vehicle  # noqa: E402
 from tests.api.conftest import Server, create_vehicle, upload, wait_for  # noqa: E402
@@ -155,6 +159,8 @@ def abuse(c: httpx.Client, srv: Server, seed: int, n: int, stalled: int, analysi
     files, handles = leaks(srv)
     print(f"after the abuse: files left in tmp/: {files}, server handles open on tmp/: {handles}")
     assert c.get("/health").json()["status"] == "ok"
+    for line in attacks_work.run(srv, kill=False):  # the reads below keep this server
+        print(line, flush=True)
 
 
 def main() -> int:

@@ -39,6 +39,7 @@ from sim.params_base import DAMPING, INERTIA, LASH_RAD, SEGMENTS, STIFFNESS, TEE
 KINDS = ("spline", "gear", "planetary", "chain", "differential", "halfshaft")
 ALIASES = {"coupling": "spline", "belt": "chain"}
 DRIVE_KINDS = ("spline", "gear", "planetary", "chain")  # before the differential
+MAX_STAGES = 24  # decided before any stage is parsed: what one check, analysis or what-if may cost
 STAGE_RATIO = (0.1, 30.0)  # one stage's speed ratio input / output
 END_TABLES = {"rotor": "motor", "wheel": "wheel"}  # end entries of the chain -> their own tables
 RESERVED = frozenset({"rotor", "wheel", "wheels", "housing", "vehicle", "mount", "tyre"})  # the model's own bodies
@@ -233,6 +234,9 @@ def parse_chain(raw: Any, first: int = 0) -> tuple[Stage, ...]:
     """
     if not isinstance(raw, list) or not raw:
         raise ParameterError("stage", raw, "must be a non-empty list of [[stage]] tables from rotor to wheels")
+    if len(raw) > MAX_STAGES:
+        raise ParameterError("stage", f"{len(raw)} stages", f"at most {MAX_STAGES} stages (the limit of a "
+                             "driveline; a car has up to about 12): the simulator's cost grows with their square")
     stages = tuple(parse_stage(i + first, s) for i, s in enumerate(raw))
     seen: dict[str, int] = {}
     for i, s in enumerate(stages, start=first):

@@ -54,6 +54,7 @@ from app.jobs import JobRunner
 from app.settings import Settings, get_settings
 from app.storage.results import ResultCache
 from app.storage.url import open_store
+from app.tempfiles import temp_dir_of
 from app.web import install as install_dashboard
 
 ROUTERS: list[APIRouter] = [health.router, logs.router, vehicles.router, analyses.router, series.router,
@@ -103,24 +104,25 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         store = open_store(cfg.store_location, files=cfg.data_dir)
-        store.clean_temp(2 * cfg.upload_idle_s)  # uploads cut off by a stop (not those another server receives)
-        runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts, cfg.job_timeout_s,
-                           lease_s=cfg.job_lease_s, timeouts=cfg.job_timeouts)
-        app.state.store, app.state.runner, app.state.settings = store, runner, cfg
-        app.state.results = ResultCache()
-        runner.on_done.append(lambda job: series.warm(store, app.state.results, job))
-        await asyncio.to_thread(_warm_up)
-        resumed = runner.start()
-        if resumed:
-            log.info("resumed %d queued job(s)", len(resumed))
-        try:
-            yield
-        finally:
-            # The runner first: analyses queued from here on (those of the live recordings) stay queued in
-            # SQLite and run after the next start instead of holding up the exit.
-            runner.shutdown(wait=False)
-            await _stop_live_sessions(app)
-            store.close()
+        store.clean_temp(2 * cfg.upload_idle_s)  # files cut off by a stop (not those another server still receives)
+        with temp_dir_of(store.root):  # every temporary file of the server, a library's too, in the data directory
+            runner = JobRunner(store, cfg.analysis_workers, cfg.job_max_attempts, cfg.job_timeout_s,
+                               lease_s=cfg.job_lease_s, timeouts=cfg.job_timeouts)
+            app.state.store, app.state.runner, app.state.settings = store, runner, cfg
+            app.state.results = ResultCache()
+            runner.on_done.append(lambda job: series.warm(store, app.state.results, job))
+            await asyncio.to_thread(_warm_up)
+            resumed = runner.start()
+            if resumed:
+                log.info("resumed %d queued job(s)", len(resumed))
+            try:
+                yield
+            finally:
+                # The runner first: analyses queued from here on (those of the live recordings) stay queued in
+                # SQLite and run after the next start instead of holding up the exit.
+                runner.shutdown(wait=False)
+                await _stop_live_sessions(app)
+                store.close()
 
     app = FastAPI(title="lashscope", version=__version__, description=DESCRIPTION, lifespan=lifespan,
                   docs_url=None, redoc_url=None)  # /docs is served from packaged assets (app.web)

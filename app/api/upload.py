@@ -11,7 +11,8 @@ Every malformed body is a 400 with a code and leaves nothing behind (partial fil
 deleted, handles closed): a multipart body the parser rejects (wrong boundary, garbage:
 ``multipart_error``), one that ends inside a part (no closing boundary: ``multipart_incomplete``),
 a part header over :data:`MAX_HEADER_BYTES` (``multipart_header_too_large``), more than
-:data:`MAX_PARTS` parts (``too_many_parts``), a file name over :data:`MAX_FILENAME_CHARS`
+:data:`MAX_PARTS` parts (``too_many_parts``), a file field given twice (``repeated_field``) or more
+file parts than the route takes (``too_many_files``), a file name over :data:`MAX_FILENAME_CHARS`
 (``filename_too_long``). A body that sends nothing for ``idle_s`` seconds is dropped with 408
 ``upload_timeout``, so stalled clients cannot hold files and handles open.
 """
@@ -121,8 +122,8 @@ def _suffix(filename: str) -> str:
 
 
 class _Multipart:
-    def __init__(self, boundary: bytes, new_path: object, cap: int, result: UploadResult) -> None:
-        self.new_path, self.cap, self.result = new_path, cap, result
+    def __init__(self, boundary: bytes, new_path: object, cap: int, result: UploadResult, max_files: int) -> None:
+        self.new_path, self.cap, self.result, self.max_files = new_path, cap, result, max_files
         self.sinks: list[_Sink] = []
         self.parts = 0
         self.open_part = False
@@ -166,6 +167,11 @@ class _Multipart:
         _, opts = parse_options_header(self._headers.get(b"content-disposition", b""))
         name = opts.get(b"name", b"").decode("utf-8", "replace")[:MAX_FILENAME_CHARS]
         if b"filename" in opts:
+            if any(sink.field_name == (name or "file") for sink in self.sinks):
+                raise InputError(f"file field {name or 'file'!r} given more than once; send each file once",
+                                 code="repeated_field")
+            if len(self.sinks) >= self.max_files:
+                raise InputError(f"more than {self.max_files} file(s) in the upload", code="too_many_files")
             filename = _safe_name(opts[b"filename"].decode("utf-8", "replace"))
             path = self.new_path(_suffix(filename))  # type: ignore[operator]
             self._sink = _Sink(path, filename, name or "file", self.cap)
@@ -249,8 +255,11 @@ async def _chunks(request: Request, idle_s: float | None) -> AsyncIterator[bytes
 
 async def receive_upload(request: Request, new_path: object, cap: int, drain_bytes: int,
                          raw_filename: str | None = None, urlencoded_form: bool = False,
-                         idle_s: float | None = None) -> UploadResult:
+                         idle_s: float | None = None, max_files: int = 1) -> UploadResult:
     """Stream the request body into files created by ``new_path(suffix)``; see the module docstring.
+
+    A multipart body may carry at most ``max_files`` file parts, each under its own field name; a
+    repeated one or one too many is refused when its headers arrive, before any of it is written.
 
     With ``urlencoded_form``, an ``application/x-www-form-urlencoded`` body is read as form
     fields (no files); otherwise such a body is the raw file (curl ``--data-binary`` sends
@@ -279,7 +288,7 @@ async def receive_upload(request: Request, new_path: object, cap: int, drain_byt
                 raise InputError("multipart upload without a boundary in Content-Type")
             if len(boundary) > 200:
                 raise InputError("multipart boundary longer than 200 bytes", code="multipart_error")
-            mp = _Multipart(boundary, new_path, cap, result)
+            mp = _Multipart(boundary, new_path, cap, result, max_files)
             sinks = mp.sinks
             async for chunk in _chunks(request, idle_s):
                 mp.parser.write(chunk)

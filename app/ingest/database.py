@@ -26,12 +26,19 @@ need repairs to load, is refused (``empty_database``): nothing is invented for i
 Everything else (syntax errors, bad frame IDs, KCD/SYM/ARXML problems) raises
 :class:`~app.errors.DatabaseError` naming the file, the line when known, and the reason.
 Strict mode (``tolerant=False``) applies no repairs and passes ``strict=True`` to cantools.
+
+Loading is bounded before and during the work: a DBC with a message of more than
+:data:`MAX_SIGNALS_PER_MESSAGE` signals is refused before cantools sees it, and tolerant loading
+re-parses the file once per repair for at most :data:`REPAIR_CPU_S` seconds of CPU (a file built
+from overlapping signals would otherwise need hundreds of parses); both refusals are
+``database_too_complex`` and name the limit.
 """
 
 from __future__ import annotations
 
 import logging
 import re
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,6 +49,8 @@ from app.errors import DatabaseError
 
 FORMATS = {".dbc": "dbc", ".kcd": "kcd", ".sym": "sym", ".arxml": "arxml", ".xml": "arxml"}
 _MAX_REPAIR_ROUNDS = 500  # each round fixes one cantools complaint; bounded so a bad file cannot loop
+MAX_SIGNALS_PER_MESSAGE = 1024  # a 64-byte CAN FD frame holds 512 one-bit signals; real files stay far below
+REPAIR_CPU_S = 5.0  # CPU seconds tolerant loading may spend re-parsing a DBC to repair it
 
 _RE_BO = re.compile(r"^\s*BO_\s+(\d+)\s+(\w+)\s*:")
 _RE_SG = re.compile(r"^\s*SG_\s+(\w+)\s*(?:M|m\d+M?)?\s*:")
@@ -333,10 +342,16 @@ def _load_dbc(src: Path, raw: bytes, tolerant: bool) -> LoadedDatabase:
     if not text.strip():
         raise DatabaseError(f"{src}: the database file is empty", code="empty_database")
     doc = _DbcText(text)
+    _check_layout(src, doc)
     if tolerant:
         _drop_unused_vals(doc, repairs)
     sections_checked = False
+    started = time.thread_time()
     for _ in range(_MAX_REPAIR_ROUNDS):
+        if repairs and time.thread_time() - started > REPAIR_CPU_S:
+            raise DatabaseError(f"{src}: still not loadable after {len(repairs)} repairs and {REPAIR_CPU_S:g} s of CPU "
+                                "(the limit of repairing a DBC); fix the overlapping or misplaced signals it "
+                                f"reported first: {repairs[0].message}", code="database_too_complex")
         try:
             with _CantoolsNotes() as notes:
                 db = cantools.database.load_string(doc.text(), database_format="dbc", strict=True)
@@ -356,6 +371,15 @@ def _load_dbc(src: Path, raw: bytes, tolerant: bool) -> LoadedDatabase:
                                 f"{'; '.join(r.message for r in repairs)}", code="empty_database")
         return LoadedDatabase(db, src, "dbc", repairs, encoding, notes.notes())
     raise DatabaseError(f"{src}: gave up after {_MAX_REPAIR_ROUNDS} repairs; the file is too broken to load")
+
+
+def _check_layout(src: Path, doc: _DbcText) -> None:
+    """Refuse a DBC whose messages carry more signals than any frame can (before cantools parses it)."""
+    for name, line, signals in doc.messages().values():
+        if len(signals) > MAX_SIGNALS_PER_MESSAGE:
+            raise DatabaseError(f"{src}: message {name} (line {doc.origin[line]}) has {len(signals)} signals, more "
+                                f"than the {MAX_SIGNALS_PER_MESSAGE} a database may give one message",
+                                code="database_too_complex")
 
 
 def _repair_from_error(doc: _DbcText, exc: Exception, repairs: list[Repair]) -> bool:

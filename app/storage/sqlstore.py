@@ -2,7 +2,8 @@
 
 Layout of the files directory (``root``)::
 
-    <root>/tmp/                       uploads in progress (removed on failure and at startup)
+    <root>/tmp/                       temporary files: uploads in progress, inflated logs (app.tempfiles;
+                                      removed on failure, at startup and when their writer is gone)
     <root>/logs/<sha256><.ext>        uploaded logs, one file per distinct content
     <root>/vehicles/<name>/v<N>/      driveline.toml, database<.ext>, signals.map.toml
     <root>/analyses/<id>/             results written by the pipeline (atomic rename on completion)
@@ -24,7 +25,6 @@ import json
 import os
 import shutil
 import threading
-import time
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -35,8 +35,22 @@ from app.storage.dialect import Connection, Dialect
 from app.storage.jobtable import JobTable, now
 from app.storage.keys import KeyTable
 from app.storage.records import AnalysisRecord, JobStatus, LogRecord, VehicleRecord
+from app.tempfiles import TMP, owner_tag, sweep
 
 VEHICLE_NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789-_")
+MAX_VEHICLE_NAME = 64
+
+
+def check_vehicle_name(name: str) -> str:
+    """``name`` if it can name a vehicle, else 400 ``invalid_vehicle_name``.
+
+    A vehicle's name becomes a directory (``vehicles/<name>/``) and part of file names, so every
+    route checks it before it writes anything: no separators, dots, NULs or upper case can reach a path.
+    """
+    if not name or len(name) > MAX_VEHICLE_NAME or not set(name) <= VEHICLE_NAME_CHARS:
+        raise InputError(f"vehicle name {name[:80]!r}: use 1-{MAX_VEHICLE_NAME} of a-z, 0-9, '-' and '_'",
+                         code="invalid_vehicle_name")
+    return name
 
 
 def file_sha256(*paths: Path) -> str:
@@ -56,7 +70,7 @@ class SQLStore(JobTable, KeyTable):
     def __init__(self, root: Path) -> None:
         self.root = Path(root).resolve()
         try:
-            for sub in ("tmp", "logs", "vehicles", "analyses", "jobs"):
+            for sub in (TMP, "logs", "vehicles", "analyses", "jobs"):
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise StorageError(f"cannot create the data directory {self.root.name!r}: {exc.strerror}") from exc
@@ -111,20 +125,14 @@ class SQLStore(JobTable, KeyTable):
 
     # -- files -------------------------------------------------------------------------
     def temp_path(self, suffix: str = "") -> Path:
-        return self.root / "tmp" / f"{uuid.uuid4().hex}{suffix}"
+        """A new file name under ``<root>/tmp`` tagged with this process (:func:`app.tempfiles.owner_tag`)."""
+        return self.root / TMP / f"{owner_tag()}{uuid.uuid4().hex}{suffix}"
 
     def clean_temp(self, older_than_s: float = 0.0) -> int:
-        """Remove uploads cut off by a stop: those not written to for ``older_than_s`` seconds (an upload
-        still being received by another server on the same files is younger than its idle limit)."""
-        n = 0
-        cutoff = time.time() - older_than_s
-        for p in (self.root / "tmp").iterdir():
-            with contextlib.suppress(OSError):
-                if older_than_s > 0 and p.stat().st_mtime > cutoff:
-                    continue
-                shutil.rmtree(p) if p.is_dir() else p.unlink()
-                n += 1
-        return n
+        """Remove temporary files whose writer on this host is gone (a server or worker stopped mid-upload or
+        mid-inflation) and those not written to for ``older_than_s`` seconds (an upload still being received
+        by another server on the same files is younger than its idle limit); 0: every one."""
+        return sweep(self.root / TMP, older_than_s)
 
     def analysis_dir(self, analysis_id: str) -> Path:
         return self.root / "analyses" / analysis_id
@@ -206,8 +214,7 @@ class SQLStore(JobTable, KeyTable):
     def add_vehicle(self, name: str, *, driveline: Path, database: Path, signal_map: Path,
                     summary: dict[str, Any]) -> tuple[VehicleRecord, bool]:
         """Store a new version of vehicle ``name`` (files are copied); identical content returns the latest."""
-        if not name or len(name) > 64 or not set(name) <= VEHICLE_NAME_CHARS:
-            raise InputError(f"vehicle name {name!r}: use 1-64 of a-z, 0-9, '-' and '_'")
+        check_vehicle_name(name)
         digest = file_sha256(driveline, database, signal_map)
         with self._tx() as db:
             self.dialect.serialise(db, f"vehicle {name}")  # two uploads never both take the next version

@@ -56,8 +56,10 @@ def test_malformed_multipart_is_400_and_leaves_nothing(client: TestClient, tmp_p
         (_part("file", "d.asc", b"x", b"X-Pad: " + b"p" * 2_000_000 + b"\r\n") + b"\r\n--XX--\r\n", MP,
          "multipart_error"),
         (_part("file", "a" * 300 + ".asc", b"x") + b"\r\n--XX--\r\n", MP, "filename_too_long"),
-        (b"".join(_part(f"f{i}", f"{i}.asc", b"x") + b"\r\n" for i in range(20)) + b"--XX--\r\n", MP,
-         "too_many_parts"),
+        (b"".join(f'--XX\r\nContent-Disposition: form-data; name="f{i}"\r\n\r\nx\r\n'.encode() for i in range(20))
+         + b"--XX--\r\n", MP, "too_many_parts"),
+        (b"".join(_part(f"f{i}", f"{i}.asc", b"x") + b"\r\n" for i in range(2)) + b"--XX--\r\n", MP,
+         "too_many_files"),
         (b"--XX\r\nContent-Disposition: form-data; name=\"file\"; filename=\"d.asc\"\r\n", MP, "multipart_incomplete"),
         (_part("file", "d.asc", b"x") + b"\r\n--XX--\r\n", "multipart/form-data; boundary=" + "b" * 300,
          "multipart_error"),

@@ -15,8 +15,9 @@ import pytest
 
 from app.errors import InflatedTooLargeError
 from app.ingest.frames import FrameChunk
-from app.ingest.readers import mf4 as mf4_module
+from app.ingest.readers import _source as source_module
 from app.ingest.readers import open_log
+from app.tempfiles import owner_tag
 from tests.conftest import DATA, REPO
 
 MF4 = sorted((DATA / "css-electronics-mf4").rglob("*.MF4")) if DATA.is_dir() else []
@@ -47,23 +48,23 @@ def test_gzipped_mf4_reads_like_the_plain_file(path: Path, tmp_path: Path, spool
     for source in (gz, io.BytesIO(gz.read_bytes())):
         with open_log(source) as log:  # type: ignore[arg-type]
             assert log.meta.format == "mf4" and log.meta.start_time == plain_start
-            assert len(list(spool_dir.glob("lashscope-*.mf4"))) == 1  # the inflated copy, while open
+            assert len(list(spool_dir.glob(f"{owner_tag()}*.mf4"))) == 1  # the inflated copy, while open
             got = FrameChunk.concat(list(log.chunks()))
-        assert list(spool_dir.glob("lashscope-*.mf4")) == []  # removed on close
+        assert list(spool_dir.glob(f"{owner_tag()}*.mf4")) == []  # removed on close
         assert len(got) == len(plain) > 100
         for col in ("t_ns", "arb_id", "flags", "dlc", "channel", "data"):
             assert np.array_equal(getattr(got, col), getattr(plain, col)), col
 
 
 def test_gzip_bomb_stops_at_the_cap(tmp_path: Path, spool_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(mf4_module, "MAX_INFLATED_BYTES", 1 << 20)
+    monkeypatch.setattr(source_module, "MAX_INFLATED_BYTES", 1 << 20)
     bomb = tmp_path / "drive.mf4.gz"
     bomb.write_bytes(_bomb(8 << 20))
     assert bomb.stat().st_size < 20_000
     with pytest.raises(InflatedTooLargeError, match=r"drive\.mf4\.gz: decompresses to more than the 1 MiB cap") as err:
         open_log(bomb)
     assert err.value.code == "inflated_too_large" and err.value.status == 413
-    assert list(spool_dir.glob("lashscope-*.mf4")) == []  # the partial file is gone
+    assert list(spool_dir.glob(f"{owner_tag()}*.mf4")) == []  # the partial file is gone
 
 
 def test_gzip_bomb_on_the_command_line(tmp_path: Path) -> None:
@@ -75,6 +76,6 @@ def test_gzip_bomb_on_the_command_line(tmp_path: Path) -> None:
                          capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
     assert out.returncode == 2
     assert out.stderr.strip() == ("lashscope: error [inflated_too_large]: drive.mf4.gz: decompresses to more than "
-                                  "the 1 MiB cap for compressed MF4 logs (LASHSCOPE_MAX_INFLATED_MB); decompress it "
+                                  "the 1 MiB cap for compressed logs (LASHSCOPE_MAX_INFLATED_MB); decompress it "
                                   "yourself or raise the cap")
     assert "Traceback" not in out.stderr

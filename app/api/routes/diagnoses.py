@@ -48,6 +48,7 @@ from app.jobkinds.diagnosis import (
 )
 from app.storage.base import Store
 from app.storage.records import JobStatus
+from app.storage.sqlstore import check_vehicle_name
 
 
 class DiagnosisCreate(BaseModel):
@@ -169,6 +170,8 @@ def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict
     from sim import dump_toml, load_vehicle
     from sim.effects import apply_effects
 
+    if body.name is not None:
+        check_vehicle_name(body.name)  # before anything is read or written: the name never reaches a path
     d = _dir(store, diagnosis_id)
     report = _done_report(store, d, diagnosis_id)
     st = read_json(d / STATUS) or {}
@@ -176,12 +179,15 @@ def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict
     effects = chosen(report)
     augmented = apply_effects(with_base(load_vehicle(veh.driveline_path), base_ratios(report)), effects)
     name = body.name or veh.name
-    path = d / f"{name}-augmented.toml"
-    path.write_text(dump_toml(augmented), encoding="utf-8")
-    summary = check_vehicle_files(path, veh.database_path, veh.signal_map_path)
-    summary["diagnosis"] = {"id": diagnosis_id, "effects": effects, "from": f"{veh.name}@{veh.version}"}
-    rec, created = store.add_vehicle(name, driveline=path, database=veh.database_path,
-                                     signal_map=veh.signal_map_path, summary=summary)
+    path = store.temp_path(".toml")  # the store keeps its own copy; this one goes either way
+    try:
+        path.write_text(dump_toml(augmented), encoding="utf-8")
+        summary = check_vehicle_files(path, veh.database_path, veh.signal_map_path)
+        summary["diagnosis"] = {"id": diagnosis_id, "effects": effects, "from": f"{veh.name}@{veh.version}"}
+        rec, created = store.add_vehicle(name, driveline=path, database=veh.database_path,
+                                         signal_map=veh.signal_map_path, summary=summary)
+    finally:
+        path.unlink(missing_ok=True)
     update(d / STATUS, applied={"vehicle": rec.name, "version": rec.version, "effects": effects})
     return {"vehicle": rec.name, "version": rec.version, "created": created, "effects": effects,
             "from": f"{veh.name}@{veh.version}"}

@@ -71,7 +71,7 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
         if f.size == 0:
             raise InputError(f"upload {f.filename!r} is empty")
         with user_file_names({f.path: f.filename}):
-            info = await run_in_threadpool(inspect_log, f.path)
+            info = await run_in_threadpool(inspect_log, f.path, cpu_s=settings.validate_cpu_s)
     except BaseException:
         f.path.unlink(missing_ok=True)
         raise

@@ -12,12 +12,16 @@ from fastapi.concurrency import run_in_threadpool
 from app.api.deps import SettingsDep, StoreDep
 from app.api.schemas import ERRORS, GapSensitivityOut, VehicleOut
 from app.api.upload import check_toml, receive_upload, user_file_names
-from app.errors import InputError
+from app.errors import InputError, UploadTooLargeError
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity
 from app.storage.results import json_safe
+from app.storage.sqlstore import check_vehicle_name
 from sim import load_vehicle, preset_names
 
 router = APIRouter(prefix="/vehicles", tags=["vehicles"], responses=ERRORS)
+# bytes each file may have (checked before it is read): a driveline of 24 stages or a signal map is a few kB;
+# the largest production DBC we know (Model 3, 148 messages) is 375 KiB and loads in 1.3 s
+MAX_FILE_BYTES = {"driveline": 256 * 2**10, "signal_map": 256 * 2**10, "dbc": 4 * 2**20}
 
 FORM_DOC = {
     "requestBody": {
@@ -38,21 +42,29 @@ FORM_DOC = {
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=VehicleOut, openapi_extra=FORM_DOC,
              summary="Create a vehicle or a new version of it")
 async def create_vehicle(request: Request, response: Response, store: StoreDep, settings: SettingsDep) -> VehicleOut:
-    """Every file is checked before anything is stored: the driveline must load in the simulator and
+    """Every file is checked before anything is stored, within limits set before the work (413
+    ``vehicle_file_too_large`` past :data:`MAX_FILE_BYTES`; at most 24 stages; a DBC's limits in
+    :mod:`app.ingest.database`): the driveline must load in the simulator and
     pass a cheap trial (one simulated second must need at most 1e6 integrator steps; otherwise 422
     naming the suspect field), the database must load, and the signal map must fit the database.
     Identical content to the latest version returns that version (200, ``unchanged: true``)."""
-    up = await receive_upload(request, store.temp_path, 64 * 2**20, 0, urlencoded_form=True,
-                              idle_s=settings.upload_idle_s)
+    up = await receive_upload(request, store.temp_path, max(MAX_FILE_BYTES.values()), 0, urlencoded_form=True,
+                              idle_s=settings.upload_idle_s, max_files=len(MAX_FILE_BYTES))
     files = {f.field_name: f.path for f in up.files}
     names = {f.path: f.filename for f in up.files}
     try:
         name = up.fields.get("name", "").strip()
         if not name:
             raise InputError("form field 'name' is required")
-        unknown = set(files) - {"driveline", "dbc", "signal_map"}
+        check_vehicle_name(name)
+        unknown = set(files) - set(MAX_FILE_BYTES)
         if unknown:
             raise InputError(f"unexpected file fields {sorted(unknown)}; use driveline, dbc, signal_map")
+        for f in up.files:
+            if f.size > MAX_FILE_BYTES[f.field_name]:
+                raise UploadTooLargeError(f"{f.field_name} {f.filename!r} has {f.size} bytes, more than the "
+                                          f"{MAX_FILE_BYTES[f.field_name] // 1024} KiB a vehicle's {f.field_name} "
+                                          "may have", code="vehicle_file_too_large")
         driveline = files.get("driveline")
         if driveline is None:
             preset = up.fields.get("preset", "").strip()

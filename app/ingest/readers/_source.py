@@ -3,6 +3,12 @@
 Every reader consumes a :class:`ByteStream`: a forward-only byte stream that counts the
 bytes it has handed out (so problems can be reported with a byte offset) and turns the
 errors of a damaged gzip member into :class:`StreamDamage` instead of a foreign exception.
+
+A gzip member inflates to at most :func:`inflate_cap` bytes, decided before any is read: the
+smaller of ``LASHSCOPE_MAX_INFLATED_MB`` (:data:`MAX_INFLATED_BYTES` overrides it in code) and
+:data:`MAX_INFLATE_RATIO` times the compressed size (at least :data:`MIN_INFLATED_BYTES`). CAN logs
+compress 3-20x; a compression bomb (1000x) is refused with :class:`~app.errors.InflatedTooLargeError`
+(413) after a bounded amount of work instead of keeping a reader busy for minutes.
 """
 
 from __future__ import annotations
@@ -17,10 +23,34 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO, Protocol, cast
 
-from app.errors import InputError, LogFormatError, LogNotFoundError, StorageError
+from app.errors import InflatedTooLargeError, InputError, LogFormatError, LogNotFoundError, StorageError
 
 GZIP_MAGIC = b"\x1f\x8b"
 HEAD_BYTES = 65536  # enough for every format's header and a few hundred text lines
+MAX_INFLATED_BYTES: int | None = None  # None: LASHSCOPE_MAX_INFLATED_MB from the settings
+MAX_INFLATE_RATIO = 32  # inflated / compressed bytes of a gzipped log; CAN logs stay well below
+MIN_INFLATED_BYTES = 32 * 2**20  # a small file may inflate this far whatever its ratio
+
+
+def inflate_cap(compressed: int | None = None) -> tuple[int, str]:
+    """Bytes a gzipped (or streamed, for MF4) log may inflate to, and the limit that sets it.
+
+    ``compressed``: the stored size, None when unknown (a pipe): then only the configured cap."""
+    if MAX_INFLATED_BYTES is not None:
+        cap, why = MAX_INFLATED_BYTES, "LASHSCOPE_MAX_INFLATED_MB"
+    else:
+        from app.settings import get_settings
+
+        cap, why = int(get_settings().max_inflated_mb * 2**20), "LASHSCOPE_MAX_INFLATED_MB"
+    if compressed is not None and max(MIN_INFLATED_BYTES, MAX_INFLATE_RATIO * compressed) < cap:
+        cap, why = max(MIN_INFLATED_BYTES, MAX_INFLATE_RATIO * compressed), f"{MAX_INFLATE_RATIO}x its compressed size"
+    return cap, why
+
+
+def too_large(name: str, cap: int, why: str) -> InflatedTooLargeError:
+    """The error for a log that inflates past ``cap`` bytes (``why``: the limit that set the cap)."""
+    return InflatedTooLargeError(f"{name}: decompresses to more than the {cap / 2**20:g} MiB cap for compressed "
+                                 f"logs ({why}); decompress it yourself or raise the cap")
 
 
 class Readable(Protocol):
@@ -79,6 +109,7 @@ class ByteStream:
 
     def __init__(self, raw: Readable, name: str, *, compressed: bool, closers: list[Readable],
                  size: int | None = None, source_tell: Callable[[], int] | None = None) -> None:
+        self._cap = inflate_cap(size) if compressed else None
         self._raw = raw
         self.name = name
         self.compressed = compressed
@@ -121,6 +152,8 @@ class ByteStream:
                 chunks.append(data)
                 self.offset += len(data)
                 want -= len(data)
+                if self._cap is not None and self.offset > self._cap[0]:
+                    raise too_large(self.name, *self._cap)
                 continue
             if chunks:
                 self._pending = damage

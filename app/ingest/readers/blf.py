@@ -33,6 +33,7 @@ from app.errors import LogFormatError, TruncatedLogError
 from app.ingest.frames import FrameChunk, ReadIssue
 from app.ingest.readers import blf_layout as K
 from app.ingest.readers._base import BaseReader, ChunkBuilder
+from app.ingest.readers._source import inflate_cap, too_large
 from app.ingest.readers.blf_containers import (
     CONTAINER_HEADER,
     Container,
@@ -126,6 +127,7 @@ class BLFReader(BaseReader):
         self._type_counts = np.zeros(256, np.int64)
         self._inner_resync: ReadIssue | None = None
         self._inflated = 0  # container bytes walked (after inflation)
+        self._inflate_cap = inflate_cap(self.size)  # zlib containers: the same cap as a gzipped log's
         self._estimates: list[tuple[ReadIssue, bool]] = []  # (issue, counted in inflated bytes)
         builder = ChunkBuilder(self.chunk_frames)
         top = ContainerStream(self._stream)
@@ -183,6 +185,8 @@ class BLFReader(BaseReader):
         if method == 0 and not cut and len(data) > unc_size:
             data = data[:unc_size]  # a corrected container size leaves the padding in the body
         self._inflated += len(data)
+        if self._inflated > self._inflate_cap[0]:
+            raise too_large(self.name, *self._inflate_cap)
         yield from self._walk(data, off, builder)
         if broken:
             self._drop_carry(off)

@@ -16,10 +16,11 @@ recorded as an ``mf4_fallback`` issue with the reason. Both give their columns t
 are refused by the sniffer with a clear message.
 
 MDF is read by random access, so a gzip-compressed MF4 (or one handed over as a stream) is
-first inflated to a temporary file in 1 MiB blocks -- never into memory -- up to a cap
-(``LASHSCOPE_MAX_INFLATED_MB``, default 4096 MiB; :data:`MAX_INFLATED_BYTES` overrides it).
-Past the cap the partial file is removed and :class:`~app.errors.InflatedTooLargeError` names
-the cap; the temporary file is removed when the reader closes.
+first inflated to a temporary file in 1 MiB blocks -- never into memory -- up to the cap of
+every gzipped log (:func:`~app.ingest.readers._source.inflate_cap`: ``LASHSCOPE_MAX_INFLATED_MB``,
+default 4096 MiB, and 32x the compressed size). Past the cap the partial file is removed and
+:class:`~app.errors.InflatedTooLargeError` names the cap; the temporary file (under the server:
+``<data>/tmp``, :mod:`app.tempfiles`) is removed when the reader closes.
 """
 
 from __future__ import annotations
@@ -35,28 +36,19 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from app.errors import InflatedTooLargeError, LogFormatError, StorageError
+from app.errors import LogFormatError, StorageError
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers import mf4_native as native
 from app.ingest.readers._base import BaseReader
-from app.ingest.readers._source import StreamDamage
+from app.ingest.readers._source import StreamDamage, inflate_cap, too_large
 from app.ingest.readers.mf4_blocks import Damaged, MdfFile, Unsupported
+from app.tempfiles import owner_tag
 
 EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFlag.FD, FrameFlag.ERROR,
                                                     FrameFlag.REMOTE, FrameFlag.BRS, FrameFlag.ESI, FrameFlag.TX))
 GROUP_KINDS = ("CAN_DataFrame", "CAN_RemoteFrame", "CAN_ErrorFrame")
-MAX_INFLATED_BYTES: int | None = None  # None: LASHSCOPE_MAX_INFLATED_MB from the settings
 _BLOCK = 1 << 20
 NATIVE = True  # read with mf4_native where the layout allows; False: always through asammdf
-
-
-def inflate_cap() -> int:
-    """Bytes a compressed or streamed MF4 may inflate to on disk."""
-    if MAX_INFLATED_BYTES is not None:
-        return MAX_INFLATED_BYTES
-    from app.settings import get_settings
-
-    return int(get_settings().max_inflated_mb * 2**20)
 
 
 def _field(samples: Any, name: str, n: int, default: int = 0) -> npt.NDArray[np.int64]:
@@ -119,7 +111,7 @@ class MF4Reader(BaseReader):
         if self.path is not None and not self._stream.compressed:
             source: Any = str(self.path)
         else:  # random access needed: a gzip member or a stream goes to a temporary file first
-            source = self._spool = self._inflate(inflate_cap())
+            source = self._spool = self._inflate(*inflate_cap(self._stream.size))
         try:
             try:
                 if NATIVE:
@@ -247,18 +239,17 @@ class MF4Reader(BaseReader):
             self.problem("no_can_groups", "the file has no CAN_DataFrame/RemoteFrame/ErrorFrame channel group "
                          "with records (not CAN bus logging?)")
 
-    def _inflate(self, cap: int) -> str:
-        """Copy the (decompressed) stream to a temporary file, block by block, refusing more than ``cap`` bytes."""
-        fd, name = tempfile.mkstemp(prefix="lashscope-", suffix=".mf4")
+    def _inflate(self, cap: int, why: str) -> str:
+        """Copy the (decompressed) stream to a temporary file, block by block, refusing more than ``cap`` bytes
+        (``why``: the limit that sets the cap)."""
+        fd, name = tempfile.mkstemp(prefix=owner_tag(), suffix=".mf4")  # under the server: <data>/tmp
         written = 0
         try:
             with os.fdopen(fd, "wb") as out:
                 while block := self._stream.read(_BLOCK):
                     written += len(block)
                     if written > cap:
-                        raise InflatedTooLargeError(
-                            f"{self.name}: decompresses to more than the {cap / 2**20:g} MiB cap for compressed MF4 "
-                            "logs (LASHSCOPE_MAX_INFLATED_MB); decompress it yourself or raise the cap")
+                        raise too_large(self.name, cap, why)
                     out.write(block)
         except StreamDamage as exc:
             os.unlink(name)

@@ -1,0 +1,225 @@
+"""Work attacks: small requests that ask the server for a lot of work or a lot of disk.
+
+Each attack runs against a real ``lashscope serve`` while a thread polls ``/health`` and samples the
+server's memory; per attack it prints the answer (status and code), the server's CPU seconds, its
+peak RSS, its open file handles, the temporary files left in ``<data>/tmp``, the files the server
+wrote outside the data directory (in the system temp folder) and the slowest ``/health``.
+
+Run alone: ``.venv/bin/python bench/attacks_work.py`` (about a minute; the attacks' bytes come from
+``tests/api/attacks.py``); ``bench/fuzz_api.py`` runs them too, after its fuzzed requests.
+
+Targets (issue 27): server RSS under 1 GiB and ``/health`` within 1 s through every attack; 0 files
+written outside the data directory; 0 temporary files left after any attack or kill -9 plus restart;
+at most 10 s of server CPU per request.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import socket
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import httpx
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from app.tempfiles import owner_tag  # noqa: E402
+from tests.api.attacks import blf_bomb, gzip_bomb, many_stage_driveline, overlapping_dbc  # noqa: E402
+from tests.api.conftest import Server  # noqa: E402
+
+BOMB_BYTES = 1 << 30  # what each compression bomb inflates to uncapped (twice that for candump)
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+@dataclass
+class Watch:
+    """What the server did while one attack ran."""
+
+    cpu_s: float = 0.0
+    peak_rss_mib: float = 0.0
+    health_max_ms: float = 0.0
+    health_failures: int = 0
+    answers: list[str] = field(default_factory=list)
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU of the server process (its threads), from /proc."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+def rss_mib(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+def handles(pid: int) -> int:
+    return len(list(Path(f"/proc/{pid}/fd").iterdir()))
+
+
+def outside_files(pid: int) -> set[str]:
+    """Files in the system temp folder that name the server process as their writer."""
+    mine = f"{owner_tag().split('-', 1)[0]}-{pid}-"
+    return {p.name for p in Path(tempfile.gettempdir()).iterdir() if p.name.startswith(mine)}
+
+
+@contextmanager
+def watched(srv: Server) -> Iterator[Watch]:
+    """Poll /health (every 0.2 s, 1 s timeout) and the server's RSS while the block runs."""
+    assert srv.proc is not None
+    pid, w, stop = srv.proc.pid, Watch(), threading.Event()
+
+    def poll() -> None:
+        with httpx.Client(base_url=srv.url, timeout=1.0) as c:
+            while not stop.is_set():
+                w.peak_rss_mib = max(w.peak_rss_mib, rss_mib(pid))
+                t0 = time.perf_counter()
+                try:
+                    c.get("/health").raise_for_status()
+                except httpx.HTTPError:
+                    w.health_failures += 1
+                w.health_max_ms = max(w.health_max_ms, (time.perf_counter() - t0) * 1e3)
+                stop.wait(0.2)
+
+    cpu0 = cpu_seconds(pid)
+    w.peak_rss_mib = rss_mib(pid)
+    t = threading.Thread(target=poll, daemon=True)
+    t.start()
+    try:
+        yield w
+    finally:
+        stop.set()
+        t.join()
+        w.cpu_s = cpu_seconds(pid) - cpu0
+        w.peak_rss_mib = max(w.peak_rss_mib, rss_mib(pid))
+
+
+def answer(r: httpx.Response) -> str:
+    try:
+        return f"{r.status_code} {r.json().get('code', '')}".strip()
+    except ValueError:
+        return str(r.status_code)
+
+
+def post_vehicle(c: httpx.Client, name: str, **files: bytes) -> str:
+    form = {"name": name} if "driveline" in files else {"name": name, "preset": "paper"}
+    return answer(c.post("/vehicles", data=form, files={k: (f"{k}.bin", v) for k, v in files.items()}))
+
+
+def upload(c: httpx.Client, name: str, body: bytes) -> str:
+    return answer(c.post("/logs", params={"filename": name}, content=body,
+                         headers={"content-type": "application/octet-stream"}))
+
+
+def repeated_fields(c: httpx.Client) -> str:
+    toml = many_stage_driveline(4)
+    files = [("driveline", (f"d{i}.toml", toml + b"#" * (200 << 10))) for i in range(4)]
+    return answer(c.post("/vehicles", data={"name": "ev"}, files=files))
+
+
+def concurrent_bombs(url: str, bomb: bytes, n: int) -> str:
+    def one(_: int) -> str:
+        with httpx.Client(base_url=url, timeout=300.0) as c:
+            return upload(c, "drive.mf4.gz", bomb)
+
+    with ThreadPoolExecutor(n) as pool:
+        return ", ".join(sorted(set(pool.map(one, range(n)))))
+
+
+def attacks(url: str) -> list[tuple[str, Callable[[httpx.Client], str]]]:
+    bombs = {fmt: gzip_bomb(fmt, BOMB_BYTES * (2 if fmt == "candump" else 1)) for fmt in ("candump", "asc", "trc",
+                                                                                         "mf4")}
+    plain_text = b"(1609459200.000000) can0 123#0011223344556677\n" * 330_000  # 15 MB candump, uncompressed
+    listing: list[tuple[str, Callable[[httpx.Client], str]]] = [
+        ("vehicle name '../../x' (path)", lambda c: post_vehicle(c, "../../x")),
+        ("vehicle name with a NUL", lambda c: post_vehicle(c, "ev\x00x")),
+        ("vehicle file field x4 (200 KiB each)", repeated_fields),
+        ("driveline of 10 000 stages (1 MiB)", lambda c: post_vehicle(c, "ev", driveline=many_stage_driveline(10_000))),
+        ("driveline of 30 stages", lambda c: post_vehicle(c, "ev", driveline=many_stage_driveline(30))),
+        ("DBC, 1100 signals in one message", lambda c: post_vehicle(c, "ev", dbc=overlapping_dbc(1100))),
+        ("DBC, 400 overlapping + 500 messages (124 KB)",
+         lambda c: post_vehicle(c, "ev", dbc=overlapping_dbc(400, filler_messages=500))),
+        ("DBC, 1000 overlapping + 1900 messages (438 KB)",
+         lambda c: post_vehicle(c, "ev", dbc=overlapping_dbc(1000, filler_messages=1900))),
+        ("gap sensitivity, 24 stiff stages (read)",
+         lambda c: (post_vehicle(c, "stiff", driveline=many_stage_driveline(24, stiffness=1e8)),
+                    answer(c.get("/vehicles/stiff/gap-sensitivity")))[1]),
+        ("gap sensitivity, 24 soft stages (read)",
+         lambda c: (post_vehicle(c, "soft", driveline=many_stage_driveline(24)),
+                    answer(c.get("/vehicles/soft/gap-sensitivity")))[1]),
+        ("candump, 15 MB uncompressed", lambda c: upload(c, "plain.log", plain_text)),
+    ]
+    for fmt, bomb in bombs.items():
+        listing.append((f"gzip bomb {fmt}, {len(bomb) / 2**20:.1f} MiB gzipped",
+                        partial(upload, name=f"drive.{fmt}.gz", body=bomb)))
+    blf = blf_bomb(3_000_000)
+    listing.append((f"BLF of zlib containers, {len(blf) / 2**20:.1f} MiB (144 MB of frames)",
+                    partial(upload, name="drive.blf", body=blf)))
+    listing.append(("3 mf4 gzip bombs at once", lambda c: concurrent_bombs(url, bombs["mf4"], 3)))
+    return listing
+
+
+def kill_mid_upload(srv: Server) -> str:
+    """A server killed with kill -9 while an upload arrives, then started again: temp files left."""
+    parts = urlsplit(srv.url)
+    with socket.create_connection((parts.hostname or "127.0.0.1", parts.port or 80)) as s:
+        s.sendall(b"POST /logs?filename=cut.log HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                  b"Content-Type: application/octet-stream\r\nContent-Length: 8000000\r\n\r\n" + b"x" * 1_000_000)
+        deadline = time.monotonic() + 10
+        while not any((srv.data_dir / "tmp").iterdir()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        before = len(list((srv.data_dir / "tmp").iterdir()))
+        srv.stop(signal.SIGKILL)
+    srv.start()
+    return f"temp files: {before} while it arrived, {len(list((srv.data_dir / 'tmp').iterdir()))} after the restart"
+
+
+def run(srv: Server, kill: bool = True) -> list[str]:
+    """Every work attack against ``srv``, one printed line each; with ``kill``, last, the server is killed
+    mid-upload and started again (on another port: ``srv.url`` changes)."""
+    assert srv.proc is not None
+    lines = ["attack | answer | server CPU s | peak RSS MiB | handles | tmp files | outside files | "
+             "/health max ms (failed)"]
+    before = outside_files(srv.proc.pid)
+    with httpx.Client(base_url=srv.url, timeout=600.0) as c:
+        for name, attack in attacks(srv.url):
+            with watched(srv) as w:
+                got = attack(c)
+            pid = srv.proc.pid
+            tmp = len(list((srv.data_dir / "tmp").iterdir()))
+            lines.append(f"{name} | {got} | {w.cpu_s:.2f} | {w.peak_rss_mib:.0f} | {handles(pid)} | {tmp} | "
+                         f"{len(outside_files(pid) - before)} | {w.health_max_ms:.0f} ({w.health_failures})")
+    if kill:
+        lines.append(f"kill -9 mid-upload, restart | {kill_mid_upload(srv)}")
+    return lines
+
+
+def main() -> int:
+    argparse.ArgumentParser(description=__doc__).parse_args()
+    work = Path(tempfile.mkdtemp(prefix="lashscope-attacks-"))
+    srv = Server(work / "data", max_upload_mb=16.0).start()
+    try:
+        for line in run(srv):
+            print(line, flush=True)
+    finally:
+        srv.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
