@@ -1,0 +1,1 @@
+"""Vehicle identification from its own logs."""

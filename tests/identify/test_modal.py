@@ -1,0 +1,188 @@
+"""Model-free modal estimate (app/identify/modal.py) against generators that share none of its equations.
+
+(a) A two-mass torsional system (motor and vehicle inertia on a damped shaft) simulated with
+scipy's exact first-order-hold discretisation, its mode set by (f, zeta), sampled as CAN loggers
+do: 1 kHz, 50 Hz with frames held back and written in bursts of 2-4, and 20 Hz, with timestamp
+jitter, sensor noise and 0.5 rpm quantisation. (b) The independent generator of ``bench/indep``
+(its own multibody equations of the paper car), whose shuffle is compared with the eigenvalues of
+its own linearisation. (c) Input that gives no mode.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from app.errors import InsufficientDataError
+from app.identify.modal import EventWindow, ModalEstimate, estimate_modes, pooled_mode, window_mode
+
+RPM = 30.0 / np.pi
+J_MOTOR = 0.12  # kg m^2: rotor and reducer at the motor
+J_VEHICLE = 1.5  # kg m^2: the vehicle at the motor
+FINE_S = 2e-4  # s, simulation grid
+
+
+def two_mass(f_hz: float, zeta: float) -> signal.StateSpace:
+    """Motor speed (rpm) of two inertias on a shaft whose free-free mode is (f_hz, zeta), driven by motor torque.
+
+    States: shaft twist, motor speed, vehicle speed. The mode of ``J1 J2 / (J1 + J2)`` on ``k``
+    and ``c``: ``omega_n^2 = k / J_r``, ``zeta = c / (2 J_r omega_n)``.
+    """
+    wn = 2 * np.pi * f_hz
+    jr = J_MOTOR * J_VEHICLE / (J_MOTOR + J_VEHICLE)
+    k, c = wn**2 * jr, 2 * zeta * wn * jr
+    a = np.array([[0.0, 1.0, -1.0],
+                  [-k / J_MOTOR, -c / J_MOTOR, c / J_MOTOR],
+                  [k / J_VEHICLE, c / J_VEHICLE, -c / J_VEHICLE]])
+    return signal.StateSpace(a, [[0.0], [1.0 / J_MOTOR], [0.0]], [[0.0, RPM, 0.0]], [[0.0]])
+
+
+@functools.cache
+def _discrete(f_hz: float, zeta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact first-order-hold discretisation of :func:`two_mass` on the simulation grid, as a filter."""
+    ss = two_mass(f_hz, zeta)
+    ad, bd, cd, dd, _ = signal.cont2discrete((ss.A, ss.B, ss.C, ss.D), FINE_S, method="foh")
+    num, den = signal.ss2tf(ad, bd, cd, dd)
+    return num[0], den
+
+
+def logged_stamps(rng: np.random.Generator, t: np.ndarray, period: float, bursty: bool) -> np.ndarray:
+    """Logger timestamps of frames sampled at ``t``: one-sided jitter, and (``bursty``) runs of 2-4
+    frames held back and written back-to-back 0.1 ms apart when the last of them arrives."""
+    out = t + np.abs(rng.normal(0.0, 1e-4, t.size))
+    i = 5
+    while bursty and i < t.size - 5:
+        if rng.random() < 0.3:
+            k = int(rng.integers(2, 5))
+            out[i:i + k] = out[i + k - 1] + 1e-4 * np.arange(k)
+            i += k + 2
+        else:
+            i += 1
+    return out
+
+
+def make_window(rng: np.random.Generator, f_hz: float, zeta: float, fs: float, bursty: bool,
+                direction: float, post_s: float = 1.0) -> EventWindow:
+    """One torque reversal through zero at 0.5 s (ramp 400-1200 N m/s between drawn levels), logged at ``fs``."""
+    t_cross = 0.5
+    t = np.arange(0.0, t_cross + post_s + 0.05, FINE_S)
+    rate = rng.uniform(400.0, 1200.0)
+    lo, hi = -rng.uniform(15.0, 40.0), rng.uniform(30.0, 80.0)
+    torque = np.clip(direction * (t - t_cross) * rate, lo, hi)
+    speed = signal.lfilter(*_discrete(f_hz, zeta), torque)
+    period = 1.0 / fs
+    ts = rng.uniform(0, period) + np.arange(0.0, t[-1] - period, period)
+    sp = np.round((2000.0 + np.interp(ts, t, speed) + rng.normal(0, 0.5, ts.size)) / 0.5) * 0.5
+    tt = rng.uniform(0, period) + np.arange(0.0, t[-1] - period, period)
+    tq = np.round((np.interp(tt, t, torque) + rng.normal(0, 0.3, tt.size)) / 0.1) * 0.1
+    return EventWindow(speed_t=logged_stamps(rng, ts, period, bursty), speed_rpm=sp,
+                       torque_t=logged_stamps(rng, tt, period, bursty), torque_nm=tq, t_cross=t_cross,
+                       direction=direction)
+
+
+def make_log(seed: int, f_hz: float, zeta: float, fs: float, bursty: bool, n: int = 6) -> list[EventWindow]:
+    """``n`` alternating tip-ins and tip-outs of one vehicle."""
+    rng = np.random.default_rng(seed)
+    return [make_window(rng, f_hz, zeta, fs, bursty, 1.0 if i % 2 == 0 else -1.0) for i in range(n)]
+
+
+CASES = [  # (f Hz, zeta, sampling Hz, bursty)
+    (2.5, 0.3, 1000.0, False), (8.0, 0.05, 1000.0, False),
+    (2.5, 0.3, 50.0, True), (8.0, 0.05, 50.0, True),
+    (2.5, 0.3, 20.0, False), (5.0, 0.1, 20.0, False),
+]
+
+
+@pytest.mark.parametrize(("f_hz", "zeta", "fs", "bursty"), CASES)
+def test_mode_of_a_two_mass_system(f_hz, zeta, fs, bursty):
+    est = estimate_modes(make_log(7, f_hz, zeta, fs, bursty))
+    assert est.freq_hz == pytest.approx(f_hz, rel=0.05)
+    assert est.zeta == pytest.approx(zeta, rel=0.2)
+    assert est.n_windows == 6 and est.n_used >= 4
+    assert est.freq_ci[0] < est.freq_hz < est.freq_ci[1] and est.zeta_ci[0] < est.zeta < est.zeta_ci[1]
+    for m in est.windows:
+        assert m.fs_hz == pytest.approx(min(fs, 100.0), rel=0.02)  # 1 kHz decimated, slow channels kept
+        assert m.fit_r2 > 0.9 and m.freq_ci[0] < m.freq_hz < m.freq_ci[1]
+        assert m.freq_hz == pytest.approx(f_hz, rel=0.1)
+
+
+@pytest.mark.parametrize(("f_hz", "zeta", "fs", "bursty", "seeds"), [(5.0, 0.15, 50.0, True, 40),
+                                                                     (8.0, 0.05, 1000.0, False, 40)])
+def test_pooled_interval_coverage(f_hz, zeta, fs, bursty, seeds):
+    """The 90 % intervals of logs of five windows cover the truth about 90 % of the time."""
+    hit_f = hit_z = 0
+    for seed in range(seeds):
+        est = estimate_modes(make_log(1000 + seed, f_hz, zeta, fs, bursty, n=5))
+        hit_f += est.freq_ci[0] <= f_hz <= est.freq_ci[1]
+        hit_z += est.zeta_ci[0] <= zeta <= est.zeta_ci[1]
+    assert 0.75 <= hit_f / seeds <= 0.99
+    assert 0.75 <= hit_z / seeds <= 0.99
+
+
+def test_pooling_over_logs_and_the_result_as_json():
+    windows = [m for seed in (1, 2) for m in (window_mode(w) for w in make_log(seed, 5.0, 0.15, 50.0, True, 4))]
+    modes = [m for m in windows if not isinstance(m, str)]
+    both = pooled_mode(modes, rejected=[(3.0, "a reason")])
+    assert both.n_windows == len(modes) + 1 and both.n_used == len(modes) == 8
+    assert both.rejected == ((3.0, "a reason"),)
+    assert both.freq_hz == pytest.approx(5.0, rel=0.05) and both.freq_ci[0] < 5.0 < both.freq_ci[1]
+    d = json.loads(json.dumps(both.to_dict()))
+    assert d["freq_hz"] == pytest.approx(both.freq_hz) and d["rejected"][-1] == {"t_event": 3.0, "reason": "a reason"}
+    assert len(d["windows"]) == both.n_used and d["windows"][0]["order"] == list(both.windows[0].order)
+
+
+def test_an_outlying_window_is_set_aside():
+    modes = [m for m in map(window_mode, make_log(3, 5.0, 0.15, 50.0, True, 6)) if not isinstance(m, str)]
+    wrong = modes[0].__class__(**{**modes[0].__dict__, "freq_hz": 9.0, "freq_ci": (8.9, 9.1), "t_event": 9.9})
+    est = pooled_mode([*modes, wrong])
+    assert est.n_used == len(modes) and est.rejected[0][0] == 9.9 and "outlier" in est.rejected[0][1]
+    assert est.freq_hz == pytest.approx(5.0, rel=0.02)
+
+
+# --- input that gives no mode ---------------------------------------------------------------------
+
+
+def _with(w: EventWindow, **changes: object) -> EventWindow:
+    return EventWindow(**{**w.__dict__, **changes})
+
+
+@pytest.fixture(scope="module")
+def good() -> EventWindow:
+    return make_window(np.random.default_rng(5), 5.0, 0.15, 50.0, False, 1.0)
+
+
+def test_reasons_for_windows_without_a_mode(good):
+    n = good.speed_t.size
+    assert "too few samples" in window_mode(_with(good, speed_t=good.speed_t[:8], speed_rpm=good.speed_rpm[:8]))
+    assert window_mode(_with(good, speed_rpm=good.speed_rpm[:-3])) == f"speed has {n} times but {n - 3} values"
+    assert "does not leave" in window_mode(_with(good, torque_nm=np.clip(good.torque_nm, -4.0, 4.0)))
+    assert "does not leave" in window_mode(_with(good, direction=-1.0))  # the torque goes the other way
+    # after the lash closed: the crossing too late for the window
+    assert "too few samples after the lash" in window_mode(_with(good, t_cross=float(good.speed_t[-5])))
+    rng = np.random.default_rng(0)
+    flat = np.round((2000.0 + rng.normal(0, 0.5, n)) / 0.5) * 0.5
+    assert "does not follow the torque" in window_mode(_with(good, speed_rpm=flat))
+    assert "does not change" in window_mode(_with(good, speed_rpm=np.full(n, 1500.0)))
+    # a first-order lag: the speed follows the torque without oscillating
+    lag = signal.lsim(([RPM / 0.12], [0.1, 1.0, 0.0]), np.interp(np.arange(0, 1.5, 1e-3), good.torque_t,
+                                                                 good.torque_nm), np.arange(0, 1.5, 1e-3))[1]
+    slow = 2000.0 + np.interp(good.speed_t, np.arange(0, 1.5, 1e-3), lag) + rng.normal(0, 0.5, n)
+    assert "no oscillatory pole pair" in window_mode(_with(good, speed_rpm=slow))
+    nan = good.speed_rpm.copy()
+    nan[::7] = np.nan  # invalid frames are dropped, the rest still gives the mode
+    m = window_mode(_with(good, speed_rpm=nan))
+    assert not isinstance(m, str) and m.freq_hz == pytest.approx(5.0, rel=0.05)
+
+
+def test_no_mode_anywhere_is_insufficient_data(good):
+    flat = _with(good, torque_nm=np.zeros(good.torque_t.size))
+    with pytest.raises(InsufficientDataError) as err:
+        estimate_modes([flat, flat])
+    assert err.value.code == "insufficient_data" and "does not leave" in str(err.value)
+    with pytest.raises(InsufficientDataError):
+        pooled_mode([])
+    assert isinstance(estimate_modes([good, flat]), ModalEstimate)
