@@ -537,8 +537,8 @@ def modes_from_signals(signals: SignalSet, events: Sequence[Event], level: float
     rejected with its reason.
     """
     diag, noise, skipped = prepare(signals, events)
-    t_of = {ev.index: ev.t_cross_s for ev in events}
-    rejected = [(float(t_of.get(int(str(s["index"])), math.nan)), str(s["reason"])) for s in skipped]
+    reasons = {s["index"]: s["reason"] for s in skipped}
+    rejected = [(ev.t_cross_s, str(reasons[ev.index])) for ev in events if ev.index in reasons]
     modes: list[WindowMode] = []
     for ev in diag:
         w = EventWindow(speed_t=ev.speed_t, speed_rpm=ev.speed_meas, torque_t=ev.torque_t, torque_nm=ev.torque_nm,
