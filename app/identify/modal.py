@@ -412,6 +412,34 @@ def _bic(fit: _Fit, n: int) -> float:
     return n * math.log(max(fit.rss, 1e-300) / n) + fit.n_params * math.log(n)
 
 
+@dataclass(frozen=True)
+class Segment:
+    """A window on the uniform grid (``dt`` s), cut where the lash opens again; it is closed from ``start`` on.
+
+    The samples before ``start`` are kept: the model's torque lags reach back into them.
+    """
+
+    speed_rpm: FloatArray
+    torque_nm: FloatArray
+    start: int
+    dt: float
+
+
+def lash_closed_segment(w: EventWindow, *, period_s: float | None = None, band_nm: float = 5.0) -> Segment | str:
+    """The window re-timed, on a uniform grid and cut to where the lash is closed; or why that is not possible.
+
+    Parameters as :func:`window_mode`'s.
+    """
+    on_grid = _uniform(w, period_s)
+    if isinstance(on_grid, str):
+        return on_grid
+    span = _lash_closed(on_grid.torque_t, on_grid.torque_nm, w, on_grid.t, band_nm)
+    if isinstance(span, str):
+        return span
+    i0, i1 = span
+    return Segment(on_grid.y[:i1], on_grid.u[:i1], i0, on_grid.dt)
+
+
 def window_mode(w: EventWindow, *, period_s: float | None = None, band_nm: float = 5.0) -> WindowMode | str:
     """The first torsional mode one event window shows, or the reason it shows none.
 
@@ -422,15 +450,10 @@ def window_mode(w: EventWindow, *, period_s: float | None = None, band_nm: float
         (pass the whole log's when known: a short window's stamps give a noisier estimate).
     band_nm : the torque band around zero in which the lash may be open (N m).
     """
-    on_grid = _uniform(w, period_s)
-    if isinstance(on_grid, str):
-        return on_grid
-    span = _lash_closed(on_grid.torque_t, on_grid.torque_nm, w, on_grid.t, band_nm)
-    if isinstance(span, str):
-        return span
-    i0, i1 = span
-    dt = on_grid.dt
-    y, u = on_grid.y[:i1], on_grid.u[:i1]
+    closed = lash_closed_segment(w, period_s=period_s, band_nm=band_nm)
+    if isinstance(closed, str):
+        return closed
+    y, u, i0, dt = closed.speed_rpm, closed.torque_nm, closed.start, closed.dt
     seg = y[i0:]
     n = seg.size
     tn = np.arange(n, dtype=np.float64)
