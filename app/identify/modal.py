@@ -72,7 +72,7 @@ from app.analysis.diagnosis.noise import sample_period
 from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, prepare
 from app.analysis.diagnosis.retime import retime_bursts
 from app.analysis.events import Event
-from app.errors import InsufficientDataError
+from app.errors import InputError, InsufficientDataError
 from app.signals import SignalSet
 
 FloatArray = npt.NDArray[np.float64]
@@ -82,6 +82,7 @@ MAX_RATE_HZ = 100.0  # faster channels are decimated to at most this rate (modes
 ORDERS: tuple[tuple[int, int], ...] = ((2, 2), (2, 3), (3, 2), (3, 3), (4, 3))  # (na, nb) candidates
 F_MIN_HZ = 0.5  # plausible band of the first torsional mode: F_MIN_HZ .. F_MAX_SHARE x sampling rate
 F_MAX_SHARE = 0.4
+MAX_GAP_PERIODS = 3.5  # longer holes in the speed after the lash closed (three frames lost) reject the window
 MIN_SAMPLES = 14  # samples after the lash has closed
 MIN_R2 = 0.7  # the model must explain this share of the speed beyond a straight line (noise alone: up to about 0.5)
 SAMPLES_PER_PARAM = 2.0  # an order is tried only with this many samples per parameter
@@ -171,7 +172,7 @@ def _clean(t: npt.ArrayLike, v: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
     ta, va = ta[ok], va[ok]
     order = np.argsort(ta, kind="stable")
     ta, va = ta[order], va[order]
-    keep = np.r_[True, np.diff(ta) > 0]
+    keep = np.r_[True, np.diff(ta) > 0][: ta.size]
     return ta[keep], va[keep]
 
 
@@ -205,6 +206,8 @@ class _Grid:
     dt: float
     torque_t: FloatArray
     torque_nm: FloatArray
+    speed_t: FloatArray  # re-timed speed stamps
+    period: float  # their sampling period (s)
 
 
 def _uniform(w: EventWindow, period_s: float | None) -> _Grid | str:
@@ -234,7 +237,7 @@ def _uniform(w: EventWindow, period_s: float | None) -> _Grid | str:
         y = signal.sosfiltfilt(sos, y)[::q]
         u = signal.sosfiltfilt(sos, u)[::q]
         grid = grid[::q]
-    return _Grid(grid, y, u, period * q, tt, tv)
+    return _Grid(grid, y, u, period * q, tt, tv, st, period)
 
 
 def _lash_closed(tt: FloatArray, tv: FloatArray, w: EventWindow, grid: FloatArray, band_nm: float
@@ -440,6 +443,11 @@ def lash_closed_segment(w: EventWindow, *, period_s: float | None = None, band_n
     if isinstance(span, str):
         return span
     i0, i1 = span
+    st = on_grid.speed_t
+    inside = st[(st >= on_grid.t[i0]) & (st <= on_grid.t[i1 - 1])]
+    gap = float(np.diff(inside).max(initial=0.0))
+    if gap > MAX_GAP_PERIODS * on_grid.period:
+        return f"a gap of {gap * 1000:.0f} ms in the speed after the lash closed (frames lost)"
     return Segment(on_grid.y[:i1], on_grid.u[:i1], i0, on_grid.dt)
 
 
@@ -517,9 +525,11 @@ def pooled_mode(windows: Sequence[WindowMode], level: float = 0.9,
     ------
     InsufficientDataError
         (code ``insufficient_data``) when no window gives a mode.
+    InputError
+        (code ``invalid_input``) for a level outside (0, 1).
     """
     if not 0.0 < level < 1.0:
-        raise ValueError(f"level {level!r} must lie in (0, 1)")
+        raise InputError(f"confidence level {level!r} must lie strictly between 0 and 1")
     out_rejected = list(rejected)
     kept = list(windows)
     if not kept:

@@ -15,9 +15,11 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import signal
 
-from app.errors import InsufficientDataError
+from app.errors import InputError, InsufficientDataError
 from app.identify.modal import EventWindow, ModalEstimate, estimate_modes, pooled_mode, window_mode
 
 RPM = 30.0 / np.pi
@@ -172,6 +174,8 @@ def test_reasons_for_windows_without_a_mode(good):
                                                                  good.torque_nm), np.arange(0, 1.5, 1e-3))[1]
     slow = 2000.0 + np.interp(good.speed_t, np.arange(0, 1.5, 1e-3), lag) + rng.normal(0, 0.5, n)
     assert "no oscillatory pole pair" in window_mode(_with(good, speed_rpm=slow))
+    lost = (good.speed_t < 0.8) | (good.speed_t > 0.9)  # five 20 ms frames lost after the lash closed: a 120 ms hole
+    assert "a gap of 120 ms" in window_mode(_with(good, speed_t=good.speed_t[lost], speed_rpm=good.speed_rpm[lost]))
     nan = good.speed_rpm.copy()
     nan[::7] = np.nan  # invalid frames are dropped, the rest still gives the mode
     m = window_mode(_with(good, speed_rpm=nan))
@@ -185,7 +189,39 @@ def test_no_mode_anywhere_is_insufficient_data(good):
     assert err.value.code == "insufficient_data" and "does not leave" in str(err.value)
     with pytest.raises(InsufficientDataError):
         pooled_mode([])
+    with pytest.raises(InputError) as bad_level:
+        pooled_mode([window_mode(good)], level=1.0)  # type: ignore[list-item]
+    assert bad_level.value.code == "invalid_input"
     assert isinstance(estimate_modes([good, flat]), ModalEstimate)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 60), m=st.integers(0, 60), t_cross=st.floats(-1.0, 3.0), direction=st.sampled_from([1.0, -1.0]),
+       seed=st.integers(0, 2**16), scale=st.sampled_from([0.0, 1e-3, 1.0, 1e3]), holes=st.booleans())
+def test_any_input_gives_a_mode_or_a_reason(n, m, t_cross, direction, seed, scale, holes):
+    """Random stamps (repeated, unordered, non-finite), values and crossings: never an exception."""
+    rng = np.random.default_rng(seed)
+    st_, tt = np.sort(rng.uniform(0, 1.5, n)), rng.uniform(0, 1.5, m)
+    sv, tv = scale * rng.normal(0, 50, n), scale * rng.normal(0, 50, m)
+    if holes and n and m:
+        st_[rng.integers(0, n)] = np.nan
+        tv[rng.integers(0, m)] = np.inf
+        st_[: n // 2] = st_[0]
+    out = window_mode(EventWindow(st_, sv, tt, tv, t_cross, direction))
+    assert isinstance(out, str) or np.isfinite(out.freq_hz)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**16), keep=st.floats(0.05, 1.0), shift=st.floats(-0.6, 1.2),
+       fs=st.sampled_from([20.0, 50.0, 1000.0]), noise=st.sampled_from([0.0, 5.0, 200.0]))
+def test_damaged_windows_give_a_mode_or_a_reason(seed, keep, shift, fs, noise):
+    """A real window with frames lost at random, a wrong crossing and noise up to swamping the mode."""
+    rng = np.random.default_rng(seed)
+    w = make_window(rng, 5.0, 0.15, fs, True, 1.0)
+    ks, kt = rng.random(w.speed_t.size) < keep, rng.random(w.torque_t.size) < keep
+    out = window_mode(EventWindow(w.speed_t[ks], w.speed_rpm[ks] + rng.normal(0, noise + 1e-9, int(ks.sum())),
+                                  w.torque_t[kt], w.torque_nm[kt], w.t_cross + shift, w.direction))
+    assert isinstance(out, str) or (np.isfinite(out.freq_hz) and out.freq_ci[0] <= out.freq_ci[1])
 
 
 # --- the independent generator --------------------------------------------------------------------
