@@ -38,9 +38,9 @@ Per window (:func:`window_mode`):
    increments' energy; ``s = ln(z) / T``, ``f = |s| / 2 pi``, ``zeta = -Re(s) / |s|``.
 6. **Interval** by the delta method from the covariance of ``a`` (the Gauss-Newton covariance of
    the projected problem, residual variance from the fit). It takes the order as known and the
-   torque as exact: on the tests' windows a nominal 90 % covers 55-80 % (``bench/modal.py``), and
-   neither a Newey-West covariance nor averaging over the orders by their BIC weights changed that
-   much. The pooled interval therefore does not rest on it (only the weights do).
+   torque as exact: on the tests' windows a nominal 90 % covers 55-80 % (``bench/modal.py``);
+   neither a Newey-West covariance nor averaging over the orders by their BIC weights changed
+   that much. The pooled interval therefore does not rest on it (only the weights do).
 
 A window that gives no mode yields a reason instead (too few samples, the torque never leaving the
 band, the speed not following the torque, no oscillatory pole pair).
@@ -284,10 +284,18 @@ def _basis(a: FloatArray, u_lags: FloatArray, n: int) -> FloatArray:
 
 
 def _project(a: FloatArray, u_lags: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray, int]:
-    """(residual, linear parameters, rank) of the best speed fit for denominator ``a``."""
+    """(residual, linear parameters, rank) of the best speed fit for denominator ``a``.
+
+    The columns are scaled to unit norm first: the torque lags are nearly collinear and their sums
+    dwarf the level column, and a rank cut on the raw columns changed between neighbouring ``a``,
+    which made the projected residual jump and its Jacobian (hence the interval) too small.
+    """
     phi = _basis(a, u_lags, y.size)
-    theta, _, rank, _ = np.linalg.lstsq(phi, y, rcond=1e-9)
-    return y - phi @ theta, np.asarray(theta, dtype=np.float64), int(rank)
+    norm = np.linalg.norm(phi, axis=0)
+    norm[norm == 0] = 1.0
+    scaled, _, rank, _ = np.linalg.lstsq(phi / norm, y, rcond=None)
+    theta = np.asarray(scaled / norm, dtype=np.float64)
+    return y - phi @ theta, theta, int(rank)
 
 
 def _arx_start(dy: FloatArray, u_lags: FloatArray, na: int) -> FloatArray:
