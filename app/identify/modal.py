@@ -84,6 +84,7 @@ F_MIN_HZ = 0.5  # plausible band of the first torsional mode: F_MIN_HZ .. F_MAX_
 F_MAX_SHARE = 0.4
 MAX_GAP_PERIODS = 3.5  # longer holes in the speed after the lash closed (three frames lost) reject the window
 MIN_SAMPLES = 14  # samples after the lash has closed
+MAX_GRID_SHARE = 3.0  # the uniform grid may have at most this many times the samples (the rest were lost)
 MIN_R2 = 0.7  # the model must explain this share of the speed beyond a straight line (noise alone: up to about 0.5)
 SAMPLES_PER_PARAM = 2.0  # an order is tried only with this many samples per parameter
 MAX_EVALS = 100  # residual evaluations of one order's search (a stalled search keeps its best point)
@@ -222,6 +223,9 @@ def _uniform(w: EventWindow, period_s: float | None) -> _Grid | str:
     period = float(period_s) if period_s is not None else sample_period(st)
     if not (period > 0 and math.isfinite(period)):
         return f"speed sample period {period!r} s is not positive"
+    span = float(st[-1] - st[0])
+    if not (MIN_SAMPLES - 1) * period <= span <= MAX_GRID_SHARE * st.size * period:
+        return f"a speed period of {period * 1000:.3g} ms does not fit {st.size} samples over {span:.3f} s"
     st = _retimed(st, period)
     tt = _retimed(tt, sample_period(tt))
     start, period = _sampling_clock(st, period)

@@ -174,6 +174,8 @@ def test_reasons_for_windows_without_a_mode(good):
                                                                  good.torque_nm), np.arange(0, 1.5, 1e-3))[1]
     slow = 2000.0 + np.interp(good.speed_t, np.arange(0, 1.5, 1e-3), lag) + rng.normal(0, 0.5, n)
     assert "no oscillatory pole pair" in window_mode(_with(good, speed_rpm=slow))
+    for period in (1e-9, 1.0):  # a speed period the stamps do not bear out
+        assert "does not fit" in window_mode(good, period_s=period)
     lost = (good.speed_t < 0.8) | (good.speed_t > 0.9)  # five 20 ms frames lost after the lash closed: a 120 ms hole
     assert "a gap of 120 ms" in window_mode(_with(good, speed_t=good.speed_t[lost], speed_rpm=good.speed_rpm[lost]))
     nan = good.speed_rpm.copy()
