@@ -544,9 +544,11 @@ def pooled_mode(windows: Sequence[WindowMode], level: float = 0.9,
         raise InputError(f"confidence level {level!r} must lie strictly between 0 and 1")
     out_rejected = list(rejected)
     kept = list(windows)
+    if not kept and not out_rejected:
+        raise InsufficientDataError("no event windows to estimate a torsional mode from (no torque reversal kept)")
     if not kept:
-        reasons = "; ".join(sorted({r for _, r in out_rejected})) or "no windows"
-        raise InsufficientDataError(f"no event window gives a torsional mode ({len(out_rejected)} tried: {reasons})")
+        reasons = "; ".join(sorted({r for _, r in out_rejected}))
+        raise InsufficientDataError(f"none of the {len(out_rejected)} event windows gives a torsional mode: {reasons}")
     if len(kept) >= 4:
         f = np.array([m.freq_hz for m in kept])
         med = float(np.median(f))

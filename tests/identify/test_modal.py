@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,8 +20,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
+from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
+from app.analysis.diagnosis.truthlog import read_log
+from app.analysis.events import detect_events
 from app.errors import InputError, InsufficientDataError
-from app.identify.modal import EventWindow, ModalEstimate, estimate_modes, pooled_mode, window_mode
+from app.identify.modal import EventWindow, ModalEstimate, estimate_modes, modes_from_signals, pooled_mode, window_mode
+from app.ingest.database import load_database
+from app.ingest.pipeline_signals import load_signals
+from app.ingest.signalmap import REQUIRED, load_signal_map
+from bench.indep.car import nominal_car
+from bench.indep.drive import BAND_A, make_drive
+from bench.indep.dynamics import N_STATE, _rhs, initial_state, pack, simulate
+from bench.indep.record import DBC, MAP, write_drive
+from tests.conftest import shared_file
 
 RPM = 30.0 / np.pi
 J_MOTOR = 0.12  # kg m^2: rotor and reducer at the motor
@@ -188,13 +200,24 @@ def test_no_mode_anywhere_is_insufficient_data(good):
     flat = _with(good, torque_nm=np.zeros(good.torque_t.size))
     with pytest.raises(InsufficientDataError) as err:
         estimate_modes([flat, flat])
-    assert err.value.code == "insufficient_data" and "does not leave" in str(err.value)
+    assert err.value.code == "insufficient_data" and str(err.value).startswith("none of the 2 event windows")
+    assert "does not leave" in str(err.value)
     with pytest.raises(InsufficientDataError):
         pooled_mode([])
     with pytest.raises(InputError) as bad_level:
         pooled_mode([window_mode(good)], level=1.0)  # type: ignore[list-item]
     assert bad_level.value.code == "invalid_input"
     assert isinstance(estimate_modes([good, flat]), ModalEstimate)
+
+
+def test_a_real_capture_without_driving_is_insufficient_data():
+    """A real Hyundai Kona EV P-CAN capture (stationary: power off, on, ready, off) has no torque reversal."""
+    log = shared_file("kona-ev", "230112-7-2019-pcan-ccan-power-off-on-ready-off.csv")
+    smap = load_signal_map(Path(__file__).resolve().parents[2] / "dbc" / "kona_pcan.map.toml")
+    signals, _ = load_signals(log, load_database(shared_file("kona-ev", "dbc", "pcan.dbc")), smap, require=REQUIRED)
+    with pytest.raises(InsufficientDataError, match="no event windows") as err:
+        modes_from_signals(signals, detect_events(signals, DIAGNOSIS_EVENTS))
+    assert err.value.code == "insufficient_data"
 
 
 @settings(max_examples=60, deadline=None)
@@ -232,8 +255,6 @@ def test_damaged_windows_give_a_mode_or_a_reason(seed, keep, shift, fs, noise):
 def linear_shuffle(car) -> tuple[float, float]:
     """(f Hz, zeta) of the lowest oscillatory eigenvalue pair of the generator's own equations,
     linearised with every contact engaged on the drive flank (central differences of its right-hand side)."""
-    from bench.indep.dynamics import N_STATE, _rhs, initial_state, pack
-
     x = initial_state(car, 25.0)
     e = 1e-3  # rad of penetration beyond each half clearance: spring and full damper engaged
     aint = -car.i2 * (car.gap_mesh2 / 2 + e)  # mesh 2: -(intermediate)/i2 - case
@@ -260,15 +281,6 @@ def linear_shuffle(car) -> tuple[float, float]:
 def test_shuffle_of_the_independent_generator(tmp_path):
     """A 30 s drive of the paper car, logged at 100 Hz with drops, bursts and quantisation, read through the
     ingest: the pooled mode agrees with the linearisation of the generator's equations."""
-    from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
-    from app.analysis.diagnosis.truthlog import read_log
-    from app.analysis.events import detect_events
-    from app.identify.modal import modes_from_signals
-    from bench.indep.car import nominal_car
-    from bench.indep.drive import BAND_A, make_drive
-    from bench.indep.dynamics import simulate
-    from bench.indep.record import DBC, MAP, write_drive
-
     car = nominal_car()
     f_lin, zeta_lin = linear_shuffle(car)
     assert 6.5 <= f_lin <= 9.0  # the paper preset's shuffle
