@@ -249,19 +249,23 @@ def _lash_closed(tt: FloatArray, tv: FloatArray, w: EventWindow, grid: FloatArra
     """Grid indices [i0, i1) during which the lash is closed after the crossing.
 
     The torque (re-timed samples ``tt``, ``tv``) is followed on the event's side from its largest
-    value after the crossing: back to the last sample still inside the ``+-band_nm`` band (the
-    segment starts after it) and forward to the first one inside it again (a next reversal; the
-    segment ends there), so a torque dithering on the band's edge during the ramp does not cut it.
+    value in its first excursion after the crossing (up to where it crosses zero again): back to
+    the last sample still inside the ``+-band_nm`` band (the segment starts after it) and forward
+    to the first one inside it again (a next reversal; the segment ends there), so a torque
+    dithering on the band's edge during the ramp does not cut it.
     """
     side = math.copysign(1.0, w.direction) * tv
     after = np.flatnonzero(tt >= w.t_cross)
-    if after.size == 0 or float(side[after].max()) <= band_nm:
+    out = after[side[after] > band_nm]
+    if out.size == 0:
         return f"the torque does not leave the +-{band_nm:g} N m band after the crossing"
-    peak = int(after[np.argmax(side[after])])
+    back = np.flatnonzero(side[out[0]:] < 0.0)  # the torque crosses zero again: a later event
+    first = after[0], out[0] + back[0] if back.size else tv.size
+    peak = first[0] + int(np.argmax(side[first[0]:first[1]]))
     inside = side <= band_nm
-    before = np.flatnonzero(inside[after[0]:peak])
+    before = np.flatnonzero(inside[first[0]:peak])
     later = np.flatnonzero(inside[peak:])
-    t0 = float(tt[after[0] + before[-1] + 1]) if before.size else float(tt[after[0]])
+    t0 = float(tt[first[0] + before[-1] + 1]) if before.size else float(tt[first[0]])
     t1 = float(tt[peak + later[0]]) if later.size else math.inf
     i0 = int(np.searchsorted(grid, t0))
     i1 = int(np.searchsorted(grid, t1))

@@ -24,7 +24,15 @@ from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
 from app.analysis.diagnosis.truthlog import read_log
 from app.analysis.events import detect_events
 from app.errors import InputError, InsufficientDataError
-from app.identify.modal import EventWindow, ModalEstimate, estimate_modes, modes_from_signals, pooled_mode, window_mode
+from app.identify.modal import (
+    EventWindow,
+    ModalEstimate,
+    estimate_modes,
+    lash_closed_segment,
+    modes_from_signals,
+    pooled_mode,
+    window_mode,
+)
 from app.ingest.database import load_database
 from app.ingest.pipeline_signals import load_signals
 from app.ingest.signalmap import REQUIRED, load_signal_map
@@ -155,6 +163,19 @@ def test_an_outlying_window_is_set_aside():
     est = pooled_mode([*modes, wrong])
     assert est.n_used == len(modes) and est.rejected[0][0] == 9.9 and "outlier" in est.rejected[0][1]
     assert est.freq_hz == pytest.approx(5.0, rel=0.02)
+
+
+def test_the_lash_closed_segment_is_the_first_excursion_after_the_crossing():
+    """A tip-in, a tip-out at 1.0-1.1 s and a larger tip-in at 1.4 s: the segment runs from where the first
+    tip-in's torque leaves the band to where the tip-out brings it back, whatever comes later."""
+    t = np.arange(0.0, 2.0, 0.02)
+    torque = np.interp(t, [0.0, 0.5, 0.6, 1.0, 1.1, 1.4, 1.5, 2.0],
+                       [-30.0, -30.0, 60.0, 60.0, -30.0, -30.0, 150.0, 150.0])
+    torque[(t > 0.5) & (t < 0.56)] = 5.0  # dithering on the band's edge on the way up
+    seg = lash_closed_segment(EventWindow(t, 2000.0 + t, t, torque, t_cross=0.5 - 30 / 900, direction=1.0))
+    assert not isinstance(seg, str) and seg.dt == pytest.approx(0.02)
+    assert seg.start * seg.dt == pytest.approx(0.56, abs=1e-6)  # first sample past the dither
+    assert seg.speed_rpm.size * seg.dt == pytest.approx(1.08, abs=1e-6)  # up to the tip-out's band entry
 
 
 # --- input that gives no mode ---------------------------------------------------------------------
