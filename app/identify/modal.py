@@ -38,9 +38,11 @@ Per window (:func:`window_mode`):
    increments' energy; ``s = ln(z) / T``, ``f = |s| / 2 pi``, ``zeta = -Re(s) / |s|``.
 6. **Interval** by the delta method from the covariance of ``a`` (the Gauss-Newton covariance of
    the projected problem, residual variance from the fit). It takes the order as known and the
-   torque as exact: on the tests' windows a nominal 90 % covers 55-80 % (``bench/modal.py``);
-   neither a Newey-West covariance nor averaging over the orders by their BIC weights changed
-   that much. The pooled interval therefore does not rest on it (only the weights do).
+   measured torque as exact: on the tests' windows a nominal 90 % covers 55-80 %
+   (``bench/modal.py``), 80-90 % when their torque carries no noise (0.3 N m of it, summed by the
+   model into a random walk of the speed, is most of the gap); neither a Newey-West covariance
+   nor averaging over the orders by their BIC weights changed that much. The pooled interval
+   therefore does not rest on it (only the weights do).
 
 A window that gives no mode yields a reason instead (too few samples, the torque never leaving the
 band, the speed not following the torque, no oscillatory pole pair).
