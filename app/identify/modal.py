@@ -55,7 +55,7 @@ between-window variance) with a Hartung-Knapp interval: Student t with ``n - 1``
 on the weighted spread of the windows about the mean. The interval thus rests on how much the
 windows disagree, not on the per-window intervals (which assume white residuals and a right
 order). With four to ten windows a percentile bootstrap of a median covers too little; the t
-interval on the between-window spread is calibrated for so few (the tests' Monte Carlo: 87-97 %
+interval on the between-window spread is calibrated for so few (``bench/modal.py``: 85-98 %
 for a 90 % interval from five windows).
 """
 
