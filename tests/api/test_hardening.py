@@ -51,6 +51,9 @@ def test_head_answers_every_get_route_with_headers_only(client: TestClient) -> N
 def test_vehicle_texts_are_capped_and_listings_stay_small(client: TestClient) -> None:
     huge = PAPER.replace('description = "', 'description = "' + "x" * 3_000_000, 1)
     r = client.post("/vehicles", data={"name": "big"}, files={"driveline": ("big.toml", huge.encode())})
+    assert "256 KiB" in _error(r, 413, "vehicle_file_too_large")  # refused by its size before it is parsed
+    long = PAPER.replace('description = "', 'description = "' + "x" * 100_000, 1)
+    r = client.post("/vehicles", data={"name": "big"}, files={"driveline": ("big.toml", long.encode())})
     detail = _error(r, 422, "invalid_parameter")
     assert detail.startswith("description = ") and "at most 4000 characters" in detail and len(detail) < 500
     long_name = PAPER.replace('name = "paper"', f'name = "{"n" * 300}"', 1)
@@ -67,8 +70,9 @@ def test_vehicle_texts_are_capped_and_listings_stay_small(client: TestClient) ->
 
 
 def test_error_messages_are_capped(client: TestClient) -> None:
-    """Half a million keys where a table belongs: the message names a dozen, not all of them (it was 9 MB)."""
-    body = f"stages = {{ {', '.join(f'k{i} = {i}' for i in range(500_000))} }}\n" + PAPER
+    """Thousands of keys where a table belongs: the message names a dozen, not all of them (half a million made a
+    9 MB message; such a file is now refused by its size, vehicle_file_too_large)."""
+    body = f"stages = {{ {', '.join(f'k{i} = {i}' for i in range(15_000))} }}\n" + PAPER
     r = client.post("/vehicles", data={"name": "keys"}, files={"driveline": ("keys.toml", body.encode())})
     detail = _error(r, 422, "invalid_parameter")
     assert detail.startswith("stages = {'k0': 0, 'k1': 1,") and "..." in detail and len(r.content) < 1000
