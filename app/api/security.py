@@ -61,6 +61,7 @@ PUBLIC_PREFIXES = ("/static/",)  # the dashboard's own files: the page must load
 UPLOAD_ROUTES = frozenset({("POST", "/logs"), ("POST", "/vehicles")})
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 KEYS_RECHECK_S = 1.0
+AUTH_BURST_S = 2.0  # failed authentications: two seconds' worth, not a dashboard's burst
 MAX_BUCKETS = 4096  # rate buckets kept before idle ones are dropped
 MAX_VERIFIED = 1024  # verified keys remembered (one per token in use: only valid ones get in)
 CHALLENGE = {"WWW-Authenticate": 'Bearer realm="lashscope"'}
@@ -178,11 +179,11 @@ class RequestGuard:
                         "'Authorization: Bearer <key>' (create one with 'lashscope keys create')", CHALLENGE)
         failures = (f"{who} (failed authentications)", self.cfg.auth_failure_rate_per_s,
                     "LASHSCOPE_AUTH_FAILURE_RATE_PER_S")
-        self._spend(*failures, take=0)  # a client guessing keys is turned away before anything is hashed
+        self._spend(*failures, take=0, burst_s=AUTH_BURST_S)  # a client guessing keys is turned away unhashed
         bearer = kind.lower() == "bearer" and bool(token)
         key = self._verify(store, token) if bearer else None
         if key is None:
-            self._spend(*failures)
+            self._spend(*failures, burst_s=AUTH_BURST_S)
             raise _Deny(401, "invalid_key", "the API key is unknown or revoked" if bearer else
                         "the Authorization header must read 'Bearer <key>'", CHALLENGE)
         if not scope_allows(key.scope, need):
@@ -214,16 +215,16 @@ class RequestGuard:
         self._verified[digest] = (key, now)
         return key
 
-    def _spend(self, who: str, rate: float, setting: str, take: float = 1.0) -> None:
+    def _spend(self, who: str, rate: float, setting: str, take: float = 1.0, burst_s: float | None = None) -> None:
         """Take ``take`` tokens from ``who``'s bucket (a key or a client address; refilled at ``rate`` a second,
-        ``rate_burst_s`` deep); 429 when it holds less than one (``take=0`` only checks that). Idle buckets are
-        dropped once there are many (a full bucket holds no state)."""
+        ``burst_s`` deep, default ``rate_burst_s``); 429 when it holds less than one (``take=0`` only checks that).
+        Idle buckets are dropped once there are many (a full bucket holds no state)."""
         if rate <= 0:
             return
         now = time.monotonic()
         if len(self._buckets) >= MAX_BUCKETS:
             self._buckets = {k: v for k, v in self._buckets.items() if now - v[1] < self.cfg.rate_burst_s}
-        depth = self.cfg.rate_burst_s * rate
+        depth = (self.cfg.rate_burst_s if burst_s is None else burst_s) * rate
         tokens, then = self._buckets.get(who, (depth, now))
         tokens = min(depth, tokens + (now - then) * rate)
         if tokens < 1:
