@@ -113,12 +113,12 @@ def torque_quantisation_variance(ev: DiagEvent, step_nm: float, inertia: float) 
     tt, vv = ev.torque_t, ev.torque_nm
     edges = np.concatenate([[tt[0] - 0.5 * (tt[1] - tt[0])], 0.5 * (tt[1:] + tt[:-1]),
                             [tt[-1] + 0.5 * (tt[-1] - tt[-2])]])
-    run = np.concatenate([[0], np.cumsum(np.diff(vv) != 0)])
-    lo = np.maximum(edges[:-1], ev.t_fine[0])
-    # time each torque sample has acted between the simulation start and each speed sample: (n, m)
-    acted = np.clip(np.minimum(edges[1:][None, :], ev.speed_t[:, None]) - lo[None, :], 0.0, None)
-    per_run = np.zeros((n, int(run[-1]) + 1))
-    np.add.at(per_run.T, run, acted.T)
+    # the samples of one run act over consecutive intervals, so a run acts from its first sample's start edge
+    # (not before the simulation start) to its last sample's end edge: (n, runs), not (n, samples)
+    first = np.flatnonzero(np.concatenate([[True], np.diff(vv) != 0]))
+    last = np.concatenate([first[1:] - 1, [vv.size - 1]])
+    start = np.maximum(edges[first], ev.t_fine[0])
+    per_run = np.clip(np.minimum(edges[last + 1][None, :], ev.speed_t[:, None]) - start[None, :], 0.0, None)
     if ev.pre.any():
         per_run -= per_run[ev.pre].mean(axis=0)
     rpm_per_nm_s = 30.0 / np.pi / inertia
