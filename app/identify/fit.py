@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from scipy import stats
+from scipy.optimize import least_squares
 
 from app.analysis.diagnosis.calibrate import GAIN_BOUNDS, Bounds, FitResult, fit
 from app.analysis.diagnosis.forward import DiagEvent, Nuisance, simulate_events, vehicle_with
@@ -46,6 +47,7 @@ from app.identify.base import (
     Physical,
     physical,
     ratio_of,
+    value_of,
     with_base,
 )
 from app.identify.modal import EventWindow, ModalEstimate, estimate_modes
@@ -57,6 +59,9 @@ Progress = Callable[[float, str], None]
 
 PASSES_PER_PARAM = 10  # simulator passes of the joint refinement per parameter (+1), Jacobians included
 IDENT_SPAN = 0.5  # a parameter whose interval covers more than this share of its prior range is not identified
+MIN_MODE_WINDOWS = 4  # windows the model-free mode must rest on to set stiffness and damping
+MAX_MODE_SPAN = 0.05  # ... its frequency's 90 % half-width, relative, at most
+MAX_MODE_NYQUIST = 0.3  # ... and its frequency at most this many times the speed channel's sampling rate
 N_NUISANCE = 2  # unit-box columns before the effects': torque gain and road load (the offset is profiled)
 MIN_EVENTS = 4  # events an identification needs (the interval has G-1 degrees of freedom)
 MIN_RESPONSE = 0.1  # measured / predicted speed swing below which the speed does not follow the torque
@@ -292,11 +297,18 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
         base = baseline
     log.append(f"baseline: chi2/n {base.chi2 / base.n:.3g}, nuisance {base.nuisance.to_dict()}")
     _require_response(vehicle, evs, base, opts.model)
-    starts = _starts(names, vehicle, {"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None)
-    say(0.15, f"joint fit of {', '.join(names)} with the nuisance")
-    joint = _joint(vehicle, evs, split, names, bounds, opts, base, starts)
+    pins = mode_pins(vehicle, names, modal, noise.period_s)
+    fitted_on = with_base(vehicle, {k: r for k, (r, _) in pins.items()})
+    if pins:
+        log.append("stiffness and damping from the model-free first mode: " + ", ".join(
+            f"{k} x{r:.3f} (+-{100 * np.expm1(h):.1f} %)" for k, (r, h) in pins.items()))
+        names = [n for n in names if n not in pins]
+    starts = _starts(names, fitted_on, None if pins else
+                     ({"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None))
+    say(0.15, f"joint fit of {', '.join(names) or 'the nuisance'} with the nuisance")
+    joint = _joint(fitted_on, evs, split, names, bounds, opts, base, starts)
     log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
-    cov, t = _cov(joint, evs, opts.level)
+    cov, t = _cov(joint, evs, opts.level) if names else (np.zeros((0, 0)), _t(opts.level, len(evs)))
     span_u = 2.0 * t * np.sqrt(np.clip(np.diag(cov)[N_NUISANCE:N_NUISANCE + len(names)], 0.0, None))
     dropped = [n for n, s in zip(names, span_u, strict=True) if not s < IDENT_SPAN]
     if dropped:
@@ -306,17 +318,18 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
         if keep:
             say(0.7, f"refit of {', '.join(keep)} with {', '.join(dropped)} at the file's values")
             at = {BASE_EFFECTS[n].id: joint.values[BASE_EFFECTS[n].id] for n in keep}
-            joint = _joint(vehicle, evs, split, keep, bounds, opts, joint, [at])
+            joint = _joint(fitted_on, evs, split, keep, bounds, opts, joint, [at])
             log.append(f"refit {keep}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes")
             cov, t = _cov(joint, evs, opts.level)
-        else:
+        elif not pins:
             raise NotIdentifiableError(
                 "none of " + ", ".join(names) + " is identifiable from these events: their 90 % intervals span "
                 + ", ".join(f"{n} {s:.0%}" for n, s in zip(names, span_u, strict=True)) + " of the prior ranges "
                 "(too few or too similar events, or a speed that hardly responds to the torque)")
         names = keep
     say(0.9, "intervals")
-    result = assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), t, base.chi2, len(evs))
+    result = assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), t, base.chi2, len(evs),
+                      pins)
     result.fit_log = log
     result.modal, result.modal_error = modal, modal_error
     result.elapsed_s = time.process_time() - clock
@@ -363,9 +376,12 @@ def _fittable(vehicle: Vehicle, name: str) -> bool:
 
 
 def _cov(fitted: FitResult, events: Sequence[DiagEvent], level: float) -> tuple[FloatArray, float]:
-    cov = sandwich(fitted, events)
-    t = float(stats.t.ppf(0.5 + level / 2.0, max(len(events) - 1, 1)))
-    return cov, t
+    return sandwich(fitted, events), _t(level, len(events))
+
+
+def _t(level: float, n_events: int) -> float:
+    """Student's t quantile of a two-sided ``level`` interval with one degree of freedom less than the events."""
+    return float(stats.t.ppf(0.5 + level / 2.0, max(n_events - 1, 1)))
 
 
 def refined(vehicle: Vehicle, names: Sequence[str], joint: FitResult, events: Sequence[DiagEvent],
@@ -376,16 +392,19 @@ def refined(vehicle: Vehicle, names: Sequence[str], joint: FitResult, events: Se
 
 
 def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joint: FitResult, cov: FloatArray,
-             t: float, chi2_before: float, n_events: int) -> Identification:
+             t: float, chi2_before: float, n_events: int,
+             pins: Mapping[str, tuple[float, float]] | None = None) -> Identification:
     """Physical figures, intervals and status of the base parameters ``names`` of a fit.
 
     ``joint``'s effects start with the base effects of ``names`` (one parameter each, in that order), after the
-    nuisance; ``cov`` is the unit-box covariance of all its parameters.
+    nuisance; ``cov`` is the unit-box covariance of all its parameters. ``pins``: parameters set from the
+    model-free mode (name -> (ratio, 90 % half-width of its log)), on top of which ``joint`` was fitted.
     """
+    pins = dict(pins or {})
     off = N_NUISANCE
     specs = [BASE_EFFECTS[n].params[0] for n in names]
     raw = np.array([joint.values[BASE_EFFECTS[n].id][s.name] for n, s in zip(names, specs, strict=True)])
-    ratios = {n: ratio_of(n, v) for n, v in zip(names, raw, strict=True)}
+    ratios = {**{k: r for k, (r, _) in pins.items()}, **{n: ratio_of(n, v) for n, v in zip(names, raw, strict=True)}}
     spans = np.array([s.hi - s.lo for s in specs])
     k_n = len(names)
     cov_raw = cov[off:off + k_n, off:off + k_n] * np.outer(spans, spans) if names else np.zeros((0, 0))
@@ -396,15 +415,19 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
     ph_nom, ph = physical(vehicle), physical(identified)
     params: dict[str, Param] = {}
     for q in BASE_NAMES:
-        if q in names:
-            k = names.index(q)
-            # 90 % half-width on the log scale: the statistics (event-clustered) and the model form, in quadrature
-            stat = t * float(np.sqrt(max(cov_log[k, k], 0.0)))
+        if q in names or q in pins:
+            # 90 % half-width on the log scale: the statistics (event-clustered, or the mode's) and the model form,
+            # in quadrature
+            if q in pins:
+                stat, at_bound = pins[q][1], False
+            else:
+                k = names.index(q)
+                stat = t * float(np.sqrt(max(cov_log[k, k], 0.0)))
+                at_bound = bool(f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or
+                                min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo))
             half = float(np.hypot(stat, np.log1p(MODEL_FORM[q])))
             r = ratios[q]
             r_lo, r_hi = r * np.exp(-half), r * np.exp(half)
-            at_bound = bool(f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or
-                            min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo))
             v = ph.value(q)
             lo, hi = v * np.exp(-half), v * np.exp(half)  # each figure scales with its parameter (damping: nearly)
             named = bool(not at_bound and not (r_lo <= 1.0 <= r_hi) and abs(r - 1.0) > PRACTICAL[q])
@@ -425,8 +448,56 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
                                   "nuisance.gain" in joint.at_bound, False, "a nuisance parameter, fitted always")
     return Identification(
         vehicle=identified, params=params, nuisance=_nuisance_dict(nui), ratios=ratios, chi2_before=chi2_before,
-        chi2_after=joint.chi2, n_samples=joint.n, n_events=n_events, fit=joint, nominal_physical=ph_nom,
+        chi2_after=joint.chi2, n_samples=joint.n, n_events=n_events, fit=_with_pins(joint, pins),
+        nominal_physical=ph_nom,
         physical=ph, not_identified=list(dropped))
+
+
+def _with_pins(joint: FitResult, pins: Mapping[str, tuple[float, float]]) -> FitResult:
+    """``joint`` (fitted on the vehicle with the pinned parameters applied) as a fit of the file's vehicle: the
+    pinned base effects first, at their values, so that it evaluates on the file's vehicle like any fit."""
+    if not pins:
+        return joint
+    settings = tuple((BASE_EFFECTS[k], {BASE_EFFECTS[k].params[0].name: value_of(k, r)}) for k, (r, _) in pins.items())
+    values = {eff.id: dict(v) for eff, v in settings}
+    return replace(joint, effects=(*(e.id for e, _ in settings), *joint.effects), values={**values, **joint.values},
+                   settings=(*settings, *joint.settings))
+
+
+def mode_pins(vehicle: Vehicle, names: Sequence[str], modal: ModalEstimate | None, period_s: float
+              ) -> dict[str, tuple[float, float]]:
+    """Stiffness and damping scales that give the vehicle the model-free first mode, with their 90 % half-widths.
+
+    The first mode is what the log measures best and most directly; a grey-box fit of every parameter lets the
+    stiffness and the damping stand in for what the model lacks elsewhere (an actuator lag fitted as 1.9x the
+    damping and 1.5x the lash). So where the mode is clear -- at least :data:`MIN_MODE_WINDOWS` windows, its
+    frequency known within :data:`MAX_MODE_SPAN` and well below the Nyquist frequency -- stiffness and damping are
+    set from it ({} otherwise, and they are fitted with the rest). The half-widths carry the mode's intervals
+    (stiffness goes with the frequency squared).
+    """
+    if modal is None or "stiffness" not in names or "damping" not in names or modal.n_used < MIN_MODE_WINDOWS:
+        return {}
+    f, z = modal.freq_hz, modal.zeta
+    f_half = 0.5 * (modal.freq_ci[1] - modal.freq_ci[0]) / f
+    if not (f_half <= MAX_MODE_SPAN and f * period_s <= MAX_MODE_NYQUIST and 0.0 < z < 1.0):
+        return {}
+    ph = physical(vehicle)
+    if not (np.isfinite(ph.freq_hz) and ph.damping_ratio > 0):
+        return {}
+    k_spec, c_spec = BASE_EFFECTS["stiffness"].params[0], BASE_EFFECTS["damping"].params[0]
+
+    def miss(x: FloatArray) -> FloatArray:
+        got = physical(with_base(vehicle, {"stiffness": 2.0 ** x[0], "damping": 2.0 ** x[1]}))
+        return np.array([got.freq_hz / f - 1.0, got.damping_ratio / z - 1.0])
+
+    x0 = np.array([np.log2((f / ph.freq_hz) ** 2), np.log2(z / ph.damping_ratio * f / ph.freq_hz)])
+    lo, hi = np.array([k_spec.lo, c_spec.lo]), np.array([k_spec.hi, c_spec.hi])
+    sol = least_squares(miss, np.clip(x0, lo + 1e-6, hi - 1e-6), bounds=(lo, hi), xtol=1e-8, max_nfev=60)
+    if np.max(np.abs(sol.fun)) > 0.01:  # the file's chain cannot have this mode within the priors
+        return {}
+    z_half = 0.5 * (modal.zeta_ci[1] - modal.zeta_ci[0]) / z
+    return {"stiffness": (float(2.0 ** sol.x[0]), float(np.log1p(2.0 * f_half))),
+            "damping": (float(2.0 ** sol.x[1]), float(np.log1p(float(np.hypot(z_half, f_half)))))}
 
 
 def _nuisance_dict(n: Nuisance) -> dict[str, float]:

@@ -25,7 +25,7 @@ from app.analysis.diagnosis.calibrate import Bounds, FitResult, fit
 from app.analysis.diagnosis.decide import CandidateScore, Decision, DecisionRules, gap_ratio, has_gap
 from app.analysis.diagnosis.forward import DiagEvent
 from app.analysis.diagnosis.split import Split
-from app.identify.base import BASE_EFFECTS
+from app.identify.base import BASE_EFFECTS, BASE_NAMES
 from app.identify.fit import Identification
 from sim import Vehicle
 from sim.effects import get_effect
@@ -65,7 +65,9 @@ def sentence(ident: Identification) -> str:
 def judge(ident: Identification, score: CandidateScore, n_heldout: Any, draws: Any, rules: DecisionRules,
           nominal_gap: Any) -> Rebase:
     """The outcome of identifying first (see the module docstring)."""
-    bound = [p for p in ident.params.values() if p.identified and p.at_bound]
+    # a base parameter on its prior bound (the torque gain is a nuisance: on its bound it stands in for an input
+    # effect -- a lag -- as often as for a wrong file, and the candidates judge that)
+    bound = [p for k, p in ident.params.items() if k in BASE_NAMES and p.identified and p.at_bound]
     if bound:
         names = ", ".join(f"{p.label} (ratio {p.ratio:.2f} to the file's)" for p in bound)
         reason = (f"identify the vehicle first: {names} rests on the bound of its prior, so the file is further "
