@@ -266,6 +266,7 @@ def run_diagnosis(
     nominal_gap = gap_ratio(b, n, draws, rules.level)
     nominal = vehicle
     ident, ident_score, rebased, ident_note, file_eval = None, None, None, "", None
+    refit_with: Identification | None = None  # base parameters the best effects are refitted with
     joint_ident: dict[str, Identification] = {}  # candidate -> the base parameters identified jointly with it
     say(step[0] / n_steps, "identifying the vehicle's base parameters on calibration events")
     try:
@@ -289,7 +290,7 @@ def run_diagnosis(
                           identified_score=ident_score,
                           nominal_gap=nominal_gap, identification_note=ident_note)
         if outcome.use:  # the candidates explain only what the identified vehicle cannot
-            rebased, file_eval = ident, base_eval
+            rebased, file_eval, refit_with = ident, base_eval, ident
             vehicle = ident.vehicle
             base_fit = nuisance_only(ident)
             base_eval = evaluate(vehicle, base_fit, events, opts.model, None, period)
@@ -297,6 +298,9 @@ def run_diagnosis(
             base_eval = evaluate(vehicle, base_fit, events, opts.model, phases, period)
             b = base_eval.chi2(ho_idx)
         else:
+            # the base alone does not help, but where it says the file is off the best effects are still refitted
+            # with it (an effect can hide the base's signature from a base-only fit, e.g. a lag taking the gain)
+            refit_with = ident if ident.named else None
             ident = replace(ident, params={k: replace(p, named=False) for k, p in ident.params.items()})
     evals: dict[str, Evaluation] = {}
     singles: list[CandidateScore] = []
@@ -361,20 +365,20 @@ def run_diagnosis(
             again = held_out(first, (first,), refined)
             singles = [again if s.id == first else s for s in singles]
 
-    if rebased is not None and singles:
+    if refit_with is not None and singles:
         # the best effect refitted jointly with the base parameters, from the nominal file: the identification
         # alone may have taken part of the effect (a mass and a torque gain standing in for a torque lag), and
         # the effect is judged on what the jointly identified base cannot explain
         # (the two best, so that the runner-up the decision compares with gets the same freedom)
         for top in [c.id for c in sorted(singles, key=lambda c: float(c.chi2.sum()))[:JOINT_REFITS]]:
             say(step[0] / n_steps, f"refitting {top} jointly with the base parameters")
-            joint = joint_with_base(nominal, rebased, cal, split, top, evals[top].fit, bounds, opts.model)
+            joint = joint_with_base(nominal, refit_with, cal, split, top, evals[top].fit, bounds, opts.model)
             fit_order.append(f"{top} + base parameters (jointly, from the file's vehicle): {[e.index for e in cal]}")
             if joint is not None and joint.chi2 < evals[top].fit.chi2:  # kept on calibration events, like every fit
                 again = held_out(top, (top,), joint, on=nominal)
                 singles = [again if c.id == top else c for c in singles]
-                fitted_base = [k for k in rebased.ratios if BASE_EFFECTS[k].id in joint.values]
-                joint_ident[top] = identified_with(nominal, fitted_base, joint, cal, rebased.chi2_before)
+                fitted_base = [k for k in refit_with.ratios if BASE_EFFECTS[k].id in joint.values]
+                joint_ident[top] = identified_with(nominal, fitted_base, joint, cal, refit_with.chi2_before)
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     if rebased is not None and ident_score is not None and decision.status == "none_of_candidates":
@@ -383,6 +387,8 @@ def run_diagnosis(
     elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
         ident = joint_ident.get("+".join(decision.top), ident)
         decision = with_base(decision, ident, nominal_gap if rebased is not None else None)
+        if "+".join(decision.top) not in joint_ident and rebased is None:  # the base played no part in the answer
+            decision = replace(decision, details={k: v for k, v in decision.details.items() if k != "base_parameters"})
     decision = with_tones(decision, noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
