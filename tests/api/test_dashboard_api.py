@@ -135,6 +135,7 @@ def test_effects_are_the_simulators_candidates(served: tuple[httpx.Client, str])
 
 NON_JSON = {("get", "/analyses/{analysis_id}/speed"), ("get", "/analyses/{analysis_id}/events/{event}/speed"),
             ("get", "/analyses/{analysis_id}/signals/{name}"), ("get", "/vehicles/{name}/versions/{version}/driveline"),
+            ("get", "/identifications/{identification_id}/vehicle"),
             ("get", "/diagnoses/{diagnosis_id}/plots/{name}"), ("get", "/live/sessions/{session_id}/stream")}
 
 

@@ -35,6 +35,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     url = f"http://127.0.0.1:{port}"
     env = {**os.environ, "LASHSCOPE_DBC_DIR": str(dbc_dir), "PYTHONPATH": str(REPO)}
     env.pop("LASHSCOPE_LIVE_INTERFACES", None)
+    # these tests start loopback hubs on free ports: the operator allows any (the default allows one port only)
+    env["LASHSCOPE_LIVE_CHANNELS"] = "virtual:*,tcp_loopback:*,socketcan:*"
     proc = subprocess.Popen([sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port),
                              "--data-dir", str(tmp_path / "data"), "--log-level", "warning"],
                             cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
