@@ -62,6 +62,7 @@ IDENT_SPAN = 0.5  # a parameter whose interval covers more than this share of it
 MIN_MODE_WINDOWS = 4  # windows the model-free mode must rest on to set stiffness and damping
 MAX_MODE_SPAN = 0.05  # ... its frequency's 90 % half-width, relative, at most
 MAX_MODE_NYQUIST = 0.3  # ... and its frequency at most this many times the speed channel's sampling rate
+MAX_FILE_MODE_NYQUIST = 0.45  # the file's own first mode beyond this share of the sampling rate: not resolved
 N_NUISANCE = 2  # unit-box columns before the effects': torque gain and road load (the offset is profiled)
 MIN_EVENTS = 4  # events an identification needs (the interval has G-1 degrees of freedom)
 MIN_RESPONSE = 0.1  # measured / predicted speed swing below which the speed does not follow the torque
@@ -303,6 +304,16 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
         log.append("stiffness and damping from the model-free first mode: " + ", ".join(
             f"{k} x{r:.3f} (+-{100 * np.expm1(h):.1f} %)" for k, (r, h) in pins.items()))
         names = [n for n in names if n not in pins]
+    unresolved = _unresolved(vehicle, names, noise.period_s) if not pins else []
+    if unresolved:
+        log.append(f"not identifiable: {', '.join(unresolved)} (the file's first mode at "
+                   f"{physical(vehicle).freq_hz:.1f} Hz is not resolved by a {1.0 / noise.period_s:.0f} Hz speed "
+                   "channel, and no clear mode was measured)")
+        names = [n for n in names if n not in unresolved]
+        if not names:
+            raise NotIdentifiableError(
+                f"{', '.join(unresolved)}: the speed channel samples at {1.0 / noise.period_s:.0f} Hz, too slow for "
+                f"the file's first mode at {physical(vehicle).freq_hz:.1f} Hz, and no clear mode was measured")
     starts = _starts(names, fitted_on, None if pins else
                      ({"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None))
     say(0.15, f"joint fit of {', '.join(names) or 'the nuisance'} with the nuisance")
@@ -310,8 +321,8 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
     cov, t = _cov(joint, evs, opts.level) if names else (np.zeros((0, 0)), _t(opts.level, len(evs)))
     span_u = 2.0 * t * np.sqrt(np.clip(np.diag(cov)[N_NUISANCE:N_NUISANCE + len(names)], 0.0, None))
-    dropped = [n for n, s in zip(names, span_u, strict=True) if not s < IDENT_SPAN]
-    if dropped:
+    dropped = [n for n, s in zip(names, span_u, strict=True) if not s < IDENT_SPAN] + unresolved
+    if len(dropped) > len(unresolved):
         keep = [n for n in names if n not in dropped]
         log.append(f"not identified (90 % interval over {IDENT_SPAN:.0%} of the prior range): "
                    + ", ".join(f"{n} {s:.0%}" for n, s in zip(names, span_u, strict=True) if n in dropped))
@@ -329,12 +340,22 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
         names = keep
     say(0.9, "intervals")
     result = assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), t, base.chi2, len(evs),
-                      pins)
+                      pins, unresolved)
     result.fit_log = log
     result.modal, result.modal_error = modal, modal_error
     result.elapsed_s = time.process_time() - clock
     say(1.0, "identified: " + (", ".join(result.named) or "nothing off the file"))
     return result
+
+
+def _unresolved(vehicle: Vehicle, names: Sequence[str], period_s: float) -> list[str]:
+    """Stiffness and damping when the speed channel is too slow for the file's first mode (above
+    :data:`MAX_FILE_MODE_NYQUIST` of its rate): what such a log shows of the mode is folded, and a fit of them
+    to it would be the sampling's answer, not the car's."""
+    f0 = physical(vehicle).freq_hz
+    if not np.isfinite(f0) or f0 * period_s <= MAX_FILE_MODE_NYQUIST:
+        return []
+    return [n for n in ("stiffness", "damping") if n in names]
 
 
 def _require_response(vehicle: Vehicle, events: Sequence[DiagEvent], base: FitResult, model: str) -> None:
@@ -393,7 +414,8 @@ def refined(vehicle: Vehicle, names: Sequence[str], joint: FitResult, events: Se
 
 def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joint: FitResult, cov: FloatArray,
              t: float, chi2_before: float, n_events: int,
-             pins: Mapping[str, tuple[float, float]] | None = None) -> Identification:
+             pins: Mapping[str, tuple[float, float]] | None = None,
+             unresolved: Sequence[str] = ()) -> Identification:
     """Physical figures, intervals and status of the base parameters ``names`` of a fit.
 
     ``joint``'s effects start with the base effects of ``names`` (one parameter each, in that order), after the
@@ -434,7 +456,8 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
             params[q] = Param(q, LABELS[q], UNITS[q], v, float(lo), float(hi), ph_nom.value(q), r, float(r_lo),
                               float(r_hi), True, at_bound, named, "at a prior bound: not trusted" if at_bound else "")
         else:
-            why = "not identifiable from these events" if q in dropped else "not fitted"
+            why = ("not identifiable from these events" if q in dropped else "not fitted") if q not in unresolved \
+                else "the speed channel is too slow for the first mode"
             if q not in dropped and not _fittable(vehicle, q):
                 why = "the vehicle has no such field"
             nv = ph_nom.value(q) if q != "damping" else ph.damping_ratio
@@ -482,8 +505,8 @@ def mode_pins(vehicle: Vehicle, names: Sequence[str], modal: ModalEstimate | Non
     if not (f_half <= MAX_MODE_SPAN and f * period_s <= MAX_MODE_NYQUIST and 0.0 < z < 1.0):
         return {}
     ph = physical(vehicle)
-    if not (np.isfinite(ph.freq_hz) and ph.damping_ratio > 0):
-        return {}
+    if not (np.isfinite(ph.freq_hz) and ph.damping_ratio > 0) or ph.freq_hz * period_s > MAX_FILE_MODE_NYQUIST:
+        return {}  # (a measured mode well below the file's unresolved one may be the sampling's fold of it)
     k_spec, c_spec = BASE_EFFECTS["stiffness"].params[0], BASE_EFFECTS["damping"].params[0]
 
     def miss(x: FloatArray) -> FloatArray:
