@@ -9,8 +9,8 @@ scored on the held-out events against the file's, like a candidate (:func:`.deci
 - a base parameter resting on its prior bound: the file is further off than the priors allow, and
   nothing is attributed -- ``base_parameters``, "identify the vehicle first", naming the parameter;
 - identified parameters that differ from the file (:attr:`Identification.named`) and a significant
-  held-out improvement: when no gap is left (or less than :data:`LEFT_GAP` times the noise floor),
-  ``base_parameters`` ("your data sheet is off", with the
+  held-out improvement: when no gap is left (less than :data:`LEFT_GAP` times the noise floor, or
+  less than :data:`LEFT_SHARE` of the gap), ``base_parameters`` ("your data sheet is off", with the
   values and intervals); otherwise the identified vehicle becomes the base every candidate effect
   is fitted on, so that an effect is named only for what the identified base cannot explain;
 - anything else: the file's vehicle stays the base (the identification is reported).
@@ -35,6 +35,8 @@ BASE_ID = "base_parameters"
 LEFT_GAP = 3.0  # residual-to-noise ratio an identified vehicle must leave for an effect to be looked for on top
 # (a base identified at a high signal-to-noise ratio leaves a little of its own model form, which an effect with
 # a stiffness of its own -- a mount, a progressive shaft -- then "explains": 1.8x after a 3500x gap)
+LEFT_SHARE = 0.05  # ... and at least this share of the gap above the noise floor (its interval's lower end): a 1 kHz
+# log whose identified vehicle took 1150x the noise floor to 7.7x leaves its own model form, not an effect
 JOINT_PASSES_PER_PARAM = 8  # the joint refit starts at the identified values and the single fit's
 
 
@@ -86,7 +88,7 @@ def judge(ident: Identification, score: CandidateScore, n_heldout: Any, draws: A
                f"{100 * score.explained.value:.0f} % [{100 * score.explained.lo:.0f}, {100 * score.explained.hi:.0f}])")
         return Rebase(None, False, f"identification: {why}; the file's vehicle stays the base")
     left = gap_ratio(score.chi2, n_heldout, draws, rules.level)
-    if not has_gap(left, rules) or left.value < LEFT_GAP:
+    if not has_gap(left, rules) or left.value < LEFT_GAP or score.explained.lo >= 1.0 - LEFT_SHARE:
         reason = (f"the vehicle file is off, and that explains the gap: {sentence(ident)}. With the identified "
                   f"values the held-out residual is {left.value:.2f}x the noise floor (from {nominal_gap.value:.2f}x): "
                   "no unmodelled effect is needed")
