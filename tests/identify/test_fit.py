@@ -107,3 +107,28 @@ def test_bursty_50_hz_sampling_still_identifies_the_stiffness() -> None:
     p = res.params["stiffness"]
     assert p.value / p.nominal == pytest.approx(0.7, rel=0.05)
     assert "stiffness" in res.named
+
+
+def test_stiffness_and_damping_come_from_a_clear_measured_mode() -> None:
+    """A clean 100 Hz drive: the model-free mode sets stiffness and damping (the fit log says so) and the rest is
+    fitted on top; the result holds the truth."""
+    events, noise = prepared(drive_signals({"stiffness": 0.8, "damping": 1.5}, seed=12, duration_s=40.0))
+    res = identify_events(events, noise, load_vehicle("paper"))
+    assert any(line.startswith("stiffness and damping from the model-free first mode") for line in res.fit_log)
+    assert res.params["stiffness"].ratio == pytest.approx(0.8, rel=0.03)
+    assert res.params["damping"].ratio == pytest.approx(1.5, rel=0.1)
+    assert {"stiffness", "damping"} <= set(res.named) and "mass" not in res.named
+
+
+def test_a_speed_channel_too_slow_for_the_mode_leaves_stiffness_and_damping_unidentified() -> None:
+    """20 Hz sampling of the chain-drive car, whose file puts the first mode near 16 Hz: what the log shows of the
+    mode is folded; stiffness and damping stay at the file's values, said so, and mass and lash are still fitted."""
+    sampling = CanSampling(period_s=0.05, jitter_s=0.001, drop_fraction=0.0)
+    events, noise = prepared(drive_signals({"mass": 1.2}, seed=13, duration_s=60.0, vehicle="chain_drive",
+                                           sampling=sampling))
+    res = identify_events(events, noise, load_vehicle("chain_drive"))
+    for name in ("stiffness", "damping"):
+        p = res.params[name]
+        assert not p.identified and p.note == "the speed channel is too slow for the first mode", p
+    assert res.params["mass"].identified
+    assert any("not resolved by a 20 Hz speed channel" in line for line in res.fit_log)
