@@ -329,8 +329,8 @@ class IdentificationResultOut(_Open):
                                        "nrmse_after, verdict_before, verdict_after, per drive before/after")
 
 
-class IdentificationOut(BaseModel):
-    """An identification job: status and progress; ``result`` once done; ``applied`` once stored as a version."""
+class VehicleJobOut(BaseModel):
+    """What every job over a vehicle's logs reports: its id, status, progress and stage, the job row, the vehicle."""
 
     id: str
     status: str
@@ -339,6 +339,11 @@ class IdentificationOut(BaseModel):
     job: JobOut
     vehicle: str
     vehicle_version: int
+
+
+class IdentificationOut(VehicleJobOut):
+    """An identification job: status and progress; ``result`` once done; ``applied`` once stored as a version."""
+
     log_ids: list[str]
     validate_log_ids: list[str]
     params: list[str]
@@ -347,16 +352,9 @@ class IdentificationOut(BaseModel):
     links: dict[str, str]
 
 
-class BatchOut(BaseModel):
+class BatchOut(VehicleJobOut):
     """A batch job: its status and progress; ``counts`` of logs ok / failed / pending; ``summary`` once done."""
 
-    id: str
-    status: str
-    progress: float
-    stage: str
-    job: JobOut
-    vehicle: str
-    vehicle_version: int
     vehicle_id: str
     logs: int
     counts: dict[str, int]

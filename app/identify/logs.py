@@ -16,7 +16,6 @@ running one log's events into another's).
 
 from __future__ import annotations
 
-import hashlib
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -37,6 +36,7 @@ from app.identify.modal import ModalEstimate
 from app.pipeline import AnalysisOptions, analyze_signals, decode_log
 from app.settings import get_settings
 from app.signals import SignalSet
+from app.storage.sqlstore import file_sha256
 from sim import Vehicle, dump_toml
 
 Progress = Callable[[float, str], None]
@@ -149,14 +149,6 @@ def _toml(v: Any) -> str:
     return "[" + ", ".join(_toml(x) for x in v) + "]"
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def shifted(events: Sequence[DiagEvent], dt: float, first_index: int) -> list[DiagEvent]:
     """``events`` moved by ``dt`` seconds and renumbered from ``first_index``."""
     out = []
@@ -218,7 +210,7 @@ def identify_logs(logs: Sequence[Path], vehicle: Vehicle, options: IdentifyOptio
         say(0.02 + 0.08 * k / max(len(logs), 1), f"decoding {Path(path).name}")
         signals, _ = decode_log(path, dbc, smap)
         decoded.append((Path(path).name, signals))
-        hashes[Path(path).name] = _sha256(Path(path))
+        hashes[Path(path).name] = file_sha256(Path(path))
     events, noise, facts = prepared_logs(decoded, opts.events)
     for f in facts:
         f["sha256"] = hashes[f["name"]]
