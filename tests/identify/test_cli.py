@@ -1,0 +1,46 @@
+"""``lashscope identify``: logs in, an identified vehicle file out, the summary, and one-line errors."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from app.cli import main
+from sim import load_vehicle
+from tests.identify.drives import write_drive_log
+
+
+def test_identify_writes_the_identified_vehicle_with_its_provenance(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    a = write_drive_log(tmp_path / "a.blf", {"lash": 1.3}, 41, duration_s=30.0)
+    b = write_drive_log(tmp_path / "b.blf", {"lash": 1.3}, 42, duration_s=30.0)
+    out = tmp_path / "paper_identified.toml"
+    assert main(["identify", str(a), "--vehicle", "paper", "--out", str(out), "--validate", str(b), "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "total lash at the motor" in text and "OFF THE FILE" in text and "off the file: lash" in text
+    assert "withheld drive: NRMSE" in text
+    identified = load_vehicle(out)  # the [provenance] table is read past
+    file = load_vehicle("paper")
+    assert identified.gap("halfshaft").nominal == pytest.approx(1.3 * file.gap("halfshaft").nominal, rel=0.05)
+    prov = tomllib.loads(out.read_text(encoding="utf-8"))["provenance"]
+    assert prov["logs"][0]["name"] == "a.blf" and len(prov["logs"][0]["sha256"]) == 64
+    assert prov["fitted"]["lash"]["ratio"] == pytest.approx(1.3, rel=0.05)
+    assert main(["identify", str(a), "--vehicle", "paper", "--out", str(tmp_path / "j.toml"), "--json",
+                 "--quiet", "--params", "lash,mass"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["named"] == ["lash"] and not doc["params"]["stiffness"]["identified"]
+    assert doc["params"]["stiffness"]["note"] == "not fitted"
+
+
+def test_identify_errors_are_one_line_and_write_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    short = write_drive_log(tmp_path / "short.blf", {}, 43, duration_s=6.0)
+    out = tmp_path / "x.toml"
+    assert main(["identify", str(short), "--vehicle", "paper", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("lashscope: error [insufficient_data]") and "Traceback" not in err
+    assert not out.exists()
+    assert main(["identify", str(short), "--vehicle", "paper", "--params", "colour", "--quiet"]) == 2
+    assert "[invalid_input]" in capsys.readouterr().err
