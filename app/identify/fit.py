@@ -332,7 +332,9 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
             joint = _joint(fitted_on, evs, split, keep, bounds, opts, joint, [at])
             log.append(f"refit {keep}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes")
             cov, t = _cov(joint, evs, opts.level)
-        elif not pins:
+        elif pins:  # only the nuisance is left to fit on the vehicle the mode set
+            joint = _joint(fitted_on, evs, split, [], bounds, opts, joint, [{}])
+        else:
             raise NotIdentifiableError(
                 "none of " + ", ".join(names) + " is identifiable from these events: their 90 % intervals span "
                 + ", ".join(f"{n} {s:.0%}" for n, s in zip(names, span_u, strict=True)) + " of the prior ranges "
