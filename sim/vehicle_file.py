@@ -84,10 +84,10 @@ def dump_toml(vehicle: Vehicle) -> str:
     stages = data.pop("stage", [])
     for key, value in data.items():
         if not isinstance(value, dict):
-            lines.append(f"{key} = {_value(value)}")
+            lines.append(f"{key} = {toml_value(value)}")
     _tables(data, [], lines)
     for stage in stages:  # the chain in order, rotor side first; sub-tables written inline
-        lines += ["", "[[stage]]", *(f"{_key(k)} = {_value(v)}" for k, v in stage.items())]
+        lines += ["", "[[stage]]", *(f"{_key(k)} = {toml_value(v)}" for k, v in stage.items())]
     return "\n".join(lines) + "\n"
 
 
@@ -101,7 +101,7 @@ def _tables(data: dict[str, Any], prefix: list[str], lines: list[str]) -> None:
             lines.append("")
             lines.append(f"[{'.'.join(path)}]")
             for k, v in scalars.items():
-                lines.append(f"{_key(k)} = {_value(v)}")
+                lines.append(f"{_key(k)} = {toml_value(v)}")
         _tables(value, path, lines)
 
 
@@ -109,7 +109,8 @@ def _key(k: str) -> str:
     return k if k.replace("_", "").isalnum() else json.dumps(k)
 
 
-def _value(v: Any) -> str:
+def toml_value(v: Any) -> str:
+    """``v`` as an inline TOML value (numbers, strings, booleans, lists and tables of them)."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -121,7 +122,7 @@ def _value(v: Any) -> str:
     if isinstance(v, str):
         return json.dumps(v)
     if isinstance(v, list | tuple):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
     if isinstance(v, dict):
-        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
+        return "{" + ", ".join(f"{_key(k)} = {toml_value(x)}" for k, x in v.items()) + "}"
     raise ParameterError("vehicle", v, f"cannot write a {type(v).__name__} to TOML")

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from app.cli.report import identified_param
 from app.cli.vehicle_args import add_log_and_vehicle, event_params, vehicle_inputs
 
 
@@ -110,13 +111,7 @@ def summary(doc: dict[str, Any]) -> str:
         ho = ident.get("heldout") or {}
         lines += ["", "identification of the base parameters (calibration events; held-out shrink "
                       f"{_pct(ho.get('shrink'))}):"]
-        for p in ident["params"].values():
-            if p["identified"]:
-                lines.append(f"  {p['label']:44s} {p['value']:.4g} [{p['lo']:.4g}, {p['hi']:.4g}] {p['unit']}  "
-                             f"file {p['nominal']:.4g}" + ("  OFF THE FILE" if p["named"] else "")
-                             + ("  AT PRIOR BOUND" if p["at_bound"] else ""))
-            else:
-                lines.append(f"  {p['label']:44s} not identified ({p['note']})")
+        lines += [f"  {p['label']:44s} {identified_param(p)}" for p in ident["params"].values()]
     loc = doc.get("localisation")
     if loc:
         lines += ["", "where (held-out, baseline): phase  share  residual/noise"]

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from app.cli.diagnose import _progress
+from app.cli.report import identified_param
 from app.cli.vehicle_args import add_vehicle, event_params, vehicle_inputs
 
 
@@ -43,16 +44,6 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
-def _iv(p: dict[str, Any]) -> str:
-    if not p["identified"]:
-        return f"not identified ({p['note']}); kept at {p['nominal']:.4g}"
-    ratio = f"{p['value'] / p['nominal']:.2f}x" if p["nominal"] else "-"
-    flag = "  OFF THE FILE" if p["named"] else ""
-    flag += "  AT PRIOR BOUND" if p["at_bound"] else ""
-    return (f"{p['value']:.4g} [{p['lo']:.4g}, {p['hi']:.4g}] {p['unit']}   file {p['nominal']:.4g}   "
-            f"{ratio}{flag}")
-
-
 def summary(doc: dict[str, Any], out: Path | None) -> str:
     lines = [f"vehicle {doc['vehicle']}: {doc['events']} events from "
              + ", ".join(f"{lg['name']} ({lg['events']})" for lg in doc["logs"])]
@@ -66,7 +57,7 @@ def summary(doc: dict[str, Any], out: Path | None) -> str:
     lines.append("")
     width = max(len(p["label"]) for p in doc["params"].values())
     for p in doc["params"].values():
-        lines.append(f"{p['label']:{width}s}  {_iv(p)}")
+        lines.append(f"{p['label']:{width}s}  {identified_param(p)}")
     lines.append(f"\nresidual / noise on the fitted events: {doc['residual_to_noise_before']:.2f} with the file, "
                  f"{doc['residual_to_noise_after']:.2f} identified")
     v = doc.get("validation")

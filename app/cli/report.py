@@ -89,3 +89,14 @@ def _offset_text(doc: dict[str, Any]) -> str:
         return f"torque-to-speed offset {_f(s['offset_ms'])} ms"
     return (f"torque-to-speed offset not applied (estimate {_f(off.get('lag_s'), 1e3)} ms at correlation "
             f"{_f(off.get('correlation'), 1.0, 2)})")
+
+
+def identified_param(p: dict[str, Any]) -> str:
+    """One identified base parameter of an identification document: value [interval] unit, the file's, flags."""
+    if not p["identified"]:
+        return f"not identified ({p['note']}); kept at {p['nominal']:.4g}"
+    ratio = f"{p['value'] / p['nominal']:.2f}x" if p["nominal"] else "-"
+    flag = "  OFF THE FILE" if p["named"] else ""
+    flag += "  AT PRIOR BOUND" if p["at_bound"] else ""
+    return (f"{p['value']:.4g} [{p['lo']:.4g}, {p['hi']:.4g}] {p['unit']}   file {p['nominal']:.4g}   "
+            f"{ratio}{flag}")

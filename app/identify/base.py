@@ -34,7 +34,7 @@ import numpy as np
 from sim import Vehicle
 from sim.effects.base import Effect, ParamSpec, Values
 from sim.layout import FIELD_MAP
-from sim.linear import state_matrix
+from sim.linear import coupling_rows, state_matrix
 from sim.model import build_chain
 
 BASE_NAMES = ("stiffness", "damping", "mass", "lash")
@@ -131,14 +131,7 @@ LABELS = {"stiffness": "torsional stiffness at the motor", "damping": "first-mod
 def effective_stiffness(vehicle: Vehicle) -> float:
     """Torque at the rotor per radian of rotor twist with the wheels (and the housing) held (N m/rad)."""
     m = build_chain(vehicle)
-    g = np.zeros((m.n_couplings, m.n_bodies))
-    for j in range(m.n_couplings):  # deflection rows without the housing term: the housing is held
-        g[j, m.ca[j]] += 1.0
-        if m.cb2[j] >= 0:
-            g[j, m.cb[j]] -= 0.5 * m.cr[j]
-            g[j, m.cb2[j]] -= 0.5 * m.cr[j]
-        elif m.cb[j] >= 0:
-            g[j, m.cb[j]] -= m.cr[j]
+    g = coupling_rows(m)  # the housing's column drops out with the housing held
     k = g.T @ (m.ck[:, None] * g)
     held = {m.wheel, m.wheel2, m.vehicle, m.housing} - {-1}
     free = [b for b in range(m.n_bodies) if b not in held]

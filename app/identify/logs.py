@@ -38,6 +38,7 @@ from app.settings import get_settings
 from app.signals import SignalSet
 from app.storage.sqlstore import file_sha256
 from sim import Vehicle, dump_toml
+from sim.vehicle_file import toml_value
 
 Progress = Callable[[float, str], None]
 LOG_GAP_S = 1000.0  # s between two logs' time lines
@@ -126,7 +127,7 @@ class IdentifyResult:
                                         f"{len(self.logs)} log(s): {', '.join(self.named) or 'nothing off the file'}"
                                         ).strip(" -"))
         lines = [dump_toml(veh).rstrip("\n"), "", "[provenance]"]
-        lines += [f"{k} = {_toml(v)}" for k, v in self.provenance().items()]
+        lines += [f"{k} = {toml_value(_filled(v))}" for k, v in self.provenance().items()]
         return "\n".join(lines) + "\n"
 
 
@@ -134,19 +135,13 @@ def _r(x: float) -> float | None:
     return round(float(x), 6) if np.isfinite(x) else None
 
 
-def _toml(v: Any) -> str:
-    """A provenance value as inline TOML (strings, numbers, lists and tables of them; None as "")."""
-    if v is None:
-        return '""'
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int | float):
-        return repr(float(v)) if isinstance(v, float) else str(v)
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+def _filled(v: Any) -> Any:
+    """``v`` with every None (a figure that is not finite) written as "", which TOML has no null for."""
     if isinstance(v, dict):
-        return "{" + ", ".join(f'"{k}" = {_toml(x)}' for k, x in v.items()) + "}"
-    return "[" + ", ".join(_toml(x) for x in v) + "]"
+        return {k: _filled(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_filled(x) for x in v]
+    return "" if v is None else v
 
 
 def shifted(events: Sequence[DiagEvent], dt: float, first_index: int) -> list[DiagEvent]:

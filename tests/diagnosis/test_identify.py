@@ -8,7 +8,8 @@ import pytest
 from app.analysis.diagnosis.calibrate import FitResult, trade_offs
 from app.analysis.diagnosis.decide import Decision
 from app.analysis.diagnosis.forward import Nuisance
-from app.analysis.diagnosis.identify import motor_side_lash_mrad, with_identifiability
+from app.analysis.diagnosis.identify import with_identifiability
+from app.identify.base import lash_mrad
 from sim.effects import apply_effects
 from tests.diagnosis.conftest import paper
 
@@ -40,13 +41,13 @@ def test_independent_columns_and_nuisance_pairs_are_not_reported() -> None:
 
 def test_motor_side_lash_of_the_paper_vehicle() -> None:
     v = paper()
-    nominal = motor_side_lash_mrad(v)
+    nominal = lash_mrad(v)
     assert nominal == pytest.approx(373.07, abs=0.01)
     both = apply_effects(v, {"backlash": {"reducer_scale": 2.0, "halfshaft_scale": 2.0}})
-    assert motor_side_lash_mrad(both) == pytest.approx(2 * nominal, rel=1e-9)
+    assert lash_mrad(both) == pytest.approx(2 * nominal, rel=1e-9)
     # the half-shaft gap carries 270.4 of the 373.1 mrad: doubling it adds that much
     hs = apply_effects(v, {"backlash": {"reducer_scale": 1.0, "halfshaft_scale": 2.0}})
-    assert motor_side_lash_mrad(hs) - nominal == pytest.approx(270.36, abs=0.01)
+    assert lash_mrad(hs) - nominal == pytest.approx(270.36, abs=0.01)
 
 
 def test_decision_names_the_pair_and_the_total_lash() -> None:
@@ -57,7 +58,7 @@ def test_decision_names_the_pair_and_the_total_lash() -> None:
                              paper())
     item = d.details["identifiability"][0]
     assert item["params"] == ["backlash.reducer_scale", "backlash.halfshaft_scale"] and item["correlation"] == -0.96
-    total = motor_side_lash_mrad(apply_effects(paper(), vals))
+    total = lash_mrad(apply_effects(paper(), vals))
     assert item["identified"]["value"] == pytest.approx(total, abs=1e-3) and item["identified"]["unit"] == "mrad"
     assert "only the total motor-side lash is identified" in d.reason and d.status == "explained"
     # nothing to say without a trade-off, or without an attributed effect

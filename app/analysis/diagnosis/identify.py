@@ -14,28 +14,19 @@ from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
-import numpy as np
-
 from app.analysis.diagnosis.calibrate import FitResult
 from app.analysis.diagnosis.decide import Decision
+from app.identify.base import lash_mrad
 from sim import Vehicle
 from sim.effects import apply_effects
-from sim.model import build_chain
-
-
-def motor_side_lash_mrad(vehicle: Vehicle) -> float:
-    """Total backlash of the driveline referred to the rotor (mrad): each gap times the rotor's turns per its turn."""
-    m = build_chain(vehicle)
-    gaps = m.chalf > 0
-    return float(1e3 * np.sum(2.0 * m.chalf[gaps] / m.speed_ratio[m.ca[gaps]]))
 
 
 def _identified(fit: FitResult, vehicle: Vehicle, names: set[str]) -> dict[str, Any] | None:
     """The identified combination of a traded-off pair, where the library knows one."""
     if names == {"backlash.reducer_scale", "backlash.halfshaft_scale"} and "backlash" in fit.values:
         return {"name": "total motor-side lash", "unit": "mrad",
-                "value": round(motor_side_lash_mrad(apply_effects(vehicle, {"backlash": fit.values["backlash"]})), 4),
-                "nominal": round(motor_side_lash_mrad(vehicle), 4)}
+                "value": round(lash_mrad(apply_effects(vehicle, {"backlash": fit.values["backlash"]})), 4),
+                "nominal": round(lash_mrad(vehicle), 4)}
     return None
 
 
