@@ -42,10 +42,10 @@ def run(store: Store, job: JobRecord) -> None:
     d = directory(store, job.subject)
     req = request(store, job.subject)
     veh = store.get_vehicle(req["vehicle"], req["vehicle_version"])
-    logs = [store.get_log(log_id).path for log_id in req["log_ids"]]
-    withheld = [store.get_log(log_id).path for log_id in req["validate_log_ids"]]
-    names = {store.get_log(log_id).path.name: store.get_log(log_id).filename
-             for log_id in [*req["log_ids"], *req["validate_log_ids"]]}
+    records = {log_id: store.get_log(log_id) for log_id in [*req["log_ids"], *req["validate_log_ids"]]}
+    logs = [records[log_id].path for log_id in req["log_ids"]]
+    withheld = [records[log_id].path for log_id in req["validate_log_ids"]]
+    names = {rec.path.name: rec.filename for rec in records.values()}
     progress = progress_reporter(store, job.id)
     options = IdentifyOptions(dbc=veh.database_path, signal_map=veh.signal_map_path, seed=int(req["seed"]),
                               params=tuple(req["params"]))
