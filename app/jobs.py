@@ -206,7 +206,9 @@ class JobRunner:
                                     f"({setting}); the worker was stopped")
                 log.warning("job %s timed out after %g s", job.id, timeout_s)
                 return False
-            if not self.store.renew_lease(job.id, self.owner, self.lease_s):
+            with self._lock:  # never renewed after shutdown() let the lease go (it sets _closed first)
+                renewed = self._closed or self.store.renew_lease(job.id, self.owner, self.lease_s)
+            if not renewed:
                 proc.kill()
                 proc.join()
                 log.warning("job %s is no longer this runner's (cancelled or taken over); worker stopped", job.id)
