@@ -37,6 +37,7 @@ from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, validate_
 from app.analysis.diagnosis.report import report_dict  # noqa: E402
 from app.analysis.diagnosis.truthlog import read_log  # noqa: E402
 from bench.diagnosis_report import CONFIDENT, pct  # noqa: E402
+from bench.indep.car import vehicle_source  # noqa: E402
 from bench.indep.cases import FAINT_SIGMA, LIBRARY, Case, build, plan, read_manifest, write_manifest  # noqa: E402
 from bench.indep.record import DBC, MAP  # noqa: E402
 from sim import load_vehicle  # noqa: E402
@@ -78,7 +79,7 @@ def generate(which: str, quick: bool, jobs: int = 1, names: list[str] | None = N
 
 
 def diagnose(case: Case, folder: Path) -> Result:
-    vehicle = load_vehicle(case.car)
+    vehicle = load_vehicle(vehicle_source(case.car))
     try:
         signals = read_log(folder / case.drive_a, DBC, MAP)
         t0 = time.process_time()

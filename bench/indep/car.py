@@ -33,7 +33,8 @@ from pathlib import Path
 PRESETS = Path(__file__).resolve().parents[2] / "sim" / "presets"
 PRESET = PRESETS / "paper.toml"
 CHAIN_PRESET = PRESETS / "chain_drive.toml"
-CARS = ("paper", "chain_drive")  # lashscope preset names of the generator's nominal cars
+CHAIN_LOW = Path(__file__).with_name("chain_low.toml")  # the chain car with a low, heavily damped first mode
+CARS = ("paper", "chain_drive", "chain_low")  # the generator's nominal cars (see vehicle_source)
 G = 9.81
 
 
@@ -166,7 +167,22 @@ def car_named(name: str) -> Car:
         return nominal_car()
     if name == "chain_drive":
         return chain_car()
+    if name == "chain_low":
+        return chain_car(CHAIN_LOW)
     raise ValueError(f"no generator car for preset {name!r}")
+
+
+def vehicle_source(name: str) -> str:
+    """What lashscope loads as the vehicle file of the nominal car ``name`` (``sim.load_vehicle``): a preset
+    name, or the path of the benchmark's own file."""
+    if name not in CARS:
+        raise ValueError(f"no generator car {name!r}; known: {', '.join(CARS)}")
+    return str(CHAIN_LOW) if name == "chain_low" else name
+
+
+def is_chain(name: str) -> bool:
+    """Whether the nominal car ``name`` is one of the chain cars (slow, bursty logger)."""
+    return name.startswith("chain")
 
 
 def ratio(car: Car) -> float:

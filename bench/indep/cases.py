@@ -37,6 +37,7 @@ from bench.indep.car import (
     PRESET,
     Car,
     car_named,
+    is_chain,
     lash_at_motor_mrad,
     nominal_car,
     stiffness_at_motor,
@@ -80,8 +81,11 @@ OUT_OF_LIBRARY: dict[str, Draw] = {
 LIBRARY = tuple(EFFECT_DRAWS)
 FAINT_SIGMA = (2.0, 10.0)
 SEED_BASE = {"dev": 10_000, "final": 50_000, "holdout": 90_000, "check": 130_000, "check2": 170_000,
-             "idev": 210_000, "ifinal": 250_000}
-IDENTIFY_SETS = ("idev", "ifinal")
+             "idev": 210_000, "ifinal": 250_000, "idev2": 290_000, "ifinal2": 330_000}
+IDENTIFY_SETS = ("idev", "ifinal", "idev2", "ifinal2")
+# the chain car of each identification set: idev and ifinal kept the preset's ~16 Hz mode (above what a 20-33 Hz
+# logger resolves); idev2 and ifinal2 drive the low-mode car the formula-student logs show (chain_low.toml)
+CHAIN_CAR = {"idev": "chain_drive", "ifinal": "chain_drive", "idev2": "chain_low", "ifinal2": "chain_low"}
 
 
 def _off_by(rng: np.random.Generator, down: tuple[float, float], up: tuple[float, float]) -> float:
@@ -101,6 +105,7 @@ BASE_DRAWS: dict[str, Callable[[np.random.Generator], float]] = {
 BASE_NEAR = 0.2  # base_effect cases: every base scale within 1 +- 20 %
 PARAM_OF = {"k_scale": "stiffness", "c_scale": "damping_ratio", "mass_scale": "mass", "gap_scale": "lash"}
 CHAIN_ZETA = (0.2, 0.35)  # chain car: heavily damped first mode, the damping scale solved for it
+CHAIN_LOW_ZETA = (0.3, 0.55)  # the low-mode chain car (file: 0.19): near the logs' 0.47-0.64
 CHAIN_RATES_HZ = (20.0, 25.0, 33.3, 50.0)  # chain car: torque and speed message rates of its logger
 MODE_KMH = 30.0  # vehicle speed of the linearisation (the tyre's damping depends on it)
 REC = Recording()
@@ -219,29 +224,31 @@ def plan(which: str, quick: bool) -> list[Case]:
     return out
 
 
-def _chain_damping(base: dict[str, float], zeta: float) -> float:
+def _chain_damping(base: dict[str, float], zeta: float, car: str = "chain_drive") -> float:
     """Damping scale that gives the chain car (with ``base``'s other errors) a first mode damped at ``zeta``."""
     lo, hi = 0.0, np.log(20.0)  # zeta rises with the scale over this range
     for _ in range(30):
         mid = 0.5 * (lo + hi)
-        got = first_mode(with_base(car_named("chain_drive"), base | {"c_scale": float(np.exp(mid))}), MODE_KMH)[1]
+        got = first_mode(with_base(car_named(car), base | {"c_scale": float(np.exp(mid))}), MODE_KMH)[1]
         lo, hi = (mid, hi) if got < zeta else (lo, mid)
     return float(np.exp(0.5 * (lo + hi)))
 
 
 def plan_identify(which: str, quick: bool) -> list[Case]:
-    """The cases of an identification set (``idev`` or ``ifinal``); ``quick`` keeps a smaller subset.
+    """The cases of an identification set (:data:`IDENTIFY_SETS`); ``quick`` keeps a smaller subset.
 
     Paper car: ``none``; ``base`` with each base parameter moved alone (two each) and 2-4 moved together,
     alternately logged at 100 Hz and 1 kHz; ``base_effect`` (one per library effect). Chain car (slow,
     bursty logger: every other case at 50 Hz, the others at a rate drawn from the slower
     :data:`CHAIN_RATES_HZ`): ``base`` with its damping raised until the first mode's
-    damping ratio is a drawn value in :data:`CHAIN_ZETA` (the preset's is ~0.04), alone or with other
-    errors, and ``none`` (the preset's car).
+    damping ratio is a drawn value in :data:`CHAIN_ZETA` (the preset's is ~0.04; :data:`CHAIN_LOW_ZETA` for the
+    low-mode car, whose file says 0.19), alone or with other errors, and ``none`` (the file's car). The chain car
+    is the set's :data:`CHAIN_CAR`.
     """
     base = SEED_BASE[which]
     dur = 40.0 if quick else 60.0
     knobs = list(BASE_DRAWS)
+    chain = CHAIN_CAR[which]
     n_each, n_combo, effects, n_chain, n_chain_none, n_none = \
         (1, 0, LIBRARY[:2], 2, 0, 1) if quick else (2, 6, LIBRARY, 8, 2, 4)
     out: list[Case] = []
@@ -267,16 +274,16 @@ def plan_identify(which: str, quick: bool) -> list[Case]:
         r = np.random.default_rng(s)
         rate = CHAIN_RATES_HZ[-1] if i % 2 == 0 else float(r.choice(CHAIN_RATES_HZ[:-1]))  # half at 50 Hz
         if i >= n_chain:
-            out.append(Case(f"chain_none_{s}", "none", s, {}, ["none"], dur, car="chain_drive", rate_hz=rate))
+            out.append(Case(f"chain_none_{s}", "none", s, {}, ["none"], dur, car=chain, rate_hz=rate))
         else:
             combined = i % 4 in (1, 2)  # damping alone or with 1-2 other errors, at 50 Hz and slower alike
             others = [str(k) for k in r.choice(knobs[:1] + knobs[2:], size=1 + i // 4 % 2, replace=False)] \
                 if combined else []
             v = {k: BASE_DRAWS[k](r) for k in others}
-            zeta = _u(r, *CHAIN_ZETA)
-            v["c_scale"] = _chain_damping(v, zeta)
+            zeta = _u(r, *(CHAIN_ZETA if chain == "chain_drive" else CHAIN_LOW_ZETA))
+            v["c_scale"] = _chain_damping(v, zeta, chain)
             names = "+".join(PARAM_OF[k] for k in sorted(v))
-            out.append(Case(f"chain_base_{names}_{s}", "base", s, {}, ["base_parameters"], dur, car="chain_drive",
+            out.append(Case(f"chain_base_{names}_{s}", "base", s, {}, ["base_parameters"], dur, car=chain,
                             base=v, rate_hz=rate, recorded={"target_zeta": zeta}))
         s += 1
     return out
@@ -301,7 +308,7 @@ def _band_drive(band: Band, seed: int, duration: float, car: Car | None = None) 
 
 def recording(case: Case) -> Recording:
     """How the case's drives are logged: the paper car at 100 Hz (or 1 kHz), the chain car slow and bursty."""
-    if case.car == "chain_drive":
+    if is_chain(case.car):
         return Recording(period_s=1.0 / case.rate_hz, bursts_per_min=20.0, burst_s=(0.1, 0.5))
     return REC if case.rate_hz == 100.0 else Recording(period_s=1.0 / case.rate_hz)
 

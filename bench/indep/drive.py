@@ -37,7 +37,8 @@ BAND_B = Band((38.0, 60.0), (70.0, 140.0), (25.0, 70.0))
 # within ~15-45 km/h on drive A and ~20-65 km/h on drive B; peaks ~50 and ~75 N m).
 CHAIN_A = Band((22.0, 36.0), (8.0, 35.0), (8.0, 30.0))
 CHAIN_B = Band((34.0, 50.0), (12.0, 50.0), (10.0, 40.0))
-BANDS = {"paper": (BAND_A, BAND_B), "chain_drive": (CHAIN_A, CHAIN_B)}  # drives A and B per car
+# drives A and B per car
+BANDS = {"paper": (BAND_A, BAND_B), "chain_drive": (CHAIN_A, CHAIN_B), "chain_low": (CHAIN_A, CHAIN_B)}
 
 
 @dataclass(frozen=True)

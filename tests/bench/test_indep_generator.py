@@ -332,3 +332,32 @@ def test_identification_cases_and_their_truths(tmp_path):
     assert tr["zeta_nominal"] < 0.05 and 14 < tr["freq_hz_nominal"] < 17
     assert tr["mass_nominal"] == 300.0 and tr["stiffness_nominal"] == pytest.approx(371.6, rel=1e-3)
     assert (tmp_path / c.drive_a).exists() and (tmp_path / c.drive_b).exists()
+
+
+def test_low_mode_chain_car_is_its_file_on_both_sides(tmp_path):
+    """The low-mode chain car (bench/indep/chain_low.toml): the generator and lashscope read the same file and find
+    the same 5.5 Hz first mode; its sets plan it, slow and bursty, damped to the drawn ratio."""
+    from app.identify.base import physical
+    from bench.indep.car import CHAIN_LOW, car_named, vehicle_source
+    from bench.indep.cases import CHAIN_LOW_ZETA, build, plan, recording
+    from bench.indep.dynamics import first_mode
+    from sim import load_vehicle
+
+    ours = physical(load_vehicle(vehicle_source("chain_low")))
+    fn, zeta, _ = first_mode(car_named("chain_low"))
+    assert 5.3 < fn < 5.7 and 0.17 < zeta < 0.21
+    assert ours.freq_hz == pytest.approx(fn, rel=0.01) and ours.damping_ratio == pytest.approx(zeta, rel=0.02)
+    assert car_named("chain_low").k_shaft_l == 350.0 and vehicle_source("chain_low") == str(CHAIN_LOW)
+    assert vehicle_source("paper") == "paper"
+    with pytest.raises(ValueError, match="chain_low"):
+        vehicle_source("tractor")
+    cases = plan("idev2", True)
+    chain = [c for c in cases if c.car.startswith("chain")]
+    assert chain and {c.car for c in chain} == {"chain_low"}
+    assert all(c.rate_hz <= 50 and recording(c).bursts_per_min > 4 for c in chain)
+    assert {c.car for c in plan("idev", True) if c.car.startswith("chain")} == {"chain_drive"}  # the old sets stay
+    c = next(c for c in chain if c.kind == "base")
+    c.duration_s = 4.0
+    build(c, tmp_path)
+    assert CHAIN_LOW_ZETA[0] < c.truth["zeta"] < CHAIN_LOW_ZETA[1]
+    assert 5.3 < c.truth["freq_hz_nominal"] < 5.7
