@@ -33,10 +33,15 @@ Two further estimates per drive:
 - ``--identify``: the project's identification (``app.identify.identify_logs``) on each drive,
   validated on the next drive of the same car in the manifest (same database and signal map). It
   prints the identified parameters with their intervals, the model-free mode and the withheld
-  drive's NRMSE before and after. On a checkout without ``app.identify`` it says so and goes on.
+  drive's NRMSE before and after. On a checkout without ``app.identify`` it says so and goes on;
+- ``--pool``: per car with three drives or more, the identification on all its drives together, each
+  drive's own identification checked against it (a drive is consistent when each of its identified
+  parameters' intervals holds the pooled value), and leave-one-drive-out: identified on the others,
+  tracked on the one left out (verdict and NRMSE with the file's vehicle and with the identified one).
 
     .venv/bin/python bench/real_logs.py /work/fsdata/manifest.toml
     .venv/bin/python bench/real_logs.py /work/fsdata/manifest.toml --only oct26-6 --identify
+    .venv/bin/python bench/real_logs.py /work/fsdata/manifest.toml --pool
 """
 
 from __future__ import annotations
@@ -218,6 +223,56 @@ def identify_lines(entry: LogEntry, withheld: LogEntry | None) -> list[str]:
     return lines
 
 
+def _identify(paths: list[Path], like: LogEntry, validate: list[Path]) -> Any:
+    """``identify_logs`` on ``paths`` (decoded like ``like``): its result, or the error's text."""
+    from app.identify import IdentifyOptions, identify_logs
+
+    try:
+        return identify_logs(paths, load_vehicle(like.vehicle),
+                             IdentifyOptions(dbc=like.dbc, signal_map=like.signal_map, seed=0), validate=validate)
+    except Exception as exc:  # a drive too short to identify is a result to print
+        return f"{type(exc).__name__}: {str(exc)[:120]}"
+
+
+def pool_lines(car: str, drives: list[LogEntry]) -> list[str]:
+    """One car's drives identified together, each drive against the pooled values, and leave-one-drive-out."""
+    lines = [f"== car {car}: {len(drives)} drives pooled ({', '.join(d.name for d in drives)})"]
+    pooled = _identify([d.path for d in drives], drives[0], [])
+    if isinstance(pooled, str):
+        return [*lines, f"  pooled identification failed: {pooled}"]
+    ids = {k: p for k, p in pooled.params.items() if p.identified and k in PARAM_ORDER}
+    lines.append("  pooled: " + "; ".join(f"{k} {_g(p.value)} [{_g(p.lo)}, {_g(p.hi)}] {p.unit}" for k, p in
+                                          ids.items()) + (f"; modal {_f(pooled.modal.freq_hz, 2)} Hz, zeta "
+                                                          f"{_f(pooled.modal.zeta, 3)}" if pooled.modal else ""))
+    consistent = identified = 0
+    improved = 0
+    for d in drives:
+        own = _identify([d.path], d, [])
+        if isinstance(own, str):
+            lines.append(f"  {d.name:24s} own: failed ({own})")
+        else:
+            held = {k: own.params[k] for k in ids if k in own.params and own.params[k].identified}
+            ok = bool(held) and all(p.lo <= ids[k].value <= p.hi for k, p in held.items())
+            identified += bool(held)
+            consistent += ok
+            lines.append(f"  {d.name:24s} own: " + ("; ".join(f"{k} {_g(p.value)} [{_g(p.lo)}, {_g(p.hi)}]"
+                                                            for k, p in held.items()) or "nothing identified")
+                         + (" -- holds the pooled values" if ok else ""))
+        rest = [e.path for e in drives if e is not d]
+        loo = _identify(rest, d, [d.path])
+        if isinstance(loo, str):
+            lines.append(f"  {'':24s} left out: identification of the others failed ({loo})")
+            continue
+        v = loo.validation
+        better = (v.get("nrmse_after") or math.inf) < (v.get("nrmse_before") or math.inf)
+        improved += better
+        lines.append(f"  {'':24s} left out: tracking {v.get('verdict_before')} -> {v.get('verdict_after')}, "
+                     f"NRMSE {_f(v.get('nrmse_before'), 3)} -> {_f(v.get('nrmse_after'), 3)}")
+    lines.append(f"  consistent with the pooled values: {consistent} of {identified} drives identified on their own "
+                 f"({len(drives)} drives); left-out drive tracked better: {improved} of {len(drives)}")
+    return lines
+
+
 def withheld_for(entry: LogEntry, entries: list[LogEntry]) -> LogEntry | None:
     """The next drive of the same car (cyclically) that decodes with the same database and map."""
     same = [e for e in entries if e.car == entry.car and e.dbc == entry.dbc and e.signal_map == entry.signal_map
@@ -232,11 +287,23 @@ def main() -> int:
     ap.add_argument("manifest", type=Path)
     ap.add_argument("--only", nargs="*", default=None, metavar="NAME", help="these logs of the manifest only")
     ap.add_argument("--identify", action="store_true", help="also run app.identify per drive (when present)")
+    ap.add_argument("--pool", action="store_true", help="per car: pooled identification, per-drive consistency "
+                    "and leave-one-drive-out tracking (instead of the per-log blocks)")
     ap.add_argument("--no-whole-log", action="store_true", help="skip the whole-log simulation (faster; the "
                     "tracking verdict then lacks the drift check)")
     a = ap.parse_args()
     entries = read_manifest(a.manifest)
     chosen = [e for e in entries if a.only is None or e.name in a.only]
+    if a.pool:
+        cars: dict[tuple[str, ...], list[LogEntry]] = {}
+        for e in chosen:
+            if e.car != "-":
+                cars.setdefault((e.car, str(e.dbc), str(e.signal_map), e.vehicle), []).append(e)
+        for key, drives in cars.items():
+            if len(drives) >= 3:
+                for line in pool_lines(key[0], drives):
+                    print(line, flush=True)
+        return 0
     for e in chosen:
         print(f"== {e.name}: {e.path.name}  car {e.car}, {e.date} (season {e.season}), vehicle {Path(e.vehicle).stem}, "
               f"map {e.signal_map.name}")

@@ -33,7 +33,8 @@ from scipy import stats
 from scipy.optimize import least_squares
 
 from app.analysis.diagnosis.calibrate import GAIN_BOUNDS, Bounds, FitResult, fit
-from app.analysis.diagnosis.forward import DiagEvent, Nuisance, simulate_events, vehicle_with
+from app.analysis.diagnosis.forward import DiagEvent, Nuisance, prediction, simulate_events, vehicle_with
+from app.analysis.diagnosis.localise import MIN_TRAVERSE_SAMPLES, phase_times
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.split import Split
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
@@ -66,11 +67,19 @@ MAX_FILE_MODE_NYQUIST = 0.45  # the file's own first mode beyond this share of t
 N_NUISANCE = 2  # unit-box columns before the effects': torque gain and road load (the offset is profiled)
 MIN_EVENTS = 4  # events an identification needs (the interval has G-1 degrees of freedom)
 MIN_RESPONSE = 0.1  # measured / predicted speed swing below which the speed does not follow the torque
+# the lash is fitted only when its free traverse (loss of load to impact, predicted) lasts this many periods of the
+# speed channel in the median event: a shorter one shows in one sample or none, as a small phase shift that a fit
+# trades against the damping and the contact law's model form (see localise.MIN_TRAVERSE_SAMPLES)
+MIN_LASH_SAMPLES = float(MIN_TRAVERSE_SAMPLES)
 PRACTICAL = {"stiffness": 0.04, "damping": 0.15, "mass": 0.03, "lash": 0.08}  # smallest change worth naming
 # relative 90 % half-width of what the model form alone leaves uncertain: the simulator is not the car, and a fit
 # at a high signal-to-noise ratio is as tight as its statistics only within its own family. Calibrated on the
 # independent generator's development set (bench/identify_indep.py --set idev, docs/identify.md)
 MODEL_FORM = {"stiffness": 0.04, "damping": 0.12, "mass": 0.04, "lash": 0.06}
+# ... at ten or more speed samples per period of the first mode; a coarser log widens it in proportion (the torque
+# between its samples is reconstructed, and the mode's phase with it: on the generator's low-mode chain car logged
+# at 20-25 Hz the mass came out 6-17 % off with intervals of +-4 %)
+MODE_SAMPLES = 10.0
 
 
 @dataclass(frozen=True)
@@ -305,6 +314,7 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
             f"{k} x{r:.3f} (+-{100 * np.expm1(h):.1f} %)" for k, (r, h) in pins.items()))
         names = [n for n in names if n not in pins]
     unresolved = _unresolved(vehicle, names, noise.period_s) if not pins else []
+    why = dict.fromkeys(unresolved, "the speed channel is too slow for the first mode")
     if unresolved:
         log.append(f"not identifiable: {', '.join(unresolved)} (the file's first mode at "
                    f"{physical(vehicle).freq_hz:.1f} Hz is not resolved by a {1.0 / noise.period_s:.0f} Hz speed "
@@ -314,6 +324,14 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
             raise NotIdentifiableError(
                 f"{', '.join(unresolved)}: the speed channel samples at {1.0 / noise.period_s:.0f} Hz, too slow for "
                 f"the file's first mode at {physical(vehicle).freq_hz:.1f} Hz, and no clear mode was measured")
+    short = _short_traverse(fitted_on, evs, base, noise.period_s, opts.model) if "lash" in names else ""
+    if short:
+        log.append(f"not identifiable: lash ({short})")
+        names = [n for n in names if n != "lash"]
+        unresolved.append("lash")
+        why["lash"] = short
+        if not names and not pins:
+            raise NotIdentifiableError(f"lash: {short}, and nothing else of the vehicle is left to identify")
     starts = _starts(names, fitted_on, None if pins else
                      ({"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None))
     say(0.15, f"joint fit of {', '.join(names) or 'the nuisance'} with the nuisance")
@@ -342,7 +360,7 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
         names = keep
     say(0.9, "intervals")
     result = assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), t, base.chi2, len(evs),
-                      pins, unresolved)
+                      pins, why, noise.period_s)
     result.fit_log = log
     result.modal, result.modal_error = modal, modal_error
     result.elapsed_s = time.process_time() - clock
@@ -358,6 +376,30 @@ def _unresolved(vehicle: Vehicle, names: Sequence[str], period_s: float) -> list
     if not np.isfinite(f0) or f0 * period_s <= MAX_FILE_MODE_NYQUIST:
         return []
     return [n for n in ("stiffness", "damping") if n in names]
+
+
+def model_form_scale(freq_hz: float, period_s: float) -> float:
+    """Factor on :data:`MODEL_FORM` for a log with ``period_s`` between speed samples and a first mode at
+    ``freq_hz``: 1 at :data:`MODE_SAMPLES` samples per mode period or more, in proportion below."""
+    if not (np.isfinite(freq_hz) and freq_hz > 0.0 and period_s > 0.0):
+        return 1.0
+    return float(max(1.0, freq_hz * period_s * MODE_SAMPLES))
+
+
+def _short_traverse(vehicle: Vehicle, events: Sequence[DiagEvent], base: FitResult, period_s: float,
+                    model: str) -> str:
+    """Why the lash cannot be fitted when its free traverse is too short for the speed channel (else "").
+
+    The traverse is the predicted one (``vehicle`` with the baseline's nuisance): from the loss of load at the torque
+    reversal to the impact, as the diagnosis' phases (:func:`~app.analysis.diagnosis.localise.phase_times`)."""
+    outs = simulate_events(events, vehicle_with(vehicle, base.nuisance, ()), base.nuisance.gain, (), model)
+    spans = [(lambda ph: ph.t_close - ph.t_open)(phase_times(ev, prediction(ev, out, base.nuisance.offset_s)))
+             for ev, out in zip(events, outs, strict=True)]
+    med = float(np.median(spans)) if spans else 0.0
+    if med >= MIN_LASH_SAMPLES * period_s:
+        return ""
+    return (f"its free traverse lasts {1e3 * med:.0f} ms in the median event, under {MIN_LASH_SAMPLES:g} samples "
+            f"of the {1.0 / period_s:.0f} Hz speed channel")
 
 
 def _require_response(vehicle: Vehicle, events: Sequence[DiagEvent], base: FitResult, model: str) -> None:
@@ -411,20 +453,25 @@ def refined(vehicle: Vehicle, names: Sequence[str], joint: FitResult, events: Se
             chi2_before: float, level: float = 0.9) -> Identification:
     """The identification a joint fit of base parameters *and* an effect gives (base effects first in the fit)."""
     cov, t = _cov(joint, events, level)
-    return assemble(vehicle, names, (), joint, cov, t, chi2_before, len(events))
+    steps = [float(np.median(np.diff(ev.speed_t))) for ev in events if ev.speed_t.size > 1]
+    period = float(np.median(steps)) if steps else 0.0
+    return assemble(vehicle, names, (), joint, cov, t, chi2_before, len(events), period_s=period)
 
 
 def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joint: FitResult, cov: FloatArray,
              t: float, chi2_before: float, n_events: int,
              pins: Mapping[str, tuple[float, float]] | None = None,
-             unresolved: Sequence[str] = ()) -> Identification:
+             unresolved: Mapping[str, str] | None = None, period_s: float = 0.0) -> Identification:
     """Physical figures, intervals and status of the base parameters ``names`` of a fit.
 
     ``joint``'s effects start with the base effects of ``names`` (one parameter each, in that order), after the
     nuisance; ``cov`` is the unit-box covariance of all its parameters. ``pins``: parameters set from the
     model-free mode (name -> (ratio, 90 % half-width of its log)), on top of which ``joint`` was fitted.
+    ``unresolved``: parameters the log cannot show at all (name -> why), held at the file's values. ``period_s``:
+    the speed channel's sampling period (the model-form floor widens below :data:`MODE_SAMPLES` per mode period).
     """
     pins = dict(pins or {})
+    unresolved = dict(unresolved or {})
     off = N_NUISANCE
     specs = [BASE_EFFECTS[n].params[0] for n in names]
     raw = np.array([joint.values[BASE_EFFECTS[n].id][s.name] for n, s in zip(names, specs, strict=True)])
@@ -437,6 +484,7 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
     cov_log = cov_raw * np.outer(d, d)
     identified = with_base(vehicle, ratios)
     ph_nom, ph = physical(vehicle), physical(identified)
+    coarse = model_form_scale(ph.freq_hz, period_s)
     params: dict[str, Param] = {}
     for q in BASE_NAMES:
         if q in names or q in pins:
@@ -449,7 +497,7 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
                 stat = t * float(np.sqrt(max(cov_log[k, k], 0.0)))
                 at_bound = bool(f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or
                                 min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo))
-            half = float(np.hypot(stat, np.log1p(MODEL_FORM[q])))
+            half = float(np.hypot(stat, np.log1p(coarse * MODEL_FORM[q])))
             r = ratios[q]
             r_lo, r_hi = r * np.exp(-half), r * np.exp(half)
             v = ph.value(q)
@@ -458,8 +506,7 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
             params[q] = Param(q, LABELS[q], UNITS[q], v, float(lo), float(hi), ph_nom.value(q), r, float(r_lo),
                               float(r_hi), True, at_bound, named, "at a prior bound: not trusted" if at_bound else "")
         else:
-            why = ("not identifiable from these events" if q in dropped else "not fitted") if q not in unresolved \
-                else "the speed channel is too slow for the first mode"
+            why = unresolved.get(q) or ("not identifiable from these events" if q in dropped else "not fitted")
             if q not in dropped and not _fittable(vehicle, q):
                 why = "the vehicle has no such field"
             nv = ph_nom.value(q) if q != "damping" else ph.damping_ratio

@@ -53,13 +53,13 @@ def prepared(signals: SignalSet) -> tuple[list[DiagEvent], NoiseFloor]:
 
 
 def write_drive_log(path: Path, truth: Mapping[str, float], seed: int, duration_s: float = 40.0,
-                    vehicle: Vehicle | None = None) -> Path:
+                    vehicle: Vehicle | None = None, period_s: float = 0.01) -> Path:
     """A drive of the paper car with base parameters ``truth``, written as BLF through the reference DBC."""
     nominal = vehicle or load_vehicle("paper")
     rng = np.random.default_rng(seed)
     drive = make_drive(nominal, rng, DriveSpec(duration_s=duration_s))
     res = run_truth(with_base(nominal, truth), drive)
-    frames = measure_frames(drive, res, CanSampling(offset_s=0.004), rng)
+    frames = measure_frames(drive, res, CanSampling(period_s=period_s, offset_s=0.004), rng)
     write_blf(path, frames, load_database(REPO / "dbc" / "lashscope_ev.dbc"),
               load_signal_map(REPO / "dbc" / "lashscope_ev.map.toml"))
     return path

@@ -15,8 +15,10 @@ from tests.identify.drives import write_drive_log
 
 def test_identify_writes_the_identified_vehicle_with_its_provenance(tmp_path: Path,
                                                                     capsys: pytest.CaptureFixture[str]) -> None:
-    a = write_drive_log(tmp_path / "a.blf", {"lash": 1.3}, 41, duration_s=30.0)
-    b = write_drive_log(tmp_path / "b.blf", {"lash": 1.3}, 42, duration_s=30.0)
+    # logged at 200 Hz: these drives cross the lash in ~19 ms, under two samples of a 100 Hz channel (which leaves the
+    # lash at the file's value, test_fit's slow-channel test)
+    a = write_drive_log(tmp_path / "a.blf", {"lash": 1.3}, 41, duration_s=30.0, period_s=0.005)
+    b = write_drive_log(tmp_path / "b.blf", {"lash": 1.3}, 42, duration_s=30.0, period_s=0.005)
     out = tmp_path / "paper_identified.toml"
     assert main(["identify", str(a), "--vehicle", "paper", "--out", str(out), "--validate", str(b), "--quiet"]) == 0
     text = capsys.readouterr().out

@@ -132,3 +132,15 @@ def test_a_speed_channel_too_slow_for_the_mode_leaves_stiffness_and_damping_unid
         assert not p.identified and p.note == "the speed channel is too slow for the first mode", p
     assert res.params["mass"].identified
     assert any("not resolved by a 20 Hz speed channel" in line for line in res.fit_log)
+    # the chain's lash is crossed in a few tens of ms, under two samples at 20 Hz: held at the file's value, said so
+    lash = res.params["lash"]
+    assert not lash.identified and lash.ratio == 1.0
+    assert "free traverse lasts" in lash.note and "20 Hz speed channel" in lash.note, lash.note
+
+
+def test_the_model_form_floor_widens_below_ten_samples_per_mode_period() -> None:
+    from app.identify.fit import MODE_SAMPLES, model_form_scale
+
+    assert model_form_scale(7.7, 0.01) == 1.0 and model_form_scale(7.7, 0.001) == 1.0  # the paper car, 100 Hz, 1 kHz
+    assert model_form_scale(5.5, 0.04) == pytest.approx(5.5 * 0.04 * MODE_SAMPLES)  # 25 Hz: 2.2x
+    assert model_form_scale(float("nan"), 0.04) == 1.0 and model_form_scale(5.5, 0.0) == 1.0

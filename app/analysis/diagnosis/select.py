@@ -48,7 +48,14 @@ from app.analysis.diagnosis.forward import (
     weighted_residual,
 )
 from app.analysis.diagnosis.identify import with_identifiability
-from app.analysis.diagnosis.localise import PhaseTimes, band_energy, phase_chi2, phase_times, uniform
+from app.analysis.diagnosis.localise import (
+    MIN_TRAVERSE_SAMPLES,
+    PhaseTimes,
+    band_energy,
+    phase_chi2,
+    phase_times,
+    uniform,
+)
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.partners import screen_partners
 from app.analysis.diagnosis.rebase import BASE_ID, base_only, joint_with_base, judge, nuisance_only, with_base
@@ -251,6 +258,12 @@ def run_diagnosis(
     phases = {ev.index: phase_times(ev, base_eval.predictions[ev.index]) for ev in events}
     base_eval = evaluate(vehicle, base_fit, events, opts.model, phases, period)
     tick("baseline calibrated")
+    traverse = float(np.median([ph.resolved_samples for ph in phases.values()])) if phases else 0.0
+    if "backlash" in candidates and traverse < MIN_TRAVERSE_SAMPLES and any(
+            ph.t_close > ph.t_open for ph in phases.values()):
+        not_applicable["backlash"] = (f"the lash traverse spans {traverse:g} speed samples in the median event (under "
+                                      f"{MIN_TRAVERSE_SAMPLES}): where the lash sits cannot be told from this log")
+        candidates.remove("backlash")
 
     draws = bootstrap_draws(len(ho), rules, opts.seed + 1)
     b = base_eval.chi2(ho_idx)
