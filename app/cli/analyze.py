@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli.vehicle_args import add_log_and_vehicle, event_params, vehicle_inputs
+from app.cli.vehicle_args import add_log_and_vehicle, event_params, resolve_vehicle
 
 
 def register(sub: Any) -> None:
@@ -35,7 +35,7 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
     from app.pipeline import AnalysisOptions, run_analysis
     from app.storage.results import json_safe
 
-    inputs = vehicle_inputs(args)
+    inputs, vehicle_name = resolve_vehicle(args)
     opts = AnalysisOptions(model=args.model, whole_log=not args.no_whole_log, events=event_params(args))
     doc, arrays = result_payload(run_analysis(args.log, inputs, opts))
     if getattr(args, "tolerance", 0):
@@ -46,7 +46,7 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
         stored = SimpleNamespace(doc=doc, array=arrays.__getitem__)  # the result as the job reads it from disk
         doc["tolerance"] = tolerance_for_result(stored, inputs.vehicle, args.tolerance, getattr(args, "seed", 0))
     doc["log"] = str(args.log)
-    doc["vehicle"] = inputs.vehicle.name
+    doc["vehicle"] = vehicle_name
     if getattr(args, "gap_sensitivity", False):
         from app.pipeline import gap_sensitivity
 

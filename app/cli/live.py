@@ -128,6 +128,8 @@ def _watch(session: LiveSession, args: argparse.Namespace, done: threading.Event
 
 
 def _run_with_store(args: argparse.Namespace, done: threading.Event, emit: Any) -> int:
+    from app.cli.vehicle_args import vehicle_not_found
+    from app.errors import NotFoundError
     from app.jobs import JobRunner
     from app.live.decoding import source_for
     from app.live.manager import LiveManager, StartRequest
@@ -137,6 +139,14 @@ def _run_with_store(args: argparse.Namespace, done: threading.Event, emit: Any) 
 
     settings = Settings(data_dir=args.data_dir) if args.data_dir is not None else get_settings()
     store = open_store(settings.store_location, files=settings.data_dir)  # LASHSCOPE_STORE_URL, if set
+    try:
+        store.get_vehicle(args.vehicle, args.vehicle_version)
+    except NotFoundError as exc:
+        names = [v.name for v in store.list_vehicles()]
+        store.close()
+        if args.vehicle in names:  # the vehicle is there, the version is not
+            raise
+        raise vehicle_not_found(args.vehicle, names) from exc
     runner = JobRunner(store)
     try:
         manager = LiveManager(store, settings.data_dir / "live", source_for, submit=runner.submit,
