@@ -7,10 +7,12 @@ import csv
 import json
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from app.errors import InputError
 
+TOLERANCE_METRIC = ("largest peak-to-adjacent-valley of the raw motor speed in the event window (not detrended; "
+                    "analyze's metrics are detrended)")
 ONE_EVENT_S = 2.0  # an event window: 0.5 s before the crossing, 1.5 s after (app.analysis.events.EventParams)
 
 if TYPE_CHECKING:  # numpy and the simulator (numba) are imported when a command runs, not for --help
@@ -242,14 +244,27 @@ def _tolerance(args: argparse.Namespace) -> int:
     from sim import load_vehicle
     from sim.batch import tolerance_analysis
 
+    window = _check_window(args.window)
     t, q = _read_torque(args.torque_csv)
     vehicle = load_vehicle(args.vehicle)
+    if window is None:
+        from app.analysis.whatif import torque_events
+        from sim import simulate
+
+        base = simulate(vehicle, t, q, interp=args.interp, speed0_rpm=args.speed0_rpm, output_dt=args.output_dt)
+        events = torque_events(base.t, base.airgap_torque_nm, base.motor_speed_rpm)
+        if events:
+            return _tolerance_per_event(args, vehicle, t, q, base, events)
+        if float(t[-1] - t[0]) > ONE_EVENT_S:
+            raise InputError("tolerance: no tip-in or tip-out in the torque input (a reversal through 0 N m held "
+                             "80 ms each side) and no --window: a ripple over the whole input would be a speed swing "
+                             "of the drive; give --window T0 T1", code="no_events")
 
     def progress(done: int, total: int) -> None:
         print(f"tolerance: {done}/{total} variants", file=sys.stderr, flush=True)
 
     res = tolerance_analysis(vehicle, t, q, n=args.n, seed=args.seed, distribution=args.distribution,
-                             window=tuple(args.window) if args.window else None, interp=args.interp,
+                             window=window, interp=args.interp,
                              speed0_rpm=args.speed0_rpm, output_dt=args.output_dt, progress=progress)
     p5, p50, p95 = (float(v) for v in np.percentile(res.fluct_rpm, [5.0, 50.0, 95.0]))
     u5, u50, u95 = (float(v) for v in np.percentile(res.unloaded_ms, [5.0, 50.0, 95.0]))
@@ -268,11 +283,71 @@ def _tolerance(args: argparse.Namespace) -> int:
         return 0
     print(f"vehicle {vehicle.name}: {args.n} variants ({args.distribution}, seed {args.seed}) over "
           f"{', '.join(res.fields)}")
-    print(f"ripple (largest peak-to-valley of motor speed): nominal {res.nominal_fluct_rpm:.1f} rpm; "
-          f"predicted 5 % {p5:.1f}, 50 % {p50:.1f}, 95 % {p95:.1f} rpm")
+    where = f"in {window[0]:g}..{window[1]:g} s" if window is not None else "over the whole input (one event)"
+    print(f"ripple (largest peak-to-adjacent-valley of the raw motor speed {where}, not detrended): nominal "
+          f"{res.nominal_fluct_rpm:.1f} rpm; predicted 5 % {p5:.1f}, 50 % {p50:.1f}, 95 % {p95:.1f} rpm")
     print(f"first unloaded interval: 5 % {u5:.1f}, 50 % {u50:.1f}, 95 % {u95:.1f} ms")
     if pct is not None:
         where = "below the band" if args.measured_ripple < p5 else "above the band" if args.measured_ripple > p95 \
             else "inside the 5-95 % band"
         print(f"measured ripple {args.measured_ripple:.1f} rpm: percentile {pct:.1f} of the prediction ({where})")
+    return 0
+
+
+def _tolerance_per_event(args: argparse.Namespace, vehicle: Any, t: np.ndarray, q: np.ndarray, base: SimResult,
+                         events: list[Any]) -> int:
+    """The Monte Carlo per tip-in/tip-out event of the torque: each event window simulated from just before it
+    (at the nominal run's speed there), its ripple band, and the median over the events."""
+    import numpy as np
+
+    from sim.batch import tolerance_analysis
+
+    lead = 0.05  # s simulated before the window, as the analysis' tolerance band
+    rows: list[dict[str, Any]] = []
+    fields: tuple[str, ...] = ()
+    for k, ev in enumerate(events):
+        m = (t >= ev.t_start_s - lead) & (t <= ev.t_end_s)
+        if int(m.sum()) < 2:
+            continue
+
+        def progress(done: int, total: int, k: int = k) -> None:
+            print(f"tolerance: event {k + 1}/{len(events)}: {done}/{total} variants", file=sys.stderr, flush=True)
+
+        speed0 = float(np.interp(t[m][0], base.t, base.motor_speed_rpm))
+        res = tolerance_analysis(vehicle, t[m], q[m], n=args.n, seed=args.seed, distribution=args.distribution,
+                                 window=(ev.t_start_s, ev.t_end_s), interp=args.interp, speed0_rpm=speed0,
+                                 output_dt=args.output_dt, progress=progress)
+        fields = res.fields
+        p5, p50, p95 = (float(v) for v in np.percentile(res.fluct_rpm, [5.0, 50.0, 95.0]))
+        row: dict[str, Any] = {"index": ev.index, "kind": ev.kind.value, "t_cross_s": ev.t_cross_s,
+                               "t_start_s": ev.t_start_s, "t_end_s": ev.t_end_s,
+                               "nominal_ripple_rpm": res.nominal_fluct_rpm,
+                               "ripple_rpm": {"p5": p5, "p50": p50, "p95": p95},
+                               "unloaded_ms_median": float(np.median(res.unloaded_ms))}
+        if args.measured_ripple is not None:
+            row["measured_percentile"] = res.percentile_of(args.measured_ripple)
+        rows.append(row)
+    med = {key: float(np.median([r["ripple_rpm"][key] for r in rows])) for key in ("p5", "p50", "p95")}
+    nominal = float(np.median([r["nominal_ripple_rpm"] for r in rows]))
+    out: dict[str, Any] = {"vehicle": vehicle.name, "n": args.n, "seed": args.seed, "distribution": args.distribution,
+                           "fields": list(fields), "metric": TOLERANCE_METRIC, "events": rows,
+                           "median_over_events": {"nominal_ripple_rpm": nominal, "ripple_rpm": med}}
+    if args.measured_ripple is not None:
+        out["measured_ripple_rpm"] = args.measured_ripple
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"vehicle {vehicle.name}: {args.n} variants per event ({args.distribution}, seed {args.seed}) over "
+          f"{', '.join(fields)}")
+    print(f"ripple per event: {TOLERANCE_METRIC}")
+    head = f"{'#':>3} {'kind':<8} {'t (s)':>7} {'window (s)':>13} {'nominal':>8} {'p5':>8} {'p50':>8} {'p95':>8}"
+    print(head + (f" {'measured pct':>12}" if args.measured_ripple is not None else "") + "   (rpm)")
+    for r in rows:
+        b = r["ripple_rpm"]
+        pct = f" {r['measured_percentile']:>11.1f}%" if "measured_percentile" in r else ""
+        span = f"{r['t_start_s']:.2f}..{r['t_end_s']:.2f}"
+        print(f"{r['index']:>3} {r['kind']:<8} {r['t_cross_s']:>7.2f} {span:>13} {r['nominal_ripple_rpm']:>8.1f} "
+              f"{b['p5']:>8.1f} {b['p50']:>8.1f} {b['p95']:>8.1f}{pct}")
+    print(f"median over {len(rows)} events (of each column): nominal {nominal:.1f} rpm; predicted 5 % "
+          f"{med['p5']:.1f}, 50 % {med['p50']:.1f}, 95 % {med['p95']:.1f} rpm")
     return 0

@@ -90,3 +90,22 @@ def test_plain_torque_csv_still_reads(tmp_path: Path, capsys: pytest.CaptureFixt
     assert main(["simulate", str(path), "--what-if", "gap=all:0"]) == 0
     rows = _rows(capsys.readouterr().out)
     assert len(rows) == 2 and all(w < b for b, w in rows)
+
+
+def test_tolerance_answers_per_event(torque_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    capsys.readouterr()
+    assert main(["tolerance", str(torque_csv), "--n", "12", "--seed", "3", "--measured-ripple", "250", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert "event window (not detrended" in doc["metric"] and len(doc["events"]) >= 2
+    for e in doc["events"]:
+        b = e["ripple_rpm"]
+        assert e["t_start_s"] < e["t_cross_s"] < e["t_end_s"] and b["p5"] <= b["p50"] <= b["p95"]
+        assert 0.0 <= e["measured_percentile"] <= 100.0
+    med = doc["median_over_events"]["ripple_rpm"]["p50"]
+    assert med == pytest.approx(float(np.median([e["ripple_rpm"]["p50"] for e in doc["events"]])))
+    steady = tmp_path / "steady.csv"
+    steady.write_text("t_s,torque_nm\n" + "".join(f"{k * 0.01:.2f},50\n" for k in range(500)))
+    assert main(["tolerance", str(steady), "--n", "5"]) == 2
+    assert "[no_events]" in capsys.readouterr().err
