@@ -84,7 +84,9 @@ def tolerance_table(tol: dict[str, Any]) -> str:
         return "-" if v is None else format(v, fmt)
 
     lines = [f"tolerance band, {tol['n']} variants per event (seed {tol['seed']}); {tol['metric']}",
-             f"{'#':>3} {'kind':<8} {'p5':>8} {'p50':>8} {'p95':>8} {'nominal':>8} {'measured':>9} {'pct':>6}"]
+             f"{'#':>3} {'kind':<8} {'p5':>8} {'p50':>8} {'p95':>8} {'nominal':>8} {'measured':>9} {'pct':>6} "
+             f"{'detrended':>10}",
+             f"{'':>3} {'':<8} {'rpm':>8} {'rpm':>8} {'rpm':>8} {'rpm':>8} {'raw, rpm':>9} {'':>6} {'meas., rpm':>10}"]
     for e in tol["events"]:
         if e.get("error"):
             lines.append(f"{e['index']:>3} {e['kind']:<8} {e['error']}")
@@ -92,7 +94,9 @@ def tolerance_table(tol: dict[str, Any]) -> str:
         b = e["band_rpm"]
         lines.append(f"{e['index']:>3} {e['kind']:<8} {num(b['p5']):>8} {num(b['p50']):>8} {num(b['p95']):>8} "
                      f"{num(e['nominal_fluctuation_rpm']):>8} {num(e['measured_fluctuation_rpm']):>9} "
-                     f"{num(e['measured_percentile'], '.0f'):>5}%")
+                     f"{num(e['measured_percentile'], '.0f'):>5}% {num(e.get('analysis_fluctuation_rpm')):>10}")
+    lines.append("pct: the measured (raw) ripple's percentile in the band; detrended: the same event's fluctuation in "
+                 "the metrics table (detrended from the rigid-body trend, so it differs from the raw one)")
     return "\n".join(lines)
 
 

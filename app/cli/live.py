@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 import threading
@@ -51,13 +52,17 @@ def _status_line(st: dict[str, Any]) -> str:
     return (f"live {st['id']}: bus {st['bus']['state']}, {st['frames_received']:,} frames "
             f"({st['frames_per_s']:,.0f}/s), dropped {st['frames_dropped']}, bus errors {st['bus_errors']}, "
             f"decode errors {st['decode_errors']}, unknown-ID frames {st['unknown_id_frames']}, "
-            f"events {st['events']}, latency p50 {lat if lat is None else round(lat, 3)} ms")
+            f"events {st['events']}, latency p50 {'-' if lat is None else round(lat, 3)} ms")
 
 
 def _event_line(ev: dict[str, Any]) -> str:
     m = ev.get("metrics") or {}
-    what = (f"fluctuation {m.get('fluctuation_rpm', float('nan')):.1f} rpm, "
-            f"gap-open {1e3 * m.get('gap_open_time_s', float('nan')):.1f} ms") if ev["included"] else ev["exclusion"]
+
+    def num(v: Any, scale: float = 1.0) -> str:  # a metric the event's sampling cannot resolve is "-", never nan
+        return f"{scale * v:.1f}" if isinstance(v, int | float) and math.isfinite(v) else "-"
+
+    what = (f"fluctuation {num(m.get('fluctuation_rpm'))} rpm (detrended), "
+            f"gap-open {num(m.get('gap_open_time_s'), 1e3)} ms") if ev["included"] else ev["exclusion"]
     return f"event {ev['index']}: {ev['kind']} at t = {ev['t_cross_s']:.3f} s, {what}"
 
 
