@@ -96,7 +96,7 @@ def resolve_vehicle(args: argparse.Namespace) -> tuple[VehicleInputs, str]:
     registered, where = registered_vehicle(name, getattr(args, "data_dir", None))
     if registered is not None:
         return VehicleInputs(load_vehicle(registered.driveline_path), args.dbc or registered.database_path,
-                             args.signal_map or registered.signal_map_path), registered.name
+                             args.signal_map or registered.signal_map_path, registered.name), registered.name
     if name in preset_names():
         return VehicleInputs(load_vehicle(name), args.dbc or dbc_dir / "lashscope_ev.dbc",
                              args.signal_map or dbc_dir / "lashscope_ev.map.toml"), name
