@@ -82,6 +82,7 @@ def resolve_vehicle(args: argparse.Namespace) -> tuple[VehicleInputs, str]:
     override them), a preset with the project's DBC and map. Anything else is InputError
     ``vehicle_not_found`` listing the registered vehicles and the presets.
     """
+    from app.errors import AppError
     from app.pipeline import VehicleInputs
     from app.settings import get_settings
     from sim import load_vehicle, preset_names
@@ -93,7 +94,12 @@ def resolve_vehicle(args: argparse.Namespace) -> tuple[VehicleInputs, str]:
         vehicle = load_vehicle(path)
         return VehicleInputs(vehicle, args.dbc or dbc_dir / "lashscope_ev.dbc",
                              args.signal_map or dbc_dir / "lashscope_ev.map.toml"), vehicle.name
-    registered, where = registered_vehicle(name, getattr(args, "data_dir", None))
+    try:
+        registered, where = registered_vehicle(name, getattr(args, "data_dir", None))
+    except AppError:
+        if name not in preset_names():
+            raise
+        registered, where = None, None  # a store that cannot be opened does not stand between a user and a preset
     if registered is not None:
         return VehicleInputs(load_vehicle(registered.driveline_path), args.dbc or registered.database_path,
                              args.signal_map or registered.signal_map_path, registered.name), registered.name

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import builtins
 import json
+import os
+import subprocess
+import sys
 import tomllib
 from collections.abc import Iterator
 from pathlib import Path
@@ -34,33 +37,40 @@ def _stored_map(data: Path, name: str, version: int = 1) -> dict[str, dict[str, 
     return dict(tomllib.loads(text)["channels"])
 
 
-def test_two_commands_from_a_log_and_a_dbc_to_an_analysis(log: Path, tmp_path: Path,
-                                                         capsys: pytest.CaptureFixture[str]) -> None:
-    data = tmp_path / "data"
-    assert main(["init", str(log), "--dbc", str(DBC), "--name", "my-ev", "--preset", "paper", "--yes",
-                 "--data-dir", str(data)]) == 0
-    out = capsys.readouterr().out
+def _lashscope(*argv: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """The installed command line in its own process, as a user runs it (default data dir ./lashscope-data)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("LASHSCOPE_")}
+    return subprocess.run([sys.executable, "-m", "app", *argv], cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=600)
+
+
+def test_two_commands_from_a_log_and_a_dbc_to_an_analysis(log: Path, tmp_path: Path) -> None:
+    """README's "Your first real log": init, then analyze with the registered name; nothing written by hand."""
+    run = _lashscope("init", str(log), "--dbc", str(DBC), "--name", "my-ev", "--preset", "paper", "--yes",
+                     cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    out = run.stdout
     # the evidence is printed per channel: source, unit, rate, range, correlation and sign
     row = next(line for line in out.splitlines() if line.startswith("motor_speed_rpm"))
     assert "MCU_Speed.MotorSpeed" in row and " rpm " in row and "99." in row and "+0." in row
     assert "vehicle my-ev v1 registered" in out
-    assert f"next: lashscope analyze {log} --vehicle my-ev --data-dir {data}" in out
+    assert f"next: lashscope analyze {log} --vehicle my-ev\n" in out
+    data = tmp_path / "lashscope-data"
     channels = _stored_map(data, "my-ev")
     assert channels["motor_torque_nm"] == {"message": "MCU_Torque", "signal": "MotorTorqueActual"}
     assert channels["motor_speed_rpm"] == {"message": "MCU_Speed", "signal": "MotorSpeed"}
     assert channels["pedal_pct"] == {"message": "VCU_Pedal", "signal": "AccelPedalPos"}
 
-    assert main(["analyze", str(log), "--vehicle", "my-ev", "--data-dir", str(data), "--no-whole-log",
-                 "--json"]) == 0
-    doc = json.loads(capsys.readouterr().out)
+    run = _lashscope("analyze", str(log), "--vehicle", "my-ev", "--no-whole-log", "--json", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    doc = json.loads(run.stdout)
     assert doc["vehicle"] == "my-ev"  # the registered name, not the driveline's
     assert doc["summary"]["with_metrics"] >= 4
     assert doc["ingest"]["database"] == "database.dbc"  # the registered vehicle's own copy of the DBC
 
     # the same files again: no new version
-    assert main(["init", str(log), "--dbc", str(DBC), "--name", "my-ev", "--preset", "paper", "-y",
-                 "--data-dir", str(data)]) == 0
-    assert "vehicle my-ev v1 unchanged" in capsys.readouterr().out
+    run = _lashscope("init", str(log), "--dbc", str(DBC), "--name", "my-ev", "--preset", "paper", "-y", cwd=tmp_path)
+    assert run.returncode == 0 and "vehicle my-ev v1 unchanged" in run.stdout, run.stderr
 
 
 def test_map_overrides_and_signs_are_the_users(log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
