@@ -10,7 +10,7 @@ from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 
 from app.api.deps import SettingsDep, StoreDep
-from app.api.schemas import ERRORS, GapSensitivityOut, VehicleOut
+from app.api.schemas import ERRORS, GapSensitivityOut, SignalMapProposalOut, VehicleOut
 from app.api.upload import check_toml, receive_upload, user_file_names
 from app.errors import InputError, UploadTooLargeError
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity
@@ -164,7 +164,7 @@ PROPOSAL_DOC = {
 }
 
 
-@router.post("/signal-map-proposal", openapi_extra=PROPOSAL_DOC,
+@router.post("/signal-map-proposal", openapi_extra=PROPOSAL_DOC, response_model=SignalMapProposalOut,
              summary="Propose a signal map for a stored log and a DBC, with the evidence per channel")
 async def propose_signal_map(request: Request, store: StoreDep, settings: SettingsDep) -> dict[str, Any]:
     """The map ``lashscope init`` proposes (:mod:`app.signal_proposal`): per channel the DBC signal, its unit and
