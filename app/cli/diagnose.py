@@ -116,7 +116,9 @@ def summary(doc: dict[str, Any]) -> str:
         if any("%*" in line for line in lines):
             lines.append(OVER_FULL_NOTE)
     ident = doc.get("identification")
-    if ident:
+    if ident and "params" not in ident:  # too few events to identify: say why instead of a table
+        lines += ["", f"identification of the base parameters skipped: {ident.get('skipped', 'no result')}"]
+    elif ident:
         ho = ident.get("heldout") or {}
         lines += ["", "identification of the base parameters (calibration events; held-out shrink "
                       f"{_pct(ho.get('shrink'))}):"]

@@ -56,3 +56,11 @@ def test_live_lines_show_no_nan() -> None:
           "frames_per_s": 0.0, "frames_dropped": 0, "bus_errors": 0, "decode_errors": 0, "unknown_id_frames": 0,
           "events": 0}
     assert "None" not in _status_line(st) and "latency p50 - ms" in _status_line(st)
+
+
+def test_diagnose_says_why_the_identification_was_skipped() -> None:
+    doc = _diagnosis(0.8)
+    doc["identification"] = {"skipped": "not identified: identification needs at least 4 usable tip-in/tip-out "
+                                        "events; the log gives 3"}
+    out = summary(doc)
+    assert "identification of the base parameters skipped: not identified: identification needs at least 4" in out
