@@ -33,7 +33,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     s = subparsers.add_parser("simulate", help="simulate motor speed from a torque CSV (columns t_s, torque_nm)")
     s.add_argument("torque_csv", type=Path, help="CSV with header t_s,torque_nm (irregular times allowed), or the "
                    "signals.csv of lashscope decode --map")
-    s.add_argument("--vehicle", default="paper", help="preset name or TOML file (default: paper)")
+    s.add_argument("--vehicle", default="paper",
+                   help="registered vehicle (lashscope init), preset name or TOML file (default: paper)")
     s.add_argument("--model", choices=("multibody", "two_inertia"), default="multibody")
     s.add_argument("--interp", choices=("hold", "linear"), default="hold")
     s.add_argument("--speed0-rpm", type=float, default=None, help="initial motor speed (default: from the vehicle)")
@@ -53,7 +54,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     tol = subparsers.add_parser(
         "tolerance", help="Monte Carlo over the vehicle's tolerance bands: predicted ripple band for a torque CSV")
     tol.add_argument("torque_csv", type=Path, help="CSV with header t_s,torque_nm (irregular times allowed)")
-    tol.add_argument("--vehicle", default="paper", help="preset name or TOML file with [min, max] bands")
+    tol.add_argument("--vehicle", default="paper",
+                     help="registered vehicle, preset name or TOML file with [min, max] bands")
     tol.add_argument("--n", type=int, default=1000, help="number of sampled variants (default 1000)")
     tol.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same band")
     tol.add_argument("--distribution", choices=("uniform", "normal"), default="uniform",
@@ -118,13 +120,14 @@ def _read_torque(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from sim import load_vehicle, simulate
+    from app.cli.vehicle_args import load_driveline
+    from sim import simulate
     from sim.whatif import parse_what_if
 
     what_if = parse_what_if(args.what_if) if args.what_if else None  # bad specs fail before any work
     window = _check_window(args.window)
     t, q = _read_torque(args.torque_csv)
-    vehicle = load_vehicle(args.vehicle)
+    vehicle = load_driveline(args.vehicle)
     if what_if is not None:  # unknown gaps, fields and oversize shaping too: before the baseline runs
         what_if.apply_vehicle(vehicle)
         what_if.apply_torque(t, q)
@@ -241,12 +244,12 @@ def _summary(label: str, res: SimResult) -> float:
 def _tolerance(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from sim import load_vehicle
+    from app.cli.vehicle_args import load_driveline
     from sim.batch import tolerance_analysis
 
     window = _check_window(args.window)
     t, q = _read_torque(args.torque_csv)
-    vehicle = load_vehicle(args.vehicle)
+    vehicle = load_driveline(args.vehicle)
     if window is None:
         from app.analysis.whatif import torque_events
         from sim import simulate

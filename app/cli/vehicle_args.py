@@ -10,6 +10,7 @@ if TYPE_CHECKING:
     from app.analysis.events import EventParams
     from app.pipeline import VehicleInputs
     from app.storage.records import VehicleRecord
+    from sim import Vehicle
 
 # (option, EventParams field, metavar, default, help). The defaults are repeated here so that
 # registering the commands imports no numpy; tests/test_pipeline_tracking.py checks they equal EventParams'.
@@ -106,6 +107,28 @@ def resolve_vehicle(args: argparse.Namespace) -> tuple[VehicleInputs, str]:
     if name in preset_names():
         return VehicleInputs(load_vehicle(name), args.dbc or dbc_dir / "lashscope_ev.dbc",
                              args.signal_map or dbc_dir / "lashscope_ev.map.toml"), name
+    raise vehicle_not_found(name, where)
+
+
+def load_driveline(name: str, data_dir: Path | None = None) -> Vehicle:
+    """The driveline ``--vehicle`` names for the commands that need only it (``simulate``, ``tolerance``): a
+    file, a registered vehicle's driveline, or a preset, in the order of :func:`resolve_vehicle`."""
+    from app.errors import AppError
+    from sim import load_vehicle, preset_names
+
+    path = Path(name)
+    if path.suffix.lower() in (".toml", ".json") or path.is_file():
+        return load_vehicle(path)
+    try:
+        registered, where = registered_vehicle(name, data_dir)
+    except AppError:
+        if name not in preset_names():
+            raise
+        registered, where = None, None
+    if registered is not None:
+        return load_vehicle(registered.driveline_path)
+    if name in preset_names():
+        return load_vehicle(name)
     raise vehicle_not_found(name, where)
 
 

@@ -173,3 +173,40 @@ def test_proposal_evidence_and_overrides(log: Path) -> None:
     assert ev.correlation is not None and ev.correlation > 0.5 and ev.sign == "agrees with the speed"
     assert p.evidence["pedal_pct"].correlation is not None and p.evidence["pedal_pct"].correlation > 0.5
     assert p.to_dict()["signal_map_toml"].startswith("[vehicle]")
+
+
+def test_simulate_takes_a_registered_vehicle(log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)  # the default data directory, ./lashscope-data
+    from app.settings import get_settings
+
+    get_settings.cache_clear()
+    monkeypatch.delenv("LASHSCOPE_DATA_DIR", raising=False)
+    try:
+        assert main(["init", str(log), "--dbc", str(DBC), "--name", "chain-car", "--preset", "chain_drive",
+                     "--yes"]) == 0
+        torque = tmp_path / "tq.csv"
+        torque.write_text("t_s,torque_nm\n" + "".join(f"{k * 0.01:.2f},{50 if k > 50 else -20}\n"
+                                                      for k in range(150)))
+        capsys.readouterr()
+        assert main(["simulate", str(torque), "--vehicle", "chain-car"]) == 0
+        assert capsys.readouterr().out.startswith("vehicle chain_drive,")  # the registered car's driveline
+        assert main(["simulate", str(torque), "--vehicle", "chain-cat"]) == 2
+        err = capsys.readouterr().err
+        assert "[vehicle_not_found]" in err and "registered: chain-car" in err
+    finally:
+        get_settings.cache_clear()
+
+
+def test_a_bad_driveline_file_is_refused_before_anything_is_stored(log: Path, tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    from sim import dump_toml, load_vehicle
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text(dump_toml(load_vehicle("paper")).replace("segments = 2", "segments = 100000"), encoding="utf-8")
+    data = tmp_path / "data"
+    assert main(["init", str(log), "--dbc", str(DBC), "--name", "ev", "--driveline", str(bad), "--yes",
+                 "--data-dir", str(data)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("lashscope: error [") and "halfshaft.segments = 100000" in err and err.count("\n") == 1
+    assert not (data / "vehicles").exists()
