@@ -76,59 +76,53 @@ def vehicle_inputs(args: argparse.Namespace) -> VehicleInputs:
 
 
 def resolve_vehicle(args: argparse.Namespace) -> tuple[VehicleInputs, str]:
-    """The vehicle inputs and the name to report them under.
-
-    ``--vehicle`` is, in this order: an existing driveline file (or a name ending in ``.toml``), a
-    vehicle registered in the store (its driveline, DBC and signal map; ``--dbc``/``--signal-map``
-    override them), a preset with the project's DBC and map. Anything else is InputError
-    ``vehicle_not_found`` listing the registered vehicles and the presets.
-    """
-    from app.errors import AppError
+    """The vehicle inputs and the name to report them under (:func:`find_vehicle`); a registered vehicle
+    brings its DBC and signal map, the others the project's, and ``--dbc``/``--signal-map`` override both."""
     from app.pipeline import VehicleInputs
     from app.settings import get_settings
-    from sim import load_vehicle, preset_names
+    from app.storage.records import VehicleRecord
+    from sim import load_vehicle
 
-    name = str(args.vehicle)
+    found = find_vehicle(str(args.vehicle), getattr(args, "data_dir", None))
+    if isinstance(found, VehicleRecord):
+        return VehicleInputs(load_vehicle(found.driveline_path), args.dbc or found.database_path,
+                             args.signal_map or found.signal_map_path, found.name), found.name
     dbc_dir = get_settings().dbc_dir
-    path = Path(name)
-    if path.suffix.lower() in (".toml", ".json") or path.is_file():
-        vehicle = load_vehicle(path)
-        return VehicleInputs(vehicle, args.dbc or dbc_dir / "lashscope_ev.dbc",
-                             args.signal_map or dbc_dir / "lashscope_ev.map.toml"), vehicle.name
-    try:
-        registered, where = registered_vehicle(name, getattr(args, "data_dir", None))
-    except AppError:
-        if name not in preset_names():
-            raise
-        registered, where = None, None  # a store that cannot be opened does not stand between a user and a preset
-    if registered is not None:
-        return VehicleInputs(load_vehicle(registered.driveline_path), args.dbc or registered.database_path,
-                             args.signal_map or registered.signal_map_path, registered.name), registered.name
-    if name in preset_names():
-        return VehicleInputs(load_vehicle(name), args.dbc or dbc_dir / "lashscope_ev.dbc",
-                             args.signal_map or dbc_dir / "lashscope_ev.map.toml"), name
-    raise vehicle_not_found(name, where)
+    vehicle = load_vehicle(found)
+    return VehicleInputs(vehicle, args.dbc or dbc_dir / "lashscope_ev.dbc",
+                         args.signal_map or dbc_dir / "lashscope_ev.map.toml"), \
+        vehicle.name if isinstance(found, Path) else found
 
 
 def load_driveline(name: str, data_dir: Path | None = None) -> Vehicle:
-    """The driveline ``--vehicle`` names for the commands that need only it (``simulate``, ``tolerance``): a
-    file, a registered vehicle's driveline, or a preset, in the order of :func:`resolve_vehicle`."""
+    """The driveline ``--vehicle`` names, for the commands that need only it (``simulate``, ``tolerance``)."""
+    from app.storage.records import VehicleRecord
+    from sim import load_vehicle
+
+    found = find_vehicle(name, data_dir)
+    return load_vehicle(found.driveline_path if isinstance(found, VehicleRecord) else found)
+
+
+def find_vehicle(name: str, data_dir: Path | None) -> Path | VehicleRecord | str:
+    """What ``--vehicle`` names, in this order: an existing driveline file (or a name ending in ``.toml``) as a
+    Path, a vehicle registered in the store as its latest record, a preset as its name. Anything else is
+    InputError ``vehicle_not_found`` listing the registered vehicles and the presets."""
     from app.errors import AppError
-    from sim import load_vehicle, preset_names
+    from sim import preset_names
 
     path = Path(name)
     if path.suffix.lower() in (".toml", ".json") or path.is_file():
-        return load_vehicle(path)
+        return path
     try:
         registered, where = registered_vehicle(name, data_dir)
     except AppError:
         if name not in preset_names():
             raise
-        registered, where = None, None
+        registered, where = None, None  # a store that cannot be opened does not stand between a user and a preset
     if registered is not None:
-        return load_vehicle(registered.driveline_path)
+        return registered
     if name in preset_names():
-        return load_vehicle(name)
+        return name
     raise vehicle_not_found(name, where)
 
 
