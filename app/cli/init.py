@@ -29,7 +29,11 @@ CHANNELS_HELP = ("pedal_pct, motor_torque_nm, motor_speed_rpm, vehicle_speed_kmh
 def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "init", help="register a vehicle from a log and its DBC: proposed signal map with evidence, driveline",
-        description=__doc__.split("\n\n", 1)[1] if __doc__ else None)
+        description="Read LOG once for its message rates, propose a signal map from the DBC's names, units and rates "
+        "among the messages the log carries, decode it and print per channel the signal, unit, rate, decoded range, "
+        "correlation and sign check. Accept it (--yes, or y at the prompt on a terminal; e edits), change channels "
+        "(--map ROLE=Message.Signal, ROLE=- drops one), and the vehicle is stored with the chosen driveline (a preset "
+        "or a TOML file) as POST /vehicles stores it. Then --vehicle NAME works in every command.")
     p.add_argument("log", type=Path, help="a CAN log of the vehicle (any format lashscope reads)")
     p.add_argument("--dbc", type=Path, required=True, help="the vehicle's database (DBC, KCD, SYM, ARXML)")
     p.add_argument("--name", required=True, help="vehicle name: a-z, 0-9, '-', '_' (used as --vehicle NAME)")
