@@ -342,7 +342,7 @@ def test_live_page_shows_frames_arriving(page: Any, server: Server, hub_port: in
 def _keys(server: Server, *args: str) -> str:
     out = subprocess.run([sys.executable, "-m", "app", "keys", *args, "--data-dir", str(server.data_dir)],
                          capture_output=True, text=True, timeout=120, check=True)
-    return out.stdout
+    return out.stdout + out.stderr  # create: the key alone on stdout, then the notice on stderr
 
 
 def test_the_api_key_goes_with_every_request(page: Any, server: Server) -> None:
