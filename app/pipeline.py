@@ -118,6 +118,7 @@ class VehicleInputs:
     vehicle: Vehicle
     database: Path
     signal_map: Path
+    name: str | None = None  # the registered vehicle's name, when it comes from the store (else the driveline's)
 
 
 @dataclass(frozen=True)

@@ -100,5 +100,6 @@ def tolerance_doc(vehicle: Vehicle, torque: Signal, speed: Signal, windows: Sequ
         rows.append(row)
         progress((k + 1) / max(1, len(windows)))
     return {"n": n, "seed": seed, "distribution": "uniform", "percentiles": list(BAND_PERCENTILES),
-            "metric": "peak-to-adjacent-valley fluctuation of motor speed over the event window (rpm)",
+            "metric": "peak-to-adjacent-valley fluctuation of the raw motor speed over the event window (rpm; not "
+                      "detrended, unlike the analysis' metrics)",
             "sampled_fields": list(fields), "events": rows}

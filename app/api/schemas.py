@@ -375,3 +375,36 @@ class BatchLogsOut(BaseModel):
     batch_id: str
     count: int
     logs: list[BatchLogOut]
+
+
+class ChannelEvidenceOut(BaseModel):
+    """One proposed channel and what the log says about it (app.signal_proposal.ChannelEvidence)."""
+
+    channel: str
+    source: str = Field(description="Message.Signal")
+    dbc_unit: str
+    unit: str = Field(description="the canonical unit")
+    factor: float = Field(description="DBC unit -> canonical unit")
+    invert: bool
+    chosen_by: str = Field(description="suggested | user")
+    score: float | None = Field(description="name/unit/rate score of the suggester (null: the user's choice)")
+    reasons: list[str]
+    samples: int
+    rate_hz: float | None
+    minimum: float | None = Field(description="decoded, in the canonical unit")
+    maximum: float | None
+    correlation: float | None
+    correlation_with: str
+    sign: str
+
+
+class SignalMapProposalOut(BaseModel):
+    log_id: str
+    database: str
+    log_format: str
+    frames: int
+    duration_s: float
+    missing: list[str] = Field(description="channels every analysis needs that no signal was found for")
+    channels: list[ChannelEvidenceOut]
+    candidates: dict[str, list[str]] = Field(description="per channel, the suggester's best signals")
+    signal_map_toml: str = Field(description="the proposed map, for POST /vehicles (field signal_map)")

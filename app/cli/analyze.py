@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from app.cli.vehicle_args import add_log_and_vehicle, event_params, vehicle_inputs
+from app.cli.vehicle_args import add_log_and_vehicle, event_params, resolve_vehicle
 
 
 def register(sub: Any) -> None:
@@ -35,7 +35,7 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
     from app.pipeline import AnalysisOptions, run_analysis
     from app.storage.results import json_safe
 
-    inputs = vehicle_inputs(args)
+    inputs, vehicle_name = resolve_vehicle(args)
     opts = AnalysisOptions(model=args.model, whole_log=not args.no_whole_log, events=event_params(args))
     doc, arrays = result_payload(run_analysis(args.log, inputs, opts))
     if getattr(args, "tolerance", 0):
@@ -46,7 +46,7 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
         stored = SimpleNamespace(doc=doc, array=arrays.__getitem__)  # the result as the job reads it from disk
         doc["tolerance"] = tolerance_for_result(stored, inputs.vehicle, args.tolerance, getattr(args, "seed", 0))
     doc["log"] = str(args.log)
-    doc["vehicle"] = inputs.vehicle.name
+    doc["vehicle"] = vehicle_name
     if getattr(args, "gap_sensitivity", False):
         from app.pipeline import gap_sensitivity
 
@@ -84,7 +84,9 @@ def tolerance_table(tol: dict[str, Any]) -> str:
         return "-" if v is None else format(v, fmt)
 
     lines = [f"tolerance band, {tol['n']} variants per event (seed {tol['seed']}); {tol['metric']}",
-             f"{'#':>3} {'kind':<8} {'p5':>8} {'p50':>8} {'p95':>8} {'nominal':>8} {'measured':>9} {'pct':>6}"]
+             f"{'#':>3} {'kind':<8} {'p5':>8} {'p50':>8} {'p95':>8} {'nominal':>8} {'measured':>9} {'pct':>6} "
+             f"{'detrended':>10}",
+             f"{'':>3} {'':<8} {'rpm':>8} {'rpm':>8} {'rpm':>8} {'rpm':>8} {'raw, rpm':>9} {'':>6} {'meas., rpm':>10}"]
     for e in tol["events"]:
         if e.get("error"):
             lines.append(f"{e['index']:>3} {e['kind']:<8} {e['error']}")
@@ -92,7 +94,9 @@ def tolerance_table(tol: dict[str, Any]) -> str:
         b = e["band_rpm"]
         lines.append(f"{e['index']:>3} {e['kind']:<8} {num(b['p5']):>8} {num(b['p50']):>8} {num(b['p95']):>8} "
                      f"{num(e['nominal_fluctuation_rpm']):>8} {num(e['measured_fluctuation_rpm']):>9} "
-                     f"{num(e['measured_percentile'], '.0f'):>5}%")
+                     f"{num(e['measured_percentile'], '.0f'):>5}% {num(e.get('analysis_fluctuation_rpm')):>10}")
+    lines.append("pct: the measured (raw) ripple's percentile in the band; detrended: the same event's fluctuation in "
+                 "the metrics table (detrended from the rigid-body trend, so it differs from the raw one)")
     return "\n".join(lines)
 
 

@@ -21,7 +21,8 @@ def register(sub: Any) -> None:
     add_vehicle(p)
     p.add_argument("--out", type=Path, required=True, help="output directory (records and event store)")
     p.add_argument("--vehicle-id", default=None, metavar="ID",
-                   help="the fleet's name of the vehicle the logs come from (default: the driveline's name)")
+                   help="the fleet's name of the vehicle the logs come from (default: the registered "
+                   "vehicle's name, else the driveline's)")
     p.add_argument("--vehicle-id-from-dir", action="store_true",
                    help="take each log's vehicle name from its parent folder (logs/<vehicle>/*.blf)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -38,7 +39,7 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.cli.vehicle_args import event_params, vehicle_inputs
+    from app.cli.vehicle_args import event_params, resolve_vehicle
     from app.errors import InputError
     from app.fleet.batch import BatchConfig, expand_sources, run_batch
     from app.fleet.work import BatchSpec
@@ -49,11 +50,12 @@ def run(args: argparse.Namespace) -> int:
     if args.connect_timeout <= 0:
         raise InputError(f"--connect-timeout {args.connect_timeout:g}: must be > 0 s")
     sources = expand_sources(args.logs)
-    inputs = vehicle_inputs(args)  # a bad vehicle, DBC or signal map fails here, before any worker starts
+    # a bad vehicle, DBC or signal map fails here, before any worker starts
+    inputs, vehicle_name = resolve_vehicle(args)
     signal_routes(inputs.database, inputs.signal_map)
     options = AnalysisOptions(model=args.model, events=event_params(args))
     cfg = BatchConfig(out=args.out, spec=BatchSpec(inputs, options.to_dict(), args.diagnose),
-                      vehicle_id=args.vehicle_id or inputs.vehicle.name, vehicle_id_from_dir=args.vehicle_id_from_dir,
+                      vehicle_id=args.vehicle_id or vehicle_name, vehicle_id_from_dir=args.vehicle_id_from_dir,
                       scheduler=args.scheduler, workers=args.workers, retry_failed=args.retry_failed,
                       connect_timeout_s=args.connect_timeout)
     summary = run_batch(sources, cfg, None if args.quiet else sys.stderr)

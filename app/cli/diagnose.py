@@ -54,9 +54,16 @@ def _progress(quiet: bool) -> Any:
 
 
 def _pct(iv: dict[str, float] | None) -> str:
+    """``value % [lo, hi]``; a share above 100 % is starred (see :data:`OVER_FULL_NOTE`)."""
     if not iv:
         return "-"
-    return f"{100 * iv['value']:.0f} % [{100 * iv['lo']:.0f}, {100 * iv['hi']:.0f}]"
+    star = "*" if iv["value"] > 1.0 else ""
+    return f"{100 * iv['value']:.0f} %{star} [{100 * iv['lo']:.0f}, {100 * iv['hi']:.0f}]"
+
+
+OVER_FULL_NOTE = ("* above 100 %: the fit removed more than the residual above the noise floor (part of the noise "
+                  "as well); explained share = residual removed / residual above the noise floor, held-out shrink = "
+                  "residual energy removed / residual energy")
 
 
 def _ratio(iv: dict[str, float] | float | None) -> str:
@@ -106,21 +113,28 @@ def summary(doc: dict[str, Any]) -> str:
                                for eff, vals in c["fit"]["params"].items() for k, v in vals.items())
             lines.append(f"{c['id']:34s} {_pct(h['shrink']):>22s} {_pct(h['explained_share']):>22s} "
                          f"{100 * h['improved_fraction']:8.0f}%  {params}")
+        if any("%*" in line for line in lines):
+            lines.append(OVER_FULL_NOTE)
     ident = doc.get("identification")
-    if ident:
+    if ident and "params" not in ident:  # too few events to identify: say why instead of a table
+        lines += ["", f"identification of the base parameters skipped: {ident.get('skipped', 'no result')}"]
+    elif ident:
         ho = ident.get("heldout") or {}
         lines += ["", "identification of the base parameters (calibration events; held-out shrink "
                       f"{_pct(ho.get('shrink'))}):"]
         lines += [f"  {p['label']:44s} {identified_param(p)}" for p in ident["params"].values()]
     loc = doc.get("localisation")
     if loc:
-        lines += ["", "where (held-out, baseline): phase  share  residual/noise"]
+        lines += ["", "where (held-out, baseline): phase, share of the residual energy, residual RMS / noise floor"]
         for p in loc["phases"]:
             r = p["residual_to_noise"]
-            lines.append(f"  {p['phase']:13s} {100 * (p['energy_share'] or 0):5.1f} %  {r if r is not None else '-'}")
-        lines.append("  band      share  coherence with torque")
+            lines.append(f"  {p['phase']:13s} {100 * (p['energy_share'] or 0):5.1f} %  "
+                         f"{'-' if r is None else f'{r:.2f}x'}")
+        lines.append("  band, share of the residual energy, coherence with torque (0..1)")
         for b in loc["bands"]:
-            lines.append(f"  {b['band']:8s} {100 * (b['energy_share'] or 0):5.1f} %  {b['coherence']}")
+            coh = b["coherence"]
+            shown = "-" if coh is None else f"{coh:.2f}"
+            lines.append(f"  {b['band']:8s} {100 * (b['energy_share'] or 0):5.1f} %  {shown}")
         lines += [f"  note: {n}" for n in loc["notes"]]
     rem = d.get("remainder")
     if rem:
@@ -133,7 +147,9 @@ def summary(doc: dict[str, Any]) -> str:
     elif val:
         lines += ["", f"validation on another drive ({val['events']} events): held-out shrink "
                       f"{_pct(val['shrink'])}, explained share {_pct(val['explained_share'])}"]
-    lines.append(f"\n{doc['elapsed_s']:.1f} s")
+        if "%*" in lines[-1] and OVER_FULL_NOTE not in lines:
+            lines.append(OVER_FULL_NOTE)
+    lines.append(f"\ndiagnosis took {doc['elapsed_s']:.1f} s (wall time)")
     return "\n".join(lines)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from typing import Any
 
 SCOPES = ("read", "write", "admin")  # app.storage.keys.SCOPES, without importing the store for --help
@@ -48,8 +49,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.action == "create":
             key, token = store.create_key(args.scope, args.name)
-            print(token)
-            print(f"lashscope: created key {key.id} (scope {key.scope}); it is not shown again", flush=True)
+            print(token, flush=True)  # stdout holds the key alone, so KEY=$(lashscope keys create ...) captures it
+            print(f"lashscope: created key {key.id} (scope {key.scope}); it is not shown again", file=sys.stderr,
+                  flush=True)
         elif args.action == "list":
             keys = store.list_keys()
             if args.json:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 import threading
@@ -51,13 +52,17 @@ def _status_line(st: dict[str, Any]) -> str:
     return (f"live {st['id']}: bus {st['bus']['state']}, {st['frames_received']:,} frames "
             f"({st['frames_per_s']:,.0f}/s), dropped {st['frames_dropped']}, bus errors {st['bus_errors']}, "
             f"decode errors {st['decode_errors']}, unknown-ID frames {st['unknown_id_frames']}, "
-            f"events {st['events']}, latency p50 {lat if lat is None else round(lat, 3)} ms")
+            f"events {st['events']}, latency p50 {'-' if lat is None else round(lat, 3)} ms")
 
 
 def _event_line(ev: dict[str, Any]) -> str:
     m = ev.get("metrics") or {}
-    what = (f"fluctuation {m.get('fluctuation_rpm', float('nan')):.1f} rpm, "
-            f"gap-open {1e3 * m.get('gap_open_time_s', float('nan')):.1f} ms") if ev["included"] else ev["exclusion"]
+
+    def num(v: Any, scale: float = 1.0) -> str:  # a metric the event's sampling cannot resolve is "-", never nan
+        return f"{scale * v:.1f}" if isinstance(v, int | float) and math.isfinite(v) else "-"
+
+    what = (f"fluctuation {num(m.get('fluctuation_rpm'))} rpm (detrended), "
+            f"gap-open {num(m.get('gap_open_time_s'), 1e3)} ms") if ev["included"] else ev["exclusion"]
     return f"event {ev['index']}: {ev['kind']} at t = {ev['t_cross_s']:.3f} s, {what}"
 
 
@@ -128,6 +133,8 @@ def _watch(session: LiveSession, args: argparse.Namespace, done: threading.Event
 
 
 def _run_with_store(args: argparse.Namespace, done: threading.Event, emit: Any) -> int:
+    from app.cli.vehicle_args import vehicle_not_found
+    from app.errors import NotFoundError
     from app.jobs import JobRunner
     from app.live.decoding import source_for
     from app.live.manager import LiveManager, StartRequest
@@ -137,6 +144,14 @@ def _run_with_store(args: argparse.Namespace, done: threading.Event, emit: Any) 
 
     settings = Settings(data_dir=args.data_dir) if args.data_dir is not None else get_settings()
     store = open_store(settings.store_location, files=settings.data_dir)  # LASHSCOPE_STORE_URL, if set
+    try:
+        store.get_vehicle(args.vehicle, args.vehicle_version)
+    except NotFoundError as exc:
+        names = [v.name for v in store.list_vehicles()]
+        store.close()
+        if args.vehicle in names:  # the vehicle is there, the version is not
+            raise
+        raise vehicle_not_found(args.vehicle, names) from exc
     runner = JobRunner(store)
     try:
         manager = LiveManager(store, settings.data_dir / "live", source_for, submit=runner.submit,

@@ -17,6 +17,13 @@ METRIC_ROWS = (
 )
 
 
+METRIC_NOTES = [
+    "  measured, simulated: medians over the analysed events; sim-meas: median of the per-event differences "
+    "(not the difference of the two medians)",
+    "  speed metrics on the motor speed detrended from the rigid-body trend in each event window (docs/metrics.md)",
+]
+
+
 def _f(v: Any, scale: float = 1.0, digits: int = 1) -> str:
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return "-"
@@ -54,6 +61,7 @@ def metrics_table(doc: dict[str, Any]) -> str:
         if row:
             lines.append(f"{label:<30} {'':>10} {'':>10} {_f(row['difference_median'], 1.0, 3):>10}  "
                          f"{'rpm' if key == 'rms_rpm' else '-'}")
+    lines += METRIC_NOTES
     labels = {key: label for key, label, _, _ in METRIC_ROWS}
     for key, why in (doc["summary"].get("resolution") or {}).items():
         lines.append(f"  {labels.get(key, key)}: {why}")

@@ -8,7 +8,8 @@ disables it); the job workers it spawns inherit it. Elsewhere (``lashscope analy
 calls, tests) it is unset and nothing is written.
 
 The hook never fails an analysis: a store that cannot be written is logged as a warning.
-The vehicle of the rows is the driveline description's name.
+The vehicle of the rows is the registered vehicle's name (``VehicleInputs.name``; the driveline
+description's name when the inputs do not come from the store), the driveline's is in ``driveline``.
 """
 
 from __future__ import annotations
@@ -55,9 +56,8 @@ def after_analysis(log_source: LogSource, inputs: VehicleInputs, result: Analysi
             seek(0)
         log_hash = content_hash(log_source)
         doc, _ = result_payload(result)
-        name = inputs.vehicle.name
-        rows = event_rows(dict(json_safe(doc)), vehicle=name, log_hash=log_hash, log_name=source_name(log_source),
-                          source="service", driveline=name)
+        rows = event_rows(dict(json_safe(doc)), vehicle=inputs.name or inputs.vehicle.name, log_hash=log_hash,
+                          log_name=source_name(log_source), source="service", driveline=inputs.vehicle.name)
         write_rows(root, rows, source="service", log_hash=log_hash)
     except Exception as exc:  # the analysis itself succeeded; the store is a by-product
         log.warning("event store %s: events of %s not written: %s", root, log_source, exc)

@@ -97,6 +97,7 @@ def fleet_report(root: str | Path, k: float = 3.0, level: float = 0.9, seed: int
             "weekly_ripple_rpm": [{"week": str(w), "events": int(n), "median": float(v)}
                                   for w, n, v in zip(weeks["week"], weeks["events"], weeks["median"], strict=True)],
             "flags": [],
+            "outside": [],  # the quantities (QUANTITIES keys) whose band the vehicle lies outside
         })
     bands = {q: _band([v[q]["median"] for v in vehicles], k) for q in QUANTITIES}
     for v in vehicles:
@@ -107,10 +108,19 @@ def fleet_report(root: str | Path, k: float = 3.0, level: float = 0.9, seed: int
                 side = "above" if value > band["hi"] else "below"
                 v["flags"].append(f"{what} {value:.3g} {unit} {side} the fleet band "
                                   f"[{band['lo']:.3g}, {band['hi']:.3g}] {unit}")
+                v["outside"].append(q)
     return {"store": str(root), "vehicles": vehicles, "bands": bands, "band_k": k, "interval_level": level,
             "poor_tracking": poor_tracking,
             "units": {q: u for q, (u, _) in QUANTITIES.items()},
             "flagged": [v["vehicle"] for v in vehicles if v["flags"]]}
+
+
+def point_colour(vehicle: dict[str, Any], quantity: str) -> str:
+    """A vehicle's colour on the panel of ``quantity``: red only when it lies outside *that* quantity's band (the
+    band drawn behind it), orange when only another quantity flags it, blue otherwise."""
+    if quantity in vehicle.get("outside", ()):
+        return "tab:red"
+    return "tab:orange" if vehicle.get("flags") else "tab:blue"
 
 
 def report_png(report: dict[str, Any], path: Path) -> Path:
@@ -125,7 +135,7 @@ def report_png(report: dict[str, Any], path: Path) -> Path:
     x = np.arange(len(vehicles))
     for i, v in enumerate(vehicles):
         q = v["total_lash_deg"]
-        color = "tab:red" if v["flags"] else "tab:blue"
+        color = point_colour(v, "total_lash_deg")
         ax1.errorbar([i], [q["median"]], yerr=[[q["median"] - q["lo"]], [q["hi"] - q["median"]]], fmt="o",
                      color=color, capsize=4)
     band = report["bands"]["total_lash_deg"]
@@ -136,14 +146,14 @@ def report_png(report: dict[str, Any], path: Path) -> Path:
     ax1.set_xticks(x, [v["vehicle"] for v in vehicles], rotation=30, ha="right")
     ax1.set_ylabel("total lash, motor side (deg)")
     ax1.set_title(f"lash estimate per vehicle, median and {100 * report['interval_level']:.0f} % interval "
-                  "(red: outside the band)")
+                  "(red: outside this band; orange: flagged on gap-open time or ripple)", fontsize="medium")
     for v in vehicles:
         weeks = v["weekly_ripple_rpm"]
         if weeks:
             ax2.plot([np.datetime64(w["week"]) for w in weeks], [w["median"] for w in weeks], marker="o",
-                     label=v["vehicle"], color="tab:red" if v["flags"] else None)
+                     label=v["vehicle"], color="tab:red" if "ripple_rpm" in v["outside"] else None)
     ax2.set_ylabel("median fluctuation per week (rpm)")
-    ax2.set_title("ripple over time")
+    ax2.set_title("ripple over time (red: median ripple outside the fleet band)")
     if any(v["weekly_ripple_rpm"] for v in vehicles):
         ax2.legend(loc="best", fontsize="small", ncol=2)
     fig.tight_layout()

@@ -20,7 +20,7 @@ def run(store: Store, job: JobRecord) -> None:
     rec = store.get_analysis(job.subject)
     logrec = store.get_log(rec.log_id)
     veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
-    inputs = VehicleInputs(load_vehicle(veh.driveline_path), veh.database_path, veh.signal_map_path)
+    inputs = VehicleInputs(load_vehicle(veh.driveline_path), veh.database_path, veh.signal_map_path, veh.name)
     result = run_analysis(logrec.path, inputs, AnalysisOptions.from_dict(rec.options),
                           progress_reporter(store, job.id))
     store.update_job(job.id, 0.99, "saving")

@@ -53,7 +53,7 @@ def run(store: Store, job: JobRecord) -> None:
         raise InputError(f"batch {job.subject} has no readable request", code="batch_not_found") from exc
     veh = store.get_vehicle(req["vehicle"], req["vehicle_version"])
     logs = [store.get_log(log_id) for log_id in req["log_ids"]]
-    spec = BatchSpec(VehicleInputs(load_vehicle(veh.driveline_path), veh.database_path, veh.signal_map_path),
+    spec = BatchSpec(VehicleInputs(load_vehicle(veh.driveline_path), veh.database_path, veh.signal_map_path, veh.name),
                      AnalysisOptions.from_dict(req["options"]).to_dict(), bool(req["diagnose"]))
     cfg = BatchConfig(out=d / "out", spec=spec, vehicle_id=req["vehicle_id"], workers=0)
     progress = progress_reporter(store, job.id)

@@ -143,7 +143,7 @@ def test_cli_vehicle_missing_or_unknown(fleet_logs: dict[str, Path], tmp_path: P
     assert exc.value.code == 2 and "the following arguments are required: --vehicle" in capsys.readouterr().err
     code = main(["batch", str(fleet_logs["log0"]), "--vehicle", "nosuchcar", "--out", str(tmp_path), "--quiet"])
     err = capsys.readouterr().err
-    assert code == 2 and "[invalid_parameter]" in err and "nosuchcar" in err
+    assert code == 2 and "[vehicle_not_found]" in err and "nosuchcar" in err and "presets: " in err
     assert not (tmp_path / "logs").exists()  # refused before any log was touched
 
 

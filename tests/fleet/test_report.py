@@ -123,3 +123,37 @@ def test_hook_writes_service_rows_only_when_enabled(tmp_path: Path, monkeypatch:
     assert measured and all(got[i] == pytest.approx(v) for i, v in measured.items())
     monkeypatch.setenv(ENV, str(fleet_logs["log2"]))  # a file, not a folder: logged, the analysis still succeeds
     assert run_analysis(fleet_logs["log2"], inputs, opts).events == result.events
+
+
+def test_a_vehicle_is_red_on_a_panel_only_outside_that_panels_band(store: Path) -> None:
+    """ev-06 has an ordinary lash but a large ripple: flagged, yet inside the lash band drawn behind it."""
+    from app.fleet.report import point_colour
+
+    rows = _vehicle_rows("ev-06", 18.1, 251.0, 700.0, seed=9)
+    for h in sorted({r["log_hash"] for r in rows}):
+        write_rows(store, [r for r in rows if r["log_hash"] == h], source="batch", log_hash=h)
+    report = fleet_report(store)
+    by = {v["vehicle"]: v for v in report["vehicles"]}
+    assert by["ev-06"]["outside"] == ["ripple_rpm"] and by["ev-06"]["flags"]
+    band = report["bands"]["total_lash_deg"]
+    for v in report["vehicles"]:
+        inside = band["lo"] <= v["total_lash_deg"]["median"] <= band["hi"]
+        assert (point_colour(v, "total_lash_deg") == "tab:red") == (not inside), v["vehicle"]
+    assert point_colour(by["ev-06"], "total_lash_deg") == "tab:orange"
+    assert point_colour(by["ev-06"], "ripple_rpm") == "tab:red"
+    assert point_colour(by["ev-01"], "total_lash_deg") == "tab:blue"
+    assert point_colour(by["ev-05"], "total_lash_deg") == "tab:red"
+
+
+def test_service_rows_carry_the_registered_vehicle_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                        fleet_logs: dict[str, Path]) -> None:
+    from app.fleet.hook import ENV
+    from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
+    from sim import load_vehicle
+    from tests.fleet.conftest import DBC, MAP
+
+    monkeypatch.setenv(ENV, str(tmp_path / "events"))
+    run_analysis(fleet_logs["log2"], VehicleInputs(load_vehicle("paper"), DBC, MAP, "my-car"),
+                 AnalysisOptions(whole_log=False))
+    frame = read_events(tmp_path / "events")
+    assert set(frame["vehicle"]) == {"my-car"} and set(frame["driveline"]) == {"paper"}

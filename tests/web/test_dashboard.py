@@ -261,6 +261,40 @@ def test_vehicles_page_compares_two_versions_field_by_field(page: Any, server: S
     screenshot(page, "vehicles-compare")
 
 
+def test_vehicles_page_registers_from_uploaded_files_and_a_proposed_map(page: Any, server: Server, analysis_id: str,
+                                                                        tmp_path: Path) -> None:
+    """The DBC and the driveline file go up through the page; the map is proposed from the stored log with its
+    evidence, edited on the page, and registered with them."""
+    from sim import dump_toml, load_vehicle
+
+    driveline = tmp_path / "my-driveline.toml"
+    driveline.write_text(dump_toml(load_vehicle("single_reduction")), encoding="utf-8")
+    log_id = api(server, f"/analyses/{analysis_id}")["log_id"]
+    page.goto(f"{server.url}/#/vehicles")
+    page.wait_for_selector("#vehicle-form")
+    page.fill("#vehicle-name", "from-log")
+    page.set_input_files("#vehicle-dbc", str(default_dbc_dir() / "lashscope_ev.dbc"))
+    page.set_input_files("#vehicle-driveline", str(driveline))
+    page.select_option("#vehicle-log", log_id)
+    page.fill("#vehicle-map-changes", "brake_pressed=-")
+    page.click("#vehicle-propose")
+    page.wait_for_selector("#proposal-table")
+    table = page.text_content("#proposal-table") or ""
+    assert "MCU_Speed.MotorSpeed" in table and "brake_pressed" not in table and "rate (Hz)" in table
+    text = page.input_value("#vehicle-map")
+    assert "[channels.motor_torque_nm]" in text and "[channels.vehicle_speed_kmh]" in text
+    # edit on the page: drop the road speed
+    head, _, rest = text.partition("[channels.vehicle_speed_kmh]")
+    page.fill("#vehicle-map", head + rest.partition("\n\n")[2])
+    page.click("#vehicle-register")
+    page.wait_for_function("document.querySelector('#vehicle-msg').textContent.includes('stored from-log v1')")
+    summary = api(server, "/vehicles/from-log")["summary"]
+    assert "vehicle_speed_kmh" not in summary["channels"] and "brake_pressed" not in summary["channels"]
+    assert summary["channels"]["motor_speed_rpm"] == "MCU_Speed.MotorSpeed"
+    assert summary["vehicle"] == load_vehicle("single_reduction").name
+    screenshot(page, "vehicles-register", full_page=True)
+
+
 def test_live_page_shows_frames_arriving(page: Any, server: Server, hub_port: int, tmp_path: Path) -> None:
     drive = tmp_path / "live.blf"
     dbc = default_dbc_dir()
@@ -308,7 +342,7 @@ def test_live_page_shows_frames_arriving(page: Any, server: Server, hub_port: in
 def _keys(server: Server, *args: str) -> str:
     out = subprocess.run([sys.executable, "-m", "app", "keys", *args, "--data-dir", str(server.data_dir)],
                          capture_output=True, text=True, timeout=120, check=True)
-    return out.stdout
+    return out.stdout + out.stderr  # create: the key alone on stdout, then the notice on stderr
 
 
 def test_the_api_key_goes_with_every_request(page: Any, server: Server) -> None:

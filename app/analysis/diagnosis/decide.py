@@ -263,7 +263,8 @@ def decide(
         return Decision("none_of_candidates", gap_ratio=ratio, best=ranked[0] if ranked else None, reason=(
             f"baseline residual is {ratio.value:.2f}x the noise floor, but no candidate removes a significant share "
             f"of it on held-out events (best: {ranked[0].id if ranked else '-'}, explained share "
-            f"{100 * best_share:.0f} %): the remainder is structure no candidate in the library explains"),
+            f"{100 * best_share:.0f} %{OVER_FULL if best_share > 1.0 else ''}): the remainder is structure no "
+            "candidate in the library explains"),
             details={"remainder": remainder_field(["overall"], ratio.value, explained=False)})
     best = sig[0]
     joint_note = ""
@@ -309,10 +310,14 @@ def decide(
     return Decision(status, top=chosen.effects, gap_ratio=ratio, best=chosen, reason=reason, details=details)
 
 
+OVER_FULL = " (above 100 %: the fit also removed part of the noise floor)"
+
+
 def _figures(c: CandidateScore) -> str:
     """The two held-out figures of a candidate, each under its one name (see :mod:`.score`)."""
     return (f"explained share {100 * c.explained.value:.0f} % [{100 * c.explained.lo:.0f}, "
-            f"{100 * c.explained.hi:.0f}] of the residual above the noise floor, held-out shrink "
+            f"{100 * c.explained.hi:.0f}] of the residual above the noise floor"
+            f"{OVER_FULL if c.explained.value > 1.0 else ''}, held-out shrink "
             f"{100 * c.shrink.value:.0f} % [{100 * c.shrink.lo:.0f}, {100 * c.shrink.hi:.0f}] of the residual energy")
 
 

@@ -10,7 +10,7 @@ from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 
 from app.api.deps import SettingsDep, StoreDep
-from app.api.schemas import ERRORS, GapSensitivityOut, VehicleOut
+from app.api.schemas import ERRORS, GapSensitivityOut, SignalMapProposalOut, VehicleOut
 from app.api.upload import check_toml, receive_upload, user_file_names
 from app.errors import InputError, UploadTooLargeError
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity
@@ -148,3 +148,69 @@ async def vehicle_gap_sensitivity(name: str, store: StoreDep,
     tmp.write_text(json.dumps(doc), encoding="utf-8")
     Path(tmp).replace(cached)
     return doc
+
+
+PROPOSAL_DOC = {
+    "requestBody": {
+        "content": {"multipart/form-data": {"schema": {"type": "object", "properties": {
+            "log_id": {"type": "string", "description": "a stored log of the vehicle (POST /logs)"},
+            "dbc": {"type": "string", "format": "binary", "description": "the vehicle's database (DBC/KCD/SYM/ARXML); "
+                    "default: the project's dbc/lashscope_ev.dbc"},
+            "map": {"type": "string", "description": "optional changes, one a line: ROLE=Message.Signal (ROLE=- drops "
+                    "the channel), invert ROLE, keep ROLE"},
+        }, "required": ["log_id"]}}},
+        "required": True,
+    }
+}
+
+
+@router.post("/signal-map-proposal", openapi_extra=PROPOSAL_DOC, response_model=SignalMapProposalOut,
+             summary="Propose a signal map for a stored log and a DBC, with the evidence per channel")
+async def propose_signal_map(request: Request, store: StoreDep, settings: SettingsDep) -> dict[str, Any]:
+    """The map ``lashscope init`` proposes (:mod:`app.signal_proposal`): per channel the DBC signal, its unit and
+    factor, rate (Hz), decoded range in the canonical unit, correlation and sign check, and the other candidates;
+    ``signal_map_toml`` is the map to register (``POST /vehicles``, field ``signal_map``) as is or edited.
+    ``missing`` lists the channels every analysis needs that no signal was found for. Nothing is stored."""
+    from app.ingest.signalmap import CANONICAL
+    from app.signal_proposal import parse_overrides, propose
+
+    up = await receive_upload(request, store.temp_path, MAX_FILE_BYTES["dbc"], 0, urlencoded_form=True,
+                              idle_s=settings.upload_idle_s, max_files=1)
+    files = {f.field_name: f.path for f in up.files}
+    names = {f.path: f.filename for f in up.files}
+    try:
+        unknown = set(files) - {"dbc"}
+        if unknown:
+            raise InputError(f"unexpected file fields {sorted(unknown)}; use dbc")
+        for f in up.files:
+            if f.size > MAX_FILE_BYTES["dbc"]:
+                raise UploadTooLargeError(f"dbc {f.filename!r} has {f.size} bytes, more than the "
+                                          f"{MAX_FILE_BYTES['dbc'] // 1024} KiB a vehicle's dbc may have",
+                                          code="vehicle_file_too_large")
+        log_id = up.fields.get("log_id", "").strip()
+        if not log_id:
+            raise InputError("form field 'log_id' is required: a stored log (POST /logs)")
+        log = store.get_log(log_id)
+        overrides: dict[str, str | None] = {}
+        fixed: dict[str, bool] = {}
+        for line in (s.strip() for s in up.fields.get("map", "").splitlines()):
+            word, _, role = line.partition(" ")
+            if word in ("invert", "keep") and role.strip():
+                if role.strip() not in CANONICAL:
+                    raise InputError(f"map: {line!r}: not a channel; channels are {', '.join(CANONICAL)}",
+                                     code="invalid_map_override")
+                fixed[role.strip()] = word == "invert"
+            elif line:
+                overrides.update(parse_overrides([line]))
+        dbc = files.get("dbc") or settings.dbc_dir / "lashscope_ev.dbc"
+        names.setdefault(dbc, f"default {dbc.name}")
+        names[log.path] = log.filename
+        with user_file_names(names):
+            proposal = await run_in_threadpool(propose, log.path, dbc, overrides, invert=fixed)
+    finally:
+        for p in files.values():
+            p.unlink(missing_ok=True)
+    doc = proposal.to_dict()
+    doc["log_id"] = log_id
+    doc["database"] = names.get(dbc, dbc.name)
+    return dict(json_safe(doc))

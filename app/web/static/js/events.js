@@ -54,7 +54,7 @@ export function metricsTable(id, metrics) {
   cols.push({ key: "rms_rpm", label: "aligned RMS error (rpm)", num: true, digits: 1 },
     { key: "nrmse", label: "NRMSE (-)", num: true, digits: 3 });
   return h("section", { class: "card offscreen-lazy" }, h("h2", {}, `Metrics per event (${metrics.events.length})`),
-    h("div", { class: "toolbar" }, h("span", { class: "muted" }, "Click a column to sort. Definitions: docs/metrics.md."),
+    h("div", { class: "toolbar" }, h("span", { class: "muted" }, "Click a column to sort. Speed metrics are taken on the motor speed detrended from the rigid-body trend; sim-meas is each event's own difference. Definitions: docs/metrics.md."),
       h("button", { id: "metrics-csv", onclick: () => download(`/analyses/${id}/metrics?format=csv`,
         `${id}-metrics.csv`, "text/csv") }, "CSV")),
     h("div", { class: "scroll" }, sortableTable(cols, metrics.events, { id: "metrics-table" })));

@@ -1,29 +1,13 @@
-// Vehicles: the list, a new vehicle from a preset, every version of one, and two versions compared
-// field by field (which driveline parameter changed, by how much).
+// Vehicles: the list, registering one (a preset or the user's driveline file, the user's DBC and a signal
+// map uploaded, or proposed from a stored log with the evidence per channel and edited on the page), every
+// version of one, and two versions compared field by field (which driveline parameter changed, by how much).
 import { api, upload } from "./api.js";
 import { errorBox, fmt, h, utc } from "./util.js";
 
 export async function render(main) {
   const list = h("div", { id: "vehicles" });
   const detail = h("div", { id: "vehicle-detail" });
-  const name = h("input", { id: "vehicle-name", placeholder: "name, e.g. my-ev", required: true, pattern: "[a-z0-9_-]+" });
-  const preset = h("select", { id: "vehicle-preset" }, ["paper", "single_reduction", "chain_drive"].map((p) => h("option", { value: p }, p)));
-  const msg = h("span", {});
-  const form = h("form", { class: "toolbar", id: "vehicle-form" }, name, preset,
-    h("button", { class: "primary", type: "submit" }, "Register"), msg);
-  form.addEventListener("submit", async (e) => {
-    e.preventDefault();
-    try {
-      const v = await upload("/vehicles", { name: name.value, preset: preset.value }, () => {});
-      msg.textContent = v.unchanged ? `${v.name} v${v.version} unchanged` : `stored ${v.name} v${v.version}`;
-      await refresh();
-    } catch (err) {
-      msg.replaceChildren(errorBox(err));
-    }
-  });
-  main.append(h("h1", {}, "Vehicles"),
-    h("section", { class: "card" }, h("h2", {}, "Register a vehicle from a preset"),
-      h("p", { class: "muted" }, "Uses the project's DBC and signal map. Own driveline TOML, DBC and map: POST /vehicles (API docs)."), form),
+  main.append(h("h1", {}, "Vehicles"), await registration(refresh),
     h("section", { class: "card" }, h("h2", {}, "Vehicles (latest version)"), list), detail);
 
   async function refresh() {
@@ -83,4 +67,87 @@ export async function render(main) {
 function show(v) {
   if (v === null || v === undefined) return "-";
   return typeof v === "number" ? String(+v.toPrecision(6)) : JSON.stringify(v);
+}
+
+const PRESETS = ["paper", "single_reduction", "chain_drive", "paper_fitted"];
+
+// The registration form: every file goes up through the page (POST /vehicles, multipart).
+async function registration(onStored) {
+  const name = h("input", { id: "vehicle-name", placeholder: "name, e.g. my-ev", required: true, pattern: "[a-z0-9_-]+" });
+  const preset = h("select", { id: "vehicle-preset" }, PRESETS.map((p) => h("option", { value: p }, p)));
+  const driveline = h("input", { id: "vehicle-driveline", type: "file", accept: ".toml" });
+  const dbc = h("input", { id: "vehicle-dbc", type: "file", accept: ".dbc,.kcd,.sym,.arxml,.xml" });
+  const mapFile = h("input", { id: "vehicle-map-file", type: "file", accept: ".toml" });
+  const log = h("select", { id: "vehicle-log" }, h("option", { value: "" }, "a stored log ..."));
+  const changes = h("input", { id: "vehicle-map-changes", size: 44,
+    placeholder: "changes: ROLE=Message.Signal; ROLE=-; invert ROLE" });
+  const mapText = h("textarea", { id: "vehicle-map", rows: 10, cols: 70, spellcheck: "false",
+    placeholder: "signal map TOML: proposed from a log, or leave empty for the uploaded map (else the project's)" });
+  const evidence = h("div", { id: "vehicle-evidence" });
+  const msg = h("span", { id: "vehicle-msg" });
+  try {
+    for (const l of await api("/logs?limit=1000")) log.append(h("option", { value: l.id }, `${l.filename} (${l.id})`));
+  } catch (_) {
+    /* no logs readable: the proposal is unavailable, the rest of the form works */
+  }
+
+  const propose = async () => {
+    if (!log.value) {
+      evidence.replaceChildren(h("p", { class: "muted" }, "Upload a log of the vehicle on the Logs page and choose it here."));
+      return;
+    }
+    evidence.replaceChildren(h("p", { class: "muted" }, "reading the log ..."));
+    const fields = { log_id: log.value, map: changes.value.split(";").map((x) => x.trim()).filter(Boolean).join("\n") };
+    if (dbc.files[0]) fields.dbc = dbc.files[0];
+    try {
+      const p = await upload("/vehicles/signal-map-proposal", fields, () => {});
+      mapText.value = p.signal_map_toml;
+      evidence.replaceChildren(proposalTable(p));
+    } catch (err) {
+      evidence.replaceChildren(errorBox(err));
+    }
+  };
+
+  const form = h("form", { id: "vehicle-form" },
+    h("div", { class: "toolbar" }, h("label", {}, "name ", name), h("label", {}, "preset ", preset),
+      h("label", {}, "or driveline TOML ", driveline)),
+    h("div", { class: "toolbar" }, h("label", {}, "DBC ", dbc), h("label", {}, "signal map TOML ", mapFile)),
+    h("div", { class: "toolbar" }, "propose the signal map from ", log, changes,
+      h("button", { type: "button", id: "vehicle-propose", onclick: propose }, "Propose map")),
+    evidence, mapText,
+    h("div", { class: "toolbar" }, h("button", { class: "primary", type: "submit", id: "vehicle-register" }, "Register"), msg));
+  form.addEventListener("submit", async (e) => {
+    e.preventDefault();
+    const fields = { name: name.value };
+    if (driveline.files[0]) fields.driveline = driveline.files[0];
+    else fields.preset = preset.value;
+    if (dbc.files[0]) fields.dbc = dbc.files[0];
+    if (mapText.value.trim()) fields.signal_map = new File([mapText.value], "signals.map.toml", { type: "application/toml" });
+    else if (mapFile.files[0]) fields.signal_map = mapFile.files[0];
+    try {
+      const v = await upload("/vehicles", fields, () => {});
+      msg.textContent = v.unchanged ? `${v.name} v${v.version} unchanged` : `stored ${v.name} v${v.version}`;
+      await onStored();
+    } catch (err) {
+      msg.replaceChildren(errorBox(err));
+    }
+  });
+  return h("section", { class: "card" }, h("h2", {}, "Register a vehicle"),
+    h("p", { class: "muted" }, "A preset or your driveline file, your DBC (default: the project's) and a signal map: upload one, " +
+      "or propose it from a stored log with the evidence per channel, edit it below, then register."), form);
+}
+
+function proposalTable(p) {
+  const rows = p.channels.map((c) => h("tr", {},
+    h("td", {}, h("code", {}, c.channel)), h("td", {}, c.source + (c.chosen_by === "user" ? " (yours)" : "")),
+    h("td", {}, (c.dbc_unit || "-") + (c.factor !== 1 ? ` x${+c.factor.toPrecision(4)}` : "")),
+    h("td", { class: "num" }, fmt(c.rate_hz, 1)),
+    h("td", { class: "num" }, `${fmt(c.minimum, 1)}..${fmt(c.maximum, 1)} ${c.unit}`),
+    h("td", { class: "num" }, c.correlation === null ? "-" : c.correlation.toFixed(2)),
+    h("td", {}, c.sign + (c.invert ? " (inverted)" : "") + (c.correlation_with ? `; ${c.correlation_with}` : ""))));
+  return h("div", {}, h("p", {}, `${p.log_format}, ${p.frames} frames over ${fmt(p.duration_s, 1)} s; database ${p.database}` +
+    (p.missing.length ? `; MISSING (every analysis needs them): ${p.missing.join(", ")}` : "")),
+  h("table", { id: "proposal-table" }, h("thead", {}, h("tr", {},
+    ["channel", "source (Message.Signal)", "unit", "rate (Hz)", "range (canonical unit)", "corr", "sign / correlation with"]
+      .map((c) => h("th", {}, c)))), h("tbody", {}, rows)));
 }
