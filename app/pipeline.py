@@ -28,9 +28,12 @@ from typing import Any, Literal
 import numpy as np
 
 from app.analysis.align import OffsetEstimate, common_time_base, estimate_lag, overlap, shift
+from app.analysis.accel import AccelSource, acceleration_source
 from app.analysis.compare import EventComparison, SpeedError, compare_event, speed_error
 from app.analysis.diagnosis.uncertainty import rigid_inertia
+from app.analysis.drivability import DrivabilityParams
 from app.analysis.events import SPEED, TORQUE, Event, EventParams, find_events
+from app.analysis.feel import FeelComparison, event_feel
 from app.analysis.lash import LashParams
 from app.analysis.logchecks import CheckParams, Finding, Limits, check_log
 from app.analysis.metrics import MetricParams, ripple_metrics
@@ -67,6 +70,7 @@ class AnalysisOptions:
     event_dt_s: float = 0.001  # time base of the per-event aligned series
     whole_log: bool = True  # also simulate the whole log in one open-loop run
     torque_interp: Literal["hold", "linear"] = "linear"
+    drivability: DrivabilityParams = field(default_factory=DrivabilityParams)  # acceleration criteria per event
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -78,12 +82,14 @@ class AnalysisOptions:
         mp_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("metrics", {}).items()}
         tr_kw: dict[str, Any] = dict(data.pop("tracking", {}) or {})
         ck_kw: dict[str, Any] = dict(data.pop("checks", {}) or {})
+        dr_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                                 for k, v in (data.pop("drivability", {}) or {}).items()}
         try:
             if isinstance(mp_kw.get("lash"), dict):
                 lash_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in mp_kw["lash"].items()}
                 mp_kw["lash"] = LashParams(**lash_kw)
             opts = cls(events=EventParams(**ev_kw), metrics=MetricParams(**mp_kw), tracking=TrackingParams(**tr_kw),
-                       checks=CheckParams(**ck_kw), **data)
+                       checks=CheckParams(**ck_kw), drivability=DrivabilityParams(**dr_kw), **data)
         except (TypeError, ValueError) as exc:
             raise InputError(f"analysis options: {exc}") from exc
         if opts.model not in ("multibody", "two_inertia"):
@@ -138,6 +144,7 @@ class EventResult:
     sim_gap_open_time_s: float = float("nan")  # the simulator's own first-gap-open to last-gap-close time
     error: str | None = None  # why this included event has no metrics (simulation failed, too few samples)
     tracking: Verdict | None = None  # does the simulation follow the measured speed here (None: no metrics)
+    feel: FeelComparison | None = None  # drivability criteria, measured and simulated (None: no acceleration)
 
 
 @dataclass(frozen=True)
@@ -153,6 +160,7 @@ class AnalysisResult:
     notes: list[str] = field(default_factory=list)
     tracking: Verdict = field(default_factory=lambda: Verdict("unknown", ["no analysed event to judge"]))
     findings: list[Finding] = field(default_factory=list)  # problems of the log as decoded (app.analysis.logchecks)
+    acceleration: AccelSource | None = None  # where the drivability criteria's measured acceleration comes from
 
 
 def decode_log(log: LogSource, database: Path, signal_map: Path,
@@ -306,6 +314,18 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
                         f"(lower quartile over the log); wheel slip is checked against the log's own ratio "
                         f"{vehicle.ratio * scale:.3g}")
         drive = replace(drive, ratio=vehicle.ratio * scale)
+    accel: AccelSource | None = None
+    feel_s = 0.0  # time spent on the drivability criteria; moved out of the stage timings by advancing `clock`
+    if opts.drivability.enabled:
+        clock_feel = time.perf_counter()
+        accel = acceleration_source(signals, vehicle.wheel.radius, opts.drivability.derive_cutoff_hz,
+                                    checks.computed)
+        checks.findings.extend(accel.findings if accel is not None else [])
+        if accel is None:
+            notes.append("no acceleration: the log has no accelerometer and no road speed; drivability criteria "
+                         "are left out")
+        feel_s = time.perf_counter() - clock_feel
+        clock += feel_s
     detection = find_events(signals, opts.events, drive)
     events = detection.events
     timings["events"] = time.perf_counter() - clock
@@ -366,8 +386,15 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
             continue
         comparison = compare_event(ev.index, m_meas, m_sim, aligned.measured_rpm, aligned.simulated_rpm)
         gap_time = unloaded_time(res.gap_events, ev.t_cross_s - 0.2, ev.t_cross_s + 0.3)
+        feel = None
+        if accel is not None:
+            clock_feel = time.perf_counter()
+            feel = _event_feel(accel, res, lag, ev, signals, m_meas, m_sim, opts.drivability)
+            spent = time.perf_counter() - clock_feel
+            clock += spent
+            feel_s += spent
         results.append(EventResult(ev, aligned, comparison, gap_time,
-                                   tracking=event_verdict(comparison, opts.tracking)))
+                                   tracking=event_verdict(comparison, opts.tracking), feel=feel))
     stage("metrics", 0.75)
     timings["align_metrics"] = time.perf_counter() - clock - sum(timings.values())
 
@@ -389,9 +416,23 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
                           offset.correlation if np.isfinite(offset.correlation) else None,
                           (whole.t, whole.measured_rpm, whole.simulated_rpm) if whole is not None else None,
                           mismatch)
+    if opts.drivability.enabled:
+        timings["drivability"] = feel_s
     stage("done", 1.0)
     return AnalysisResult(signals, events, results, offset, whole, whole_err, timings_s=timings, notes=notes,
-                          tracking=verdict, findings=checks.findings)
+                          tracking=verdict, findings=checks.findings, acceleration=accel)
+
+
+def _event_feel(accel: AccelSource, res: SimResult, lag: float, ev: Event, signals: SignalSet, m_meas: Any,
+                m_sim: Any, params: DrivabilityParams) -> FeelComparison:
+    """The event's drivability criteria (:mod:`app.analysis.feel`), the simulation shifted by ``lag``."""
+    def closure(m: Any) -> float:
+        return float(m.t_gap_close_s if np.isfinite(m.t_gap_close_s) else m.t_impact_s)
+
+    return event_feel(accel, res.t + lag, res.vehicle_speed_kmh / 3.6, res.vehicle_accel_ms2, ev.t_start_s,
+                      ev.t_end_s, ev.t_cross_s + lag, ev.direction, params, pedal=signals.get("pedal_pct"),
+                      t_close_measured=closure(m_meas), t_close_simulated=closure(m_sim),
+                      shuffle_hint_hz=float(m_meas.shuffle_freq_hz))
 
 
 def run_analysis(log_path: LogSource, vehicle: VehicleInputs, options: AnalysisOptions | None = None,

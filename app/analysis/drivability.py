@@ -1,0 +1,383 @@
+r"""Drivability criteria of one event: what the occupants feel, from the longitudinal acceleration.
+
+Input: the vehicle's longitudinal acceleration ``a(t)`` (m/s^2, positive forward) on a uniform
+grid around one tip-in or tip-out, the event's torque zero crossing ``t_cross``, its direction
+``d`` (+1 tip-in, -1 tip-out), optionally the pedal and the time the lash closed. Two zero-phase
+filters (4th-order Butterworth run forwards and backwards, so no filter delay moves a peak):
+
+* the **drivability band**: low pass at ``lowpass_hz`` (20 Hz; at most 0.4 fs) -> ``a_lp``;
+* the **clunk band**: band pass ``clunk_band_hz`` (20-200 Hz; the upper edge at most 0.45 fs) -> ``a_hf``.
+
+With ``y = d * a_lp`` (the response in the direction of the torque change)::
+
+    y  (m/s^2)        kick peak
+     ^                 *        p-p (first swing)
+     |                / \   .-.  <- extrema t_k, y_k
+     |               /   \_/   \__.-.___________ settled level a_set
+     |  a_pre ______/    valley
+     +--------|----|--------------------------------> t
+           pedal  first rise (10 % of the kick peak above a_pre)
+
+``a_pre``        median of ``a_lp`` over ``[t_start, t_cross - pre_gap_s]``
+``settled``      ``a_set``: median of ``a_lp`` over the last ``final_fraction`` of the window (m/s^2, signed)
+``kick``         ``d (a_peak - a_set)``: the first prominent peak of ``y`` after ``t_cross - peak_lead_s``
+                 (parabolic vertex), over the settled level
+``shuffle p-p``  the largest swing ``|y_k - y_{k+1}|`` between successive prominent extrema from the kick
+                 peak on (normally the first: kick peak to the following valley)
+``frequency``    ``1 / (2 mean(t_{k+1} - t_k))`` over up to ``max_extrema`` extrema (a damped sine's
+                 extrema are exactly half a damped period apart)
+``decay``        damping ratio from the logarithmic decrement of successive swings:
+                 ``delta = 2 * (-slope of ln|swing_k| over k)``, ``zeta = delta / sqrt(4 pi^2 + delta^2)``
+``max jerk``     ``max |d a_lp / dt|`` (m/s^3) from ``t_cross - peak_lead_s`` to the end of the window
+``clunk``        ``max |a_hf|`` (m/s^2) within ``[t_close - clunk_before_s, t_close + clunk_after_s]``,
+                 ``t_close`` the lash closure (from the speed metrics; else the kick's first rise)
+``VDV``          vibration dose value of the whole window, ISO 2631-1 W_d (:mod:`app.analysis.iso2631`)
+``response delay`` first rise time minus the pedal's first move (``|pedal - pedal_pre|`` beyond
+                 ``max(pedal_min_pct, pedal_fraction x step)``), both linearly interpolated
+
+A criterion the data cannot support is NaN (JSON null) with a reason in ``resolution``: too few
+extrema for a frequency, a clunk band above what the sampling carries, no pedal channel, a
+saturated sensor in the window, or an acceleration derived from speed whose bandwidth is below
+``bandwidth_factor`` x the shuffle frequency (marked ``unresolved``).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy import optimize
+from scipy import signal as sps
+
+from app.analysis.iso2631 import vdv
+from app.analysis.series import FloatArray, parabolic_vertex
+from app.signals import Signal
+
+#: criterion -> unit (the order of every table, CSV and store column)
+CRITERIA: dict[str, str] = {
+    "response_delay_s": "s",
+    "kick_ms2": "m/s^2",
+    "shuffle_pp_ms2": "m/s^2",
+    "shuffle_freq_hz": "Hz",
+    "shuffle_damping_ratio": "-",
+    "max_jerk_ms3": "m/s^3",
+    "clunk_ms2": "m/s^2",
+    "vdv_ms175": "m/s^1.75",
+    "settled_accel_ms2": "m/s^2",
+}
+CRITERIA_NAMES: tuple[str, ...] = tuple(CRITERIA)
+NAN = float("nan")
+UPSAMPLED_HZ = 1000.0
+
+
+@dataclass(frozen=True)
+class DrivabilityParams:
+    enabled: bool = True  # compute the criteria in an analysis
+    lowpass_hz: float = 20.0  # drivability band (kick, shuffle, jerk, settled)
+    clunk_band_hz: tuple[float, float] = (20.0, 200.0)
+    order: int = 4  # Butterworth order of both filters (run forwards and backwards)
+    pre_gap_s: float = 0.2  # a_pre ends this long before the torque crossing
+    peak_lead_s: float = 0.05  # the kick may start this long before the crossing (timing skew)
+    final_fraction: float = 0.25
+    min_prominence_ms2: float = 0.03  # an extremum counts when this prominent, 4x the noise, and ...
+    relative_prominence: float = 0.1  # ... this fraction of the step from a_pre to the settled level
+    max_extrema: int = 6
+    min_swing_fraction: float = 0.15  # extrema after a swing smaller than this x the first are not used
+    rise_fraction: float = 0.1
+    pedal_fraction: float = 0.1
+    pedal_min_pct: float = 1.0
+    clunk_before_s: float = 0.03
+    clunk_after_s: float = 0.06
+    derive_cutoff_hz: float = 15.0  # low pass of the speed differentiator (app.analysis.accel)
+    bandwidth_factor: float = 2.0  # a derived acceleration resolves the shuffle below bandwidth / this
+
+    def __post_init__(self) -> None:
+        lo, hi = self.clunk_band_hz
+        if not (0 < self.lowpass_hz and 0 < lo < hi and self.order >= 1 and 0 < self.final_fraction <= 1
+                and self.max_extrema >= 2 and self.derive_cutoff_hz > 0 and self.bandwidth_factor >= 1):
+            raise ValueError("drivability parameters: cut-offs must be positive (clunk band low < high), "
+                             "order >= 1, 0 < final_fraction <= 1, max_extrema >= 2, bandwidth_factor >= 1")
+
+
+@dataclass(frozen=True)
+class Drivability:
+    """The criteria of one acceleration trace around one event (NaN where not determinable)."""
+
+    response_delay_s: float
+    kick_ms2: float
+    shuffle_pp_ms2: float
+    shuffle_freq_hz: float
+    shuffle_damping_ratio: float
+    max_jerk_ms3: float
+    clunk_ms2: float
+    vdv_ms175: float
+    settled_accel_ms2: float
+    t_kick_s: float = NAN
+    t_rise_s: float = NAN
+    pre_accel_ms2: float = NAN
+    sample_period_s: float = NAN
+    # criterion -> why it is not determinable (null) or "unresolved: ..." for a derived acceleration
+    resolution: dict[str, str] = field(default_factory=dict)
+
+    def values(self) -> dict[str, float]:
+        return {k: getattr(self, k) for k in CRITERIA_NAMES}
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+@functools.lru_cache(maxsize=64)
+def butter_sos(order: int, cutoff: float | tuple[float, float], btype: str, fs: float) -> tuple[FloatArray, FloatArray]:
+    """A Butterworth design and its steady-state initial conditions, cached: every event of a log (and its
+    simulation) uses the same few."""
+    sos = np.asarray(sps.butter(order, cutoff, btype=btype, fs=fs, output="sos"), dtype=np.float64)
+    return sos, np.asarray(sps.sosfilt_zi(sos), dtype=np.float64)
+
+
+def zero_phase(design: tuple[FloatArray, FloatArray], a: FloatArray) -> FloatArray:
+    """Forward-backward filtering with odd extension at both ends (what ``scipy.signal.sosfiltfilt`` does,
+    with the initial conditions from the cached design)."""
+    sos, zi = design
+    n = min(a.size - 1, 3 * (2 * len(sos) + 1))
+    if n < 1:
+        return np.asarray(a, dtype=np.float64)
+    ext = np.concatenate((2 * a[0] - a[n:0:-1], a, 2 * a[-1] - a[-2:-n - 2:-1]))
+    y, _ = sps.sosfilt(sos, ext, zi=zi * ext[0])
+    y, _ = sps.sosfilt(sos, y[::-1], zi=zi * y[-1])
+    return np.asarray(y[::-1][n:n + a.size], dtype=np.float64)
+
+
+def _rate(fs: float) -> float:
+    return float(f"{fs:.6g}")  # jitter in the last digits of a period must not defeat the design cache
+
+
+def _lowpass(a: FloatArray, fs: float, fc: float, order: int) -> FloatArray:
+    fs = _rate(fs)
+    return zero_phase(butter_sos(order, min(fc, 0.4 * fs), "low", fs), a)
+
+
+def _bandpass(a: FloatArray, fs: float, lo: float, hi: float, order: int) -> FloatArray:
+    fs = _rate(fs)
+    return zero_phase(butter_sos(order, (lo, min(hi, 0.45 * fs)), "band", fs), a)
+
+
+def _crossing(t: FloatArray, y: FloatArray, level: float, i0: int) -> float:
+    """First time from index ``i0`` on where ``y`` reaches ``level`` from below (linear interpolation)."""
+    above = np.nonzero(y[i0:] >= level)[0]
+    if not above.size:
+        return NAN
+    i = i0 + int(above[0])
+    if i == 0 or y[i - 1] >= level:
+        return float(t[i])
+    return float(t[i - 1] + (level - y[i - 1]) / (y[i] - y[i - 1]) * (t[i] - t[i - 1]))
+
+
+def _extrema(y: FloatArray, i0: int, prominence: float) -> list[int]:
+    """Alternating prominent extrema of ``y`` from index ``i0``, starting with a maximum."""
+    seg = y[i0:]
+    peaks, _ = sps.find_peaks(seg, prominence=prominence)
+    valleys, _ = sps.find_peaks(-seg, prominence=prominence)
+    if not peaks.size:
+        return []
+    marks = sorted([(int(p), 1) for p in peaks] + [(int(v), -1) for v in valleys if v > peaks[0]])
+    out: list[tuple[int, int]] = []
+    for idx, kind in marks:
+        if out and out[-1][1] == kind:  # two of a kind in a row: keep the more extreme
+            if kind * seg[idx] > kind * seg[out[-1][0]]:
+                out[-1] = (idx, kind)
+            continue
+        out.append((idx, kind))
+    return [i0 + idx for idx, _ in out]
+
+
+def _damped_fit(t: FloatArray, y: FloatArray, t0: float, c0: float, a0: float, f0: float,
+                zeta0: float) -> tuple[float, float] | None:
+    """Frequency (Hz) and damping ratio of ``y ~ c + A exp(-s tau) cos(w tau + phi)``, ``tau = t - t0``, fitted
+    by least squares from the kick peak on (None: the fit does not converge inside its bounds)."""
+    m = t >= t0
+    if m.sum() < 8:
+        return None
+    tau, ym = t[m] - t0, y[m]
+    w0 = 2 * math.pi * f0
+    s0 = (zeta0 if math.isfinite(zeta0) else 0.15) * w0
+
+    def resid(x: FloatArray) -> FloatArray:
+        c, amp, sig, w, phi = x
+        return np.asarray(c + amp * np.exp(-sig * tau) * np.cos(w * tau + phi) - ym, dtype=np.float64)
+
+    def jac(x: FloatArray) -> FloatArray:
+        _, amp, sig, w, phi = x
+        e = np.exp(-sig * tau)
+        cos, sin = np.cos(w * tau + phi), np.sin(w * tau + phi)
+        return np.column_stack((np.ones_like(tau), e * cos, -amp * tau * e * cos, -amp * tau * e * sin,
+                                -amp * e * sin))
+
+    try:  # Levenberg-Marquardt with the analytic Jacobian: a few ms per event; the bounds are checked after
+        fit = optimize.least_squares(resid, np.array([c0, a0, s0, w0, 0.0]), jac=jac, method="lm", max_nfev=200)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    _, _, sig, w, _ = fit.x
+    sig, w = float(sig), abs(float(w))
+    if not fit.success or not (0.6 * w0 < w < 1.6 * w0) or not 0.0 <= sig < 2.0 * w0:
+        return None
+    return float(w / (2 * math.pi)), float(sig / math.hypot(sig, w))
+
+
+def _pedal_move(pedal: Signal | None, t_start: float, t_cross: float, p: DrivabilityParams) -> tuple[float, str]:
+    if pedal is None or len(pedal) < 2:
+        return NAN, "no pedal channel"
+    w = pedal.window(t_start, t_cross + 0.3)
+    ok = np.isfinite(w.values)
+    t, v = w.t[ok], w.values[ok]
+    if t.size < 3:
+        return NAN, "too few pedal samples in the window"
+    pre = float(np.median(v[t <= t_start + 0.15])) if (t <= t_start + 0.15).any() else float(v[0])
+    step = float(v[-1] - pre)
+    thr = max(p.pedal_min_pct, p.pedal_fraction * abs(step))
+    moved = np.nonzero(np.abs(v - pre) >= thr)[0]
+    if not moved.size or abs(step) < p.pedal_min_pct:
+        return NAN, "the pedal does not move in the window (torque change without the driver)"
+    i = int(moved[0])
+    if i == 0:
+        return float(t[0]), ""
+    d0, d1 = abs(v[i - 1] - pre), abs(v[i] - pre)
+    return float(t[i - 1] + (thr - d0) / (d1 - d0) * (t[i] - t[i - 1])) if d1 > d0 else float(t[i]), ""
+
+
+def drivability_criteria(
+    t: FloatArray, a: FloatArray, t_start: float, t_end: float, t_cross: float, direction: float,
+    params: DrivabilityParams | None = None, *, pedal: Signal | None = None, t_close: float = NAN,
+    bandwidth_hz: float = math.inf, shuffle_hint_hz: float = NAN, saturated: bool = False,
+) -> Drivability:
+    """The criteria (module docstring) of uniform samples ``t`` (s), ``a`` (m/s^2), shape (n,) each.
+
+    ``t``/``a`` may extend beyond ``[t_start, t_end]`` (filter run-in); the criteria use the window.
+    ``bandwidth_hz`` is the bandwidth of an acceleration derived from speed (inf: an accelerometer);
+    ``shuffle_hint_hz`` the shuffle frequency known from the motor speed, to judge that bandwidth.
+    """
+    p = params or DrivabilityParams()
+    nan_all = Drivability(*(NAN,) * len(CRITERIA_NAMES))
+    ok = np.isfinite(a)
+    if t.size < 8 or ok.sum() < 8:
+        return _with(nan_all, {k: "fewer than 8 acceleration samples in the window" for k in CRITERIA_NAMES})
+    if not ok.all():
+        a = np.interp(t, t[ok], a[ok])
+    dt = float((t[-1] - t[0]) / (t.size - 1))
+    fs = 1.0 / dt
+    reasons: dict[str, str] = {}
+    lp = _lowpass(a, fs, p.lowpass_hz, p.order)
+    inside = (t >= t_start) & (t <= t_end)
+    iw = np.nonzero(inside)[0]
+    if iw.size < 8:
+        return _with(nan_all, {k: "the acceleration does not cover the event window" for k in CRITERIA_NAMES})
+    i_a, i_b = int(iw[0]), int(iw[-1]) + 1
+    noise = float(np.std(a[i_a:i_b] - lp[i_a:i_b]))
+    # extrema and jerk on a band-limited interpolation (polyphase, zero phase) at >= UPSAMPLED_HZ: a 100 Hz
+    # trace has 12 samples per cycle of an 8 Hz shuffle, too few for a parabolic vertex within 1 %
+    up = max(1, math.ceil(UPSAMPLED_HZ / fs))
+    tu = t[0] + np.arange(lp.size * up) * (dt / up) if up > 1 else t
+    if up > 1:
+        pad = min(lp.size - 1, 16)  # mirrored ends keep the interpolation filter's run-in out of the window
+        ext = np.concatenate((2 * lp[0] - lp[pad:0:-1], lp, 2 * lp[-1] - lp[-2:-pad - 2:-1]))
+        lu = np.asarray(sps.resample_poly(ext, up, 1), dtype=np.float64)[pad * up: (pad + lp.size) * up]
+    else:
+        lu = lp
+    j_a, j_b = i_a * up, (i_b - 1) * up + 1
+    tw, lw = tu[j_a:j_b], lu[j_a:j_b]
+    dt_u = dt / up
+    pre_m = tw <= t_cross - p.pre_gap_s
+    a_pre = float(np.median(lw[pre_m])) if pre_m.any() else float(lw[0])
+    n_final = max(2, int(round(p.final_fraction * tw.size)))
+    a_set = float(np.median(lw[-n_final:]))
+    y = direction * lw
+    prom = max(p.min_prominence_ms2, 4.0 * noise, p.relative_prominence * abs(a_set - a_pre))
+    i0 = int(np.searchsorted(tw, t_cross - p.peak_lead_s))
+    ext = _extrema(y, i0, prom)
+    kick = pp = freq = zeta = t_kick = t_rise = NAN
+    if not ext:
+        reasons["kick_ms2"] = reasons["shuffle_pp_ms2"] = "no acceleration peak after the torque crossing"
+    else:
+        verts = [parabolic_vertex(y, i) for i in ext[: p.max_extrema]]
+        times = np.array([tw[i] + off * dt_u for i, (off, _) in zip(ext, verts, strict=False)])
+        vals = np.array([v for _, v in verts])
+        swings = np.abs(np.diff(vals))
+        if swings.size:  # later swings drowned in noise would bias the frequency and the decay
+            keep = int(np.argmax(np.concatenate((swings < p.min_swing_fraction * swings[0], [True]))))
+            times, vals = times[: keep + 1], vals[: keep + 1]
+        t_kick = float(times[0])
+        kick = float(vals[0] - direction * a_set)
+        swings = np.abs(np.diff(vals))
+        if swings.size:
+            pp = float(swings.max())
+        else:
+            reasons["shuffle_pp_ms2"] = "no swing after the kick peak"
+        if times.size >= 2:
+            freq = float(1.0 / (2.0 * np.mean(np.diff(times))))
+        else:
+            reasons["shuffle_freq_hz"] = "fewer than two extrema"
+        if swings.size >= 2 and (swings > 0).all():
+            slope = float(np.polyfit(np.arange(swings.size), np.log(swings), 1)[0])
+            delta = -2.0 * slope
+            zeta = float(delta / math.sqrt(4 * math.pi**2 + delta**2)) if delta > 0 else NAN
+            if not math.isfinite(zeta):
+                reasons["shuffle_damping_ratio"] = "the swings do not decay"
+        else:
+            reasons["shuffle_damping_ratio"] = "fewer than two swings"
+        if math.isfinite(freq):
+            fitted = _damped_fit(t[i_a:i_b], direction * lp[i_a:i_b], t_kick, direction * a_set,
+                                 float(vals[0]) - direction * a_set, freq, zeta)
+            if fitted is not None:
+                freq, zeta = fitted
+                reasons.pop("shuffle_damping_ratio", None)
+        height = float(vals[0] - direction * a_pre)
+        if height > 0:
+            t_rise = _crossing(tw, y, direction * a_pre + p.rise_fraction * height, i0)
+    jerk = np.gradient(lw, dt_u)
+    max_jerk = float(np.max(np.abs(jerk[i0:]))) if i0 < jerk.size else NAN
+    lo, hi = p.clunk_band_hz
+    clunk = NAN
+    if lo >= 0.9 * 0.45 * fs:
+        reasons["clunk_ms2"] = f"the sampling ({fs:.0f} Hz) cannot carry the clunk band above {lo:g} Hz"
+    else:
+        t_c = t_close if math.isfinite(t_close) else t_rise
+        if not math.isfinite(t_c):
+            reasons["clunk_ms2"] = "no lash closure time and no acceleration rise"
+        else:
+            hf = _bandpass(a, fs, lo, hi, p.order)
+            m = (t >= t_c - p.clunk_before_s) & (t <= t_c + p.clunk_after_s)
+            clunk = float(np.max(np.abs(hf[m]))) if m.any() else NAN
+    dose = vdv(a[i_a:i_b], fs)
+    t_pedal, why = _pedal_move(pedal, t_start, t_cross, p)
+    delay = t_rise - t_pedal if math.isfinite(t_pedal) and math.isfinite(t_rise) else NAN
+    if why:
+        reasons["response_delay_s"] = why
+    elif not math.isfinite(delay):
+        reasons["response_delay_s"] = "no acceleration rise"
+    out = Drivability(delay, kick, pp, freq, zeta, max_jerk, clunk, dose, a_set, t_kick, t_rise, a_pre, dt)
+    if saturated:
+        for k in ("kick_ms2", "shuffle_pp_ms2", "max_jerk_ms3", "clunk_ms2", "vdv_ms175"):
+            reasons[k] = "the accelerometer is saturated in this window"
+    if math.isfinite(bandwidth_hz):
+        f_ref = shuffle_hint_hz if math.isfinite(shuffle_hint_hz) else freq
+        if math.isfinite(f_ref) and bandwidth_hz < p.bandwidth_factor * f_ref:
+            why = (f"unresolved: acceleration derived from speed with bandwidth {bandwidth_hz:.1f} Hz, below "
+                   f"{p.bandwidth_factor:g} x the shuffle frequency {f_ref:.1f} Hz")
+            for k in ("kick_ms2", "shuffle_pp_ms2", "shuffle_damping_ratio", "max_jerk_ms3"):
+                reasons.setdefault(k, why)
+        reasons.setdefault("clunk_ms2", f"unresolved: an acceleration derived from speed ({bandwidth_hz:.1f} Hz "
+                                        "bandwidth) carries no clunk")
+    return _with(out, reasons)
+
+
+def _with(d: Drivability, reasons: dict[str, str]) -> Drivability:
+    """``d`` with the criteria named in ``reasons`` set to NaN (a reason marks the value as not supported)."""
+    values = {k: (NAN if k in reasons else v) for k, v in d.values().items()}
+    return Drivability(**{**asdict(d), **values, "resolution": dict(reasons)})
+
+
+def difference(measured: Drivability, simulated: Drivability) -> dict[str, float]:
+    """``simulated - measured`` per criterion (NaN if either is)."""
+    m, s = measured.values(), simulated.values()
+    return {k: s[k] - m[k] for k in CRITERIA_NAMES}
