@@ -27,8 +27,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from app.analysis.align import OffsetEstimate, common_time_base, estimate_lag, overlap, shift
 from app.analysis.accel import AccelSource, acceleration_source
+from app.analysis.align import OffsetEstimate, common_time_base, estimate_lag, overlap, shift
 from app.analysis.compare import EventComparison, SpeedError, compare_event, speed_error
 from app.analysis.diagnosis.uncertainty import rigid_inertia
 from app.analysis.drivability import DrivabilityParams

@@ -170,7 +170,7 @@ def check_accelerometer(accel: Signal, road: Signal | None) -> AccelCheck:
         return AccelCheck("unchecked", saturated=sat)
     t, v = uniform(road)
     h = float(t[1] - t[0])
-    n = max(1, int(round(CHECK_AVERAGE_S / h)))
+    n = max(1, round(CHECK_AVERAGE_S / h))
     kernel = np.ones(n) / n
     dvdt = np.convolve(np.gradient(v, h), kernel, mode="same")
     ta = np.convolve(s.at(t), kernel, mode="same")

@@ -95,7 +95,7 @@ class DrivabilityParams:
 
     def __post_init__(self) -> None:
         lo, hi = self.clunk_band_hz
-        if not (0 < self.lowpass_hz and 0 < lo < hi and self.order >= 1 and 0 < self.final_fraction <= 1
+        if not (self.lowpass_hz > 0 and 0 < lo < hi and self.order >= 1 and 0 < self.final_fraction <= 1
                 and self.max_extrema >= 2 and self.derive_cutoff_hz > 0 and self.bandwidth_factor >= 1):
             raise ValueError("drivability parameters: cut-offs must be positive (clunk band low < high), "
                              "order >= 1, 0 < final_fraction <= 1, max_extrema >= 2, bandwidth_factor >= 1")
@@ -258,7 +258,7 @@ def drivability_criteria(
     ``shuffle_hint_hz`` the shuffle frequency known from the motor speed, to judge that bandwidth.
     """
     p = params or DrivabilityParams()
-    nan_all = Drivability(*(NAN,) * len(CRITERIA_NAMES))
+    nan_all = Drivability(NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN)
     ok = np.isfinite(a)
     if t.size < 8 or ok.sum() < 8:
         return _with(nan_all, {k: "fewer than 8 acceleration samples in the window" for k in CRITERIA_NAMES})
@@ -274,14 +274,14 @@ def drivability_criteria(
         return _with(nan_all, {k: "the acceleration does not cover the event window" for k in CRITERIA_NAMES})
     i_a, i_b = int(iw[0]), int(iw[-1]) + 1
     noise = float(np.std(a[i_a:i_b] - lp[i_a:i_b]))
-    # extrema and jerk on a band-limited interpolation (polyphase, zero phase) at >= UPSAMPLED_HZ: a 100 Hz
+    # extrema on a band-limited interpolation (polyphase, zero phase) at >= UPSAMPLED_HZ: a 100 Hz
     # trace has 12 samples per cycle of an 8 Hz shuffle, too few for a parabolic vertex within 1 %
     up = max(1, math.ceil(UPSAMPLED_HZ / fs))
     tu = t[0] + np.arange(lp.size * up) * (dt / up) if up > 1 else t
     if up > 1:
         pad = min(lp.size - 1, 16)  # mirrored ends keep the interpolation filter's run-in out of the window
-        ext = np.concatenate((2 * lp[0] - lp[pad:0:-1], lp, 2 * lp[-1] - lp[-2:-pad - 2:-1]))
-        lu = np.asarray(sps.resample_poly(ext, up, 1), dtype=np.float64)[pad * up: (pad + lp.size) * up]
+        padded = np.concatenate((2 * lp[0] - lp[pad:0:-1], lp, 2 * lp[-1] - lp[-2:-pad - 2:-1]))
+        lu = np.asarray(sps.resample_poly(padded, up, 1), dtype=np.float64)[pad * up: (pad + lp.size) * up]
     else:
         lu = lp
     j_a, j_b = i_a * up, (i_b - 1) * up + 1
@@ -289,7 +289,7 @@ def drivability_criteria(
     dt_u = dt / up
     pre_m = tw <= t_cross - p.pre_gap_s
     a_pre = float(np.median(lw[pre_m])) if pre_m.any() else float(lw[0])
-    n_final = max(2, int(round(p.final_fraction * tw.size)))
+    n_final = max(2, round(p.final_fraction * tw.size))
     a_set = float(np.median(lw[-n_final:]))
     y = direction * lw
     prom = max(p.min_prominence_ms2, 4.0 * noise, p.relative_prominence * abs(a_set - a_pre))
@@ -334,8 +334,9 @@ def drivability_criteria(
         height = float(vals[0] - direction * a_pre)
         if height > 0:
             t_rise = _crossing(tw, y, direction * a_pre + p.rise_fraction * height, i0)
-    jerk = np.gradient(lw, dt_u)
-    max_jerk = float(np.max(np.abs(jerk[i0:]))) if i0 < jerk.size else NAN
+    jerk = np.gradient(lp, dt)[i_a:i_b]
+    k0 = int(np.searchsorted(t[i_a:i_b], t_cross - p.peak_lead_s))
+    max_jerk = float(np.max(np.abs(jerk[k0:]))) if k0 < jerk.size else NAN
     lo, hi = p.clunk_band_hz
     clunk = NAN
     if lo >= 0.9 * 0.45 * fs:

@@ -53,9 +53,9 @@ def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, si
     """
     m = (src.t >= t_start - PAD_S) & (src.t <= t_end + PAD_S)
     t = src.t[m]
-    kw = {"pedal": pedal, "bandwidth_hz": src.bandwidth_hz, "shuffle_hint_hz": shuffle_hint_hz}
-    measured = drivability_criteria(t, src.a[m], t_start, t_end, t_cross, direction, params,
-                                    t_close=t_close_measured, saturated=src.saturated_in(t_start, t_end), **kw)
+    measured = drivability_criteria(t, src.a[m], t_start, t_end, t_cross, direction, params, pedal=pedal,
+                                    t_close=t_close_measured, bandwidth_hz=src.bandwidth_hz,
+                                    shuffle_hint_hz=shuffle_hint_hz, saturated=src.saturated_in(t_start, t_end))
     inside = (t >= sim_t[0]) & (t <= sim_t[-1])
     ts = t[inside]
     if src.kind == "accelerometer":
@@ -64,8 +64,9 @@ def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, si
         a_sim, _ = derive(ts, np.interp(ts, sim_t, sim_speed_ms), params.derive_cutoff_hz)
     else:
         a_sim = np.interp(ts, sim_t, sim_accel_ms2)
-    simulated = drivability_criteria(ts, a_sim, t_start, t_end, t_cross, direction, params,
-                                     t_close=t_close_simulated, **kw)
+    simulated = drivability_criteria(ts, a_sim, t_start, t_end, t_cross, direction, params, pedal=pedal,
+                                     t_close=t_close_simulated, bandwidth_hz=src.bandwidth_hz,
+                                     shuffle_hint_hz=shuffle_hint_hz)
     return FeelComparison(src.kind, measured, simulated, difference(measured, simulated))
 
 

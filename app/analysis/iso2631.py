@@ -55,7 +55,7 @@ def wd_sos(fs_hz: float) -> FloatArray:
     w1, w2, w3, w4 = (2 * np.pi * f for f in (F1_HZ, F2_HZ, F3_HZ, F4_HZ))
     num = np.polymul([1.0, 0.0, 0.0], [1.0 / w3, 1.0])
     den = np.polymul([1.0, w1 / Q1, w1**2], [1.0 / w4**2, 1.0 / (Q4 * w4), 1.0])
-    if F2_HZ < LOWPASS_MAX_FRACTION * fs_hz:
+    if LOWPASS_MAX_FRACTION * fs_hz > F2_HZ:
         num = np.polymul(num, [w2**2])
         den = np.polymul(den, [1.0, w2 / Q1, w2**2])
     z, p, k = sps.tf2zpk(num, den)

@@ -97,7 +97,8 @@ def tolerance_table(tol: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.cli.report import events_table, finding_lines, metrics_table, summary_line, tracking_lines
+    from app.cli.report import drivability_table, events_table, finding_lines, metrics_table, summary_line, \
+        tracking_lines
 
     doc = analysis_doc(args)
     text = json.dumps(doc, indent=1)
@@ -115,6 +116,10 @@ def run(args: argparse.Namespace) -> int:
         for line in (*finding_lines(doc), *tracking_lines(doc)):
             print(line)
         print(metrics_table(doc))
+        feel = drivability_table(doc)
+        if feel:
+            print()
+            print(feel)
         if "gap_sensitivity" in doc:
             print()
             print(gap_sensitivity_table(doc["gap_sensitivity"]))
