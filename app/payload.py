@@ -18,13 +18,18 @@ import numpy.typing as npt
 
 from app.analysis.compare import resolution_reasons, summarize
 from app.analysis.feel import summarize_feel
+from app.analysis.ratings import RatingModel, apply_ratings
 from app.analysis.sampling import spacing
 from app.pipeline import AnalysisResult
+from app.ratings_file import model_from_env
 
 SERIES_COLUMNS = ("measured_rpm", "simulated_rpm", "torque_nm")
 
 
-def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.NDArray[np.float64]]]:
+def result_payload(res: AnalysisResult, ratings: RatingModel | None = None,
+                   ) -> tuple[dict[str, Any], dict[str, npt.NDArray[np.float64]]]:
+    """The stored document and arrays; drivability ratings only with a fitted model (``ratings``, else the one
+    ``LASHSCOPE_RATINGS`` names: :mod:`app.ratings_file`)."""
     arrays: dict[str, npt.NDArray[np.float64]] = {}
     events: list[dict[str, Any]] = []
     metrics: list[dict[str, Any]] = []
@@ -93,4 +98,7 @@ def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.N
         "sampling": {name: spacing(sig.t).to_dict() for name, sig in sorted(res.signals.items())},
         "acceleration": res.acceleration.describe() if res.acceleration is not None else None,
     }
+    model = ratings if ratings is not None else model_from_env()
+    if model is not None and feels:
+        apply_ratings(doc, model)
     return doc, arrays

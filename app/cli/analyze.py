@@ -25,6 +25,9 @@ def register(sub: Any) -> None:
                    help="add the predicted ripple band (5/50/95 %%) over the vehicle's tolerance bands, N Monte "
                    "Carlo variants per event, and each measured ripple's percentile in it")
     p.add_argument("--seed", type=int, default=0, help="random seed of --tolerance (default 0)")
+    p.add_argument("--ratings", type=Path, default=None, metavar="MODEL",
+                   help="score every event with a fitted rating model (lashscope ratings fit); "
+                   "default: LASHSCOPE_RATINGS, else no rating")
     p.add_argument("--json", action="store_true", help="print the full result as JSON")
     p.add_argument("--out", type=Path, default=None, help="also write the JSON result to this file")
     p.set_defaults(func=run)
@@ -37,7 +40,12 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
 
     inputs = vehicle_inputs(args)
     opts = AnalysisOptions(model=args.model, whole_log=not args.no_whole_log, events=event_params(args))
-    doc, arrays = result_payload(run_analysis(args.log, inputs, opts))
+    ratings = None
+    if getattr(args, "ratings", None) is not None:
+        from app.ratings_file import load_model
+
+        ratings = load_model(args.ratings)  # a bad model file fails before the analysis runs
+    doc, arrays = result_payload(run_analysis(args.log, inputs, opts), ratings)
     if getattr(args, "tolerance", 0):
         from types import SimpleNamespace
 

@@ -13,6 +13,7 @@ service stores and the batch writes), so an upload and a batch run give the same
     measured_<metric>, simulated_<metric>   every ripple metric (app.analysis.metrics.METRIC_NAMES)
     accel_source, measured_accel_<criterion>, simulated_accel_<criterion>   every drivability criterion
                                             (app.analysis.drivability.CRITERIA; m/s^2, m/s^3, m/s^1.75, s, Hz)
+    rating                                  1-10 score of a fitted rating model (app.analysis.ratings), else null
     sim_gap_open_time_s (the simulator's own gap-open interval), rms_rpm, nrmse
     tracking (event verdict: good | poor | unknown), log_tracking (the whole log's verdict)
     diagnosis_status, diagnosis_top ("+"-joined effects) when the log was diagnosed
@@ -35,6 +36,7 @@ FLOAT_COLUMNS: tuple[str, ...] = (
     "torque_rate_nm_s", *(f"measured_{m}" for m in METRIC_NAMES), *(f"simulated_{m}" for m in METRIC_NAMES),
     "sim_gap_open_time_s", "rms_rpm", "nrmse",
     *(f"measured_accel_{c}" for c in CRITERIA_NAMES), *(f"simulated_accel_{c}" for c in CRITERIA_NAMES),
+    "rating",
 )
 STRING_COLUMNS: tuple[str, ...] = (
     "log_hash", "log_name", "source", "driveline", "kind", "exclusion", "error", "tracking", "log_tracking",
@@ -96,6 +98,7 @@ def event_rows(doc: dict[str, Any], *, vehicle: str, log_hash: str, log_name: st
             row[f"simulated_{name}"] = _num(sim.get(name))
         feel = m.get("drivability") or {}
         row["accel_source"] = feel.get("source")
+        row["rating"] = _num((feel.get("rating") or {}).get("score"))
         for name in CRITERIA_NAMES:
             row[f"measured_accel_{name}"] = _num((feel.get("measured") or {}).get(name))
             row[f"simulated_accel_{name}"] = _num((feel.get("simulated") or {}).get(name))
