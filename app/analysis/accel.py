@@ -28,8 +28,15 @@ differentiated with the five-point central difference
 ``a_i = (-v_{i+2} + 8 v_{i+1} - 8 v_{i-1} + v_{i-2}) / (12 h)`` (zero phase, gain error below 1 %
 up to fs/8). The **bandwidth** reported is the frequency where the product of both responses
 falls to 1/sqrt 2, computed from their exact frequency responses. The criteria that need more
-than that (clunk always; kick, shuffle and jerk when the shuffle is above bandwidth / 2) are
-marked ``unresolved``.
+than that (clunk always; kick, shuffle and jerk when the shuffle is above bandwidth / 1.5, where
+the gain has fallen by 4 %) are marked ``unresolved``. A differentiator amplifies the speed's
+noise: its RMS on the acceleration (``noise_ms2``) is the speed's white-noise RMS (second
+differences, :func:`app.analysis.series.noise_rms`) times the filters' noise gain
+(:func:`derivative_noise_gain`). A peak read through that noise is biased up by about one noise
+RMS at each extremum, so for a derived acceleration kick and shuffle peak-to-peak are read off
+the damped sine fitted to the shuffle (:mod:`app.analysis.drivability`), whose amplitude averages
+the noise out, and are marked ``unresolved`` when the fit's amplitude is uncertain by more than
+5 %.
 """
 
 from __future__ import annotations
@@ -40,11 +47,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.analysis.drivability import butter_sos, zero_phase
 from app.analysis.logchecks import Finding
 from app.analysis.sampling import sample_period
-from app.analysis.series import FloatArray, finite_signal
+from app.analysis.series import FloatArray, finite_signal, noise_rms
 from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
+from app.analysis.zerophase import butter_sos, zero_phase
 from app.errors import InsufficientDataError
 from app.signals import Signal, SignalSet
 
@@ -80,6 +87,7 @@ class AccelSource:
     check: AccelCheck | None = None
     findings: list[Finding] = field(default_factory=list)
     note: str = ""
+    noise_ms2: float = math.nan  # derived: RMS the speed's own noise leaves on the acceleration (NaN: not known)
 
     @property
     def period_s(self) -> float:
@@ -91,7 +99,7 @@ class AccelSource:
     def describe(self) -> dict[str, object]:
         return {"kind": self.kind, "bandwidth_hz": self.bandwidth_hz if math.isfinite(self.bandwidth_hz) else None,
                 "sample_period_s": self.period_s, "check": self.check.to_dict() if self.check else None,
-                "note": self.note}
+                "note": self.note, "noise_ms2": self.noise_ms2 if math.isfinite(self.noise_ms2) else None}
 
 
 def uniform(sig: Signal, period: float | None = None) -> tuple[FloatArray, FloatArray]:
@@ -122,6 +130,16 @@ def derivative_bandwidth(fs: float, cutoff_hz: float, order: int = 4) -> float:
     stencil = (8 * np.sin(x) - np.sin(2 * x)) / (6 * x)
     below = np.nonzero(lp * stencil < 1 / math.sqrt(2))[0]
     return float(f[below[0]]) if below.size else 0.5 * fs
+
+
+@functools.lru_cache(maxsize=32)
+def derivative_noise_gain(fs: float, cutoff_hz: float, order: int = 4) -> float:
+    """RMS acceleration (m/s^2) per m/s RMS of white speed noise through the low pass and the stencil."""
+    fc = min(cutoff_hz, 0.4 * fs)
+    f = np.linspace(1e-3, 0.5 * fs, 4000)
+    x = 2 * np.pi * f / fs
+    h2 = (1.0 / (1.0 + (f / fc) ** (2 * order))) ** 2 * ((8 * np.sin(x) - np.sin(2 * x)) / 6 * fs) ** 2
+    return float(np.sqrt(np.mean(h2)))
 
 
 def derive(t: FloatArray, v_ms: FloatArray, cutoff_hz: float, order: int = 4) -> tuple[FloatArray, float]:
@@ -242,4 +260,6 @@ def acceleration_source(signals: SignalSet, wheel_radius_m: float | None, cutoff
         return None
     t, v = uniform(road[0])
     a, bw = derive(t, v, cutoff_hz)
-    return AccelSource(t, a, road[1], bw, rejected, findings, note)
+    fs = float(f"{1.0 / float(t[1] - t[0]):.6g}")
+    noise = noise_rms(v) * derivative_noise_gain(fs, cutoff_hz)
+    return AccelSource(t, a, road[1], bw, rejected, findings, note, noise)

@@ -43,9 +43,8 @@ saturated sensor in the window, or an acceleration derived from speed whose band
 
 from __future__ import annotations
 
-import functools
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy import optimize
@@ -53,6 +52,7 @@ from scipy import signal as sps
 
 from app.analysis.iso2631 import vdv
 from app.analysis.series import FloatArray, parabolic_vertex
+from app.analysis.zerophase import butter_sos, zero_phase
 from app.signals import Signal
 
 #: criterion -> unit (the order of every table, CSV and store column)
@@ -69,7 +69,13 @@ CRITERIA: dict[str, str] = {
 }
 CRITERIA_NAMES: tuple[str, ...] = tuple(CRITERIA)
 NAN = float("nan")
-UPSAMPLED_HZ = 1000.0
+REFINE_BELOW_HZ = 500.0
+FIT_PERIODS = 5.0  # the damped-sine fit spans this many shuffle periods from the kick peak (or the window)
+CLUNK_PAD_S = 0.15  # the clunk band is filtered over its search interval and this much on either side
+_TAPS = np.arange(-8, 9)
+_OFFSETS = np.linspace(-1.0, 1.0, 81)
+# windowed-sinc interpolation weights, (offsets, taps): value at i + offset = sum_k y[i + k] w[offset, k]
+_SINC = np.sinc(_OFFSETS[:, None] - _TAPS[None, :]) * np.kaiser(_TAPS.size + 2, 6.0)[1:-1][None, :]
 
 
 @dataclass(frozen=True)
@@ -82,7 +88,7 @@ class DrivabilityParams:
     peak_lead_s: float = 0.05  # the kick may start this long before the crossing (timing skew)
     final_fraction: float = 0.25
     min_prominence_ms2: float = 0.03  # an extremum counts when this prominent, 4x the noise, and ...
-    relative_prominence: float = 0.1  # ... this fraction of the step from a_pre to the settled level
+    relative_prominence: float = 0.04  # ... this fraction of the step from a_pre to the settled level
     max_extrema: int = 6
     min_swing_fraction: float = 0.15  # extrema after a swing smaller than this x the first are not used
     rise_fraction: float = 0.1
@@ -91,7 +97,8 @@ class DrivabilityParams:
     clunk_before_s: float = 0.03
     clunk_after_s: float = 0.06
     derive_cutoff_hz: float = 15.0  # low pass of the speed differentiator (app.analysis.accel)
-    bandwidth_factor: float = 2.0  # a derived acceleration resolves the shuffle below bandwidth / this
+    bandwidth_factor: float = 1.5  # a derived acceleration resolves the shuffle below bandwidth / this (gain >= 0.96)
+    max_fit_error: float = 0.05  # ... and (speed-derived: kick, p-p from the fit) the fit's amplitude within this
 
     def __post_init__(self) -> None:
         lo, hi = self.clunk_band_hz
@@ -128,27 +135,6 @@ class Drivability:
         return asdict(self)
 
 
-@functools.lru_cache(maxsize=64)
-def butter_sos(order: int, cutoff: float | tuple[float, float], btype: str, fs: float) -> tuple[FloatArray, FloatArray]:
-    """A Butterworth design and its steady-state initial conditions, cached: every event of a log (and its
-    simulation) uses the same few."""
-    sos = np.asarray(sps.butter(order, cutoff, btype=btype, fs=fs, output="sos"), dtype=np.float64)
-    return sos, np.asarray(sps.sosfilt_zi(sos), dtype=np.float64)
-
-
-def zero_phase(design: tuple[FloatArray, FloatArray], a: FloatArray) -> FloatArray:
-    """Forward-backward filtering with odd extension at both ends (what ``scipy.signal.sosfiltfilt`` does,
-    with the initial conditions from the cached design)."""
-    sos, zi = design
-    n = min(a.size - 1, 3 * (2 * len(sos) + 1))
-    if n < 1:
-        return np.asarray(a, dtype=np.float64)
-    ext = np.concatenate((2 * a[0] - a[n:0:-1], a, 2 * a[-1] - a[-2:-n - 2:-1]))
-    y, _ = sps.sosfilt(sos, ext, zi=zi * ext[0])
-    y, _ = sps.sosfilt(sos, y[::-1], zi=zi * y[-1])
-    return np.asarray(y[::-1][n:n + a.size], dtype=np.float64)
-
-
 def _rate(fs: float) -> float:
     return float(f"{fs:.6g}")  # jitter in the last digits of a period must not defeat the design cache
 
@@ -174,6 +160,19 @@ def _crossing(t: FloatArray, y: FloatArray, level: float, i0: int) -> float:
     return float(t[i - 1] + (level - y[i - 1]) / (y[i] - y[i - 1]) * (t[i] - t[i - 1]))
 
 
+def _sinc_vertex(y: FloatArray, i: int) -> tuple[float, float]:
+    """Sub-sample offset and value of the extremum of ``y`` near index ``i`` (a maximum: ``y`` is signed so
+    that the caller's extrema of both kinds are refined by looking at ``sign * y``) from a windowed-sinc
+    interpolation over +-8 samples; the parabolic vertex at the edges."""
+    if i < 8 or i > y.size - 9:
+        return parabolic_vertex(y, i)
+    seg = y[i - 8:i + 9]
+    interp = _SINC @ seg / _SINC.sum(axis=1)
+    sign = 1.0 if y[i] >= 0.5 * (y[i - 1] + y[i + 1]) else -1.0
+    k = int(np.argmax(sign * interp))
+    return float(_OFFSETS[k]), float(interp[k])
+
+
 def _extrema(y: FloatArray, i0: int, prominence: float) -> list[int]:
     """Alternating prominent extrema of ``y`` from index ``i0``, starting with a maximum."""
     seg = y[i0:]
@@ -192,11 +191,39 @@ def _extrema(y: FloatArray, i0: int, prominence: float) -> list[int]:
     return [i0 + idx for idx, _ in out]
 
 
+@dataclass(frozen=True)
+class _Fit:
+    """``y ~ c + amp exp(-sig tau) cos(w tau + phi)``, ``tau = t - t0``, and the relative standard error of amp."""
+
+    c: float
+    amp: float
+    sig: float
+    w: float
+    phi: float
+    amp_rel_se: float
+
+    @property
+    def freq_hz(self) -> float:
+        return self.w / (2 * math.pi)
+
+    @property
+    def zeta(self) -> float:
+        return self.sig / math.hypot(self.sig, self.w)
+
+    def first_swing(self) -> tuple[float, float]:
+        """The model's first peak (near tau = 0) and the valley after it, as values of y."""
+        period = 2 * math.pi / self.w
+        tau = np.linspace(-0.25 * period, 0.75 * period, 401)
+        y = self.c + self.amp * np.exp(-self.sig * tau) * np.cos(self.w * tau + self.phi)
+        k = int(np.argmax(y[:201]))
+        return float(y[k]), float(np.min(y[k:k + 201]))
+
+
 def _damped_fit(t: FloatArray, y: FloatArray, t0: float, c0: float, a0: float, f0: float,
-                zeta0: float) -> tuple[float, float] | None:
-    """Frequency (Hz) and damping ratio of ``y ~ c + A exp(-s tau) cos(w tau + phi)``, ``tau = t - t0``, fitted
-    by least squares from the kick peak on (None: the fit does not converge inside its bounds)."""
-    m = t >= t0
+                zeta0: float) -> _Fit | None:
+    """The damped sine fitted by least squares from the kick peak ``t0`` on, over at most ``FIT_PERIODS``
+    periods (None: no convergence inside the bounds)."""
+    m = (t >= t0) & (t <= t0 + FIT_PERIODS / f0)  # the first periods carry the shuffle; later ones mostly noise
     if m.sum() < 8:
         return None
     tau, ym = t[m] - t0, y[m]
@@ -214,18 +241,24 @@ def _damped_fit(t: FloatArray, y: FloatArray, t0: float, c0: float, a0: float, f
         return np.column_stack((np.ones_like(tau), e * cos, -amp * tau * e * cos, -amp * tau * e * sin,
                                 -amp * e * sin))
 
-    try:  # Levenberg-Marquardt with the analytic Jacobian: a few ms per event; the bounds are checked after
-        fit = optimize.least_squares(resid, np.array([c0, a0, s0, w0, 0.0]), jac=jac, method="lm", max_nfev=200)
-    except (ValueError, np.linalg.LinAlgError):
+    try:  # Levenberg-Marquardt (MINPACK) with the analytic Jacobian: a fraction of a millisecond per event
+        x, cov, info, _, ier = optimize.leastsq(resid, np.array([c0, a0, s0, w0, 0.0]), Dfun=jac, full_output=True,
+                                                maxfev=200, ftol=1e-7, xtol=1e-7)
+    except (ValueError, TypeError, np.linalg.LinAlgError):
         return None
-    _, _, sig, w, _ = fit.x
-    sig, w = float(sig), abs(float(w))
-    if not fit.success or not (0.6 * w0 < w < 1.6 * w0) or not 0.0 <= sig < 2.0 * w0:
+    c, amp, sig, w, phi = (float(v) for v in x)
+    if w < 0:
+        w, phi = -w, -phi
+    if ier not in (1, 2, 3, 4) or not (0.6 * w0 < w < 1.6 * w0) or not 0.0 <= sig < 2.0 * w0 or amp == 0:
         return None
-    return float(w / (2 * math.pi)), float(sig / math.hypot(sig, w))
+    dof = max(1, tau.size - 5)
+    var = float(np.sum(info["fvec"] ** 2)) / dof
+    rel = math.sqrt(max(float(cov[1, 1]) * var, 0.0)) / abs(amp) if cov is not None else math.inf
+    return _Fit(c, amp, sig, w, phi, rel)
 
 
-def _pedal_move(pedal: Signal | None, t_start: float, t_cross: float, p: DrivabilityParams) -> tuple[float, str]:
+def pedal_move(pedal: Signal | None, t_start: float, t_cross: float, p: DrivabilityParams) -> tuple[float, str]:
+    """Time (s) the pedal first moves in the event window, or NaN and why not."""
     if pedal is None or len(pedal) < 2:
         return NAN, "no pedal channel"
     w = pedal.window(t_start, t_cross + 0.3)
@@ -250,12 +283,16 @@ def drivability_criteria(
     t: FloatArray, a: FloatArray, t_start: float, t_end: float, t_cross: float, direction: float,
     params: DrivabilityParams | None = None, *, pedal: Signal | None = None, t_close: float = NAN,
     bandwidth_hz: float = math.inf, shuffle_hint_hz: float = NAN, saturated: bool = False,
+    noise_ms2: float = NAN, pedal_time: tuple[float, str] | None = None,
 ) -> Drivability:
     """The criteria (module docstring) of uniform samples ``t`` (s), ``a`` (m/s^2), shape (n,) each.
 
     ``t``/``a`` may extend beyond ``[t_start, t_end]`` (filter run-in); the criteria use the window.
     ``bandwidth_hz`` is the bandwidth of an acceleration derived from speed (inf: an accelerometer);
-    ``shuffle_hint_hz`` the shuffle frequency known from the motor speed, to judge that bandwidth.
+    ``shuffle_hint_hz`` the shuffle frequency known from the motor speed, to judge that bandwidth;
+    ``pedal_time`` the pedal's first move (:func:`pedal_move`) when already known (then ``pedal`` is not read);
+    ``noise_ms2`` the noise such a derivation leaves (finite: kick and peak-to-peak are read off the fitted
+    damped sine, unresolved when its amplitude's standard error exceeds ``max_fit_error``).
     """
     p = params or DrivabilityParams()
     nan_all = Drivability(NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN, NAN)
@@ -274,19 +311,7 @@ def drivability_criteria(
         return _with(nan_all, {k: "the acceleration does not cover the event window" for k in CRITERIA_NAMES})
     i_a, i_b = int(iw[0]), int(iw[-1]) + 1
     noise = float(np.std(a[i_a:i_b] - lp[i_a:i_b]))
-    # extrema on a band-limited interpolation (polyphase, zero phase) at >= UPSAMPLED_HZ: a 100 Hz
-    # trace has 12 samples per cycle of an 8 Hz shuffle, too few for a parabolic vertex within 1 %
-    up = max(1, math.ceil(UPSAMPLED_HZ / fs))
-    tu = t[0] + np.arange(lp.size * up) * (dt / up) if up > 1 else t
-    if up > 1:
-        pad = min(lp.size - 1, 16)  # mirrored ends keep the interpolation filter's run-in out of the window
-        padded = np.concatenate((2 * lp[0] - lp[pad:0:-1], lp, 2 * lp[-1] - lp[-2:-pad - 2:-1]))
-        lu = np.asarray(sps.resample_poly(padded, up, 1), dtype=np.float64)[pad * up: (pad + lp.size) * up]
-    else:
-        lu = lp
-    j_a, j_b = i_a * up, (i_b - 1) * up + 1
-    tw, lw = tu[j_a:j_b], lu[j_a:j_b]
-    dt_u = dt / up
+    tw, lw = t[i_a:i_b], lp[i_a:i_b]
     pre_m = tw <= t_cross - p.pre_gap_s
     a_pre = float(np.median(lw[pre_m])) if pre_m.any() else float(lw[0])
     n_final = max(2, round(p.final_fraction * tw.size))
@@ -299,8 +324,11 @@ def drivability_criteria(
     if not ext:
         reasons["kick_ms2"] = reasons["shuffle_pp_ms2"] = "no acceleration peak after the torque crossing"
     else:
-        verts = [parabolic_vertex(y, i) for i in ext[: p.max_extrema]]
-        times = np.array([tw[i] + off * dt_u for i, (off, _) in zip(ext, verts, strict=False)])
+        # a 100 Hz trace has 12 samples per cycle of an 8 Hz shuffle, too few for a parabolic vertex within 1 %:
+        # below REFINE_BELOW_HZ each extremum is refined on a band-limited (windowed-sinc) interpolation
+        refine = _sinc_vertex if fs < REFINE_BELOW_HZ else parabolic_vertex
+        verts = [refine(y, i) for i in ext[: p.max_extrema]]
+        times = np.array([tw[i] + off * dt for i, (off, _) in zip(ext, verts, strict=False)])
         vals = np.array([v for _, v in verts])
         swings = np.abs(np.diff(vals))
         if swings.size:  # later swings drowned in noise would bias the frequency and the decay
@@ -318,7 +346,8 @@ def drivability_criteria(
         else:
             reasons["shuffle_freq_hz"] = "fewer than two extrema"
         if swings.size >= 2 and (swings > 0).all():
-            slope = float(np.polyfit(np.arange(swings.size), np.log(swings), 1)[0])
+            n_sw = np.arange(swings.size) - 0.5 * (swings.size - 1)
+            slope = float(np.dot(n_sw, np.log(swings)) / np.dot(n_sw, n_sw))  # least-squares slope of ln(swing) over k
             delta = -2.0 * slope
             zeta = float(delta / math.sqrt(4 * math.pi**2 + delta**2)) if delta > 0 else NAN
             if not math.isfinite(zeta):
@@ -329,8 +358,22 @@ def drivability_criteria(
             fitted = _damped_fit(t[i_a:i_b], direction * lp[i_a:i_b], t_kick, direction * a_set,
                                  float(vals[0]) - direction * a_set, freq, zeta)
             if fitted is not None:
-                freq, zeta = fitted
+                freq, zeta, level = fitted.freq_hz, fitted.zeta, fitted.c
                 reasons.pop("shuffle_damping_ratio", None)
+                a_set = direction * level  # the oscillation's own centre: exact while it has not died out
+                kick = float(vals[0] - level)
+                if math.isfinite(noise_ms2):  # derived from speed: read the swing off the fit, not the noisy peaks
+                    peak, valley = fitted.first_swing()
+                    kick, pp = peak - level, peak - valley
+                    if fitted.amp_rel_se > p.max_fit_error:
+                        why = (f"unresolved: the shuffle amplitude is known to {fitted.amp_rel_se * 100:.0f} % only "
+                               f"(noise {noise_ms2:.3f} m/s^2 RMS on the acceleration derived from speed)")
+                        reasons.setdefault("kick_ms2", why)
+                        reasons.setdefault("shuffle_pp_ms2", why)
+            elif math.isfinite(noise_ms2):
+                reasons.setdefault("shuffle_pp_ms2", "unresolved: no damped oscillation fits the acceleration "
+                                                     "derived from speed")
+                reasons.setdefault("kick_ms2", reasons["shuffle_pp_ms2"])
         height = float(vals[0] - direction * a_pre)
         if height > 0:
             t_rise = _crossing(tw, y, direction * a_pre + p.rise_fraction * height, i0)
@@ -346,11 +389,13 @@ def drivability_criteria(
         if not math.isfinite(t_c):
             reasons["clunk_ms2"] = "no lash closure time and no acceleration rise"
         else:
-            hf = _bandpass(a, fs, lo, hi, p.order)
-            m = (t >= t_c - p.clunk_before_s) & (t <= t_c + p.clunk_after_s)
+            near = (t >= t_c - p.clunk_before_s - CLUNK_PAD_S) & (t <= t_c + p.clunk_after_s + CLUNK_PAD_S)
+            tn = t[near]
+            hf = _bandpass(a[near], fs, lo, hi, p.order) if tn.size > 8 else np.full(tn.size, NAN)
+            m = (tn >= t_c - p.clunk_before_s) & (tn <= t_c + p.clunk_after_s)
             clunk = float(np.max(np.abs(hf[m]))) if m.any() else NAN
     dose = vdv(a[i_a:i_b], fs)
-    t_pedal, why = _pedal_move(pedal, t_start, t_cross, p)
+    t_pedal, why = pedal_time if pedal_time is not None else pedal_move(pedal, t_start, t_cross, p)
     delay = t_rise - t_pedal if math.isfinite(t_pedal) and math.isfinite(t_rise) else NAN
     if why:
         reasons["response_delay_s"] = why
@@ -374,8 +419,7 @@ def drivability_criteria(
 
 def _with(d: Drivability, reasons: dict[str, str]) -> Drivability:
     """``d`` with the criteria named in ``reasons`` set to NaN (a reason marks the value as not supported)."""
-    values = {k: (NAN if k in reasons else v) for k, v in d.values().items()}
-    return Drivability(**{**asdict(d), **values, "resolution": dict(reasons)})
+    return replace(d, **{k: NAN for k in reasons if k in CRITERIA}, resolution=dict(reasons))
 
 
 def difference(measured: Drivability, simulated: Drivability) -> dict[str, float]:

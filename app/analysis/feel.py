@@ -20,12 +20,12 @@ from app.analysis.drivability import (
     CRITERIA_NAMES,
     Drivability,
     DrivabilityParams,
-    butter_sos,
     difference,
     drivability_criteria,
-    zero_phase,
+    pedal_move,
 )
 from app.analysis.series import FloatArray
+from app.analysis.zerophase import butter_sos, zero_phase
 from app.signals import Signal
 
 PAD_S = 0.3  # filter run-in on each side of the event window
@@ -51,11 +51,13 @@ def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, si
 
     ``sim_t`` (s), ``sim_speed_ms`` (m/s), ``sim_accel_ms2`` (m/s^2), shape (n,) each: the simulation of the window.
     """
+    moved = pedal_move(pedal, t_start, t_cross, params)  # the same driver input for both sides
     m = (src.t >= t_start - PAD_S) & (src.t <= t_end + PAD_S)
     t = src.t[m]
-    measured = drivability_criteria(t, src.a[m], t_start, t_end, t_cross, direction, params, pedal=pedal,
+    measured = drivability_criteria(t, src.a[m], t_start, t_end, t_cross, direction, params, pedal_time=moved,
                                     t_close=t_close_measured, bandwidth_hz=src.bandwidth_hz,
-                                    shuffle_hint_hz=shuffle_hint_hz, saturated=src.saturated_in(t_start, t_end))
+                                    shuffle_hint_hz=shuffle_hint_hz, saturated=src.saturated_in(t_start, t_end),
+                                    noise_ms2=src.noise_ms2)
     inside = (t >= sim_t[0]) & (t <= sim_t[-1])
     ts = t[inside]
     if src.kind == "accelerometer":
@@ -64,7 +66,7 @@ def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, si
         a_sim, _ = derive(ts, np.interp(ts, sim_t, sim_speed_ms), params.derive_cutoff_hz)
     else:
         a_sim = np.interp(ts, sim_t, sim_accel_ms2)
-    simulated = drivability_criteria(ts, a_sim, t_start, t_end, t_cross, direction, params, pedal=pedal,
+    simulated = drivability_criteria(ts, a_sim, t_start, t_end, t_cross, direction, params, pedal_time=moved,
                                      t_close=t_close_simulated, bandwidth_hz=src.bandwidth_hz,
                                      shuffle_hint_hz=shuffle_hint_hz)
     return FeelComparison(src.kind, measured, simulated, difference(measured, simulated))

@@ -33,6 +33,7 @@ import numpy as np
 from scipy import signal as sps
 
 from app.analysis.series import FloatArray
+from app.analysis.zerophase import sections
 
 F1_HZ, F2_HZ, Q1 = 0.4, 100.0, 1.0 / math.sqrt(2.0)
 F3_HZ, F4_HZ, Q4 = 2.0, 2.0, 0.63
@@ -70,10 +71,8 @@ def _zi(fs_hz: float) -> FloatArray:
 
 def weighted(a: FloatArray, fs_hz: float) -> FloatArray:
     """``a`` (m/s^2, uniform at ``fs_hz``) through W_d, starting in the steady state of ``a[0]``."""
-    sos = wd_sos(float(f"{fs_hz:.6g}"))
-    zi = _zi(float(f"{fs_hz:.6g}")) * float(a[0])
-    out, _ = sps.sosfilt(sos, a, zi=zi)
-    return np.asarray(out, dtype=np.float64)
+    rate = float(f"{fs_hz:.6g}")
+    return sections(wd_sos(rate), _zi(rate), np.asarray(a, dtype=np.float64))
 
 
 def vdv(a: FloatArray, fs_hz: float) -> float:

@@ -33,6 +33,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import nnls
 
 from app.analysis.series import FloatArray
@@ -157,11 +158,11 @@ def fit_ratings(x: FloatArray, scores: FloatArray, features: tuple[str, ...] = F
     if y.size < min_events:
         raise InsufficientDataError(f"ratings: {y.size} scored events with criteria; a rating model needs at least "
                                     f"{min_events}", code="ratings_too_few_events")
-    known = np.isfinite(x).any(axis=0)
+    known: npt.NDArray[np.bool_] = np.asarray(np.isfinite(x).any(axis=0), dtype=bool)
     if not known.any():
         raise InsufficientDataError("ratings: none of the scored events has a drivability criterion",
                                     code="ratings_too_few_events")
-    keep = tuple(f for f, k in zip(features, known, strict=True) if k)
+    keep = tuple(f for f, k in zip(features, [bool(v) for v in known], strict=True) if k)
     x = x[:, known]
     order = np.random.default_rng(seed).permutation(y.size)
     pred = np.empty(y.size)

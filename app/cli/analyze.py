@@ -105,8 +105,14 @@ def tolerance_table(tol: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.cli.report import drivability_table, events_table, finding_lines, metrics_table, summary_line, \
-        tracking_lines
+    from app.cli.report import (
+        drivability_table,
+        events_table,
+        finding_lines,
+        metrics_table,
+        summary_line,
+        tracking_lines,
+    )
 
     doc = analysis_doc(args)
     text = json.dumps(doc, indent=1)

@@ -96,7 +96,7 @@ def test_derived_acceleration_follows_the_shuffle_with_its_bandwidth() -> None:
 
 
 def test_wheel_speeds_need_the_tyre_radius() -> None:
-    t, v, a = drive(10.0)
+    t, v, _ = drive(10.0)
     ss = signals(t, v, None, speed_channel="wheels")
     assert road_speed(ss, None) is None
     sig, kind = road_speed(ss, 0.3) or (None, "")
