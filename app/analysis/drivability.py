@@ -355,8 +355,11 @@ def drivability_criteria(
         else:
             reasons["shuffle_damping_ratio"] = "fewer than two swings"
         if math.isfinite(freq):
+            # the motor speed's shuffle frequency, when known, is the better starting point: a small kick in
+            # noise can put the extrema (and a fit started there) on the wrong period
+            f_start = shuffle_hint_hz if math.isfinite(shuffle_hint_hz) and shuffle_hint_hz > 0 else freq
             fitted = _damped_fit(t[i_a:i_b], direction * lp[i_a:i_b], t_kick, direction * a_set,
-                                 float(vals[0]) - direction * a_set, freq, zeta)
+                                 float(vals[0]) - direction * a_set, f_start, zeta)
             if fitted is not None:
                 freq, zeta, level = fitted.freq_hz, fitted.zeta, fitted.c
                 reasons.pop("shuffle_damping_ratio", None)
