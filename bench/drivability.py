@@ -163,10 +163,11 @@ def simulated(duration: float) -> None:
             within += abs(r - 1) <= 0.15
             outside += abs(r - 1) > 0.15
         head = "3." if n == 0 else "  "
-        print(f"{head} derived from {1 / period:.0f} Hz wheel speeds (differentiator bandwidth {src.bandwidth_hz:.1f} Hz, "
-              f"noise {src.noise_ms2:.3f} m/s^2 RMS): shuffle p-p against the accelerometer's: {within} within 15 %, "
-              f"{flagged} flagged unresolved, {outside} outside"
-              + (f"; ratio median {np.median(ratios):.3f}, range {min(ratios):.3f}-{max(ratios):.3f}" if ratios else ""))
+        spread = (f"; ratio median {np.median(ratios):.3f}, range {min(ratios):.3f}-{max(ratios):.3f}"
+                  if ratios else "")
+        print(f"{head} derived from {1 / period:.0f} Hz wheel speeds (differentiator bandwidth "
+              f"{src.bandwidth_hz:.1f} Hz, noise {src.noise_ms2:.3f} m/s^2 RMS): shuffle p-p against the "
+              f"accelerometer's: {within} within 15 %, {flagged} flagged unresolved, {outside} outside{spread}")
 
 
 def rule(x: np.ndarray) -> np.ndarray:
