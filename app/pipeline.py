@@ -489,7 +489,7 @@ def inspect_log(path: Path, progress: ProgressFn = _no_progress, cpu_s: float | 
     }
 
 
-GAP_SENSITIVITY_FORMAT = 2  # 2: units stated, per-mm and per-rad values side by side
+GAP_SENSITIVITY_FORMAT = 3  # 2: units stated, per-mm and per-rad values side by side; 3: acceleration criteria per case
 # stage-steps (cases x integrator steps per simulated second x stages) a gap sensitivity may cost: ~10-25 ns
 # each, so about 5 s of CPU; the paper preset needs 1e6, a 24-stage chain of soft stages 2e7
 MAX_GAP_SENSITIVITY_WORK = 4e8
@@ -515,7 +515,8 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
     """Gap what-ifs for a vehicle under the paper's scripted tip-in (see :mod:`sim.paper`).
 
     For each of the five gaps: the speed fluctuation and impact-induced fluctuation with the
-    gap removed and halved, and the sensitivity ``S_i`` = (impact fluctuation of the nominal
+    gap removed and halved (and the body acceleration's shuffle peak-to-peak, kick, jerk and VDV,
+    :func:`app.analysis.feel.run_feel`), and the sensitivity ``S_i`` = (impact fluctuation of the nominal
     minus that without gap i) / size of gap i, normalised to the half-shaft gap = 100, next to
     the nominal and the zero-gap (no backlash at all) responses.
 
@@ -563,8 +564,14 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
 
 
 def _case(c: Any) -> dict[str, float]:
+    """One what-if case: the speed metrics and what the occupants feel (body acceleration criteria)."""
+    from app.analysis.feel import run_feel
+
+    res = c.result
+    feel = run_feel(res.t, res.vehicle_accel_ms2, res.airgap_torque_nm)
     return {"unloaded_ms": c.unloaded_ms, "fluctuation_rpm": c.fluct_rpm, "impact_rpm": c.impact_rpm,
-            "rise_rpm": c.rise_rpm}
+            "rise_rpm": c.rise_rpm, "shuffle_pp_ms2": feel.shuffle_pp_ms2, "kick_ms2": feel.kick_ms2,
+            "max_jerk_ms3": feel.max_jerk_ms3, "vdv_ms175": feel.vdv_ms175}
 
 
 def tolerance_for_result(files: Any, vehicle: Vehicle, n: int, seed: int,

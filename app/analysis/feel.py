@@ -72,6 +72,27 @@ def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, si
     return FeelComparison(src.kind, measured, simulated, difference(measured, simulated))
 
 
+def run_feel(t: FloatArray, accel_ms2: FloatArray, torque_nm: FloatArray,
+             params: DrivabilityParams | None = None) -> Drivability:
+    """The criteria of a simulated run without events (a scripted tip-in, a what-if): around the first
+    torque zero crossing with a step of at least 10 N m (else the steepest torque change), over the
+    window an analysis would use (0.5 s before, 1.5 s after, within the run). ``t`` (s), ``accel_ms2``,
+    ``torque_nm`` (n,) on one grid; no pedal, so no response delay."""
+    p = params or DrivabilityParams()
+    sign = np.sign(torque_nm)
+    cross = np.nonzero((sign[:-1] < 0) != (sign[1:] < 0))[0]
+    k = next((int(i) for i in cross if abs(float(torque_nm[min(i + 50, torque_nm.size - 1)])
+                                             - float(torque_nm[max(i - 50, 0)])) >= 10.0), None)
+    if k is None:
+        k = int(np.argmax(np.abs(np.gradient(torque_nm))))
+    t_cross = float(t[k])
+    after = float(np.median(torque_nm[k:min(k + 200, torque_nm.size)]))
+    before = float(np.median(torque_nm[max(k - 200, 0):k + 1]))
+    direction = 1.0 if after >= before else -1.0
+    return drivability_criteria(t, accel_ms2, max(float(t[0]), t_cross - 0.5), min(float(t[-1]), t_cross + 1.5),
+                                t_cross, direction, p, pedal_time=(math.nan, "a simulated run has no pedal"))
+
+
 def _band_limit(t: FloatArray, a: FloatArray, period_s: float) -> FloatArray:
     """``a`` low-passed (zero phase) to 0.45 of the rate it is about to be sampled at, as a sensor's
     anti-alias filter does; unchanged when it is not finer than that."""

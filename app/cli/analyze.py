@@ -67,7 +67,7 @@ def gap_sensitivity_table(sens: dict[str, Any]) -> str:
     unit = sens["sensitivity_unit"]
 
     def num(v: float | None, fmt: str) -> str:
-        return "-" if v is None else format(v, fmt)
+        return "-" if v is None or v != v else format(v, fmt)
 
     lines = [f"gap sensitivity, {sens['scenario']}; S = impact-fluctuation change per {unit} of gap "
              f"({'circumferential clearance' if unit == 'mm' else 'angle in its own shaft'}), halfshaft = 100",
@@ -80,6 +80,11 @@ def gap_sensitivity_table(sens: dict[str, Any]) -> str:
     nom, zero = sens["nominal"], sens["zero_gaps"]
     lines.append(f"nominal: impact-induced fluctuation {nom['impact_rpm']:.1f} rpm, fluctuation "
                  f"{nom['fluctuation_rpm']:.1f} rpm; no backlash at all: fluctuation {zero['fluctuation_rpm']:.1f} rpm")
+    if "shuffle_pp_ms2" in nom:
+        lines.append("felt (body acceleration): shuffle peak-to-peak nominal "
+                     f"{num(nom['shuffle_pp_ms2'], '.2f')} m/s^2, no backlash {num(zero['shuffle_pp_ms2'], '.2f')}; "
+                     + "; ".join(f"{g['gap']} halved {num(g['halved'].get('shuffle_pp_ms2'), '.2f')}, removed "
+                                 f"{num(g['removed'].get('shuffle_pp_ms2'), '.2f')}" for g in sens["gaps"]))
     if unit == "rad":
         lines.append("(per mm needs every gap's contact radius, gaps.<gap>.radius_mm, in the driveline file)")
     return "\n".join(lines)

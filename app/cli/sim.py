@@ -118,6 +118,7 @@ def _simulate(args: argparse.Namespace) -> int:
         if base[0] > 0:
             print(f"what-if ripple {new[0]:.1f} rpm = {100.0 * new[0] / base[0]:.0f} % of the baseline's "
                   f"{base[0]:.1f} rpm; longest unloaded interval {new[1]:.1f} ms vs {base[1]:.1f} ms")
+        print(_feel_change(res, alt))
         res = alt
     if res.input_gaps:
         print(f"{len(res.input_gaps)} holes in the torque samples, first at {res.input_gaps[0][0]:.3f} s")
@@ -132,6 +133,22 @@ def _simulate(args: argparse.Namespace) -> int:
             w.writerows(zip(*cols.values(), strict=True))
         print(f"wrote {args.out}", file=sys.stderr)
     return 0
+
+
+def _feel_change(base: SimResult, alt: SimResult) -> str:
+    """What the occupants feel, baseline -> what-if: body acceleration criteria around the torque reversal."""
+    from app.analysis.feel import run_feel
+
+    a = run_feel(base.t, base.vehicle_accel_ms2, base.airgap_torque_nm)
+    b = run_feel(alt.t, alt.vehicle_accel_ms2, alt.airgap_torque_nm)
+
+    def pair(x: float, y: float, fmt: str) -> str:
+        return f"{format(x, fmt) if x == x else '-'} -> {format(y, fmt) if y == y else '-'}"
+
+    return (f"felt (body acceleration, baseline -> what-if): shuffle peak-to-peak "
+            f"{pair(a.shuffle_pp_ms2, b.shuffle_pp_ms2, '.2f')} m/s^2, kick {pair(a.kick_ms2, b.kick_ms2, '.2f')} "
+            f"m/s^2, max jerk {pair(a.max_jerk_ms3, b.max_jerk_ms3, '.1f')} m/s^3, VDV "
+            f"{pair(a.vdv_ms175, b.vdv_ms175, '.2f')} m/s^1.75")
 
 
 def _summary(label: str, res: SimResult) -> tuple[float, float]:
