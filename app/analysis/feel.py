@@ -81,8 +81,9 @@ def run_feel(t: FloatArray, accel_ms2: FloatArray, torque_nm: FloatArray,
     p = params or DrivabilityParams()
     sign = np.sign(torque_nm)
     cross = np.nonzero((sign[:-1] < 0) != (sign[1:] < 0))[0]
-    k = next((int(i) for i in cross if abs(float(torque_nm[min(i + 50, torque_nm.size - 1)])
-                                             - float(torque_nm[max(i - 50, 0)])) >= 10.0), None)
+    last = torque_nm.size - 1
+    k = next((i for i in (int(c) for c in cross)
+              if abs(float(torque_nm[min(i + 50, last)]) - float(torque_nm[max(i - 50, 0)])) >= 10.0), None)
     if k is None:
         k = int(np.argmax(np.abs(np.gradient(torque_nm))))
     t_cross = float(t[k])
