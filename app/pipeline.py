@@ -594,11 +594,17 @@ def tolerance_for_result(files: Any, vehicle: Vehicle, n: int, seed: int,
         k = meta["key"]
         sigs[name] = finite_signal(Signal(name, np.asarray(files.array(f"sig_{k}_t")),
                                           np.asarray(files.array(f"sig_{k}_v")), meta["unit"]))
-    windows = [EventWindow(e["index"], e["kind"], e["t_start_s"] - lead_s, e["t_start_s"], e["t_end_s"])
-               for e in doc["events"] if e["has_metrics"]]
+    windows = [EventWindow(e["index"], e["kind"], e["t_start_s"] - lead_s, e["t_start_s"], e["t_end_s"],
+                           e["t_cross_s"]) for e in doc["events"] if e["has_metrics"]]
     out = tolerance_doc(vehicle, sigs[TORQUE], sigs[SPEED], windows, n, seed, progress)
     by_index = {m["event_index"]: m for m in doc["metrics"]}
     for row in out["events"]:
         meas = by_index.get(row["index"], {}).get("measured") or {}
         row["analysis_fluctuation_rpm"] = meas.get("fluctuation_rpm")  # the detrended metric, for reference
+        felt = ((by_index.get(row["index"], {}).get("drivability") or {}).get("measured") or {})
+        pp = felt.get("shuffle_pp_ms2")
+        row["measured_shuffle_pp_ms2"] = pp
+        band = row.get("band_shuffle_pp_ms2")
+        if pp is not None and np.isfinite(pp) and band is not None:
+            row["measured_shuffle_pp_in_band"] = bool(band["p5"] <= pp <= band["p95"])
     return out

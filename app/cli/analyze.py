@@ -94,18 +94,23 @@ def tolerance_table(tol: dict[str, Any]) -> str:
     """The tolerance band per event as text."""
 
     def num(v: float | None, fmt: str = ".1f") -> str:
-        return "-" if v is None else format(v, fmt)
+        return "-" if v is None or v != v else format(v, fmt)
 
-    lines = [f"tolerance band, {tol['n']} variants per event (seed {tol['seed']}); {tol['metric']}",
-             f"{'#':>3} {'kind':<8} {'p5':>8} {'p50':>8} {'p95':>8} {'nominal':>8} {'measured':>9} {'pct':>6}"]
+    lines = [f"tolerance band, {tol['n']} variants per event (seed {tol['seed']}); {tol['metric']}; felt: "
+             f"{tol.get('felt_metric', '-')}",
+             f"{'#':>3} {'kind':<8} {'p5':>8} {'p50':>8} {'p95':>8} {'nominal':>8} {'measured':>9} {'pct':>6}"
+             f"   {'p-p p5-p95 (m/s^2)':>18} {'measured':>8}"]
     for e in tol["events"]:
         if e.get("error"):
             lines.append(f"{e['index']:>3} {e['kind']:<8} {e['error']}")
             continue
         b = e["band_rpm"]
+        felt = e.get("band_shuffle_pp_ms2")
+        felt_text = f"{num(felt['p5'], '.2f')}-{num(felt['p95'], '.2f')}" if felt else "-"
         lines.append(f"{e['index']:>3} {e['kind']:<8} {num(b['p5']):>8} {num(b['p50']):>8} {num(b['p95']):>8} "
                      f"{num(e['nominal_fluctuation_rpm']):>8} {num(e['measured_fluctuation_rpm']):>9} "
-                     f"{num(e['measured_percentile'], '.0f'):>5}%")
+                     f"{num(e['measured_percentile'], '.0f'):>5}%   {felt_text:>18} "
+                     f"{num(e.get('measured_shuffle_pp_ms2'), '.2f'):>8}")
     return "\n".join(lines)
 
 
