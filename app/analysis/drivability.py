@@ -70,7 +70,7 @@ CRITERIA: dict[str, str] = {
 CRITERIA_NAMES: tuple[str, ...] = tuple(CRITERIA)
 NAN = float("nan")
 REFINE_BELOW_HZ = 500.0
-FIT_PERIODS = 5.0  # the damped-sine fit spans this many shuffle periods from the kick peak (or the window)
+FIT_PERIODS = 4.0  # the damped-sine fit spans this many shuffle periods from the kick peak (or the window)
 CLUNK_PAD_S = 0.15  # the clunk band is filtered over its search interval and this much on either side
 _TAPS = np.arange(-8, 9)
 _OFFSETS = np.linspace(-1.0, 1.0, 81)
@@ -243,7 +243,7 @@ def _damped_fit(t: FloatArray, y: FloatArray, t0: float, c0: float, a0: float, f
 
     try:  # Levenberg-Marquardt (MINPACK) with the analytic Jacobian: a fraction of a millisecond per event
         x, cov, info, _, ier = optimize.leastsq(resid, np.array([c0, a0, s0, w0, 0.0]), Dfun=jac, full_output=True,
-                                                maxfev=200, ftol=1e-7, xtol=1e-7)
+                                                maxfev=100, ftol=1e-6, xtol=1e-6)
     except (ValueError, TypeError, np.linalg.LinAlgError):
         return None
     c, amp, sig, w, phi = (float(v) for v in x)
