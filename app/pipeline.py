@@ -318,12 +318,16 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     feel_s = 0.0  # time spent on the drivability criteria; moved out of the stage timings by advancing `clock`
     if opts.drivability.enabled:
         clock_feel = time.perf_counter()
-        accel = acceleration_source(signals, vehicle.wheel.radius, opts.drivability.derive_cutoff_hz,
-                                    checks.computed)
+        try:
+            accel = acceleration_source(signals, vehicle.wheel.radius, opts.drivability.derive_cutoff_hz,
+                                        checks.computed)
+            if accel is None:
+                notes.append("no acceleration: the log has no accelerometer and no road speed; drivability "
+                             "criteria are left out")
+        except InsufficientDataError as exc:
+            accel = None
+            notes.append(f"no acceleration: {exc}; drivability criteria are left out")
         checks.findings.extend(accel.findings if accel is not None else [])
-        if accel is None:
-            notes.append("no acceleration: the log has no accelerometer and no road speed; drivability criteria "
-                         "are left out")
         feel_s = time.perf_counter() - clock_feel
         clock += feel_s
     detection = find_events(signals, opts.events, drive)
@@ -389,7 +393,10 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
         feel = None
         if accel is not None:
             clock_feel = time.perf_counter()
-            feel = _event_feel(accel, res, lag, ev, signals, m_meas, m_sim, opts.drivability)
+            try:
+                feel = _event_feel(accel, res, lag, ev, signals, m_meas, m_sim, opts.drivability)
+            except (InsufficientDataError, ValueError, np.linalg.LinAlgError) as exc:  # never fails the analysis
+                notes.append(f"event {ev.index}: drivability criteria not computed ({exc})")
             spent = time.perf_counter() - clock_feel
             clock += spent
             feel_s += spent

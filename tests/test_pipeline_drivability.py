@@ -103,3 +103,24 @@ def test_payload_csv_and_event_store_rows_carry_the_criteria(with_accelerometer:
     analysed = [r for r in rows if np.isfinite(r["measured_accel_shuffle_pp_ms2"])]
     assert len(analysed) == summ["shuffle_pp_ms2"]["events"]
     assert all(r["accel_source"] == "accelerometer" for r in analysed)
+
+
+def test_an_inverted_accelerometer_is_a_finding_and_the_road_speed_stands_in() -> None:
+    ss = _signals(replace(SCENARIO, duration_s=12.0))
+    acc = ss["accel_long_ms2"]
+    ss.add(Signal("accel_long_ms2", acc.t, -acc.values, acc.unit))
+    res = analyze_signals(ss, load_vehicle("paper"), AnalysisOptions())
+    assert "accel_sign" in [f.code for f in res.findings]
+    assert res.acceleration is not None and res.acceleration.kind == "vehicle_speed"
+    assert res.acceleration.check is not None and res.acceleration.check.verdict == "sign"
+    doc, _ = result_payload(res)
+    assert doc["acceleration"]["note"] == "accelerometer rejected (sign)"
+
+
+def test_no_accelerometer_and_no_road_speed_leaves_the_criteria_out_with_a_note() -> None:
+    road = ("accel_long_ms2", "vehicle_speed_kmh", *(f"wheel_speed_{w}_rpm" for w in ("fl", "fr", "rl", "rr")))
+    res = analyze_signals(_signals(replace(SCENARIO, duration_s=10.0), drop=road), load_vehicle("paper"),
+                          AnalysisOptions())
+    assert res.acceleration is None and all(er.feel is None for er in res.event_results)
+    assert any(n.startswith("no acceleration") for n in res.notes)
+    assert any(er.comparison is not None for er in res.event_results)  # the speed metrics are there as before

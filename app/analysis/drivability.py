@@ -102,10 +102,12 @@ class DrivabilityParams:
 
     def __post_init__(self) -> None:
         lo, hi = self.clunk_band_hz
-        if not (self.lowpass_hz > 0 and 0 < lo < hi and self.order >= 1 and 0 < self.final_fraction <= 1
-                and self.max_extrema >= 2 and self.derive_cutoff_hz > 0 and self.bandwidth_factor >= 1):
-            raise ValueError("drivability parameters: cut-offs must be positive (clunk band low < high), "
-                             "order >= 1, 0 < final_fraction <= 1, max_extrema >= 2, bandwidth_factor >= 1")
+        if not (self.lowpass_hz >= 1.0 and 1.0 <= lo < hi and 1 <= self.order <= 8 and 0 < self.final_fraction <= 1
+                and self.max_extrema >= 2 and self.derive_cutoff_hz >= 1.0 and self.bandwidth_factor >= 1
+                and self.max_fit_error > 0):
+            raise ValueError("drivability parameters: cut-offs must be at least 1 Hz (clunk band low < high), "
+                             "1 <= order <= 8, 0 < final_fraction <= 1, max_extrema >= 2, bandwidth_factor >= 1, "
+                             "max_fit_error > 0")
 
 
 @dataclass(frozen=True)
