@@ -19,15 +19,18 @@ With ``y = d * a_lp`` (the response in the direction of the torque change)::
            pedal  first rise (10 % of the kick peak above a_pre)
 
 ``a_pre``        median of ``a_lp`` over ``[t_start, t_cross - pre_gap_s]``
-``settled``      ``a_set``: median of ``a_lp`` over the last ``final_fraction`` of the window (m/s^2, signed)
+``fit``          ``c + A exp(-sigma tau) cos(omega tau + phi)``, ``tau = t - t_kick``, fitted by least squares
+                 (Levenberg-Marquardt) to ``y`` over up to ``FIT_PERIODS`` periods from the kick peak,
+                 started at the motor speed's shuffle frequency when known, else at the extrema's
+``settled``      ``a_set = d c`` (the oscillation's centre, exact while it has not died out by the window's
+                 end); without a fit the median of ``a_lp`` over the last ``final_fraction`` of the window
 ``kick``         ``d (a_peak - a_set)``: the first prominent peak of ``y`` after ``t_cross - peak_lead_s``
-                 (parabolic vertex), over the settled level
+                 (vertex on a windowed-sinc interpolation below 500 Hz), over the settled level
 ``shuffle p-p``  the largest swing ``|y_k - y_{k+1}|`` between successive prominent extrema from the kick
                  peak on (normally the first: kick peak to the following valley)
-``frequency``    ``1 / (2 mean(t_{k+1} - t_k))`` over up to ``max_extrema`` extrema (a damped sine's
-                 extrema are exactly half a damped period apart)
-``decay``        damping ratio from the logarithmic decrement of successive swings:
-                 ``delta = 2 * (-slope of ln|swing_k| over k)``, ``zeta = delta / sqrt(4 pi^2 + delta^2)``
+``frequency``    ``omega / 2 pi`` of the fit; without one ``1 / (2 mean(t_{k+1} - t_k))`` over the extrema
+``decay``        damping ratio ``sigma / sqrt(sigma^2 + omega^2)`` of the fit; without one from the logarithmic
+                 decrement of successive swings, ``zeta = delta / sqrt(4 pi^2 + delta^2)``
 ``max jerk``     ``max |d a_lp / dt|`` (m/s^3) from ``t_cross - peak_lead_s`` to the end of the window
 ``clunk``        ``max |a_hf|`` (m/s^2) within ``[t_close - clunk_before_s, t_close + clunk_after_s]``,
                  ``t_close`` the lash closure (from the speed metrics; else the kick's first rise)
@@ -35,10 +38,14 @@ With ``y = d * a_lp`` (the response in the direction of the torque change)::
 ``response delay`` first rise time minus the pedal's first move (``|pedal - pedal_pre|`` beyond
                  ``max(pedal_min_pct, pedal_fraction x step)``), both linearly interpolated
 
+For an acceleration derived from speed (``noise_ms2`` given) kick and peak-to-peak are read off the fit
+(its first peak and the valley after it), which averages the differentiator's noise out.
+
 A criterion the data cannot support is NaN (JSON null) with a reason in ``resolution``: too few
 extrema for a frequency, a clunk band above what the sampling carries, no pedal channel, a
 saturated sensor in the window, or an acceleration derived from speed whose bandwidth is below
-``bandwidth_factor`` x the shuffle frequency (marked ``unresolved``).
+``bandwidth_factor`` x the shuffle frequency or whose fitted amplitude is uncertain by more than
+``max_fit_error`` (marked ``unresolved``). Definitions in docs/drivability.md.
 """
 
 from __future__ import annotations
