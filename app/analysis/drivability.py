@@ -183,21 +183,30 @@ def _sinc_vertex(y: FloatArray, i: int) -> tuple[float, float]:
 
 
 def _extrema(y: FloatArray, i0: int, prominence: float) -> list[int]:
-    """Alternating prominent extrema of ``y`` from index ``i0``, starting with a maximum."""
+    """Alternating extrema of ``y`` from index ``i0``, starting with a maximum, each at least ``prominence``
+    away from the one before (a zig-zag filter over the local extrema: a smaller reversal is passed over and
+    the larger of two same-kind extrema kept). The start of the segment counts as a minimum, so the first
+    maximum must rise ``prominence`` above what precedes it."""
     seg = y[i0:]
-    peaks, _ = sps.find_peaks(seg, prominence=prominence)
-    valleys, _ = sps.find_peaks(-seg, prominence=prominence)
-    if not peaks.size:
+    if seg.size < 3:
         return []
-    marks = sorted([(int(p), 1) for p in peaks] + [(int(v), -1) for v in valleys if v > peaks[0]])
-    out: list[tuple[int, int]] = []
-    for idx, kind in marks:
-        if out and out[-1][1] == kind:  # two of a kind in a row: keep the more extreme
-            if kind * seg[idx] > kind * seg[out[-1][0]]:
-                out[-1] = (idx, kind)
+    d = np.diff(seg)
+    maxima = np.nonzero((d[:-1] > 0) & (d[1:] <= 0))[0] + 1
+    minima = np.nonzero((d[:-1] < 0) & (d[1:] >= 0))[0] + 1
+    kinds = np.concatenate((np.ones(maxima.size), -np.ones(minima.size)))
+    idx = np.concatenate((maxima, minima))
+    order = np.argsort(idx, kind="stable")
+    out: list[tuple[int, float]] = [(int(np.argmin(seg[: int(maxima[0]) + 1])) if maxima.size else 0, -1.0)]
+    for k, kind in zip(idx[order].tolist(), kinds[order].tolist(), strict=True):
+        last, last_kind = out[-1]
+        if k <= last:
             continue
-        out.append((idx, kind))
-    return [i0 + idx for idx, _ in out]
+        if kind == last_kind:
+            if kind * seg[k] > kind * seg[last]:
+                out[-1] = (k, kind)
+        elif abs(seg[k] - seg[last]) >= prominence:
+            out.append((k, kind))
+    return [i0 + k for k, _ in out[1:]]
 
 
 @dataclass(frozen=True)
