@@ -55,7 +55,6 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy import optimize
-from scipy import signal as sps
 
 from app.analysis.iso2631 import vdv
 from app.analysis.series import FloatArray, parabolic_vertex
