@@ -7,7 +7,7 @@ import csv
 import json
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from app.errors import InputError
 
@@ -151,6 +151,24 @@ def _feel_change(base: SimResult, alt: SimResult) -> str:
             f"{pair(a.vdv_ms175, b.vdv_ms175, '.2f')} m/s^1.75")
 
 
+def _felt_band(res: Any, t: Any, q: Any) -> dict[str, float | None]:
+    """Shuffle peak-to-peak (m/s^2) of the nominal run and its 5/50/95 % band over the variants
+    (:func:`app.analysis.feel.run_feel` on each run's body acceleration); None where not determinable."""
+    import numpy as np
+
+    from app.analysis.feel import run_feel
+
+    if res.t is None or res.vehicle_speed_kmh is None:
+        return {"nominal": None, "p5": None, "p50": None, "p95": None}
+    torque = np.interp(res.t, t, q)
+    pp = np.array([run_feel(res.t, np.gradient(v / 3.6, res.t), torque).shuffle_pp_ms2
+                   for v in res.vehicle_speed_kmh])
+    fin = pp[1:][np.isfinite(pp[1:])]
+    band = np.percentile(fin, [5.0, 50.0, 95.0]) if fin.size else [None] * 3
+    return {"nominal": float(pp[0]) if np.isfinite(pp[0]) else None,
+            **{k: (None if v is None else float(v)) for k, v in zip(("p5", "p50", "p95"), band, strict=True)}}
+
+
 def _summary(label: str, res: SimResult) -> tuple[float, float]:
     """Print one run's speed range, ripple and unloaded intervals; return (ripple rpm, longest unloaded ms)."""
     from sim.metrics import peak_to_valley, unloaded_intervals
@@ -179,14 +197,17 @@ def _tolerance(args: argparse.Namespace) -> int:
 
     res = tolerance_analysis(vehicle, t, q, n=args.n, seed=args.seed, distribution=args.distribution,
                              window=tuple(args.window) if args.window else None, interp=args.interp,
-                             speed0_rpm=args.speed0_rpm, output_dt=args.output_dt, progress=progress)
+                             speed0_rpm=args.speed0_rpm, output_dt=args.output_dt, progress=progress,
+                             body_speed=True)
     p5, p50, p95 = (float(v) for v in np.percentile(res.fluct_rpm, [5.0, 50.0, 95.0]))
+    felt = _felt_band(res, t, q)
     u5, u50, u95 = (float(v) for v in np.percentile(res.unloaded_ms, [5.0, 50.0, 95.0]))
     out: dict[str, object] = {
         "vehicle": vehicle.name, "n": args.n, "seed": args.seed, "distribution": args.distribution,
         "fields": list(res.fields), "nominal_ripple_rpm": res.nominal_fluct_rpm,
         "ripple_rpm": {"p5": p5, "p50": p50, "p95": p95},
         "unloaded_ms": {"p5": u5, "p50": u50, "p95": u95},
+        "shuffle_pp_ms2": felt,
     }
     pct = res.percentile_of(args.measured_ripple) if args.measured_ripple is not None else None
     if pct is not None:
@@ -200,6 +221,10 @@ def _tolerance(args: argparse.Namespace) -> int:
     print(f"ripple (largest peak-to-valley of motor speed): nominal {res.nominal_fluct_rpm:.1f} rpm; "
           f"predicted 5 % {p5:.1f}, 50 % {p50:.1f}, 95 % {p95:.1f} rpm")
     print(f"first unloaded interval: 5 % {u5:.1f}, 50 % {u50:.1f}, 95 % {u95:.1f} ms")
+    if felt["p50"] is not None:
+        nom = "-" if felt["nominal"] is None else f"{felt['nominal']:.2f}"
+        print(f"felt shuffle peak-to-peak (body acceleration): nominal {nom} m/s^2; predicted "
+              f"5 % {felt['p5']:.2f}, 50 % {felt['p50']:.2f}, 95 % {felt['p95']:.2f} m/s^2")
     if pct is not None:
         where = "below the band" if args.measured_ripple < p5 else "above the band" if args.measured_ripple > p95 \
             else "inside the 5-95 % band"
