@@ -17,13 +17,19 @@ import numpy as np
 import numpy.typing as npt
 
 from app.analysis.compare import resolution_reasons, summarize
+from app.analysis.feel import summarize_feel
+from app.analysis.ratings import RatingModel, apply_ratings
 from app.analysis.sampling import spacing
 from app.pipeline import AnalysisResult
+from app.ratings_file import model_from_env
 
 SERIES_COLUMNS = ("measured_rpm", "simulated_rpm", "torque_nm")
 
 
-def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.NDArray[np.float64]]]:
+def result_payload(res: AnalysisResult, ratings: RatingModel | None = None,
+                   ) -> tuple[dict[str, Any], dict[str, npt.NDArray[np.float64]]]:
+    """The stored document and arrays; drivability ratings only with a fitted model (``ratings``, else the one
+    ``LASHSCOPE_RATINGS`` names: :mod:`app.ratings_file`)."""
     arrays: dict[str, npt.NDArray[np.float64]] = {}
     events: list[dict[str, Any]] = []
     metrics: list[dict[str, Any]] = []
@@ -50,6 +56,7 @@ def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.N
             m["t_cross_s"] = er.event.t_cross_s
             m["sim_gap_open_time_s"] = er.sim_gap_open_time_s
             m["tracking"] = er.tracking.to_dict() if er.tracking is not None else None
+            m["drivability"] = er.feel.to_dict() if er.feel is not None else None
             metrics.append(m)
     for key, chunks in parts.items():
         arrays[f"ev_{key}"] = np.concatenate(chunks) if chunks else np.empty(0)
@@ -68,6 +75,7 @@ def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.N
                          "t_start_s": float(sig.t[0]) if len(sig) else None,
                          "t_end_s": float(sig.t[-1]) if len(sig) else None}
     comparisons = [er.comparison for er in res.event_results if er.comparison is not None]
+    feels = [er.feel for er in res.event_results if er.feel is not None]
     included = sum(1 for e in res.events if e.included)
     summary = {
         "events": len(res.events), "included": included, "excluded": len(res.events) - included,
@@ -81,11 +89,16 @@ def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.N
         "findings": [f.to_dict() for f in res.findings],
         "whole_rms_rpm": res.whole_error.rms_rpm if res.whole_error else None,
         "whole_nrmse": res.whole_error.nrmse if res.whole_error else None,
+        "drivability": summarize_feel(feels) if feels else {},
     }
     doc = {
         "schema": 1, "summary": summary, "events": events, "metrics": metrics, "event_rows": rows,
         "offset": asdict(res.offset), "whole": whole, "signals": signals, "ingest": res.ingest,
         "timings_s": res.timings_s, "notes": res.notes, "tracking": res.tracking.to_dict(),
         "sampling": {name: spacing(sig.t).to_dict() for name, sig in sorted(res.signals.items())},
+        "acceleration": res.acceleration.describe() if res.acceleration is not None else None,
     }
+    model = ratings if ratings is not None else model_from_env()
+    if model is not None and feels:
+        apply_ratings(doc, model)
     return doc, arrays

@@ -27,10 +27,13 @@ from typing import Any, Literal
 
 import numpy as np
 
+from app.analysis.accel import AccelSource, acceleration_source
 from app.analysis.align import OffsetEstimate, common_time_base, estimate_lag, overlap, shift
 from app.analysis.compare import EventComparison, SpeedError, compare_event, speed_error
 from app.analysis.diagnosis.uncertainty import rigid_inertia
+from app.analysis.drivability import DrivabilityParams
 from app.analysis.events import SPEED, TORQUE, Event, EventParams, find_events
+from app.analysis.feel import FeelComparison, event_feel
 from app.analysis.lash import LashParams
 from app.analysis.logchecks import CheckParams, Finding, Limits, check_log
 from app.analysis.metrics import MetricParams, ripple_metrics
@@ -67,6 +70,7 @@ class AnalysisOptions:
     event_dt_s: float = 0.001  # time base of the per-event aligned series
     whole_log: bool = True  # also simulate the whole log in one open-loop run
     torque_interp: Literal["hold", "linear"] = "linear"
+    drivability: DrivabilityParams = field(default_factory=DrivabilityParams)  # acceleration criteria per event
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -78,12 +82,14 @@ class AnalysisOptions:
         mp_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.pop("metrics", {}).items()}
         tr_kw: dict[str, Any] = dict(data.pop("tracking", {}) or {})
         ck_kw: dict[str, Any] = dict(data.pop("checks", {}) or {})
+        dr_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                                 for k, v in (data.pop("drivability", {}) or {}).items()}
         try:
             if isinstance(mp_kw.get("lash"), dict):
                 lash_kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in mp_kw["lash"].items()}
                 mp_kw["lash"] = LashParams(**lash_kw)
             opts = cls(events=EventParams(**ev_kw), metrics=MetricParams(**mp_kw), tracking=TrackingParams(**tr_kw),
-                       checks=CheckParams(**ck_kw), **data)
+                       checks=CheckParams(**ck_kw), drivability=DrivabilityParams(**dr_kw), **data)
         except (TypeError, ValueError) as exc:
             raise InputError(f"analysis options: {exc}") from exc
         if opts.model not in ("multibody", "two_inertia"):
@@ -139,6 +145,7 @@ class EventResult:
     sim_gap_open_time_s: float = float("nan")  # the simulator's own first-gap-open to last-gap-close time
     error: str | None = None  # why this included event has no metrics (simulation failed, too few samples)
     tracking: Verdict | None = None  # does the simulation follow the measured speed here (None: no metrics)
+    feel: FeelComparison | None = None  # drivability criteria, measured and simulated (None: no acceleration)
 
 
 @dataclass(frozen=True)
@@ -154,6 +161,7 @@ class AnalysisResult:
     notes: list[str] = field(default_factory=list)
     tracking: Verdict = field(default_factory=lambda: Verdict("unknown", ["no analysed event to judge"]))
     findings: list[Finding] = field(default_factory=list)  # problems of the log as decoded (app.analysis.logchecks)
+    acceleration: AccelSource | None = None  # where the drivability criteria's measured acceleration comes from
 
 
 def decode_log(log: LogSource, database: Path, signal_map: Path,
@@ -307,6 +315,22 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
                         f"(lower quartile over the log); wheel slip is checked against the log's own ratio "
                         f"{vehicle.ratio * scale:.3g}")
         drive = replace(drive, ratio=vehicle.ratio * scale)
+    accel: AccelSource | None = None
+    feel_s = 0.0  # time spent on the drivability criteria; moved out of the stage timings by advancing `clock`
+    if opts.drivability.enabled:
+        clock_feel = time.perf_counter()
+        try:
+            accel = acceleration_source(signals, vehicle.wheel.radius, opts.drivability.derive_cutoff_hz,
+                                        checks.computed)
+            if accel is None:
+                notes.append("no acceleration: the log has no accelerometer and no road speed; drivability "
+                             "criteria are left out")
+        except InsufficientDataError as exc:
+            accel = None
+            notes.append(f"no acceleration: {exc}; drivability criteria are left out")
+        checks.findings.extend(accel.findings if accel is not None else [])
+        feel_s = time.perf_counter() - clock_feel
+        clock += feel_s
     detection = find_events(signals, opts.events, drive)
     events = detection.events
     timings["events"] = time.perf_counter() - clock
@@ -367,8 +391,18 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
             continue
         comparison = compare_event(ev.index, m_meas, m_sim, aligned.measured_rpm, aligned.simulated_rpm)
         gap_time = unloaded_time(res.gap_events, ev.t_cross_s - 0.2, ev.t_cross_s + 0.3)
+        feel = None
+        if accel is not None:
+            clock_feel = time.perf_counter()
+            try:
+                feel = _event_feel(accel, res, lag, ev, signals, m_meas, m_sim, opts.drivability)
+            except (InsufficientDataError, ValueError, np.linalg.LinAlgError) as exc:  # never fails the analysis
+                notes.append(f"event {ev.index}: drivability criteria not computed ({exc})")
+            spent = time.perf_counter() - clock_feel
+            clock += spent
+            feel_s += spent
         results.append(EventResult(ev, aligned, comparison, gap_time,
-                                   tracking=event_verdict(comparison, opts.tracking)))
+                                   tracking=event_verdict(comparison, opts.tracking), feel=feel))
     stage("metrics", 0.75)
     timings["align_metrics"] = time.perf_counter() - clock - sum(timings.values())
 
@@ -390,9 +424,23 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
                           offset.correlation if np.isfinite(offset.correlation) else None,
                           (whole.t, whole.measured_rpm, whole.simulated_rpm) if whole is not None else None,
                           mismatch)
+    if opts.drivability.enabled:
+        timings["drivability"] = feel_s
     stage("done", 1.0)
     return AnalysisResult(signals, events, results, offset, whole, whole_err, timings_s=timings, notes=notes,
-                          tracking=verdict, findings=checks.findings)
+                          tracking=verdict, findings=checks.findings, acceleration=accel)
+
+
+def _event_feel(accel: AccelSource, res: SimResult, lag: float, ev: Event, signals: SignalSet, m_meas: Any,
+                m_sim: Any, params: DrivabilityParams) -> FeelComparison:
+    """The event's drivability criteria (:mod:`app.analysis.feel`), the simulation shifted by ``lag``."""
+    def closure(m: Any) -> float:
+        return float(m.t_gap_close_s if np.isfinite(m.t_gap_close_s) else m.t_impact_s)
+
+    return event_feel(accel, res.t + lag, res.vehicle_speed_kmh / 3.6, res.vehicle_accel_ms2, ev.t_start_s,
+                      ev.t_end_s, ev.t_cross_s + lag, ev.direction, params, pedal=signals.get("pedal_pct"),
+                      t_close_measured=closure(m_meas), t_close_simulated=closure(m_sim),
+                      shuffle_hint_hz=float(m_meas.shuffle_freq_hz))
 
 
 def run_analysis(log_path: LogSource, vehicle: VehicleInputs, options: AnalysisOptions | None = None,
@@ -449,7 +497,7 @@ def inspect_log(path: Path, progress: ProgressFn = _no_progress, cpu_s: float | 
     }
 
 
-GAP_SENSITIVITY_FORMAT = 2  # 2: units stated, per-mm and per-rad values side by side
+GAP_SENSITIVITY_FORMAT = 3  # 2: units stated, per-mm and per-rad values side by side; 3: acceleration criteria per case
 # stage-steps (cases x integrator steps per simulated second x stages) a gap sensitivity may cost: ~10-25 ns
 # each, so about 5 s of CPU; the paper preset needs 1e6, a 24-stage chain of soft stages 2e7
 MAX_GAP_SENSITIVITY_WORK = 4e8
@@ -475,7 +523,8 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
     """Gap what-ifs for a vehicle under the paper's scripted tip-in (see :mod:`sim.paper`).
 
     For each of the five gaps: the speed fluctuation and impact-induced fluctuation with the
-    gap removed and halved, and the sensitivity ``S_i`` = (impact fluctuation of the nominal
+    gap removed and halved (and the body acceleration's shuffle peak-to-peak, kick, jerk and VDV,
+    :func:`app.analysis.feel.run_feel`), and the sensitivity ``S_i`` = (impact fluctuation of the nominal
     minus that without gap i) / size of gap i, normalised to the half-shaft gap = 100, next to
     the nominal and the zero-gap (no backlash at all) responses.
 
@@ -523,8 +572,14 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
 
 
 def _case(c: Any) -> dict[str, float]:
+    """One what-if case: the speed metrics and what the occupants feel (body acceleration criteria)."""
+    from app.analysis.feel import run_feel
+
+    res = c.result
+    feel = run_feel(res.t, res.vehicle_accel_ms2, res.airgap_torque_nm)
     return {"unloaded_ms": c.unloaded_ms, "fluctuation_rpm": c.fluct_rpm, "impact_rpm": c.impact_rpm,
-            "rise_rpm": c.rise_rpm}
+            "rise_rpm": c.rise_rpm, "shuffle_pp_ms2": feel.shuffle_pp_ms2, "kick_ms2": feel.kick_ms2,
+            "max_jerk_ms3": feel.max_jerk_ms3, "vdv_ms175": feel.vdv_ms175}
 
 
 def tolerance_for_result(files: Any, vehicle: Vehicle, n: int, seed: int,
@@ -547,11 +602,17 @@ def tolerance_for_result(files: Any, vehicle: Vehicle, n: int, seed: int,
         k = meta["key"]
         sigs[name] = finite_signal(Signal(name, np.asarray(files.array(f"sig_{k}_t")),
                                           np.asarray(files.array(f"sig_{k}_v")), meta["unit"]))
-    windows = [EventWindow(e["index"], e["kind"], e["t_start_s"] - lead_s, e["t_start_s"], e["t_end_s"])
-               for e in doc["events"] if e["has_metrics"]]
+    windows = [EventWindow(e["index"], e["kind"], e["t_start_s"] - lead_s, e["t_start_s"], e["t_end_s"],
+                           e["t_cross_s"]) for e in doc["events"] if e["has_metrics"]]
     out = tolerance_doc(vehicle, sigs[TORQUE], sigs[SPEED], windows, n, seed, progress)
     by_index = {m["event_index"]: m for m in doc["metrics"]}
     for row in out["events"]:
         meas = by_index.get(row["index"], {}).get("measured") or {}
         row["analysis_fluctuation_rpm"] = meas.get("fluctuation_rpm")  # the detrended metric, for reference
+        felt = ((by_index.get(row["index"], {}).get("drivability") or {}).get("measured") or {})
+        pp = felt.get("shuffle_pp_ms2")
+        row["measured_shuffle_pp_ms2"] = pp
+        band = row.get("band_shuffle_pp_ms2")
+        if pp is not None and np.isfinite(pp) and band is not None:
+            row["measured_shuffle_pp_in_band"] = bool(band["p5"] <= pp <= band["p95"])
     return out

@@ -32,19 +32,25 @@ class BatchResult:
     motor_speed_rpm : (n_variants, n) rpm, rotor relative to housing
     variants : the dotted-field changes of each variant
     gap_events : per variant, (gap, t_open, t_close) as in SimResult
+    vehicle_speed_kmh : (n_variants, n) km/h, the vehicle body's speed (only with ``body_speed=True``)
     """
 
     t: F64
     motor_speed_rpm: F64
     variants: tuple[Mapping[str, Any], ...]
     gap_events: tuple[list[tuple[str, float, float]], ...]
+    vehicle_speed_kmh: F64 | None = None
 
 
 def simulate_batch(
     vehicle: Vehicle, variants: Sequence[Mapping[str, Any]], t_s: ArrayLike, torque_nm: ArrayLike, *,
     speed0_rpm: float | None = None, interp: Literal["hold", "linear"] = "hold", output_dt: float = 0.001,
+    body_speed: bool = False,
 ) -> BatchResult:
     """Simulate ``vehicle.with_changes(v)`` for every ``v`` in ``variants`` (multibody model).
+
+    ``body_speed`` also returns every variant's vehicle speed (what the occupants' acceleration is the
+    derivative of).
 
     Variants may change any numeric field but not the topology (half-shaft segments, housing
     on/off). Each variant gets its own stable step. Effects other than rotor drag and torque
@@ -73,7 +79,7 @@ def simulate_batch(
     t0, n_out = _grid(inp, output_dt)
     span = float(inp.t[-1]) - t0
     nv = len(chains)
-    check_output(span, output_dt, n_out, 16 * nv)  # kernel buffer and the rpm copy
+    check_output(span, output_dt, n_out, (32 if body_speed else 16) * nv)  # kernel buffers and the copies
     w0 = initial_speed(vehicle, speed0_rpm)
     states = [quasi_static_full(c, float(inp.torque[0]), w0) for c in chains]
     q_max = float(np.max(np.abs(inp.torque)))
@@ -95,6 +101,8 @@ def simulate_batch(
     ev_kind = np.zeros((nv, EVENTS_PER_VARIANT), dtype=np.int64)
     status = np.zeros(nv, dtype=np.int64)
     n_events = np.zeros(nv, dtype=np.int64)
+    out_body = np.zeros((nv if body_speed else 0, n_out))
+    body = ref.vehicle if ref.vehicle >= 0 else ref.wheel
     eff = vehicle.effects
     run_chain_batch(
         stack("inertia"), ref.ca, ref.cb, ref.cr, ref.ce, stack("ck"), stack("ck3"), stack("cc"), stack("chalf"),
@@ -105,7 +113,7 @@ def simulate_batch(
         inp.t, inp.torque, inp.linear, t0, np.array([s[0] for s in steps]), n_out,
         np.array([s[1] for s in steps], dtype=np.int64),
         np.stack([s[0] for s in states]), np.stack([s[1] for s in states]), 20.0 * abs(w0) + 5000.0,
-        out, ev_gap, ev_t, ev_kind, status, n_events,
+        out, ev_gap, ev_t, ev_kind, status, n_events, out_body, body,
     )
     bad = np.flatnonzero(status != STATUS_OK)
     if bad.size:
@@ -119,7 +127,9 @@ def simulate_batch(
         open0 = {g: bool(abs(delta[j]) < chains[v].chalf[j]) for g, j in chains[v].gap_coupling.items()}
         events.append(_pair_events(raw, open0, t0))
     t = np.asarray(t0 + np.arange(n_out) * output_dt, dtype=np.float64)
-    return BatchResult(t=t, motor_speed_rpm=out * RPM, variants=tuple(variants), gap_events=tuple(events))
+    radius = np.array([c.road[0] for c in chains])[:, None]  # m, per variant
+    return BatchResult(t=t, motor_speed_rpm=out * RPM, variants=tuple(variants), gap_events=tuple(events),
+                       vehicle_speed_kmh=out_body * radius * 3.6 if body_speed else None)
 
 
 @dataclass(frozen=True)
@@ -131,6 +141,8 @@ class ToleranceResult:
     fluct_rpm : (n,) peak-to-adjacent-valley of the resolver speed in the window, per variant
     unloaded_ms : (n,) first unloaded interval after the window start, per variant
     samples : (n, p) sampled values, columns named by ``fields``
+    t, vehicle_speed_kmh : (m,) s and (n + 1, m) km/h, the nominal's (row 0) and every variant's vehicle
+        speed, only with ``body_speed=True`` (for the acceleration the occupants feel)
     """
 
     fluct_rpm: F64
@@ -138,6 +150,8 @@ class ToleranceResult:
     samples: F64
     fields: tuple[str, ...]
     nominal_fluct_rpm: float
+    t: F64 | None = None
+    vehicle_speed_kmh: F64 | None = None
 
     def band(self, lo: float = 5.0, hi: float = 95.0) -> tuple[float, float]:
         """Percentile band (rpm) of the predicted fluctuation."""
@@ -156,7 +170,7 @@ def tolerance_analysis(
     vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLike, *, n: int = 1000, seed: int = 0,
     window: tuple[float, float] | None = None, distribution: Literal["uniform", "normal"] = "uniform",
     speed0_rpm: float | None = None, interp: Literal["hold", "linear"] = "hold", output_dt: float = 0.001,
-    progress: ProgressFn | None = None,
+    progress: ProgressFn | None = None, body_speed: bool = False,
 ) -> ToleranceResult:
     """Monte Carlo over every gap's [min, max] band and every ``vehicle.tolerances`` band.
 
@@ -165,6 +179,7 @@ def tolerance_analysis(
     window (s) bounds the fluctuation metric; default: the whole input. Variants run in
     compiled batches of ``TOLERANCE_CHUNK``; ``progress(done, n)`` is called after each (and
     once with ``done = 0`` before the first). The same ``seed`` gives the same result.
+    ``body_speed`` keeps every run's vehicle speed (``t``, ``vehicle_speed_kmh``).
 
     Raises
     ------
@@ -195,7 +210,8 @@ def tolerance_analysis(
     for start in range(0, n, TOLERANCE_CHUNK):
         chunk = variants[start:start + TOLERANCE_CHUNK]
         runs.append(simulate_batch(vehicle, [{}, *chunk] if start == 0 else chunk, t_s, torque_nm,
-                                   speed0_rpm=speed0_rpm, interp=interp, output_dt=output_dt))
+                                   speed0_rpm=speed0_rpm, interp=interp, output_dt=output_dt,
+                                   body_speed=body_speed))
         report(start + len(chunk), n)
     t = runs[0].t
     speeds = np.concatenate([r.motor_speed_rpm for r in runs])
@@ -203,8 +219,10 @@ def tolerance_analysis(
     w0, w1 = window if window is not None else (float(t[0]), float(t[-1]))
     fl = np.array([peak_to_valley(t, s, w0, w1) for s in speeds])
     ul = np.array([unloaded_time(ev, w0, w1) for ev in events]) * 1e3
+    body = (np.concatenate([r.vehicle_speed_kmh for r in runs if r.vehicle_speed_kmh is not None])
+            if body_speed else None)
     return ToleranceResult(fluct_rpm=fl[1:], unloaded_ms=ul[1:], samples=x, fields=fields,
-                           nominal_fluct_rpm=float(fl[0]))
+                           nominal_fluct_rpm=float(fl[0]), t=t if body_speed else None, vehicle_speed_kmh=body)
 
 
 def _check_analysis_budget(vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLike, runs: int,
@@ -212,7 +230,7 @@ def _check_analysis_budget(vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLik
     """Refuse up front an analysis whose ``runs`` runs at the nominal step exceed ``MAX_BATCH_STEPS``."""
     inp = prepare_input(t_s, torque_nm, interp)
     t0, n_out = _grid(inp, output_dt)
-    check_output(float(inp.t[-1]) - t0, output_dt, n_out, 16 * runs)  # every variant's speed, kept for metrics
+    check_output(float(inp.t[-1]) - t0, output_dt, n_out, 32 * runs)  # every variant's speeds, kept for metrics
     chain = build_chain(vehicle)
     _, omega0, _ = quasi_static_full(chain, float(inp.torque[0]), initial_speed(vehicle, speed0_rpm))
     step, sub = choose_step(chain, output_dt, torque_max=float(np.max(np.abs(inp.torque))),

@@ -357,16 +357,18 @@ def run_chain_batch(
     lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray, tin: np.ndarray, tq: np.ndarray, linear: bool,
     t0: float, dt: np.ndarray, n_out: int, sub: np.ndarray, theta0: np.ndarray, omega0: np.ndarray,
     speed_limit: float, out_res: np.ndarray, ev_gap: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray,
-    status: np.ndarray, n_events: np.ndarray,
+    status: np.ndarray, n_events: np.ndarray, out_body: np.ndarray, body: int,
 ) -> None:
     """Variant ``v`` uses row ``v`` of every 2-D parameter array (``tyre``: (nv, 3)); resolver speed to
-    ``out_res[v]``."""
+    ``out_res[v]``; the speed (rad/s) of body ``body`` to ``out_body[v]`` when ``out_body`` has rows."""
     nv = inertia.shape[0]
     nb = inertia.shape[1]
     nc = ca.size
-    dummy_f = np.zeros((0, nb))
-    dummy_t = np.zeros((0, nc))
-    dummy_o = np.zeros((0, nc), dtype=np.bool_)
+    keep = out_body.shape[0] > 0
+    rows = n_out if keep else 0
+    buf_f = np.zeros((rows, nb))
+    buf_t = np.zeros((rows, nc + 1))
+    buf_o = np.zeros((rows, nc), dtype=np.bool_)
     sens = np.zeros(n_out)
     torq = np.zeros(n_out)
     for v in range(nv):
@@ -375,7 +377,10 @@ def run_chain_batch(
             wheel_drag[v], road[v], rotor_drag[v], lag, sensor_tau, vehicle, tyre[v], tin, tq, linear, t0, dt[v],
             n_out, sub[v],
             theta0[v], omega0[v],
-            speed_limit, out_res[v], sens, torq, dummy_f, dummy_t, dummy_o, ev_gap[v], ev_t[v], ev_kind[v],
+            speed_limit, out_res[v], sens, torq, buf_f, buf_t, buf_o, ev_gap[v], ev_t[v], ev_kind[v],
         )
         status[v] = st
         n_events[v] = ne
+        if keep:
+            for i in range(n_out):
+                out_body[v, i] = buf_f[i, body]

@@ -48,6 +48,11 @@ def test_analyze_json(short_log: Path, capsys: pytest.CaptureFixture[str], tmp_p
     assert doc == json.loads(out.read_text())
     assert doc["vehicle"] == "paper" and doc["summary"]["with_metrics"] >= 4
     assert doc["ingest"]["format"] == "blf" and "motor_speed_rpm" in doc["ingest"]["channels"]
+    # the demo's 100 Hz ESP accelerometer decodes, passes the check against the road speed, feeds the criteria
+    assert "accel_long_ms2" in doc["ingest"]["channels"]
+    assert doc["acceleration"]["kind"] == "accelerometer" and doc["acceleration"]["check"]["verdict"] == "ok"
+    assert doc["acceleration"]["check"]["offset_ms2"] == pytest.approx(Scenario().accel_offset_ms2, abs=0.03)
+    assert doc["summary"]["drivability"]["shuffle_pp_ms2"]["events"] >= 4
     assert {"measured", "simulated", "difference", "rms_rpm", "nrmse"} <= set(doc["metrics"][0])
     sens = doc["gap_sensitivity"]
     assert sens["sensitivity_unit"] == "mm" and sens["gaps"][-1]["sensitivity_per_rad"] == pytest.approx(100.0)

@@ -56,3 +56,29 @@ def test_table_names_the_unit(with_radii: dict[str, Any], without_a_radius: dict
     assert "S per mm" in mm and "S per rad" in mm and "halfshaft" in mm
     rad = gap_sensitivity_table(without_a_radius)
     assert "per rad of gap" in rad.splitlines()[0] and "radius_mm" in rad.splitlines()[-1]
+
+
+def test_every_case_reports_what_the_driver_feels(with_radii: dict[str, Any]) -> None:
+    nominal, zero = with_radii["nominal"], with_radii["zero_gaps"]
+    half = next(g for g in with_radii["gaps"] if g["gap"] == "halfshaft")["halved"]
+    for case in (nominal, zero, half):
+        assert {"shuffle_pp_ms2", "kick_ms2", "max_jerk_ms3", "vdv_ms175"} <= set(case)
+    # less lash, less shuffle felt in the body: halving the half-shaft's lash, removing all of it
+    assert half["shuffle_pp_ms2"] < 0.8 * nominal["shuffle_pp_ms2"]
+    assert zero["shuffle_pp_ms2"] < 0.8 * nominal["shuffle_pp_ms2"]
+    assert "felt (body acceleration): shuffle peak-to-peak nominal" in gap_sensitivity_table(with_radii)
+
+
+def test_simulate_what_if_prints_the_felt_change(tmp_path: Any, capsys: pytest.CaptureFixture[str]) -> None:
+    import numpy as np
+
+    from app.cli import main
+
+    t = np.arange(0.0, 2.0, 0.01)
+    q = np.where(t < 0.5, -50.0, np.minimum(150.0, -50.0 + (t - 0.5) * 1500.0))
+    csv = tmp_path / "tip_in.csv"
+    csv.write_text("t_s,torque_nm\n" + "".join(f"{a},{b}\n" for a, b in zip(t, q, strict=True)), encoding="utf-8")
+    assert main(["simulate", str(csv), "--vehicle", "paper", "--what-if", "gap=halfshaft:0.5"]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("felt"))
+    before, after = (float(v) for v in line.split("shuffle peak-to-peak ")[1].split(" m/s^2")[0].split(" -> "))
+    assert after < 0.7 * before

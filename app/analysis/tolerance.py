@@ -7,6 +7,11 @@ start. The ripple compared is the same on both sides: the paper's peak-to-adjace
 fluctuation of the motor speed (:func:`sim.metrics.peak_to_valley`) over the event window, for
 each variant and for the measured speed. The measured percentile is the share of variants whose
 fluctuation is at most the measured one (0-100).
+
+What the occupants feel is predicted the same way when the window knows its torque crossing: every
+variant's body acceleration (the derivative of its vehicle speed) gives the shuffle peak-to-peak of
+:mod:`app.analysis.drivability`; ``band_shuffle_pp_ms2`` is its band, ``nominal_shuffle_pp_ms2`` the
+nominal vehicle's.
 """
 
 from __future__ import annotations
@@ -16,7 +21,9 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
+from app.analysis.drivability import drivability_criteria
 from app.errors import InputError
 from app.signals import Signal
 from sim import SimError, Vehicle
@@ -36,6 +43,7 @@ class EventWindow:
     t_sim_start_s: float
     t_start_s: float
     t_end_s: float
+    t_cross_s: float = float("nan")  # torque zero crossing: the felt criteria need it (NaN: not computed)
 
 
 def check_request(n: int, seed: int) -> None:
@@ -71,17 +79,37 @@ def event_tolerance(vehicle: Vehicle, torque: Signal, speed: Signal, window: Eve
     if len(w) < 2:
         return {**row, "error": f"measured speed has {len(w)} samples in the event window"}, None
     speed0 = float(speed.at([tq_t[0]])[0])
+    felt = bool(np.isfinite(window.t_cross_s))
     try:
         res = tolerance_analysis(vehicle, tq_t, tq_v, n=n, seed=seed, window=(window.t_start_s, window.t_end_s),
                                  speed0_rpm=speed0 if np.isfinite(speed0) else None, interp=interp,
-                                 progress=progress)
+                                 progress=progress, body_speed=felt)
     except SimError as exc:
         return {**row, "error": f"simulation failed: {exc}"}, None
     measured = peak_to_valley(w.t, w.values, window.t_start_s, window.t_end_s)
     row.update(nominal_fluctuation_rpm=res.nominal_fluct_rpm, band_rpm=band_of(res),
                measured_fluctuation_rpm=measured, measured_percentile=res.percentile_of(measured),
                unloaded_ms_median=float(np.median(res.unloaded_ms)), error=None)
+    if felt and res.t is not None and res.vehicle_speed_kmh is not None:
+        pp = felt_shuffle(res.t, res.vehicle_speed_kmh, window)
+        finite = pp[1:][np.isfinite(pp[1:])]
+        row["nominal_shuffle_pp_ms2"] = float(pp[0])
+        row["band_shuffle_pp_ms2"] = ({f"p{q:g}": float(v) for q, v in
+                                       zip(BAND_PERCENTILES, np.percentile(finite, BAND_PERCENTILES), strict=True)}
+                                      if finite.size else None)
     return row, res
+
+
+def felt_shuffle(t: npt.NDArray[np.float64], vehicle_speed_kmh: npt.NDArray[np.float64],
+                 window: EventWindow) -> npt.NDArray[np.float64]:
+    """Shuffle peak-to-peak (m/s^2) of every run's body acceleration over the event window, (runs,)."""
+    direction = 1.0 if window.kind == "tip_in" else -1.0
+    out = np.full(vehicle_speed_kmh.shape[0], np.nan)
+    for k, v in enumerate(vehicle_speed_kmh):
+        accel = np.gradient(v / 3.6, t)
+        out[k] = drivability_criteria(t, accel, window.t_start_s, window.t_end_s, window.t_cross_s, direction,
+                                      pedal_time=(np.nan, "not needed")).shuffle_pp_ms2
+    return out
 
 
 def tolerance_doc(vehicle: Vehicle, torque: Signal, speed: Signal, windows: Sequence[EventWindow], n: int, seed: int,
@@ -102,4 +130,5 @@ def tolerance_doc(vehicle: Vehicle, torque: Signal, speed: Signal, windows: Sequ
     return {"n": n, "seed": seed, "distribution": "uniform", "percentiles": list(BAND_PERCENTILES),
             "metric": "peak-to-adjacent-valley fluctuation of the raw motor speed over the event window (rpm; not "
                       "detrended, unlike the analysis' metrics)",
+            "felt_metric": "shuffle peak-to-peak of the body acceleration (m/s^2, docs/drivability.md)",
             "sampled_fields": list(fields), "events": rows}

@@ -2,7 +2,9 @@
 
 One row per analysed event; columns ``<metric>_measured``, ``<metric>_simulated``,
 ``<metric>_difference`` for every metric in :data:`app.analysis.metrics.METRIC_NAMES` (SI units
-as in the JSON: rpm, s, Hz, -), then the aligned error and the event's tracking verdict. Empty
+as in the JSON: rpm, s, Hz, -), then the aligned error and the event's tracking verdict, then the
+acceleration's source and ``accel_<criterion>_<part>`` for every drivability criterion in
+:data:`app.analysis.drivability.CRITERIA` (units there: m/s^2, m/s^3, m/s^1.75, s, Hz, -). Empty
 cells are undefined values (JSON ``null``).
 """
 
@@ -14,12 +16,19 @@ import math
 from collections.abc import Iterable, Sequence
 from typing import Any
 
+from app.analysis.drivability import CRITERIA, CRITERIA_NAMES
 from app.analysis.metrics import METRIC_NAMES
 
+#: drivability columns (``accel_<criterion>_<part>``), appended after the ripple metrics; units in CRITERIA
+DRIVABILITY_COLUMNS: tuple[str, ...] = tuple(
+    f"accel_{c}_{part}" for c in CRITERIA_NAMES for part in ("measured", "simulated", "difference"))
+DRIVABILITY_UNITS: dict[str, str] = {f"accel_{c}_{part}": CRITERIA[c] for c in CRITERIA_NAMES
+                                     for part in ("measured", "simulated", "difference")}
 METRIC_COLUMNS: tuple[str, ...] = (
     "event_index", "kind", "t_cross_s",
     *(f"{m}_{part}" for m in METRIC_NAMES for part in ("measured", "simulated", "difference")),
     "rms_rpm", "nrmse", "bias_rpm", "samples", "tracking",
+    "accel_source", *DRIVABILITY_COLUMNS,
 )
 EVENT_COLUMNS: tuple[str, ...] = (
     "index", "kind", "t_cross_s", "t_start_s", "t_end_s", "torque_before_nm", "torque_after_nm",
@@ -50,9 +59,13 @@ def metrics_csv(events: list[dict[str, Any]]) -> str:
     rows = []
     for m in events:
         row = dict(m)
+        feel = m.get("drivability") or {}
+        row["accel_source"] = feel.get("source")
         for part in ("measured", "simulated", "difference"):
             for name in METRIC_NAMES:
                 row[f"{name}_{part}"] = (m.get(part) or {}).get(name)
+            for name in CRITERIA_NAMES:
+                row[f"accel_{name}_{part}"] = (feel.get(part) or {}).get(name)
         rows.append(row)
     return csv_text(METRIC_COLUMNS, rows)
 

@@ -20,7 +20,7 @@ from app.errors import AppError
 
 # Subcommand modules, in the order they appear in --help.
 COMMANDS: tuple[str, ...] = ("decode", "sim", "serve", "keys", "analyze", "identify", "diagnose", "batch", "fleet",
-                             "demo", "replay", "live", "init")
+                             "demo", "replay", "live", "init", "ratings")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -25,6 +25,9 @@ def register(sub: Any) -> None:
                    help="add the predicted ripple band (5/50/95 %%) over the vehicle's tolerance bands, N Monte "
                    "Carlo variants per event, and each measured ripple's percentile in it")
     p.add_argument("--seed", type=int, default=0, help="random seed of --tolerance (default 0)")
+    p.add_argument("--ratings", type=Path, default=None, metavar="MODEL",
+                   help="score every event with a fitted rating model (lashscope ratings fit); "
+                   "default: LASHSCOPE_RATINGS, else no rating")
     p.add_argument("--json", action="store_true", help="print the full result as JSON")
     p.add_argument("--out", type=Path, default=None, help="also write the JSON result to this file")
     p.set_defaults(func=run)
@@ -37,7 +40,12 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
 
     inputs, vehicle_name = resolve_vehicle(args)
     opts = AnalysisOptions(model=args.model, whole_log=not args.no_whole_log, events=event_params(args))
-    doc, arrays = result_payload(run_analysis(args.log, inputs, opts))
+    ratings = None
+    if getattr(args, "ratings", None) is not None:
+        from app.ratings_file import load_model
+
+        ratings = load_model(args.ratings)  # a bad model file fails before the analysis runs
+    doc, arrays = result_payload(run_analysis(args.log, inputs, opts), ratings)
     if getattr(args, "tolerance", 0):
         from types import SimpleNamespace
 
@@ -59,7 +67,7 @@ def gap_sensitivity_table(sens: dict[str, Any]) -> str:
     unit = sens["sensitivity_unit"]
 
     def num(v: float | None, fmt: str) -> str:
-        return "-" if v is None else format(v, fmt)
+        return "-" if v is None or v != v else format(v, fmt)
 
     lines = [f"gap sensitivity, {sens['scenario']}; S = impact-fluctuation change per {unit} of gap "
              f"({'circumferential clearance' if unit == 'mm' else 'angle in its own shaft'}), halfshaft = 100",
@@ -72,6 +80,11 @@ def gap_sensitivity_table(sens: dict[str, Any]) -> str:
     nom, zero = sens["nominal"], sens["zero_gaps"]
     lines.append(f"nominal: impact-induced fluctuation {nom['impact_rpm']:.1f} rpm, fluctuation "
                  f"{nom['fluctuation_rpm']:.1f} rpm; no backlash at all: fluctuation {zero['fluctuation_rpm']:.1f} rpm")
+    if "shuffle_pp_ms2" in nom:
+        lines.append("felt (body acceleration): shuffle peak-to-peak nominal "
+                     f"{num(nom['shuffle_pp_ms2'], '.2f')} m/s^2, no backlash {num(zero['shuffle_pp_ms2'], '.2f')}; "
+                     + "; ".join(f"{g['gap']} halved {num(g['halved'].get('shuffle_pp_ms2'), '.2f')}, removed "
+                                 f"{num(g['removed'].get('shuffle_pp_ms2'), '.2f')}" for g in sens["gaps"]))
     if unit == "rad":
         lines.append("(per mm needs every gap's contact radius, gaps.<gap>.radius_mm, in the driveline file)")
     return "\n".join(lines)
@@ -81,27 +94,40 @@ def tolerance_table(tol: dict[str, Any]) -> str:
     """The tolerance band per event as text."""
 
     def num(v: float | None, fmt: str = ".1f") -> str:
-        return "-" if v is None else format(v, fmt)
+        return "-" if v is None or v != v else format(v, fmt)
 
-    lines = [f"tolerance band, {tol['n']} variants per event (seed {tol['seed']}); {tol['metric']}",
+    lines = [f"tolerance band, {tol['n']} variants per event (seed {tol['seed']}); {tol['metric']}; felt: "
+             f"{tol.get('felt_metric', '-')}",
              f"{'#':>3} {'kind':<8} {'p5':>8} {'p50':>8} {'p95':>8} {'nominal':>8} {'measured':>9} {'pct':>6} "
-             f"{'detrended':>10}",
-             f"{'':>3} {'':<8} {'rpm':>8} {'rpm':>8} {'rpm':>8} {'rpm':>8} {'raw, rpm':>9} {'':>6} {'meas., rpm':>10}"]
+             f"{'detrended':>10}   {'p-p p5-p95':>12} {'measured':>8}",
+             f"{'':>3} {'':<8} {'rpm':>8} {'rpm':>8} {'rpm':>8} {'rpm':>8} {'raw, rpm':>9} {'':>6} {'meas., rpm':>10}"
+             f"   {'m/s^2':>12} {'m/s^2':>8}"]
     for e in tol["events"]:
         if e.get("error"):
             lines.append(f"{e['index']:>3} {e['kind']:<8} {e['error']}")
             continue
         b = e["band_rpm"]
+        felt = e.get("band_shuffle_pp_ms2")
+        felt_text = f"{num(felt['p5'], '.2f')}-{num(felt['p95'], '.2f')}" if felt else "-"
         lines.append(f"{e['index']:>3} {e['kind']:<8} {num(b['p5']):>8} {num(b['p50']):>8} {num(b['p95']):>8} "
                      f"{num(e['nominal_fluctuation_rpm']):>8} {num(e['measured_fluctuation_rpm']):>9} "
-                     f"{num(e['measured_percentile'], '.0f'):>5}% {num(e.get('analysis_fluctuation_rpm')):>10}")
+                     f"{num(e['measured_percentile'], '.0f'):>5}% {num(e.get('analysis_fluctuation_rpm')):>10}"
+                     f"   {felt_text:>12} {num(e.get('measured_shuffle_pp_ms2'), '.2f'):>8}")
     lines.append("pct: the measured (raw) ripple's percentile in the band; detrended: the same event's fluctuation in "
-                 "the metrics table (detrended from the rigid-body trend, so it differs from the raw one)")
+                 "the metrics table (detrended from the rigid-body trend, so it differs from the raw one); p-p: the "
+                 "felt shuffle peak-to-peak of the body acceleration (docs/drivability.md)")
     return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.cli.report import events_table, finding_lines, metrics_table, summary_line, tracking_lines
+    from app.cli.report import (
+        drivability_table,
+        events_table,
+        finding_lines,
+        metrics_table,
+        summary_line,
+        tracking_lines,
+    )
 
     doc = analysis_doc(args)
     text = json.dumps(doc, indent=1)
@@ -119,6 +145,10 @@ def run(args: argparse.Namespace) -> int:
         for line in (*finding_lines(doc), *tracking_lines(doc)):
             print(line)
         print(metrics_table(doc))
+        feel = drivability_table(doc)
+        if feel:
+            print()
+            print(feel)
         if "gap_sensitivity" in doc:
             print()
             print(gap_sensitivity_table(doc["gap_sensitivity"]))

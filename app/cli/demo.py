@@ -42,7 +42,7 @@ def counter_gaps_table(doc: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.cli.report import events_table, metrics_table, summary_line, tracking_lines
+    from app.cli.report import drivability_table, events_table, metrics_table, summary_line, tracking_lines
     from app.demo.build import build_demo_log
     from app.demo.plot import overlay_png
     from app.jobs import JobRunner
@@ -103,6 +103,10 @@ def run(args: argparse.Namespace) -> int:
             print(line)
         print(metrics_table(doc))
         print()
+        feel = drivability_table(doc)
+        if feel:
+            print(feel)
+            print()
         print(counter_gaps_table(doc))
         print()
         print(f"demo log:      {log_path}")

@@ -68,6 +68,48 @@ def metrics_table(doc: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+DRIVABILITY_ROWS = (
+    ("response_delay_s", "response delay (pedal -> rise)", "ms", 1e3),
+    ("kick_ms2", "kick (1st peak over settled)", "m/s^2", 1.0),
+    ("shuffle_pp_ms2", "shuffle peak-to-peak", "m/s^2", 1.0),
+    ("shuffle_freq_hz", "shuffle frequency (accel)", "Hz", 1.0),
+    ("shuffle_damping_ratio", "shuffle damping ratio", "-", 1.0),
+    ("max_jerk_ms3", "maximum jerk", "m/s^3", 1.0),
+    ("clunk_ms2", "clunk (HF peak at closure)", "m/s^2", 1.0),
+    ("vdv_ms175", "VDV (ISO 2631-1 Wd)", "m/s^1.75", 1.0),
+    ("settled_accel_ms2", "settled acceleration", "m/s^2", 1.0),
+)
+
+
+def drivability_table(doc: dict[str, Any]) -> str:
+    """The drivability criteria (median over events, measured and simulated) and where the acceleration comes
+    from; empty when the analysis has none."""
+    summ = doc["summary"].get("drivability") or {}
+    if not summ:
+        return ""
+    src = doc.get("acceleration") or {}
+    where = src.get("kind", "-")
+    if src.get("bandwidth_hz"):
+        where += f", derived with {src['bandwidth_hz']:.1f} Hz bandwidth"
+    if src.get("note"):
+        where += f"; {src['note']}"
+    lines = [f"{'drivability (median over events)':<30} {'measured':>10} {'simulated':>10} {'sim-meas':>10}  unit"
+             f"   acceleration: {where}"]
+    for key, label, unit, scale in DRIVABILITY_ROWS:
+        row = summ.get(key)
+        if not row:
+            continue
+        digits = 0 if unit == "ms" else (1 if unit == "m/s^3" else 3 if unit == "-" else 2)
+        lines.append(f"{label:<30} {_f(row['measured_median'], scale, digits):>10} "
+                     f"{_f(row['simulated_median'], scale, digits):>10} "
+                     f"{_f(row['difference_median'], scale, digits):>10}  {unit}")
+    rating = doc["summary"].get("rating")
+    if rating:
+        lines.append(f"rating (model {rating['model']}, CV RMS {rating['cv_rms']:.2f}): median "
+                     f"{_f(rating['median'], 1.0, 1)} over {rating['events']} events")
+    return "\n".join(lines)
+
+
 def finding_lines(doc: dict[str, Any]) -> list[str]:
     """One warning per problem of the log as decoded (:mod:`app.analysis.logchecks`), with its code."""
     return [f"WARNING [{f['code']}]: {f['message']}" for f in doc["summary"].get("findings") or []]

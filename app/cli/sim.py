@@ -144,6 +144,7 @@ def _simulate(args: argparse.Namespace) -> int:
     for line in ripple_lines(runs, window):
         print(line)
     if what_if is not None:
+        print(_feel_change(runs[0][1], runs[1][1]))
         print(f"longest unloaded interval (any gap open): what-if {longest[1]:.1f} ms vs baseline {longest[0]:.1f} ms")
     res = runs[-1][1]
     if res.input_gaps:
@@ -230,6 +231,40 @@ def ripple_lines(runs: list[tuple[str, SimResult]], window: tuple[float, float] 
     return lines
 
 
+def _feel_change(base: SimResult, alt: SimResult) -> str:
+    """What the occupants feel, baseline -> what-if: body acceleration criteria around the torque reversal."""
+    from app.analysis.feel import run_feel
+
+    a = run_feel(base.t, base.vehicle_accel_ms2, base.airgap_torque_nm)
+    b = run_feel(alt.t, alt.vehicle_accel_ms2, alt.airgap_torque_nm)
+
+    def pair(x: float, y: float, fmt: str) -> str:
+        return f"{format(x, fmt) if x == x else '-'} -> {format(y, fmt) if y == y else '-'}"
+
+    return (f"felt (body acceleration, baseline -> what-if): shuffle peak-to-peak "
+            f"{pair(a.shuffle_pp_ms2, b.shuffle_pp_ms2, '.2f')} m/s^2, kick {pair(a.kick_ms2, b.kick_ms2, '.2f')} "
+            f"m/s^2, max jerk {pair(a.max_jerk_ms3, b.max_jerk_ms3, '.1f')} m/s^3, VDV "
+            f"{pair(a.vdv_ms175, b.vdv_ms175, '.2f')} m/s^1.75")
+
+
+def _felt_band(res: Any, t: Any, q: Any) -> dict[str, float | None]:
+    """Shuffle peak-to-peak (m/s^2) of the nominal run and its 5/50/95 % band over the variants
+    (:func:`app.analysis.feel.run_feel` on each run's body acceleration); None where not determinable."""
+    import numpy as np
+
+    from app.analysis.feel import run_feel
+
+    if res.t is None or res.vehicle_speed_kmh is None:
+        return {"nominal": None, "p5": None, "p50": None, "p95": None}
+    torque = np.interp(res.t, t, q)
+    pp = np.array([run_feel(res.t, np.gradient(v / 3.6, res.t), torque).shuffle_pp_ms2
+                   for v in res.vehicle_speed_kmh])
+    fin = pp[1:][np.isfinite(pp[1:])]
+    band = np.percentile(fin, [5.0, 50.0, 95.0]) if fin.size else [None] * 3
+    return {"nominal": float(pp[0]) if np.isfinite(pp[0]) else None,
+            **{k: (None if v is None else float(v)) for k, v in zip(("p5", "p50", "p95"), band, strict=True)}}
+
+
 def _summary(label: str, res: SimResult) -> float:
     """Print one run's speed range and unloaded intervals; return the longest unloaded interval (ms)."""
     from sim.metrics import unloaded_intervals
@@ -268,14 +303,17 @@ def _tolerance(args: argparse.Namespace) -> int:
 
     res = tolerance_analysis(vehicle, t, q, n=args.n, seed=args.seed, distribution=args.distribution,
                              window=window, interp=args.interp,
-                             speed0_rpm=args.speed0_rpm, output_dt=args.output_dt, progress=progress)
+                             speed0_rpm=args.speed0_rpm, output_dt=args.output_dt, progress=progress,
+                             body_speed=True)
     p5, p50, p95 = (float(v) for v in np.percentile(res.fluct_rpm, [5.0, 50.0, 95.0]))
+    felt = _felt_band(res, t, q)
     u5, u50, u95 = (float(v) for v in np.percentile(res.unloaded_ms, [5.0, 50.0, 95.0]))
     out: dict[str, object] = {
         "vehicle": vehicle.name, "n": args.n, "seed": args.seed, "distribution": args.distribution,
         "fields": list(res.fields), "nominal_ripple_rpm": res.nominal_fluct_rpm,
         "ripple_rpm": {"p5": p5, "p50": p50, "p95": p95},
         "unloaded_ms": {"p5": u5, "p50": u50, "p95": u95},
+        "shuffle_pp_ms2": felt,
     }
     pct = res.percentile_of(args.measured_ripple) if args.measured_ripple is not None else None
     if pct is not None:
@@ -290,6 +328,10 @@ def _tolerance(args: argparse.Namespace) -> int:
     print(f"ripple (largest peak-to-adjacent-valley of the raw motor speed {where}, not detrended): nominal "
           f"{res.nominal_fluct_rpm:.1f} rpm; predicted 5 % {p5:.1f}, 50 % {p50:.1f}, 95 % {p95:.1f} rpm")
     print(f"first unloaded interval: 5 % {u5:.1f}, 50 % {u50:.1f}, 95 % {u95:.1f} ms")
+    if felt["p50"] is not None:
+        nom = "-" if felt["nominal"] is None else f"{felt['nominal']:.2f}"
+        print(f"felt shuffle peak-to-peak (body acceleration): nominal {nom} m/s^2; predicted "
+              f"5 % {felt['p5']:.2f}, 50 % {felt['p50']:.2f}, 95 % {felt['p95']:.2f} m/s^2")
     if pct is not None:
         where = "below the band" if args.measured_ripple < p5 else "above the band" if args.measured_ripple > p95 \
             else "inside the 5-95 % band"

@@ -9,6 +9,9 @@ release happens with the brake applied (an event the analysis must exclude).
 Sensor effects applied to the simulated truth: torque and motor speed reported every
 10 ms (speed 8 ms late through inverter filtering/CAN scheduling), like every other message
 of the reference DBC; white noise, timestamp jitter; quantisation is left to the DBC encoding.
+The ESP's longitudinal accelerometer (100 Hz) sees the simulated body acceleration through a
+causal 30 Hz anti-alias filter, with a bias and white noise (drawn from their own generator, so
+the other channels do not change with it).
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import signal as sps
 
 from app.analysis.series import FloatArray
 from sim import Vehicle, simulate
@@ -39,6 +43,9 @@ class Scenario:
     truth_changes: dict[str, float] = field(default_factory=lambda: {"gaps.halfshaft": 0.8})  # factors on nominal
     brake_cycle: int = 5  # this release cycle happens with the brake pressed (-1: never)
     dropped_frames: int = 3  # frames of each message lost on the bus (their alive counters show the gaps)
+    accel_noise_ms2: float = 0.04  # ESP longitudinal accelerometer: white noise ...
+    accel_offset_ms2: float = 0.12  # ... bias and mounting tilt (0.7 degrees nose-up) ...
+    accel_bandwidth_hz: float = 30.0  # ... and its anti-alias filter (2nd-order Butterworth, causal)
 
 
 def _smooth_step(t: FloatArray, t0: float, a: float, b: float, rate: float) -> FloatArray:
@@ -109,4 +116,14 @@ def measured_channels(nominal: Vehicle, sc: Scenario | None = None) -> dict[str,
         "brake": _report(rng, t, 15.0 * brake, 0.01, 0.008, 0.0, 0.0, sc.jitter_s, end),  # bar
         **{f"wheel_speed_{w}_rpm": _report(rng, res.t, wheel, 0.01, 0.009, 0.0, 0.3, sc.jitter_s, end)
            for w in ("fl", "fr", "rl", "rr")},
+        "accel_long_ms2": _accelerometer(res.t, res.vehicle_accel_ms2, sc, end),
     }
+
+
+def _accelerometer(t: FloatArray, accel: FloatArray, sc: Scenario, end: float) -> Channel:
+    """The ESP's 100 Hz longitudinal acceleration: anti-alias filter, bias, noise, jitter."""
+    rng = np.random.default_rng(sc.seed + 2)
+    sos = sps.butter(2, sc.accel_bandwidth_hz, fs=1.0 / float(t[1] - t[0]), output="sos")
+    seen = sps.sosfilt(sos, accel, zi=sps.sosfilt_zi(sos) * float(accel[0]))[0] + sc.accel_offset_ms2
+    return _report(rng, t, np.asarray(seen, dtype=np.float64), 0.01, 0.003, 0.0, sc.accel_noise_ms2,
+                   sc.jitter_s, end)

@@ -11,6 +11,9 @@ service stores and the batch writes), so an upload and a batch run give the same
     vehicle_speed_kmh, motor_speed_rpm, torque_before_nm, torque_after_nm, torque_step_nm (after - before),
     torque_rate_nm_s
     measured_<metric>, simulated_<metric>   every ripple metric (app.analysis.metrics.METRIC_NAMES)
+    accel_source, measured_accel_<criterion>, simulated_accel_<criterion>   every drivability criterion
+                                            (app.analysis.drivability.CRITERIA; m/s^2, m/s^3, m/s^1.75, s, Hz)
+    rating                                  1-10 score of a fitted rating model (app.analysis.ratings), else null
     sim_gap_open_time_s (the simulator's own gap-open interval), rms_rpm, nrmse
     tracking (event verdict: good | poor | unknown), log_tracking (the whole log's verdict)
     diagnosis_status, diagnosis_top ("+"-joined effects) when the log was diagnosed
@@ -25,16 +28,19 @@ from __future__ import annotations
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
+from app.analysis.drivability import CRITERIA_NAMES
 from app.analysis.metrics import METRIC_NAMES
 
 FLOAT_COLUMNS: tuple[str, ...] = (
     "t_log_s", "vehicle_speed_kmh", "motor_speed_rpm", "torque_before_nm", "torque_after_nm", "torque_step_nm",
     "torque_rate_nm_s", *(f"measured_{m}" for m in METRIC_NAMES), *(f"simulated_{m}" for m in METRIC_NAMES),
     "sim_gap_open_time_s", "rms_rpm", "nrmse",
+    *(f"measured_accel_{c}" for c in CRITERIA_NAMES), *(f"simulated_accel_{c}" for c in CRITERIA_NAMES),
+    "rating",
 )
 STRING_COLUMNS: tuple[str, ...] = (
     "log_hash", "log_name", "source", "driveline", "kind", "exclusion", "error", "tracking", "log_tracking",
-    "diagnosis_status", "diagnosis_top",
+    "diagnosis_status", "diagnosis_top", "accel_source",
 )
 NAN = float("nan")
 
@@ -90,5 +96,11 @@ def event_rows(doc: dict[str, Any], *, vehicle: str, log_hash: str, log_name: st
         for name in METRIC_NAMES:
             row[f"measured_{name}"] = _num(meas.get(name))
             row[f"simulated_{name}"] = _num(sim.get(name))
+        feel = m.get("drivability") or {}
+        row["accel_source"] = feel.get("source")
+        row["rating"] = _num((feel.get("rating") or {}).get("score"))
+        for name in CRITERIA_NAMES:
+            row[f"measured_accel_{name}"] = _num((feel.get("measured") or {}).get(name))
+            row[f"simulated_accel_{name}"] = _num((feel.get("simulated") or {}).get(name))
         rows.append(row)
     return rows

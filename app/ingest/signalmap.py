@@ -56,11 +56,13 @@ CANONICAL: dict[str, tuple[str, Interp, bool]] = {
     "brake": ("", Interp.LINEAR, False),  # pressure or travel, in the DBC's unit
     "brake_pressed": ("", Interp.PREVIOUS, False),  # switch, 0/1
     "time_base": ("s", Interp.LINEAR, False),  # ECU timer or counter in the motor speed's message
+    "accel_long_ms2": ("m/s^2", Interp.LINEAR, False),  # longitudinal acceleration (ESP/ABS or IMU), + forward
 }
 TIME_BASE = "time_base"
 REQUIRED: tuple[str, ...] = tuple(k for k, (_, _, req) in CANONICAL.items() if req)
 
 _RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
+G_N = 9.80665  # standard gravity, m/s^2 per g
 #: canonical unit -> {accepted spelling (normalised) -> factor to the canonical unit}
 UNIT_FACTORS: dict[str, dict[str, float]] = {
     "rpm": {"rpm": 1.0, "1/min": 1.0, "u/min": 1.0, "rev/min": 1.0, "r/min": 1.0, "min-1": 1.0, "min^-1": 1.0,
@@ -70,6 +72,8 @@ UNIT_FACTORS: dict[str, dict[str, float]] = {
     "km/h": {"km/h": 1.0, "kph": 1.0, "kmh": 1.0, "kmph": 1.0, "m/s": 3.6, "mph": 1.609344},
     "%": {"%": 1.0, "pct": 1.0, "percent": 1.0},
     "s": {"s": 1.0, "sec": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6},
+    "m/s^2": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "m/s/s": 1.0, "m/s**2": 1.0, "mps2": 1.0, "mps^2": 1.0,
+              "g": G_N, "gn": G_N, "mg": 1e-3 * G_N},
 }
 
 

@@ -48,6 +48,8 @@ _RULES: dict[str, list[tuple[set[str], float]]] = {
                           ({"vehicle", "veh", "car", "ego", "display", "disp"}, 2.0)],
     "brake": [({"brake", "brk"}, 3.0), ({"pressure", "press", "pres", "pedal", "travel", "force"}, 1.5)],
     "brake_pressed": [({"brake", "brk"}, 3.0), ({"pressed", "switch", "sw", "applied", "status", "on"}, 1.5)],
+    "accel_long_ms2": [({"accel", "acc", "acceleration", "ax", "longaccel", "accx"}, 3.0),
+                       ({"long", "lon", "lng", "longitudinal", "x"}, 2.0)],
 }
 _WHEEL = {"wheel", "whl", "wh", "ws", "wheelspeed"}
 for _corner in ("fl", "fr", "rl", "rr"):

@@ -52,3 +52,21 @@ def test_doc_is_deterministic_and_reports_progress() -> None:
     assert "gaps.halfshaft" in a["sampled_fields"] and "halfshaft.stiffness" in a["sampled_fields"]
     c = tolerance_doc(vehicle, torque, speed, [WIN], n=20, seed=4)
     assert c["events"][0]["band_rpm"] != a["events"][0]["band_rpm"]
+
+
+def test_the_felt_shuffle_has_a_band_too_when_the_crossing_is_known() -> None:
+    vehicle = load_vehicle("paper")
+    torque, speed = Signal("motor_torque_nm", T, TORQUE, "N m"), _nominal_speed()
+    t_cross = 0.3 + 0.15 * 40.0 / 190.0
+    row, res = event_tolerance(vehicle, torque, speed, EventWindow(0, "tip_in", 0.0, 0.1, 1.2, t_cross),
+                               n=40, seed=2)
+    assert res is not None and res.vehicle_speed_kmh is not None and res.vehicle_speed_kmh.shape[0] == 41
+    band = row["band_shuffle_pp_ms2"]
+    assert 0 < band["p5"] <= band["p50"] <= band["p95"]
+    assert band["p5"] <= row["nominal_shuffle_pp_ms2"] <= band["p95"]
+    # the nominal run's vehicle speed is the plain simulation's
+    plain = simulate(vehicle, T, TORQUE, speed0_rpm=800.0, interp="linear", output_dt=0.001)
+    assert np.allclose(res.vehicle_speed_kmh[0], plain.vehicle_speed_kmh, rtol=1e-9, atol=1e-9)
+    # without the crossing nothing is computed for it
+    row2, res2 = event_tolerance(vehicle, torque, speed, WIN, n=10, seed=2)
+    assert "band_shuffle_pp_ms2" not in row2 and res2 is not None and res2.vehicle_speed_kmh is None

@@ -24,7 +24,7 @@ def test_the_tolerance_table_tells_raw_from_detrended() -> None:
          "measured_fluctuation_rpm": 2.5, "measured_percentile": 60.0, "analysis_fluctuation_rpm": 3.5}]}
     out = tolerance_table(tol)
     assert "raw, rpm" in out and "meas., rpm" in out and "detrended" in out
-    assert out.splitlines()[3].split()[-1] == "3.5"
+    assert out.splitlines()[3].split()[-3:] == ["3.5", "-", "-"]  # detrended, then the felt band and measured p-p
 
 
 def _diagnosis(share: float) -> dict[str, Any]:

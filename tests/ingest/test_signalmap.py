@@ -101,6 +101,8 @@ def test_conversion_invert_and_id_reference(ref_db, tmp_path: Path) -> None:  # 
     ("RPM", "rpm", 1.0), ("1/min", "rpm", 1.0), ("rad/s", "rpm", 60 / (2 * math.pi)), ("MPH", "km/h", 1.609344),
     ("m/s", "km/h", 3.6), ("KPH", "km/h", 1.0), ("N.m", "Nm", 1.0), ("kNm", "Nm", 1000.0), ("", "Nm", 1.0),
     ("degC", "rpm", None), ("bar", "%", None),
+    ("m/s^2", "m/s^2", 1.0), ("m/s2", "m/s^2", 1.0), ("m/s²", "m/s^2", 1.0), ("g", "m/s^2", 9.80665),
+    ("mg", "m/s^2", 9.80665e-3), ("km/h", "m/s^2", None),
 ])
 def test_unit_factor(unit: str, canonical: str, factor: float | None) -> None:
     got = unit_factor(unit, canonical)
@@ -115,6 +117,7 @@ def test_suggestions_find_the_reference_signals(ref_db) -> None:  # type: ignore
     assert routes["pedal_pct"] == ("VCU_Pedal", "AccelPedalPos")
     assert routes["vehicle_speed_kmh"] == ("ESP_Vehicle", "VehicleSpeed")
     assert routes["wheel_speed_rr_rpm"] == ("ESP_WheelSpeeds", "WheelSpeedRR")
+    assert routes["accel_long_ms2"] == ("ESP_Accel", "LongAccel")
     # an observed period overrides the DBC cycle time: a slow MCU_Fast loses against the 10 ms message
     slow = suggest_candidates(ref_db, {0xA0: 0.5, 0x101: 0.01})["motor_speed_rpm"]
     assert slow[0].signal == "MotorSpeed"

@@ -182,6 +182,8 @@ def test_cli_what_if_and_tolerance(torque_csv: Path, capsys: pytest.CaptureFixtu
     res = tolerance_analysis(PAPER, TIP_T, TIP_Q, n=150, seed=1)
     p50 = float(np.percentile(res.fluct_rpm, 50))
     assert f"50 % {p50:.1f}" in cap.out
+    assert "felt shuffle peak-to-peak (body acceleration): nominal" in cap.out
+    assert "felt (body acceleration, baseline -> what-if): shuffle peak-to-peak" in out
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -16,6 +16,17 @@ export const METRICS = [
   ["damping_ratio", "damping ratio", "-", 1, 3],
   ["settling_time_s", "settling time", "s", 1, 3],
 ];
+// drivability criteria on the vehicle's acceleration (metrics row's "drivability"), shown measured and simulated
+export const FEEL = [
+  ["response_delay_s", "delay", "ms", 1000, 0],
+  ["kick_ms2", "kick", "m/s²", 1, 2],
+  ["shuffle_pp_ms2", "shuffle p-p", "m/s²", 1, 2],
+  ["shuffle_freq_hz", "shuffle f (accel)", "Hz", 1, 2],
+  ["max_jerk_ms3", "max jerk", "m/s³", 1, 1],
+  ["clunk_ms2", "clunk", "m/s²", 1, 3],
+  ["vdv_ms175", "VDV Wd", "m/s^1.75", 1, 2],
+  ["settled_accel_ms2", "settled accel", "m/s²", 1, 2],
+];
 const PAGE = 12;
 
 export function eventsTable(events, metrics, start) {
@@ -53,8 +64,15 @@ export function metricsTable(id, metrics) {
   }
   cols.push({ key: "rms_rpm", label: "aligned RMS error (rpm)", num: true, digits: 1 },
     { key: "nrmse", label: "NRMSE (-)", num: true, digits: 3 });
+  for (const [name, label, unit, k, digits] of FEEL) {
+    for (const [part, what] of [["measured", "meas"], ["simulated", "sim"]]) {
+      cols.push({ key: `accel.${name}.${part}`, label: `${label} ${what} (${unit})`, num: true, digits,
+        value: (m) => { const v = m.drivability?.[part]?.[name]; return v == null ? null : v * k; } });
+    }
+  }
   return h("section", { class: "card offscreen-lazy" }, h("h2", {}, `Metrics per event (${metrics.events.length})`),
-    h("div", { class: "toolbar" }, h("span", { class: "muted" }, "Click a column to sort. Speed metrics are taken on the motor speed detrended from the rigid-body trend; sim-meas is each event's own difference. Definitions: docs/metrics.md."),
+    h("div", { class: "toolbar" }, h("span", { class: "muted" }, "Click a column to sort. Speed metrics are taken on the motor speed detrended from the rigid-body trend; sim-meas is each event's own difference. Definitions: docs/metrics.md, " +
+      "drivability (acceleration) columns: docs/drivability.md."),
       h("button", { id: "metrics-csv", onclick: () => download(`/analyses/${id}/metrics?format=csv`,
         `${id}-metrics.csv`, "text/csv") }, "CSV")),
     h("div", { class: "scroll" }, sortableTable(cols, metrics.events, { id: "metrics-table" })));
