@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.indep.car import (
+    CHAIN_LOW,
     CHAIN_PRESET,
     PRESET,
     Car,
@@ -355,7 +356,7 @@ def build(case: Case, folder: Path) -> Case:
 def generator_version() -> str:
     """Hash of the generator's sources and the data it reads: a cached set is reused only when equal."""
     h = hashlib.sha256()
-    for f in [*sorted(Path(__file__).parent.glob("*.py")), PRESET, CHAIN_PRESET, DBC]:
+    for f in [*sorted(Path(__file__).parent.glob("*.py")), PRESET, CHAIN_PRESET, CHAIN_LOW, DBC]:
         h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
