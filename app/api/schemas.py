@@ -375,3 +375,55 @@ class BatchLogsOut(BaseModel):
     batch_id: str
     count: int
     logs: list[BatchLogOut]
+
+
+class ResidualByEvent(BaseModel):
+    index: int
+    kind: str
+    t_event_s: float | None
+    before: float | None = Field(description="held-out residual / noise energy of the baseline (1 = noise)")
+    after: float | None = Field(description="the same with the chosen fit (null: nothing fitted)")
+
+
+class ResidualByPhase(BaseModel):
+    phase: str
+    samples: int
+    before: float | None
+    after: float | None
+
+
+class ResidualByBand(BaseModel):
+    band: str
+    before: float | None = Field(description="share of the baseline's held-out residual energy in this band")
+    after: float | None
+
+
+class HeldoutOverlay(BaseModel):
+    """Speed of one held-out event on time from its torque zero crossing (s); rpm."""
+
+    index: int
+    kind: str
+    t_event_s: float | None
+    t_s: list[float | None]
+    measured_rpm: list[float | None]
+    baseline_rpm: list[float | None]
+    fitted_rpm: list[float | None] | None
+    gap_open_s: float | None
+    gap_close_s: float | None
+
+
+class DiagnosisChartsOut(BaseModel):
+    """``/diagnoses/{id}/charts``: the numbers behind the diagnosis plots (lashscope.diagnosis-charts/1)."""
+
+    schema_: str = Field(alias="schema")
+    status: str
+    top: list[str]
+    fitted: str | None = Field(description="the fit shown as 'after': the chosen effect(s), or the best one not attributed")
+    noise_sigma_rpm: float | None
+    heldout: int
+    events: list[ResidualByEvent]
+    phases: list[ResidualByPhase]
+    bands: list[ResidualByBand]
+    overlays: list[HeldoutOverlay]
+
+    model_config = ConfigDict(populate_by_name=True, serialize_by_alias=True)

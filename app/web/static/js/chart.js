@@ -25,6 +25,21 @@ export function holdOnto(t, pt, pv) {
   return out;
 }
 
+// Labels of vertical markers laid out on rows so that none overlaps another: each label goes on the
+// first row whose last label ends left of it (x positions and widths in canvas pixels).
+export function labelRows(items, gap = 4) {
+  const ends = [];
+  return items.map(({ x, w }) => {
+    let row = ends.findIndex((end) => end + gap <= x);
+    if (row < 0) {
+      row = ends.length;
+      ends.push(0);
+    }
+    ends[row] = x + w;
+    return row;
+  });
+}
+
 function markerPlugin(getMarkers) {
   return {
     hooks: {
@@ -32,25 +47,37 @@ function markerPlugin(getMarkers) {
         const ctx = u.ctx;
         const { left, top, width, height } = u.bbox;
         const [x0, x1] = [u.scales.x.min, u.scales.x.max];
+        const dpr = devicePixelRatio;
         ctx.save();
-        ctx.font = `${Math.round(10 * devicePixelRatio)}px sans-serif`;
-        let row = 0;
-        for (const m of getMarkers()) {
-          if (m.t < x0 || m.t > x1) continue;
-          const x = Math.round(u.valToPos(m.t, "x", true));
+        ctx.font = `${Math.round(10 * dpr)}px sans-serif`;
+        const shown = getMarkers().filter((m) => m.t >= x0 && m.t <= x1)
+          .map((m) => ({ m, x: Math.round(u.valToPos(m.t, "x", true)) })).sort((a, b) => a.x - b.x);
+        for (const { m, x } of shown) {
           ctx.strokeStyle = m.color;
-          ctx.lineWidth = devicePixelRatio * (m.width || 1);
-          ctx.setLineDash(m.dash ? [4 * devicePixelRatio, 3 * devicePixelRatio] : []);
+          ctx.lineWidth = dpr * (m.width || 1);
+          ctx.setLineDash(m.dash ? [4 * dpr, 3 * dpr] : []);
           ctx.beginPath();
           ctx.moveTo(x, top);
           ctx.lineTo(x, top + height);
           ctx.stroke();
-          if (m.label) {
-            ctx.fillStyle = m.color;
-            // labels on three staggered rows so close markers (gap open, impact) stay readable
-            ctx.fillText(m.label, Math.min(x + 3, left + width - 40), top + (12 + 11 * (row++ % 3)) * devicePixelRatio);
-          }
         }
+        // labels beside their line, on as many rows as it takes for none to cover another; the rows
+        // are counted on the element (data-label-rows) for tests
+        const labelled = shown.filter((s) => s.m.label);
+        const boxes = labelled.map(({ m, x }) => {
+          const w = ctx.measureText(m.label).width + 2 * dpr;
+          return { x: Math.min(x + 3 * dpr, left + width - w), w };
+        });
+        const rows = labelRows(boxes);
+        labelled.forEach(({ m }, i) => {
+          const yy = top + (11 + 11 * rows[i]) * dpr;
+          ctx.fillStyle = "rgba(255,255,255,0.8)";
+          ctx.fillRect(boxes[i].x - dpr, yy - 9 * dpr, boxes[i].w, 11 * dpr);
+          ctx.fillStyle = m.color;
+          ctx.fillText(m.label, boxes[i].x, yy);
+        });
+        u.root.parentElement.dataset.labelRows = rows.length ? Math.max(...rows) + 1 : 0;
+        u.labelBoxes = boxes.map((b, i) => ({ ...b, row: rows[i] }));
         ctx.restore();
       }],
     },
