@@ -52,15 +52,19 @@ def _ratio(chi2: float, n: float) -> float | None:
 
 
 def chart_data(res: DiagnosisResult, max_events: int = 12) -> dict[str, object]:
-    """The diagnosis charts' numbers: held-out residual by event, phase and band for the baseline
-    (``before``) and the chosen fit (``after``; the best single effect when none was chosen, named in
-    ``fitted``), and the speed of up to ``max_events`` held-out events (rpm) on time from their torque
+    """The diagnosis charts' numbers: held-out residual by event, phase and band for the file's vehicle
+    calibrated (``before``) and the chosen fit (``after``; the best single effect when none was chosen,
+    the identified base parameters when they alone are the answer; named in ``fitted``), and the speed of up to ``max_events`` held-out events (rpm) on time from their torque
     zero crossing (s), with the predicted gap-open span. Ratios are residual / noise energy (1 = noise)."""
     if res.baseline is None:
         raise AnalysisError(f"no charts: the diagnosis decided {res.decision.status!r} ({res.decision.reason})")
     label, aug = _augmented(res)
     ho = res.heldout()
     base = res.baseline
+    if res.file_baseline is not None:  # before: the file's vehicle; after: the identified one (with the effect)
+        base = res.file_baseline
+        if aug is None:
+            label, aug = "identified base parameters", res.baseline
     by_index = {e.index: e for e in res.events}
     events = []
     for i in ho:
