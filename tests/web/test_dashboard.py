@@ -343,3 +343,171 @@ def test_docs_work_offline(page: Any, server: Server) -> None:
     assert len(page.query_selector_all(".swagger-ui .opblock")) >= 30
     assert hosts == {"127.0.0.1"}
     assert httpx.get(f"{server.url}/redoc", follow_redirects=False).headers["location"] == "/docs"
+
+
+def _drag(page: Any, selector: str, a: float, b: float) -> None:
+    box = page.query_selector(selector).bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.move(box["x"] + a * box["width"], y)
+    page.mouse.down()
+    page.mouse.move(box["x"] + b * box["width"], y, steps=5)
+    page.mouse.up()
+
+
+CHART_COLUMN = """name => { const u = document.querySelector('#timeline').chart;
+  const k = u.series.findIndex(s => s.label.split(' ')[0] === name);
+  const t = [], v = [];
+  u.data[k].forEach((x, i) => { if (x != null) { t.push(u.data[0][i]); v.push(x); } });
+  return [t, v]; }"""
+
+
+def test_channel_browser_plots_any_channel_on_its_units_axis(page: Any, server: Server, analysis_id: str) -> None:
+    signals = api(server, f"/analyses/{analysis_id}/signals")["signals"]
+    open_analysis(page, server, analysis_id)
+    page.fill("#channel-search", "wheel")
+    wheels = sorted(n for n in signals if "wheel" in n or "wheel" in signals[n]["unit"])
+    assert len(wheels) == 4  # the reference DBC's four wheel speeds
+    page.wait_for_function(f"document.querySelector('#channel-list').dataset.shown == '{len(wheels)}'")
+    assert [e.get_attribute("data-channel") for e in page.query_selector_all("#channel-list input")] == wheels
+    tl = page.query_selector("#timeline")
+    series0, axes0 = int(tl.get_attribute("data-series")), int(tl.get_attribute("data-axes"))
+    with page.expect_response(lambda r: "/signals/wheel_speed_fl_rpm?" in r.url) as resp:
+        page.check("#channel-list input[data-channel='wheel_speed_fl_rpm']")
+    page.wait_for_function(f"document.querySelector('#timeline').dataset.series == '{series0 + 1}'")
+    assert int(tl.get_attribute("data-axes")) == axes0  # rpm: the motor speed's axis
+    rows = resp.value.json()
+    t, v = page.evaluate(CHART_COLUMN, "wheel_speed_fl_rpm")
+    assert v == rows["wheel_speed_fl_rpm"] and t == rows["t_s"]  # the API's rows, each at its own time
+    assert rows["source_points"] == signals["wheel_speed_fl_rpm"]["samples"]
+    assert float(tl.get_attribute("data-channel-ms")) > 0
+    page.fill("#channel-search", "km/h")  # by unit
+    page.check("#channel-list input[data-channel='vehicle_speed_kmh']")
+    page.wait_for_function(f"document.querySelector('#timeline').dataset.series == '{series0 + 2}'")
+    assert int(tl.get_attribute("data-axes")) == axes0 + 1  # a new unit, a new axis
+    assert page.url.endswith("/ch=wheel_speed_fl_rpm,vehicle_speed_kmh")
+    page.wait_for_selector("#timeline[data-inked]", state="attached")
+    screenshot(page, "analysis-channels")
+    # the address keeps the channels: a reload plots them again
+    page.reload()
+    page.wait_for_selector("main[data-state='ready']")
+    page.wait_for_function(f"document.querySelector('#timeline').dataset.series == '{series0 + 2}'")
+    assert page.is_checked("#channel-list input[data-channel='vehicle_speed_kmh']")
+    # unticked: gone from the chart and from the address
+    page.uncheck("#channel-list input[data-channel='wheel_speed_fl_rpm']")
+    page.wait_for_function(f"document.querySelector('#timeline').dataset.series == '{series0 + 1}'")
+    assert page.url.endswith("/ch=vehicle_speed_kmh")
+
+
+def test_a_missing_channel_says_so_and_the_chart_stays(page: Any, server: Server, analysis_id: str) -> None:
+    page.goto(f"{server.url}/#/analysis/{analysis_id}/ch=no_such_channel")
+    page.wait_for_selector("main[data-state='ready']", timeout=120_000)
+    err = page.text_content("#channel-status .error") or ""
+    assert "no_such_channel" in err and "signal_not_found" in err
+    assert int(page.get_attribute("#timeline", "data-inked") or page.wait_for_selector(
+        "#timeline[data-inked]", state="attached").get_attribute("data-inked")) > 2000
+
+
+def test_two_cursors_read_every_series_and_the_delta(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    box = page.query_selector("#timeline .u-over").bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.click(box["x"] + 0.3 * box["width"], y)
+    page.keyboard.down("Shift")
+    page.mouse.click(box["x"] + 0.6 * box["width"], y)
+    page.keyboard.up("Shift")
+    page.wait_for_function("document.querySelector('#cursor-readout').dataset.b")
+    a = float(page.get_attribute("#cursor-readout", "data-a") or "nan")
+    b = float(page.get_attribute("#cursor-readout", "data-b") or "nan")
+    tl = page.query_selector("#timeline")
+    t0, t1 = float(tl.get_attribute("data-t0")), float(tl.get_attribute("data-t1"))
+    assert a == pytest.approx(t0 + 0.3 * (t1 - t0), abs=0.01 * (t1 - t0))
+    assert b == pytest.approx(t0 + 0.6 * (t1 - t0), abs=0.01 * (t1 - t0))
+    text = page.text_content("#cursor-readout") or ""
+    time_row = next(r for r in text.splitlines() if r.startswith("time (s)")).split()
+    assert float(time_row[-1]) == pytest.approx(b - a, abs=2e-3)
+    # each series' values at A and B are the chart's rows nearest the cursors, and B - A their difference
+    meas = next(r for r in text.splitlines() if r.startswith("measured rpm")).split()
+    va, vb, d = (float(x) for x in meas[-3:])
+    assert d == pytest.approx(vb - va, abs=0.011)
+    t, v = page.evaluate(CHART_COLUMN, "measured")
+    near = min(range(len(t)), key=lambda i: abs(t[i] - a))
+    assert va == pytest.approx(v[near], abs=0.006)
+    assert page.is_visible("#timeline .u-over") and text.count("\n") >= 5  # time and every series
+
+
+def test_overlays_follow_the_zoom_on_time_from_the_crossing(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    events = api(server, f"/analyses/{analysis_id}/events")["events"]
+    page.wait_for_function("document.querySelector('#overlays').dataset.ready == '1'")
+    # the panels' time axis is time from the torque zero crossing
+    spans = page.evaluate("[...document.querySelectorAll('#overlays .panel .chart')].map(c => [c.chart.scales.x.min, "
+                          "c.chart.scales.x.max])")
+    assert spans and all(lo < 0 < hi for lo, hi in spans)
+    # the whole-log chart's event labels never overlap
+    boxes = page.evaluate("document.querySelector('#timeline').chart.labelBoxes")
+    assert len(boxes) == len(events)
+    for row in {b["row"] for b in boxes}:
+        xs = sorted((b["x"], b["x"] + b["w"]) for b in boxes if b["row"] == row)
+        assert all(x1 <= x0b for (_, x1), (x0b, _) in zip(xs, xs[1:], strict=False))
+    _drag(page, "#timeline .u-over", 0.30, 0.55)
+    page.wait_for_function("document.querySelector('#overlays').dataset.focus && "
+                           "document.querySelector('#overlays').dataset.ready == '1'")
+    t0, t1 = (float(x) for x in (page.get_attribute("#overlays", "data-focus") or "").split(","))
+    inside = [e["index"] for e in events if e["has_series"] and t0 <= e["t_cross_s"] <= t1]
+    shown = [int(p.get_attribute("data-event")) for p in page.query_selector_all("#overlays .panel")]
+    assert inside and shown == inside[:12]
+    screenshot(page, "overlays-following-zoom")
+    # and back: "in chart" on a panel zooms the whole-log chart to that event's window
+    first = next(e for e in events if e["index"] == shown[0])
+    page.click(f"#overlays .panel[data-event='{shown[0]}'] button.in-chart")
+    page.wait_for_function(f"Math.abs(document.querySelector('#timeline').dataset.t0 - {first['t_start_s']}) < 1e-6")
+    assert float(page.get_attribute("#timeline", "data-t1") or "nan") == pytest.approx(first["t_end_s"], abs=1e-6)
+
+
+def test_metrics_columns_are_grouped_and_chosen(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    groups = [g.text_content() for g in page.query_selector_all("#metrics-table tr.group th")]
+    assert "fluctuation peak-valley (rpm)" in groups and "aligned error" in groups
+    assert page.query_selector("#metrics-table th[data-key='damping_ratio.measured']") is None
+    page.click("#metrics-chooser summary")
+    page.check("#metrics-chooser input[data-metric='damping_ratio']")
+    page.uncheck("#metrics-chooser input[data-part='simulated']")
+    page.wait_for_selector("#metrics-table th[data-key='damping_ratio.measured']")
+    assert page.query_selector_all("#metrics-table th[data-key$='.simulated']") == []
+    metrics = api(server, f"/analyses/{analysis_id}/metrics")["events"]
+    page.click("#metrics-table th[data-key='damping_ratio.measured']")
+    col = [h.get_attribute("data-key") for h in page.query_selector_all("#metrics-table thead tr:not(.group) th")]
+    k = col.index("damping_ratio.measured") + 1
+    shown = [c.text_content() for c in page.query_selector_all(f"#metrics-table tbody tr td:nth-child({k})")]
+    expected = sorted(m["measured"]["damping_ratio"] for m in metrics if m["measured"].get("damping_ratio") is not None)
+    assert [float(x) for x in shown[:len(expected)]] == pytest.approx(expected, abs=5.1e-4)
+    # the choice is kept in this browser
+    page.reload()
+    page.wait_for_selector("main[data-state='ready']")
+    assert page.query_selector("#metrics-table th[data-key='damping_ratio.measured']") is not None
+    screenshot(page, "metrics-chooser")
+
+
+def test_a_failed_analysis_says_why_in_the_list(page: Any, server: Server, tmp_path: Path) -> None:
+    junk = tmp_path / "other-car.log"  # frames of an id the vehicle's DBC does not know
+    junk.write_text("".join(f"({1 + 0.01 * i:.6f}) can0 7FF#00112233\n" for i in range(300)))
+    with httpx.Client(base_url=server.url, timeout=60.0) as c:
+        with junk.open("rb") as fh:
+            log_id = c.post("/logs", files={"file": (junk.name, fh)}).json()["id"]
+        aid = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
+        deadline = time.monotonic() + 120
+        while (rec := c.get(f"/analyses/{aid}").json())["status"] not in ("done", "failed"):
+            assert time.monotonic() < deadline
+            time.sleep(0.5)
+    assert rec["status"] == "failed"
+    page.goto(f"{server.url}/#/logs")
+    row = page.wait_for_selector(f"tr[data-log='{log_id}']")
+    text = row.query_selector(".failure").text_content() or ""
+    assert rec["job"]["error"]["detail"] in text and f"[{rec['job']['error']['code']}]" in text
+    assert f"{round(100 * rec['progress'])} %" in text
+    page.goto(f"{server.url}/#/analysis/{aid}")
+    page.wait_for_selector("main .error")
+    assert rec["job"]["error"]["detail"] in (page.text_content("main .error") or "")
+    page.goto(f"{server.url}/#/analysis/an_0123456789abcdef")
+    page.wait_for_selector("main .error")
+    assert "an_0123456789abcdef" in (page.text_content("main .error") or "")

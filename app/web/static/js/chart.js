@@ -205,6 +205,7 @@ export function valueAt(data, k, t) {
     if (xs[mid] < t) lo = mid + 1;
     else hi = mid;
   }
+  if (lo > 0 && Math.abs(xs[lo - 1] - t) <= Math.abs(xs[lo] - t)) lo -= 1;
   for (let d = 0; d < 2000; d++) {
     for (const i of [lo - d, lo + d]) {
       if (i >= 0 && i < xs.length && data[k][i] != null) return { t: xs[i], v: data[k][i] };

@@ -196,6 +196,7 @@ function panel(id, e, m, s, span, width, onShow) {
   const wrap = h("div", { class: "panel", dataset: { event: e.index } }, h("h3", {}, title), h("div", { class: "sub" }, sub), box);
   const u = speedChart(box, seriesData(s, undefined, t0), { width, height: 230, markers: () => markers, yRange,
     xLabel: "time from torque zero crossing (s)" });
+  box.chart = u; // for scripts driving the page
   wrap.append(h("button", { onclick: async () => saveBlob(await chartPng(u, `${id} ${title}`),
     `${id}-event-${e.index}.png`) }, "PNG"),
   onShow ? h("button", { class: "in-chart", onclick: () => onShow(e.t_start_s, e.t_end_s) }, "in chart") : null);

@@ -86,8 +86,8 @@ export async function render(main) {
           h("a", { href: `#/analysis/${a.id}` }, `${a.vehicle} v${a.vehicle_version}`), " ", badge(a.status),
           a.status === "done" ? ` ${a.summary.events ?? "?"} events`
             : a.status === "failed" ? h("div", { class: "failure", dataset: { code: a.job?.error?.code || "" } },
-              `${a.job?.stage ? `at ${a.job.stage}, ${Math.round(100 * a.progress)} %: ` : ""}` +
-              `${a.job?.error?.detail || "no reason recorded"} [${a.job?.error?.code || "unknown"}]`)
+              `stopped at ${Math.round(100 * a.progress)} %: ${a.job?.error?.detail || "no reason recorded"} ` +
+              `[${a.job?.error?.code || "unknown"}]`)
             : ` ${Math.round(100 * a.progress)} %`))
           : h("span", { class: "muted" }, "none")),
         h("td", {}, vehicles.length ? [pick, " ", start] : h("a", { href: "#/vehicles" }, "register a vehicle"),
