@@ -70,7 +70,8 @@ def _per_log(part: Any, level: float, rng: np.random.Generator) -> list[dict[str
     for log_hash, rows in part.groupby("log_hash", sort=False):
         times = rows["time"].dropna()
         out.append({
-            "log_hash": str(log_hash), "log_name": str(rows["log_name"].iloc[0]), "events": len(rows),
+            "log_hash": str(log_hash), "events": len(rows),
+            "log_name": str(rows["log_name"].iloc[0]) if rows["log_name"].notna().any() else str(log_hash),
             "time": times.min().isoformat() if len(times) else None,
             "tracking": str(rows["log_tracking"].iloc[0]) if rows["log_tracking"].notna().any() else None,
             **{q: dict(zip(("median", "lo", "hi"), median_interval(v, level, rng), strict=True))

@@ -297,12 +297,23 @@ def test_live_page_shows_frames_arriving(page: Any, server: Server, hub_port: in
                 time.sleep(0.5)
             assert rows == reported
             screenshot(page, "live")
+            # a reload (or a page opened late) reads the session's history first: every event, newest first
+            page.reload()
+            page.wait_for_selector("main[data-state='ready']")
+            page.wait_for_function(f"document.querySelectorAll('#live-events tbody tr').length >= {reported}")
+            history = api(server, f"/live/sessions/{sid}/events")
+            shown = [int(r.get_attribute("data-event")) for r in page.query_selector_all("#live-events tbody tr")]
+            assert shown == sorted((e["index"] for e in history["events"]), reverse=True)
+            assert "frames" in (page.text_content("#live-status") or "")
         finally:
             replay.join(60)
             link.close()
             httpx.post(f"{server.url}/live/sessions/{sid}/stop", timeout=60.0)
     status = api(server, f"/live/sessions/{sid}")
     assert status["frames_received"] == sum(len(c) for c in open_log(drive).chunks())
+    page.goto(f"{server.url}/#/live/no_such_session")
+    page.wait_for_selector("main .error")
+    assert "no_such_session" in (page.text_content("main .error") or "")
 
 
 def _keys(server: Server, *args: str) -> str:
