@@ -54,8 +54,9 @@ def _ratio(chi2: float, n: float) -> float | None:
 def chart_data(res: DiagnosisResult, max_events: int = 12) -> dict[str, object]:
     """The diagnosis charts' numbers: held-out residual by event, phase and band for the file's vehicle
     calibrated (``before``) and the chosen fit (``after``; the best single effect when none was chosen,
-    the identified base parameters when they alone are the answer; named in ``fitted``), and the speed of up to ``max_events`` held-out events (rpm) on time from their torque
-    zero crossing (s), with the predicted gap-open span. Ratios are residual / noise energy (1 = noise)."""
+    the identified base parameters when they alone are the answer; named in ``fitted``), and the speed
+    of up to ``max_events`` held-out events (rpm) on time from their torque zero crossing (s), with the
+    predicted gap-open span. Ratios are residual / noise energy (1 = noise)."""
     if res.baseline is None:
         raise AnalysisError(f"no charts: the diagnosis decided {res.decision.status!r} ({res.decision.reason})")
     label, aug = _augmented(res)

@@ -8,6 +8,7 @@ and watch a live session -- and compare what the page shows with what the API an
 
 from __future__ import annotations
 
+import itertools
 import re
 import subprocess
 import sys
@@ -226,6 +227,10 @@ def test_diagnosis_page_shows_the_decision_in_words(page: Any, server: Server, a
     assert report["decision"]["reason"] in decision
     rows = page.query_selector_all("#candidates tbody tr")
     assert len(rows) == len(report["candidates"]) + len(report["pairs"])
+    page.wait_for_selector("main[data-state='ready']")
+    headline = page.text_content("#headline") or ""
+    assert report["decision"]["status"] in headline and len(headline) < 200  # one line; the reason is below it
+    _diagnosis_charts(page, server, did, report)
     if report["decision"]["status"] == "base_parameters":  # the vehicle file is off: no candidate is scored
         card = page.text_content("#base-parameters") or ""
         assert all(p["label"] in card for p in report["decision"]["base_parameters"])
@@ -243,6 +248,11 @@ def test_diagnosis_page_shows_the_decision_in_words(page: Any, server: Server, a
         assert f"{val['events']} events" in (page.text_content("#validation") or "")
         assert f"{100 * val['shrink']['value']:.1f} %" in (page.text_content("#validation") or "")
     screenshot(page, "diagnosis", full_page=True)
+    assert page.console_errors == [] and page.hosts <= {"127.0.0.1", "blob", "data"}
+    # an unknown diagnosis says so in the page
+    page.goto(f"{server.url}/#/diagnosis/an_0123456789abcdef--dg00000000")
+    page.wait_for_selector("main .error")
+    assert "diagnosis_not_found" in (page.text_content("main .error") or "")
 
 
 def test_vehicles_page_compares_two_versions_field_by_field(page: Any, server: Server) -> None:
@@ -316,46 +326,6 @@ def test_live_page_shows_frames_arriving(page: Any, server: Server, hub_port: in
     assert "no_such_session" in (page.text_content("main .error") or "")
 
 
-def _keys(server: Server, *args: str) -> str:
-    out = subprocess.run([sys.executable, "-m", "app", "keys", *args, "--data-dir", str(server.data_dir)],
-                         capture_output=True, text=True, timeout=120, check=True)
-    return out.stdout
-
-
-def test_the_api_key_goes_with_every_request(page: Any, server: Server) -> None:
-    """A real key in the server's store: without it the API answers 401, with it the page works."""
-    printed = _keys(server, "create", "--scope", "admin", "--name", "browser test")
-    token = printed.splitlines()[0].strip()
-    key_id = re.search(r"created key (\S+)", printed).group(1)  # type: ignore[union-attr]
-    try:
-        time.sleep(1.2)  # the server re-reads its keys within a second
-        assert httpx.get(f"{server.url}/logs").status_code == 401
-        seen: list[tuple[str, str | None]] = []
-        page.on("request", lambda req: seen.append((req.url, req.headers.get("authorization"))))
-        page.goto(f"{server.url}/#/logs")  # the page itself loads without a key
-        page.fill("#api-key", token)
-        page.click("#key-form button")
-        page.wait_for_selector("#log-table, #no-logs")  # the list answered (it may be empty: tests run alone)
-        api_calls = [(u, a) for u, a in seen if "/static/" not in u and urlparse(u).path not in ("/", "")]
-        assert api_calls and all(a == f"Bearer {token}" for _, a in api_calls[-3:]), api_calls
-        page.fill("#api-key", "")
-        page.click("#key-form button")
-    finally:
-        _keys(server, "revoke", key_id)
-        time.sleep(1.2)
-    assert httpx.get(f"{server.url}/logs").status_code == 401  # the last key revoked: the server stays closed
-
-
-def test_docs_work_offline(page: Any, server: Server) -> None:
-    hosts: set[str] = set()
-    page.on("request", lambda req: hosts.add(urlparse(req.url).hostname or ""))
-    page.goto(f"{server.url}/docs")
-    page.wait_for_selector(".swagger-ui .opblock", timeout=60_000)
-    assert len(page.query_selector_all(".swagger-ui .opblock")) >= 30
-    assert hosts == {"127.0.0.1"}
-    assert httpx.get(f"{server.url}/redoc", follow_redirects=False).headers["location"] == "/docs"
-
-
 def _drag(page: Any, selector: str, a: float, b: float) -> None:
     box = page.query_selector(selector).bounding_box()
     y = box["y"] + box["height"] / 2
@@ -407,6 +377,7 @@ def test_channel_browser_plots_any_channel_on_its_units_axis(page: Any, server: 
     page.uncheck("#channel-list input[data-channel='wheel_speed_fl_rpm']")
     page.wait_for_function(f"document.querySelector('#timeline').dataset.series == '{series0 + 1}'")
     assert page.url.endswith("/ch=vehicle_speed_kmh")
+    assert page.console_errors == [] and page.hosts <= {"127.0.0.1", "blob", "data"}  # offline, no error
 
 
 def test_a_missing_channel_says_so_and_the_chart_stays(page: Any, server: Server, analysis_id: str) -> None:
@@ -459,7 +430,7 @@ def test_overlays_follow_the_zoom_on_time_from_the_crossing(page: Any, server: S
     assert len(boxes) == len(events)
     for row in {b["row"] for b in boxes}:
         xs = sorted((b["x"], b["x"] + b["w"]) for b in boxes if b["row"] == row)
-        assert all(x1 <= x0b for (_, x1), (x0b, _) in zip(xs, xs[1:], strict=False))
+        assert all(x1 <= x0b for (_, x1), (x0b, _) in itertools.pairwise(xs))
     _drag(page, "#timeline .u-over", 0.30, 0.55)
     page.wait_for_function("document.querySelector('#overlays').dataset.focus && "
                            "document.querySelector('#overlays').dataset.ready == '1'")
@@ -522,3 +493,102 @@ def test_a_failed_analysis_says_why_in_the_list(page: Any, server: Server, tmp_p
     page.goto(f"{server.url}/#/analysis/an_0123456789abcdef")
     page.wait_for_selector("main .error")
     assert "an_0123456789abcdef" in (page.text_content("main .error") or "")
+
+
+def _diagnosis_charts(page: Any, server: Server, did: str, report: dict[str, Any]) -> None:
+    """The diagnosis charts show the API's numbers: residual by event and phase, before and after."""
+    charts = api(server, f"/diagnoses/{did}/charts")
+    assert [e["index"] for e in charts["events"]] == report["split"]["heldout"]
+    bars = page.query_selector_all("#residual-by-phase rect.bar")
+    groups = (("before", "before (baseline)"), ("after", f"after: + {charts['fitted']}"))
+    expected = [(p["phase"], g, p[k]) for k, g in groups
+                for p in charts["phases"] if p[k] is not None and p[k] > 0 and (k == "before" or charts["fitted"])]
+    shown = [(b.get_attribute("data-category"), b.get_attribute("data-group"), float(b.get_attribute("data-value")))
+             for b in bars]
+    assert sorted(shown) == sorted(expected)
+    assert len(page.query_selector_all("#residual-by-event rect.bar")) == sum(
+        (e["before"] or 0) > 0 for e in charts["events"]) + sum((e["after"] or 0) > 0 for e in charts["events"])
+    panels = page.query_selector_all("#diagnosis-overlays .panel")
+    assert [int(p.get_attribute("data-event")) for p in panels] == [o["index"] for o in charts["overlays"]]
+    scored = [c for c in report["candidates"] + report["pairs"] if c["heldout"].get("shrink")]
+    assert len(page.query_selector_all("#shrink-chart g.interval")) == len(scored)
+    for g in page.query_selector_all("#shrink-chart g.interval"):
+        c = next(x for x in scored if x["title"] == g.get_attribute("data-label"))
+        assert float(g.get_attribute("data-lo")) == pytest.approx(100 * c["heldout"]["shrink"]["lo"])
+        assert float(g.get_attribute("data-hi")) == pytest.approx(100 * c["heldout"]["shrink"]["hi"])
+
+
+def test_tolerance_band_and_gap_sensitivity_start_from_the_page(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    page.wait_for_selector("#tolerance-out >> text=not computed yet")
+    page.wait_for_selector("#sensitivity-out >> text=not computed yet")
+    page.click("#tolerance-start")
+    page.click("#sensitivity-start")
+    page.wait_for_selector("#tolerance-chart", timeout=600_000)
+    page.wait_for_selector("#sensitivity-chart", timeout=600_000)
+    assert page.get_attribute("#tolerance-out", "data-progress") is not None  # a progress bar was shown
+    band = api(server, f"/analyses/{analysis_id}/tolerance?n=200")
+    ok = [e for e in band["events"] if not e["error"]]
+    items = page.query_selector_all("#tolerance-chart g.band-item")
+    assert len(items) == len(ok)
+    for g, e in zip(items, ok, strict=True):
+        assert g.get_attribute("data-label") == f"#{e['index']}"
+        assert float(g.get_attribute("data-measured")) == pytest.approx(e["measured_fluctuation_rpm"])
+        inside = e["band_rpm"]["p5"] <= e["measured_fluctuation_rpm"] <= e["band_rpm"]["p95"]
+        assert g.get_attribute("data-inside") == str(inside).lower()
+    outside = sum(1 for e in ok if not e["band_rpm"]["p5"] <= e["measured_fluctuation_rpm"] <= e["band_rpm"]["p95"])
+    assert f"{len(ok) - outside} of {len(ok)} events measured inside" in (page.text_content("#tolerance-summary") or "")
+    rec = api(server, f"/analyses/{analysis_id}")
+    sens = api(server, f"/vehicles/{rec['vehicle']}/gap-sensitivity?version={rec['vehicle_version']}")
+    bars = page.query_selector_all("#sensitivity-chart rect.bar")
+    shown = [float(b.get_attribute("data-value")) for b in bars]
+    assert shown == pytest.approx([g["sensitivity"] for g in sens["gaps"]])
+    assert f"per {sens['sensitivity_unit']}" in (page.text_content("#sensitivity-out") or "")
+    screenshot(page, "tolerance-sensitivity", full_page=True)
+    assert page.console_errors == [] and page.hosts <= {"127.0.0.1", "blob", "data"}
+    # computed once: the next visit shows both without starting anything
+    open_analysis(page, server, analysis_id)
+    page.wait_for_selector("#tolerance-chart")
+    page.wait_for_selector("#sensitivity-chart")
+    assert page.query_selector("#tolerance-start") is None
+
+
+# Last: this test leaves the server closed to requests without a key (its last key revoked).
+def _keys(server: Server, *args: str) -> str:
+    out = subprocess.run([sys.executable, "-m", "app", "keys", *args, "--data-dir", str(server.data_dir)],
+                         capture_output=True, text=True, timeout=120, check=True)
+    return out.stdout
+
+
+def test_the_api_key_goes_with_every_request(page: Any, server: Server) -> None:
+    """A real key in the server's store: without it the API answers 401, with it the page works."""
+    printed = _keys(server, "create", "--scope", "admin", "--name", "browser test")
+    token = printed.splitlines()[0].strip()
+    key_id = re.search(r"created key (\S+)", printed).group(1)  # type: ignore[union-attr]
+    try:
+        time.sleep(1.2)  # the server re-reads its keys within a second
+        assert httpx.get(f"{server.url}/logs").status_code == 401
+        seen: list[tuple[str, str | None]] = []
+        page.on("request", lambda req: seen.append((req.url, req.headers.get("authorization"))))
+        page.goto(f"{server.url}/#/logs")  # the page itself loads without a key
+        page.fill("#api-key", token)
+        page.click("#key-form button")
+        page.wait_for_selector("#log-table, #no-logs")  # the list answered (it may be empty: tests run alone)
+        api_calls = [(u, a) for u, a in seen if "/static/" not in u and urlparse(u).path not in ("/", "")]
+        assert api_calls and all(a == f"Bearer {token}" for _, a in api_calls[-3:]), api_calls
+        page.fill("#api-key", "")
+        page.click("#key-form button")
+    finally:
+        _keys(server, "revoke", key_id)
+        time.sleep(1.2)
+    assert httpx.get(f"{server.url}/logs").status_code == 401  # the last key revoked: the server stays closed
+
+
+def test_docs_work_offline(page: Any, server: Server) -> None:
+    hosts: set[str] = set()
+    page.on("request", lambda req: hosts.add(urlparse(req.url).hostname or ""))
+    page.goto(f"{server.url}/docs")
+    page.wait_for_selector(".swagger-ui .opblock", timeout=60_000)
+    assert len(page.query_selector_all(".swagger-ui .opblock")) >= 30
+    assert hosts == {"127.0.0.1"}
+    assert httpx.get(f"{server.url}/redoc", follow_redirects=False).headers["location"] == "/docs"

@@ -14,11 +14,12 @@ from app.demo.build import build_demo_log
 from app.demo.scenario import Scenario
 from app.fleet.store import write_rows
 from app.settings import default_dbc_dir
-from tests.api.conftest import Server, upload, wait_for
+from tests.api.conftest import Server, wait_for
 from tests.fleet.test_report import _vehicle_rows
 from tests.web.conftest import screenshot
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
+EV02 = "document.querySelector(\"section.fleet-vehicle[data-vehicle='ev-02']\")"
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +37,8 @@ def fleet(server: Server, tmp_path_factory: pytest.TempPathFactory) -> dict[str,
                 write_rows(root, [r for r in rows if r["log_hash"] == h], source="batch", log_hash=h)
         drive = tmp_path_factory.mktemp("fleet-web") / "drive.blf"
         dbc = default_dbc_dir()
-        build_demo_log(drive, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml", Scenario(duration_s=20.0, seed=5))
+        build_demo_log(drive, dbc / "lashscope_ev.dbc", dbc / "lashscope_ev.map.toml",
+                       Scenario(duration_s=20.0, seed=5))
         with drive.open("rb") as fh:
             log_id = c.post("/logs?tz=UTC", files={"file": (drive.name, fh)}).json()["id"]
         aid = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
@@ -63,7 +65,8 @@ def test_fleet_page_shows_points_band_flags_and_links(page: Any, server: Server,
         card = page.query_selector(f"section.fleet-vehicle[data-vehicle='{v['vehicle']}']")
         assert int(card.get_attribute("data-points")) == len(timed)
         pts = card.query_selector_all("svg[id^='ripple-'] .point")
-        assert [float(p.get_attribute("data-value")) for p in pts] == pytest.approx([p["ripple_rpm"]["median"] for p in timed])
+        shown = [float(p.get_attribute("data-value")) for p in pts]
+        assert shown == pytest.approx([p["ripple_rpm"]["median"] for p in timed])
     band = page.query_selector("svg[id='lash-ev-01'] rect.band")
     assert float(band.get_attribute("data-lo")) == pytest.approx(rep["bands"]["total_lash_deg"]["lo"])
     assert len(page.query_selector_all("svg[id='lash-ev-05'] .point.flagged")) == 10
@@ -73,11 +76,12 @@ def test_fleet_page_shows_points_band_flags_and_links(page: Any, server: Server,
     assert "2 events of 1 logs track poorly: left out" in (page.text_content("#fleet-poor") or "")
     assert page.get_attribute("section.fleet-vehicle[data-vehicle='ev-02']", "data-points") == "9"
     screenshot(page, "fleet", full_page=True)
+    assert page.console_errors == [] and page.hosts <= {"127.0.0.1", "blob", "data"}
     page.select_option("#fleet-filter", "poor")
-    page.wait_for_function("document.querySelector(\"section.fleet-vehicle[data-vehicle='ev-02']\")?.dataset.points == '1'")
+    page.wait_for_function(f"{EV02}?.dataset.points == '1'")
     assert page.get_attribute("section.fleet-vehicle[data-vehicle='ev-01']", "data-points") == "0"
     page.select_option("#fleet-filter", "all")
-    page.wait_for_function("document.querySelector(\"section.fleet-vehicle[data-vehicle='ev-02']\")?.dataset.points == '10'")
+    page.wait_for_function(f"{EV02}?.dataset.points == '10'")
     # the analysed drive's point links to its analysis
     real = next(v for v in rep["vehicles"] if not v["vehicle"].startswith("ev-0"))
     assert real["per_log"][0]["analyses"][0]["id"] == fleet["aid"]

@@ -55,7 +55,7 @@ export async function render(main, id) {
   const titles = Object.fromEntries([...r.candidates, ...r.pairs].map((c) => [c.id, c.title]));
   const chartsCard = h("section", { class: "card", id: "diagnosis-charts" }, h("h2", {}, "Held-out residual before and after the fit"),
     h("p", { class: "muted" }, "loading the charts ..."));
-  head.replaceChildren(
+  head.replaceChildren(...[
     h("section", { class: "card", id: "decision" },
       h("p", { class: "headline", id: "headline" }, badge(d.status), " ", headline(d, titles)),
       h("p", { class: "decision" }, d.reason),
@@ -68,7 +68,7 @@ export async function render(main, id) {
         h("dt", {}, "split"), h("dd", {}, `${r.split.calibration.length} calibration, ${r.split.heldout.length} held-out events (seed ${r.split.seed})`),
         h("dt", {}, "noise floor"), h("dd", {}, `${fmt(r.noise_floor.sigma_rpm, 2)} rpm`))),
     baseParameters(d), chartsCard, candidates(r), identifiability(r), identification(r.identification, d.reason),
-    remainder(d), actions(id, d, doc, ctrl, r), where(r));
+    remainder(d), actions(id, d, doc, ctrl, r), where(r)].filter(Boolean));
   await charts(chartsCard, id, r, ctrl.signal);
   main.dataset.state = "ready";
   return () => ctrl.abort();

@@ -185,3 +185,55 @@ export function timeBandChart({ id, rows, band, yLabel, width = 640, height = 24
     svg("line", { x1: m.l, x2: m.l + pw, y1: m.t + ph, y2: m.t + ph, class: "axis" }));
   return root;
 }
+
+// Per category a vertical band (lo-hi) with its median tick, a nominal marker (open circle) and a
+// measured point, red when it falls outside the band: rows [{label, lo, mid, hi, nominal, measured, note}].
+export function bandChart({ id, rows, yLabel, width = 900, height = 280 }) {
+  const m = { l: 62, r: 14, t: 26, b: 40 };
+  const pw = width - m.l - m.r;
+  const ph = height - m.t - m.b;
+  const vals = rows.flatMap((r) => [r.lo, r.hi, r.nominal, r.measured]).filter((v) => v != null && Number.isFinite(v));
+  let lo = Math.min(...vals);
+  let hi = Math.max(...vals);
+  if (!vals.length) [lo, hi] = [0, 1];
+  const pad = (hi - lo) * 0.08 || 1;
+  lo -= pad;
+  hi += pad;
+  const y = (v) => m.t + ph - ((v - lo) / (hi - lo)) * ph;
+  const slot = pw / Math.max(1, rows.length);
+  const root = svg("svg", { id, class: "plot", width, height, viewBox: `0 0 ${width} ${height}`, role: "img" });
+  for (const t of niceTicks(lo, hi)) {
+    root.append(svg("line", { x1: m.l, x2: m.l + pw, y1: y(t), y2: y(t), class: "grid" }),
+      svg("text", { x: m.l - 4, y: y(t) + 4, "text-anchor": "end", "font-size": FONT }, tickLabel(t)));
+  }
+  root.append(svg("text", { x: 12, y: m.t + ph / 2, transform: `rotate(-90 12 ${m.t + ph / 2})`, "text-anchor": "middle",
+    "font-size": FONT }, yLabel));
+  const every = Math.max(1, Math.ceil(rows.length / 40));
+  rows.forEach((r, i) => {
+    const cx = m.l + (i + 0.5) * slot;
+    const inside = r.measured != null && r.lo != null && r.measured >= r.lo && r.measured <= r.hi;
+    const g = svg("g", { class: inside ? "band-item" : "band-item outside", dataset: { label: r.label, lo: r.lo ?? "",
+      hi: r.hi ?? "", measured: r.measured ?? "", inside } }, svg("title", {}, `${r.label}: band ${tickLabel(r.lo ?? NaN)} to ` +
+      `${tickLabel(r.hi ?? NaN)}, median ${tickLabel(r.mid ?? NaN)}, nominal ${tickLabel(r.nominal ?? NaN)}, measured ` +
+      `${tickLabel(r.measured ?? NaN)}${r.note ? ` · ${r.note}` : ""}`));
+    const bw = Math.max(3, Math.min(16, slot * 0.6));
+    if (r.lo != null && r.hi != null) {
+      g.append(svg("rect", { x: cx - bw / 2, width: bw, y: y(r.hi), height: Math.max(1, y(r.lo) - y(r.hi)), class: "mc-band" }));
+      if (r.mid != null) g.append(svg("line", { x1: cx - bw / 2, x2: cx + bw / 2, y1: y(r.mid), y2: y(r.mid), class: "mc-mid" }));
+    }
+    if (r.nominal != null) g.append(svg("circle", { cx, cy: y(r.nominal), r: 3.5, class: "mc-nominal" }));
+    if (r.measured != null) g.append(svg("circle", { cx, cy: y(r.measured), r: 4, class: inside ? "mc-measured" : "mc-measured outside" }));
+    if (i % every === 0) root.append(svg("text", { x: cx, y: m.t + ph + 14, "text-anchor": "middle", "font-size": FONT }, r.label));
+    root.append(g);
+  });
+  root.append(svg("text", { x: m.l + pw / 2, y: m.t + ph + 32, "text-anchor": "middle", "font-size": FONT }, "event"),
+    svg("line", { x1: m.l, x2: m.l, y1: m.t, y2: m.t + ph, class: "axis" }),
+    svg("line", { x1: m.l, x2: m.l + pw, y1: m.t + ph, y2: m.t + ph, class: "axis" }));
+  const key = svg("g", { class: "legend" });
+  key.append(svg("rect", { x: m.l, y: 6, width: 10, height: 12, class: "mc-band" }), svg("text", { x: m.l + 14, y: 16, "font-size": FONT }, "predicted 5-95 % (median tick)"),
+    svg("circle", { cx: m.l + 210, cy: 12, r: 3.5, class: "mc-nominal" }), svg("text", { x: m.l + 218, y: 16, "font-size": FONT }, "nominal vehicle"),
+    svg("circle", { cx: m.l + 330, cy: 12, r: 4, class: "mc-measured" }), svg("text", { x: m.l + 338, y: 16, "font-size": FONT }, "measured"),
+    svg("circle", { cx: m.l + 410, cy: 12, r: 4, class: "mc-measured outside" }), svg("text", { x: m.l + 418, y: 16, "font-size": FONT }, "measured, outside the band"));
+  root.append(key);
+  return root;
+}
