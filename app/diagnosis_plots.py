@@ -21,6 +21,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from app.analysis.diagnosis.rebase import BASE_ID
 from app.analysis.diagnosis.score import BAND_NAMES, PHASES
 from app.analysis.diagnosis.select import DiagnosisResult, Evaluation
 from app.errors import AnalysisError
@@ -64,8 +65,8 @@ def chart_data(res: DiagnosisResult, max_events: int = 12) -> dict[str, object]:
     base = res.baseline
     if res.file_baseline is not None:  # before: the file's vehicle; after: the identified one (with the effect)
         base = res.file_baseline
-        if aug is None:
-            label, aug = "identified base parameters", res.baseline
+    if BASE_ID in res.candidates and (aug is None or res.decision.status == BASE_ID):  # they alone are the answer
+        label, aug = "identified base parameters", res.candidates[BASE_ID]
     by_index = {e.index: e for e in res.events}
     events = []
     for i in ho:

@@ -6,7 +6,6 @@
 import { answer, api, download, saveBlob } from "./api.js";
 import { chartPng, COLORS, extraColor, holdOnto, seriesData, speedChart, valueAt } from "./chart.js";
 import { eventOverlays, eventsTable, metricsTable } from "./events.js";
-import { toleranceCard } from "./tolerance.js";
 import { badge, errorBox, fmt, h, logStart, progressBar, sleep, stamp, utc } from "./util.js";
 
 const MAX_POINTS_CAP = 4000;
@@ -285,7 +284,10 @@ export async function render(main, id, extra = "") {
   overlays = eventOverlays(id, events, metrics, ctrl.signal, (t0, t1) => setX(t0, t1));
   main.append(eventsTable(events, metrics, start),
     metricsTable(id, metrics),
-    overlays, toleranceCard(id, rec, ctrl.signal));
+    overlays);
+  // loaded once the chart is up: its module is not on the first paint's path
+  const { toleranceCard } = await import("./tolerance.js");
+  main.append(toleranceCard(id, rec, ctrl.signal));
   main.dataset.state = "ready";
   return () => {
     ctrl.abort();
