@@ -136,12 +136,20 @@ export function eventOverlays(id, events, metrics, signal, onShow) {
       h("button", { id: "overlay-next", onclick: () => go(page + 1) }, "next ▶"),
       h("label", {}, shared, " same rpm span on every panel of the page"), focus),
     grid);
+  // Redrawn a moment after the last zoom (a drag, or a burst of pans, is one redraw of up to twelve
+  // panels, off the zoom's own frame), and only when the events in the window changed.
+  let focusTimer = null;
   card.focusWindow = (t0, t1) => {
-    shown = t0 == null ? all : all.filter((e) => e.t_cross_s >= t0 && e.t_cross_s <= t1);
-    focus.textContent = t0 == null ? "" : `· ${shown.length} event(s) in the chart's window ${fmt(t0, 2)}-${fmt(t1, 2)} s`;
-    grid.dataset.focus = t0 == null ? "" : `${t0},${t1}`;
-    pages = Math.max(1, Math.ceil(shown.length / PAGE));
-    go(0);
+    clearTimeout(focusTimer);
+    focusTimer = setTimeout(() => {
+      const next = t0 == null ? all : all.filter((e) => e.t_cross_s >= t0 && e.t_cross_s <= t1);
+      focus.textContent = t0 == null ? "" : `· ${next.length} event(s) in the chart's window ${fmt(t0, 2)}-${fmt(t1, 2)} s`;
+      grid.dataset.focus = t0 == null ? "" : `${t0},${t1}`;
+      if (next.length === shown.length && next.every((e, i) => e === shown[i])) return;
+      shown = next;
+      pages = Math.max(1, Math.ceil(shown.length / PAGE));
+      go(0);
+    }, 250);
   };
   shared.addEventListener("change", () => draw());
 
