@@ -18,7 +18,7 @@ fails with ``timed out after N s``) and fails the job if the process dies withou
 safe across processes. ``in_process=True`` runs jobs in the runner thread instead (for the
 command line, where nothing else has to stay responsive).
 
-Lanes: analyses and tolerance bands share the ``analysis`` lane (``workers`` at a time); the long
+Lanes: analyses, tolerance bands and gap sensitivities share the ``analysis`` lane (``workers`` at a time); the long
 kinds -- diagnoses, validations, batches, minutes each -- run one at a time in the ``long`` lane, so
 a whole-library fit never holds up a new analysis. Workers run at a lower OS priority
 (:data:`WORKER_NICE`), so on a small machine the scheduler serves request handling first.
@@ -47,7 +47,7 @@ from app.storage.records import JobRecord, JobStatus
 log = logging.getLogger("lashscope.jobs")
 #: kind -> lane; one module each in app.jobkinds, with run(store, job)
 KINDS = {"analysis": "analysis", "tolerance": "analysis", "diagnosis": "long", "validation": "long",
-         "batch": "long", "identification": "long"}
+         "batch": "long", "identification": "long", "gap_sensitivity": "analysis"}
 WORKER_NICE = 5  # added to a worker's niceness: the API's reads come first on a busy machine
 _SPAWN = multiprocessing.get_context("spawn")  # no fork of a threaded server; the child imports afresh
 

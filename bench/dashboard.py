@@ -22,8 +22,16 @@ log through the API (not timed), then in headless Chromium:
   ``/docs``), as sent (gzip-compressed where the browser accepts it), and what gzip levels 1, 6
   and 9 cost and save on the largest API answers.
 
-Targets (issue 13): first paint <= 1 s on loopback; zoom round trip p95 <= 200 ms; no response
-over 2 MB.
+* **a channel added** from the channel browser: the time from ticking a decoded channel to the chart
+  redrawn with it on its unit's axis and the next frame painted (its rows fetched for the window
+  shown with ``max_points``); beside it, the obvious alternative: fetching and parsing every row
+  of that channel (``max_points=0``).
+* **diagnosis view first paint**: a diagnosis of the same log (one candidate effect; not timed),
+  then cold loads of ``/#/diagnosis/<id>``: navigation start to the first frame with the decision
+  headline and every chart drawn (residual by event, phase and band; held-out overlays).
+
+Targets: first paint <= 1 s on loopback; zoom round trip p95 <= 200 ms; no response over 2 MB;
+a channel added <= 300 ms; diagnosis view first paint <= 1.5 s.
 """
 
 from __future__ import annotations
@@ -88,6 +96,69 @@ FETCH_PARSE = """async (url) => {
   const body = await (await fetch(url)).json();
   return [performance.now() - start, body.points];
 }"""
+
+
+ADD_CHANNEL = """async (name) => {
+  const el = document.querySelector('#timeline');
+  const series = Number(el.dataset.series);
+  const start = performance.now();
+  document.querySelector(`#channel-list input[data-channel='${name}']`).click();
+  while (Number(el.dataset.series) === series) await new Promise(r => setTimeout(r, 1));
+  await new Promise(requestAnimationFrame);
+  return performance.now() - start;
+}"""
+
+
+def diagnosed(srv: Server, aid: str) -> str | None:
+    """A diagnosis of the analysis with one candidate effect (not timed); None when it did not finish."""
+    with httpx.Client(base_url=srv.url, timeout=600.0) as c:
+        did: str = c.post(f"/analyses/{aid}/diagnoses", json={"candidates": ["backlash"]}).json()["id"]
+        t = time.monotonic()
+        while (doc := c.get(f"/diagnoses/{did}").json())["status"] in ("queued", "running"):
+            time.sleep(1.0)
+        decided = f" {doc['report']['decision']['status']}" if doc["status"] == "done" else ""
+        print(f"diagnosed in {time.monotonic() - t:.0f} s: {doc['status']}{decided} (not part of the figures)")
+        return did if doc["status"] == "done" else None
+
+
+def channel_and_diagnosis(browser: Any, srv: Server, aid: str, page: Any, loads: int) -> None:
+    """Channels added to the open analysis view, then cold first paints of the diagnosis view."""
+    names = [n for n in ("wheel_speed_fl_rpm", "vehicle_speed_kmh", "brake", "wheel_speed_rr_rpm", "brake_pressed")
+             if page.query_selector(f"#channel-list input[data-channel='{n}']")]
+    page.evaluate("document.querySelector('#full-view').click()")
+    page.wait_for_timeout(500)
+    lat = [page.evaluate(ADD_CHANNEL, n) for n in names]
+    mp = min(4000, page.evaluate("document.querySelector('#timeline').chart.width") * 2)
+    bounded, every = [], []
+    for i, n in enumerate(names):
+        url = f"{srv.url}/analyses/{aid}/signals/{n}?t1={1e6 + i}"  # t1: an answer of its own, not cached
+        bounded.append(page.evaluate(FETCH_PARSE, f"{url}&max_points={mp}")[0])
+        every.append(page.evaluate(FETCH_PARSE, f"{url}&max_points=0")[0])
+    print(f"\na channel added to the whole-log chart (tick -> rows fetched, chart rebuilt with its axis, next frame), "
+          f"{', '.join(names)}:")
+    print(f"median {statistics.median(lat):6.0f} ms   max {max(lat):6.0f} ms   target <= 300 ms: "
+          f"{'PASS' if max(lat) <= 300 else 'FAIL'}   (each: {', '.join(f'{x:.0f}' for x in lat)})")
+    print(f"a channel's read in the page (fetch + JSON parse): max_points={mp} "
+          f"median {statistics.median(bounded):5.0f} ms; "
+          f"alternative, every row median {statistics.median(every):5.0f} ms: "
+          f"{statistics.median(every) / statistics.median(bounded):.1f}x")
+    did = diagnosed(srv, aid)
+    if did is None:
+        print("diagnosis view: not measured (the diagnosis did not finish)")
+        return
+    paint = []
+    for _ in range(loads):
+        ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
+        pg = ctx.new_page()
+        pg.goto(f"{srv.url}/#/diagnosis/{did}")
+        pg.wait_for_selector("main[data-painted-ms]", state="attached", timeout=120_000)
+        paint.append(float(pg.get_attribute("main", "data-painted-ms") or "nan"))
+        panels = pg.get_attribute("#diagnosis-overlays", "data-panels")
+        ctx.close()
+    print(f"\ndiagnosis view, new browser context each (empty cache), n={loads}, {panels} held-out overlays:")
+    print(f"first paint (decision and every chart drawn)   median {statistics.median(paint):7.0f} ms   "
+          f"max {max(paint):7.0f} ms   target <= 1500 ms: {'PASS' if max(paint) <= 1500 else 'FAIL'}   "
+          f"(each, in order: {', '.join(f'{x:.0f}' for x in paint)})")
 
 
 def analysed_log(srv: Server, log: Path) -> str:
@@ -167,6 +238,7 @@ def main() -> int:
     ap.add_argument("--loads", type=int, default=5, help="cold first paints")
     ap.add_argument("--zooms", type=int, default=40)
     ap.add_argument("--log", type=Path, default=None, help="reuse (or create) the log at this path")
+    ap.add_argument("--no-diagnosis", action="store_true", help="skip the channel and diagnosis view figures")
     args = ap.parse_args()
     from playwright.sync_api import sync_playwright
 
@@ -241,6 +313,8 @@ def main() -> int:
                 print(f"\nzoom round trip (window set -> finer rows fetched, redrawn, next frame), n={args.zooms}:")
                 print(f"p50 {pct(lat, 50):6.1f} ms   p95 {pct(lat, 95):6.1f} ms   max {max(lat):6.1f} ms   "
                       f"target p95 <= 200 ms: {'PASS' if pct(lat, 95) <= 200 else 'FAIL'}")
+                if not args.no_diagnosis:
+                    channel_and_diagnosis(browser, srv, aid, page, args.loads)
                 page.goto(f"{srv.url}/docs")
                 page.wait_for_selector(".swagger-ui .opblock", timeout=60_000)
                 browser.close()

@@ -31,7 +31,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.middleware.gzip import GZipMiddleware
 
 from app import __version__
-from app.api import errors
+from app.api import errors, route_errors
 from app.api.formats import FormatGuard
 from app.api.head import HeadAsGet
 from app.api.routes import (
@@ -140,6 +140,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(ServerTiming)  # outermost: the whole of the service's time on a request
     errors.install(app)
     for router in ROUTERS:
+        route_errors.apply(router)  # each operation's own error set in the OpenAPI document
         app.include_router(router)
     install_dashboard(app)
     return app

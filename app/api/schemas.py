@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from app.storage.records import AnalysisRecord, JobRecord, LogRecord, VehicleRecord
 
@@ -140,25 +140,304 @@ class _Open(BaseModel):
     model_config = ConfigDict(extra="allow")
 
 
+# --- scientific payloads, typed (a generated client gets fields, not dicts) --------------------------------
+# The per-event metric and event models are built from the column registries (app.analysis.metrics
+# METRIC_NAMES and RippleMetrics, app.api.tables EVENT_COLUMNS, app.analysis.events.Event), so a column
+# added there is a typed field here without editing this file; every model also passes unknown keys through.
+
+UNIT_SUFFIXES = (("_rpm", "rpm"), ("_hz", "Hz"), ("_kgm2", "kg m^2"), ("_mps2", "m/s^2"), ("_mps3", "m/s^3"),
+                 ("_ms2", "m/s^2"), ("_kmh", "km/h"), ("_nm_s", "N m/s"), ("_nm", "N m"), ("_pct", "%"),
+                 ("_deg", "deg"), ("_ms", "ms"), ("_s", "s"), ("_g", "g"))
+
+
+def unit_of(name: str) -> str:
+    """The unit a column's name ends in (SI as the API sends it); ``-`` for ratios and counts."""
+    return next((u for suffix, u in UNIT_SUFFIXES if name.endswith(suffix)), "-")
+
+
+def _float_field(name: str, what: str) -> Any:
+    unit = unit_of(name)
+    return (float | None, Field(default=None, description=f"{what} ({unit})", json_schema_extra={"unit": unit}))
+
+
+def _metric_values_model() -> type[BaseModel]:
+    from dataclasses import fields as dc_fields
+
+    from app.analysis.metrics import METRIC_NAMES, RippleMetrics
+
+    names = list(METRIC_NAMES) + [f.name for f in dc_fields(RippleMetrics)
+                                  if f.name not in METRIC_NAMES and f.name != "resolution"]
+    defs: dict[str, Any] = {n: _float_field(n, n.replace("_", " ")) for n in names}
+    defs["resolution"] = (dict[str, str], Field(default_factory=dict, description=(
+        "metric -> why the sampling cannot support it (null metric unless the reason starts with 'approximate')")))
+    return create_model("MetricValues", __config__=ConfigDict(extra="allow"), **defs)
+
+
+MetricValues = _metric_values_model()
+
+
+class TrackingOut(_Open):
+    verdict: str = Field(description="good | poor | unknown")
+    reasons: list[str] = Field(default_factory=list)
+
+
+class FindingOut(_Open):
+    code: str
+    channel: str | None = None
+    message: str = ""
+
+
+def _event_model() -> type[BaseModel]:
+    import typing
+
+    from app.analysis.events import Event
+    from app.api.tables import EVENT_COLUMNS
+
+    hints = typing.get_type_hints(Event)
+    defs: dict[str, Any] = {}
+    for name in dict.fromkeys([*EVENT_COLUMNS, *hints]):
+        if name == "tracking":
+            defs[name] = (TrackingOut | None, None)
+        elif name in ("index",):
+            defs[name] = (int, ...)
+        elif name in ("kind", "exclusion"):
+            defs[name] = (str | None, None)
+        elif name in ("included", "from_coast", "pedal_corroborated"):
+            defs[name] = (bool | None, None)
+        elif hints.get(name) in (float, float | None, int, int | None) or unit_of(name) != "-":
+            defs[name] = _float_field(name, name.replace("_", " "))
+        else:
+            defs[name] = (Any, None)
+    defs.update(error=(str | None, Field(default=None, description="why the event has no metrics")),
+                has_series=(bool, False), has_metrics=(bool, False))
+    return create_model("EventOut", __config__=ConfigDict(extra="allow"), **defs)
+
+
+EventOut = _event_model()
+
+
+class EventMetricsOut(_Open):
+    """One event's metrics: ``measured``, ``simulated`` and ``difference`` (sim - meas), SI units."""
+
+    event_index: int
+    kind: str | None = None
+    t_cross_s: float | None = Field(default=None, description="torque zero crossing (s)")
+    measured: MetricValues  # type: ignore[valid-type]
+    simulated: MetricValues  # type: ignore[valid-type]
+    difference: MetricValues  # type: ignore[valid-type]
+    rms_rpm: float | None = Field(default=None, description="aligned RMS error (rpm)")
+    nrmse: float | None = Field(default=None, description="aligned RMS error over the measured range (-)")
+    bias_rpm: float | None = Field(default=None, description="mean sim - meas (rpm)")
+    samples: int | None = None
+    sim_gap_open_time_s: float | None = Field(default=None, description="simulated gap-open time (s)")
+    tracking: TrackingOut | None = None
+
+
+class MetricSummaryOut(_Open):
+    measured_median: float | None = None
+    simulated_median: float | None = None
+    difference_median: float | None = None
+    difference_mean: float | None = None
+    events: int = 0
+
+
+class MetricsSummaryOut(_Open):
+    events: int = 0
+    included: int = 0
+    excluded: int = 0
+    with_metrics: int = 0
+    tip_in: int = 0
+    tip_out: int = 0
+    offset_ms: float | None = Field(default=None, description="torque-to-speed offset applied (ms)")
+    offset_applied: bool | None = None
+    offset_correlation: float | None = None
+    metrics: dict[str, MetricSummaryOut] = Field(default_factory=dict, description="metric -> medians over events")
+    findings: list[FindingOut] = Field(default_factory=list)
+    tracking: TrackingOut | None = None
+    whole_rms_rpm: float | None = Field(default=None, description="whole-log RMS error (rpm)")
+    whole_nrmse: float | None = None
+
+
+class IntervalOut(BaseModel):
+    """A value with its 90 % interval."""
+
+    value: float | None = None
+    lo: float | None = None
+    hi: float | None = None
+
+
+class BaseParameterOut(_Open):
+    name: str
+    label: str = ""
+    ratio: float | None = Field(default=None, description="identified / the file's value (-)")
+    lo: float | None = None
+    hi: float | None = None
+    value: float | None = None
+    nominal: float | None = None
+    unit: str = ""
+
+
+class DecisionOut(_Open):
+    status: str = Field(description="explained | partial | ambiguous | none_of_candidates | no_significant_gap | "
+                                    "insufficient_data | base_parameters")
+    top: list[str] = Field(default_factory=list, description="effect ids of the chosen fit")
+    confusable: list[str] | None = None
+    reason: str = ""
+    residual_to_noise_before: IntervalOut | None = None
+    explained_share: IntervalOut | None = None
+    heldout_shrink: IntervalOut | None = None
+    residual_to_noise_after: float | None = None
+    residual_rms_rpm_before: float | None = Field(default=None, description="held-out residual RMS, baseline (rpm)")
+    residual_rms_rpm_after: float | None = Field(default=None, description="held-out residual RMS, chosen fit (rpm)")
+    base_parameters: list[BaseParameterOut] = Field(default_factory=list)
+    identify_first: bool | None = None
+
+
+class TradeOffOut(BaseModel):
+    params: list[str]
+    correlation: float | None = None
+
+
+class FitOut(_Open):
+    effects: list[str] = Field(default_factory=list)
+    params: dict[str, dict[str, float | None]] = Field(default_factory=dict,
+                                                       description="effect -> parameter -> value (SI)")
+    nuisance: dict[str, float | None] = Field(default_factory=dict)
+    at_bound: list[str] = Field(default_factory=list)
+    trade_offs: list[TradeOffOut] = Field(default_factory=list)
+
+
+class HeldoutScoreOut(_Open):
+    shrink: IntervalOut | None = None
+    explained_share: IntervalOut | None = None
+    improved_fraction: float | None = None
+    significant: bool | None = None
+    residual_to_noise: float | None = None
+    residual_rms_rpm: float | None = None
+
+
+class CandidateOut(_Open):
+    id: str
+    title: str = ""
+    effects: list[str] = Field(default_factory=list)
+    fit: FitOut
+    heldout: HeldoutScoreOut
+    phases: dict[str, IntervalOut] = Field(default_factory=dict)
+    bands: dict[str, IntervalOut] = Field(default_factory=dict)
+
+
+class SplitOut(_Open):
+    seed: int
+    calibration: list[int]
+    heldout: list[int]
+
+
+class NoiseFloorOut(_Open):
+    sigma_rpm: float | None = Field(default=None, description="white noise standard deviation (rpm)")
+    quant_step_rpm: float | None = None
+    period_s: float | None = None
+    n_samples: int | None = None
+
+
+class DiagnosisReportOut(_Open):
+    """The diagnosis report (schema lashscope.diagnosis/1, docs/diagnosis.md)."""
+
+    schema_: str = Field(alias="schema")
+    vehicle: str
+    model: str
+    split: SplitOut
+    noise_floor: NoiseFloorOut
+    decision: DecisionOut
+    baseline: FitOut | None = None
+    candidates: list[CandidateOut] = Field(default_factory=list)
+    pairs: list[CandidateOut] = Field(default_factory=list)
+    findings: list[FindingOut] = Field(default_factory=list)
+    candidates_not_applicable: dict[str, str] = Field(default_factory=dict)
+    elapsed_s: float | None = None
+
+    model_config = ConfigDict(extra="allow", populate_by_name=True, serialize_by_alias=True)
+
+
+class DiagnosisValidationOut(_Open):
+    status: str | None = None
+    log_id: str | None = None
+    events: int | None = None
+    shrink: IntervalOut | None = None
+    explained_share: IntervalOut | None = None
+    improved_fraction: float | None = None
+    residual_to_noise_baseline: float | None = None
+    residual_to_noise_augmented: float | None = None
+    error: ErrorOut | None = None
+
+
+class MedianIntervalOut(BaseModel):
+    median: float | None = None
+    lo: float | None = None
+    hi: float | None = None
+
+
+class FleetLogOut(_Open):
+    """One log of a vehicle: its medians with intervals; ``analyses`` of it on this server."""
+
+    log_hash: str
+    log_name: str | None = None
+    log_id: str | None = None
+    events: int
+    time: str | None = Field(default=None, description="first event's absolute time (UTC), null without a log clock")
+    tracking: str | None = None
+    total_lash_deg: MedianIntervalOut = Field(description="motor-referred total lash estimate (deg)")
+    ripple_rpm: MedianIntervalOut = Field(description="measured fluctuation (rpm)")
+    analyses: list[dict[str, Any]] = Field(default_factory=list)
+
+
+class FleetWeekOut(BaseModel):
+    week: str
+    events: int
+    median: float | None = None
+
+
+class FleetVehicleOut(_Open):
+    vehicle: str
+    events: int
+    logs: int
+    events_with_gap_open_time: int = 0
+    events_poor_tracking: int = 0
+    first: str | None = None
+    last: str | None = None
+    gap_open_time_ms: MedianIntervalOut = Field(description="median measured gap-open time (ms)")
+    total_lash_deg: MedianIntervalOut = Field(description="median total lash, motor-referred (deg)")
+    ripple_rpm: MedianIntervalOut = Field(description="median measured fluctuation (rpm)")
+    weekly_ripple_rpm: list[FleetWeekOut] = Field(default_factory=list)
+    flags: list[str] = Field(default_factory=list, description="why the vehicle is outside the fleet band")
+    per_log: list[FleetLogOut] = Field(default_factory=list)
+
+
+class FleetBandOut(BaseModel):
+    center: float
+    lo: float
+    hi: float
+
+
 class EventsOut(_Open):
     """``/analyses/{id}/events``: every tip-in/tip-out (``Event`` fields, ``exclusion`` says why one is left out)."""
 
     analysis_id: str
     count: int
-    events: list[dict[str, Any]]
+    events: list[EventOut]  # type: ignore[valid-type]
 
 
 class MetricsOut(_Open):
     """``/analyses/{id}/metrics``: per event ``measured``, ``simulated``, ``difference`` (sim - meas), SI units."""
 
     analysis_id: str
-    summary: dict[str, Any]
+    summary: MetricsSummaryOut
     offset: dict[str, Any]
     whole: dict[str, Any] | None
-    events: list[dict[str, Any]]
+    events: list[EventMetricsOut]
     notes: list[str]
-    tracking: dict[str, Any] | None = None
+    tracking: TrackingOut | None = None
     sampling: dict[str, Any] | None = None
+    units: dict[str, str] = Field(default_factory=dict, description="metric -> unit of its values (SI)")
 
 
 class SignalsOut(BaseModel):
@@ -178,8 +457,8 @@ class FleetOut(_Open):
     fleet's bands and the vehicles outside them."""
 
     store: str
-    vehicles: list[dict[str, Any]] = Field(default_factory=list)
-    bands: dict[str, Any] = Field(default_factory=dict)
+    vehicles: list[FleetVehicleOut] = Field(default_factory=list)
+    bands: dict[str, FleetBandOut | None] = Field(default_factory=dict)
     band_k: float
     interval_level: float
     poor_tracking: dict[str, Any] = Field(default_factory=dict, description=(
@@ -192,6 +471,28 @@ class GapSensitivityOut(_Open):
     name: str
     version: int
     sensitivity_unit: str | None = None
+
+
+class JobStateOut(BaseModel):
+    """Where a result computed on request stands: ``not_started``, ``queued``, ``running``, ``done`` or
+    ``failed`` (with ``error``); a read that never starts work."""
+
+    status: str
+    progress: float = 0.0
+    stage: str = ""
+    job_id: str | None = None
+    error: ErrorOut | None = None
+
+
+class GapSensitivityJobOut(BaseModel):
+    """A gap sensitivity being computed: poll ``GET /vehicles/{name}/gap-sensitivity`` until it answers 200."""
+
+    name: str
+    version: int
+    job_id: str
+    status: str
+    stage: str
+    progress: float
 
 
 class LiveSessionOut(_Open):
@@ -221,8 +522,8 @@ class DiagnosisOut(_Open):
     progress: float = 0.0
     stage: str = ""
     plots: list[str] = Field(default_factory=list)
-    report: dict[str, Any] | None = None
-    validation: dict[str, Any] | None = None
+    report: DiagnosisReportOut | None = None
+    validation: DiagnosisValidationOut | None = None
 
 
 class AppliedOut(BaseModel):
@@ -408,3 +709,56 @@ class SignalMapProposalOut(BaseModel):
     channels: list[ChannelEvidenceOut]
     candidates: dict[str, list[str]] = Field(description="per channel, the suggester's best signals")
     signal_map_toml: str = Field(description="the proposed map, for POST /vehicles (field signal_map)")
+
+
+class ResidualByEvent(BaseModel):
+    index: int
+    kind: str
+    t_event_s: float | None
+    before: float | None = Field(description="held-out residual / noise energy of the baseline (1 = noise)")
+    after: float | None = Field(description="the same with the chosen fit (null: nothing fitted)")
+
+
+class ResidualByPhase(BaseModel):
+    phase: str
+    samples: int
+    before: float | None
+    after: float | None
+
+
+class ResidualByBand(BaseModel):
+    band: str
+    before: float | None = Field(description="share of the baseline's held-out residual energy in this band")
+    after: float | None
+
+
+class HeldoutOverlay(BaseModel):
+    """Speed of one held-out event on time from its torque zero crossing (s); rpm."""
+
+    index: int
+    kind: str
+    t_event_s: float | None
+    t_s: list[float | None]
+    measured_rpm: list[float | None]
+    baseline_rpm: list[float | None]
+    fitted_rpm: list[float | None] | None
+    gap_open_s: float | None
+    gap_close_s: float | None
+
+
+class DiagnosisChartsOut(BaseModel):
+    """``/diagnoses/{id}/charts``: the numbers behind the diagnosis plots (lashscope.diagnosis-charts/1)."""
+
+    schema_: str = Field(alias="schema")
+    status: str
+    top: list[str]
+    fitted: str | None = Field(description="the fit shown as 'after': the chosen effect(s), the best one not "
+                                           "attributed, or the identified base parameters")
+    noise_sigma_rpm: float | None
+    heldout: int
+    events: list[ResidualByEvent]
+    phases: list[ResidualByPhase]
+    bands: list[ResidualByBand]
+    overlays: list[HeldoutOverlay]
+
+    model_config = ConfigDict(populate_by_name=True, serialize_by_alias=True)

@@ -10,6 +10,9 @@ From the event store (:mod:`app.fleet.store`), events with metrics only:
   it travels is about ``theta = 1/2 * h * pi/30 * t_open`` (rad). An estimate, good for comparing
   vehicles of one driveline and for wear trends, not an absolute clearance; same interval method;
 - **ripple**: the measured peak-to-valley fluctuation (rpm), median per vehicle and per ISO week;
+- **per log** (``per_log``, oldest first): the same medians with intervals over each log's events, with
+  the log's content hash, start time (the first event's absolute time) and tracking verdict, so a
+  plot over time can link each point to the analyses of that log;
 - **band**: over the vehicles' medians, fleet median +- ``k`` x 1.4826 x MAD (``k`` = 3; the MAD
   floored at 2 % of the median so identical vehicles do not flag noise). A vehicle whose median
   gap-open time, total lash or ripple lies outside is flagged with the reason. Needs at least
@@ -37,7 +40,7 @@ QUANTITIES = {  # report key -> (unit, what)
 }
 MIN_VEHICLES_FOR_BAND = 3
 MAD_FLOOR = 0.02
-COLUMNS = ("vehicle", "log_hash", "time", "measured_gap_open_time_s", "measured_rise_height_rpm",
+COLUMNS = ("vehicle", "log_hash", "log_name", "time", "measured_gap_open_time_s", "measured_rise_height_rpm",
            "measured_fluctuation_rpm", "log_tracking")
 POOR = "poor"
 
@@ -53,6 +56,28 @@ def median_interval(values: np.ndarray, level: float, rng: np.random.Generator,
     meds = np.median(rng.choice(v, size=(n_boot, v.size), replace=True), axis=1)
     lo, hi = np.quantile(meds, [(1 - level) / 2, (1 + level) / 2])
     return float(np.median(v)), float(lo), float(hi)
+
+
+def _lash_deg(part: Any) -> np.ndarray:
+    gap_s = part["measured_gap_open_time_s"].to_numpy(dtype=float)
+    rise = part["measured_rise_height_rpm"].to_numpy(dtype=float)
+    return np.asarray(np.degrees(0.5 * rise * np.pi / 30.0 * gap_s), dtype=float)
+
+
+def _per_log(part: Any, level: float, rng: np.random.Generator) -> list[dict[str, Any]]:
+    """One vehicle's logs, oldest first: lash and ripple medians with intervals over each log's events."""
+    out = []
+    for log_hash, rows in part.groupby("log_hash", sort=False):
+        times = rows["time"].dropna()
+        out.append({
+            "log_hash": str(log_hash), "events": len(rows),
+            "log_name": str(rows["log_name"].iloc[0]) if rows["log_name"].notna().any() else str(log_hash),
+            "time": times.min().isoformat() if len(times) else None,
+            "tracking": str(rows["log_tracking"].iloc[0]) if rows["log_tracking"].notna().any() else None,
+            **{q: dict(zip(("median", "lo", "hi"), median_interval(v, level, rng), strict=True))
+               for q, v in (("total_lash_deg", _lash_deg(rows)),
+                            ("ripple_rpm", rows["measured_fluctuation_rpm"].to_numpy(dtype=float)))}})
+    return sorted(out, key=lambda r: (r["time"] is None, r["time"] or "", r["log_hash"]))
 
 
 def _band(medians: list[float], k: float) -> dict[str, float] | None:
@@ -77,11 +102,11 @@ def fleet_report(root: str | Path, k: float = 3.0, level: float = 0.9, seed: int
         frame = frame[~poor]
     weekly = weekly_median(frame)
     rng = np.random.default_rng(seed)
+    rng_logs = np.random.default_rng(seed + 1)  # its own draws: the per-vehicle intervals stay as they were
     vehicles: list[dict[str, Any]] = []
     for name, part in sorted(frame.groupby("vehicle"), key=lambda kv: str(kv[0])):
         gap_s = part["measured_gap_open_time_s"].to_numpy(dtype=float)
-        rise = part["measured_rise_height_rpm"].to_numpy(dtype=float)
-        lash_deg = np.degrees(0.5 * rise * np.pi / 30.0 * gap_s)
+        lash_deg = _lash_deg(part)
         est = {"gap_open_time_ms": median_interval(gap_s * 1e3, level, rng),
                "total_lash_deg": median_interval(lash_deg, level, rng),
                "ripple_rpm": median_interval(part["measured_fluctuation_rpm"].to_numpy(dtype=float), level, rng)}
@@ -98,6 +123,7 @@ def fleet_report(root: str | Path, k: float = 3.0, level: float = 0.9, seed: int
                                   for w, n, v in zip(weeks["week"], weeks["events"], weeks["median"], strict=True)],
             "flags": [],
             "outside": [],  # the quantities (QUANTITIES keys) whose band the vehicle lies outside
+            "per_log": _per_log(part, level, rng_logs),
         })
     bands = {q: _band([v[q]["median"] for v in vehicles], k) for q in QUANTITIES}
     for v in vehicles:

@@ -24,6 +24,7 @@ from app.storage.records import JobRecord
 SEP = "--dg"  # <analysis id><SEP><hex>: a diagnosis id names its analysis
 STATUS, VALIDATION, REPORT = "status.json", "validation.json", "report.json"
 PLOTS = {"events": "diagnosis_events.png", "residual": "diagnosis_residual.png"}
+CHARTS = "charts.json"  # the plots' numbers for the dashboard (app.diagnosis_plots.chart_data)
 _FILE_LOCK = threading.Lock()
 
 
@@ -114,7 +115,7 @@ def base_ratios(report: dict[str, Any]) -> dict[str, float]:
 
 def run(store: Store, job: JobRecord) -> None:
     from app.analysis.diagnosis import diagnose_checked, report_dict
-    from app.diagnosis_plots import event_overlay_png, residual_chart_png
+    from app.diagnosis_plots import chart_data, event_overlay_png, residual_chart_png
 
     analysis_id, _, diagnosis_id = job.subject.split("/")
     d = store.analysis_dir(analysis_id) / "diagnoses" / diagnosis_id
@@ -133,5 +134,6 @@ def run(store: Store, job: JobRecord) -> None:
     if result.baseline is not None:
         event_overlay_png(result, d / PLOTS["events"])
         residual_chart_png(result, d / PLOTS["residual"])
+        write_json(d / CHARTS, chart_data(result))
     write_json(d / REPORT, doc)
     update(d / STATUS, decision=doc["decision"]["status"])

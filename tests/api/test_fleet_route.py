@@ -34,3 +34,7 @@ def test_analysis_rows_reach_the_fleet_report(server: Server, demo_log: Path) ->
     with_metrics = frame[frame["measured_fluctuation_rpm"].notna()]
     assert vehicle["events"] == len(with_metrics) >= 4
     assert vehicle["ripple_rpm"]["median"] == with_metrics["measured_fluctuation_rpm"].median()
+    # each log's point links to the stored log and its analyses
+    (point,) = vehicle["per_log"]
+    assert point["log_id"] == log_id and point["analyses"][0]["id"] == analysis["id"]
+    assert point["events"] == vehicle["events"] and point["ripple_rpm"]["median"] == vehicle["ripple_rpm"]["median"]

@@ -24,6 +24,7 @@ def test_tolerance_band_job(server: Server, demo_log: Path) -> None:
         url = f"/analyses/{analysis['id']}/tolerance"
         unstarted = c.get(url, params={"n": 40, "seed": 0})
         assert unstarted.status_code == 404 and unstarted.json()["code"] == "tolerance_not_started"
+        assert c.get(f"{url}/status", params={"n": 40}).json()["status"] == "not_started"  # a 200 read
         first = c.post(url, params={"n": 40, "seed": 0})
         assert first.status_code == 202, first.text
         job_id = first.json()["job_id"]
@@ -34,6 +35,9 @@ def test_tolerance_band_job(server: Server, demo_log: Path) -> None:
             time.sleep(0.3)
             r = c.get(url, params={"n": 40, "seed": 0})
         assert r.status_code == 200, r.text
+        assert c.get(f"{url}/status", params={"n": 40}).json() == {
+            "status": "done", "progress": 1.0, "stage": "", "job_id": None, "error": None}
+        assert c.get(f"{url}/status", params={"n": 41}).json()["status"] == "not_started"
         doc: dict[str, Any] = r.json()
         metrics = c.get(f"/analyses/{analysis['id']}/metrics").json()
         assert doc["n"] == 40 and doc["analysis_id"] == analysis["id"]

@@ -103,3 +103,33 @@ def test_a_blf_of_compressible_containers_stops_at_the_ratio_cap(client: TestCli
     assert r.status_code == 413 and r.json()["code"] == "inflated_too_large", r.text
     assert r.json()["detail"] == ("drive.blf: decompresses to more than the 32 MiB cap for compressed logs (32x its "
                                   "compressed size); decompress it yourself or raise the cap")
+
+
+def test_gap_sensitivity_started_in_the_background_reports_progress(client: TestClient) -> None:
+    import time
+
+    assert post_vehicle(client, driveline=many_stage_driveline(24, stiffness=1e8))["status"] == 201
+    r = client.post("/vehicles/ev/gap-sensitivity")  # refused now, not in the background
+    assert r.status_code == 422 and r.json()["code"] == "work_limit"
+    assert post_vehicle(client)["status"] == 201  # the paper preset: version 2
+    r = client.get("/vehicles/ev/gap-sensitivity", params={"compute": False})  # a read that never starts work
+    assert r.status_code == 404 and r.json()["code"] == "gap_sensitivity_not_started"
+    assert client.get("/vehicles/ev/gap-sensitivity/status").json() == {
+        "status": "not_started", "progress": 0.0, "stage": "", "job_id": None, "error": None}
+    r = client.post("/vehicles/ev/gap-sensitivity")
+    assert r.status_code == 202, r.text
+    job = r.json()
+    assert job["version"] == 2 and job["status"] in ("queued", "running", "done")
+    seen = []
+    deadline = time.monotonic() + 300
+    while (r := client.get("/vehicles/ev/gap-sensitivity", params={"compute": False})).status_code == 202:
+        seen.append(r.json()["progress"])
+        assert r.json()["job_id"] == job["job_id"] and time.monotonic() < deadline
+        time.sleep(0.2)
+    assert r.status_code == 200 and seen == sorted(seen) and all(0 <= p <= 1 for p in seen)
+    doc = r.json()
+    assert doc["version"] == 2 and len(doc["gaps"]) == 5 and doc["sensitivity_unit"] in ("mm", "rad")
+    assert client.get("/vehicles/ev/gap-sensitivity/status", params={"version": 2}).json()["status"] == "done"
+    assert client.get("/vehicles/ev/gap-sensitivity/status", params={"version": 1}).json()["status"] == "not_started"
+    again = client.post("/vehicles/ev/gap-sensitivity")  # computed: the document at once
+    assert again.status_code == 200 and again.json() == doc

@@ -79,6 +79,19 @@ def test_diagnosis_lifecycle(client: TestClient) -> None:
     for name in ("events", "residual"):
         png = client.get(f"/diagnoses/{did}/plots/{name}")
         assert png.status_code == 200 and png.content[:4] == b"\x89PNG"
+    # the plots' numbers: every held-out event, before and after the chosen fit, on time from the crossing
+    charts = client.get(f"/diagnoses/{did}/charts").json()
+    assert charts["schema"] == "lashscope.diagnosis-charts/1" and charts["fitted"] == "torque_lag"
+    assert [e["index"] for e in charts["events"]] == rep["split"]["heldout"]
+    assert sum(e["after"] < e["before"] for e in charts["events"]) >= 0.7 * len(charts["events"])
+    assert [p["phase"] for p in charts["phases"]] == ["pre_event", "gap_traverse", "impact", "oscillation", "steady"]
+    assert sum(b["before"] for b in charts["bands"]) == pytest.approx(1.0, abs=0.01)
+    first = charts["overlays"][0]
+    assert len(first["t_s"]) == len(first["measured_rpm"]) == len(first["baseline_rpm"]) == len(first["fitted_rpm"])
+    assert first["t_s"][0] < 0 < first["t_s"][-1]  # time from the torque zero crossing
+    resid = [(m - b) ** 2 for m, b in zip(first["measured_rpm"], first["baseline_rpm"], strict=True)]
+    fitted = [(m - f) ** 2 for m, f in zip(first["measured_rpm"], first["fitted_rpm"], strict=True)]
+    assert sum(fitted) < sum(resid)
 
     applied = client.post(f"/diagnoses/{did}/apply", json={})
     assert applied.status_code == 201, applied.text
@@ -100,6 +113,8 @@ def test_bad_requests(client: TestClient) -> None:
     assert r.status_code == 400 and "gremlins" in r.json()["detail"]
     assert client.post("/analyses/nope/diagnoses", json={}).status_code == 404
     r = client.get("/diagnoses/nope")
+    assert r.status_code == 404 and r.json()["code"] == "diagnosis_not_found"
+    r = client.get("/diagnoses/nope/charts")
     assert r.status_code == 404 and r.json()["code"] == "diagnosis_not_found"
 
 

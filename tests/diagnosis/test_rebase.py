@@ -12,6 +12,7 @@ import pytest
 
 from app.analysis.diagnosis import DiagnosisOptions, augmented_vehicle, diagnose_signals, report_dict
 from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
+from app.diagnosis_plots import chart_data
 from app.identify import physical, with_base
 from app.signals import SignalSet
 from sim.effects import apply_effects
@@ -37,6 +38,13 @@ def test_a_data_sheet_that_is_off_is_named_and_nothing_is_attributed() -> None:
     doc = report_dict(res)
     assert doc["identification"]["named"] == ["stiffness", "mass"]
     assert doc["decision"]["residual_to_noise_before"]["value"] > 10.0  # the file's vehicle, before
+    # the charts: before is the file's vehicle, after the identified one, which leaves about the noise floor
+    charts = chart_data(res)
+    assert charts["fitted"] == "identified base parameters"
+    assert [e["index"] for e in charts["events"]] == list(res.split.heldout)
+    assert all(e["after"] < e["before"] for e in charts["events"])
+    assert max(p["after"] for p in charts["phases"] if p["after"] is not None) < 3.0 < max(
+        p["before"] for p in charts["phases"] if p["before"] is not None)
     # applying it gives the identified vehicle
     applied = augmented_vehicle(res, paper())
     assert physical(applied).stiffness_nm_rad == pytest.approx(0.75 * physical(paper()).stiffness_nm_rad, rel=0.03)
@@ -53,3 +61,8 @@ def test_an_effect_on_a_car_whose_data_sheet_is_off_is_still_named() -> None:
     assert res.identification is not None and res.identification.params["damping"].ratio == pytest.approx(1.0,
                                                                                                             abs=0.1)
     assert {i["name"] for i in d.details.get("base_parameters", [])} <= {"mass"}
+    charts = chart_data(res)  # after: the named effect; its overlays end closer to the measured speed
+    assert charts["fitted"] == "torque_lag" and len(charts["overlays"]) == min(12, len(res.split.heldout))
+    o = charts["overlays"][0]
+    sq = lambda a: sum((m - x) ** 2 for m, x in zip(o["measured_rpm"], a, strict=True))  # noqa: E731
+    assert sq(o["fitted_rpm"]) < sq(o["baseline_rpm"])

@@ -62,6 +62,15 @@ def test_outlier_vehicle_is_flagged_with_its_estimates(store: Path, tmp_path: Pa
     assert band["lo"] < 18.0 < band["hi"] < 30.0
     png = report_png(report, tmp_path / "fleet.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # over time: one point per log, oldest first, each the median of that log's events with its interval
+    logs = v1["per_log"]
+    assert len(logs) == 10 and sum(p["events"] for p in logs) == 20
+    assert [p["time"] for p in logs] == sorted(p["time"] for p in logs)
+    for p in logs:
+        rows = frame[frame["log_hash"] == p["log_hash"]]
+        assert p["ripple_rpm"]["median"] == pytest.approx(np.median(rows["measured_fluctuation_rpm"]))
+        assert p["ripple_rpm"]["lo"] <= p["ripple_rpm"]["median"] <= p["ripple_rpm"]["hi"]
+        assert p["time"] == rows["time"].min().isoformat()
 
 
 def test_logs_that_do_not_track_are_left_out_of_the_figures_and_counted(store: Path,

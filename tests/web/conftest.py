@@ -13,6 +13,7 @@ import shutil
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlparse
 
 import httpx
 import pytest
@@ -69,15 +70,25 @@ def server(tmp_path_factory: pytest.TempPathFactory, hub_port: int) -> Iterator[
 
 @pytest.fixture
 def page(browser: Any, server: Server) -> Iterator[Any]:
-    """A fresh page on the dashboard; page errors (uncaught exceptions) fail the test."""
+    """A fresh page on the dashboard; page errors (uncaught exceptions) and console errors fail the test.
+
+    ``pg.console_errors`` lists every console error, ``pg.hosts`` every host a request went to; a
+    response the page asked for and got as an error status (a test's unknown id) is logged by the
+    browser as "Failed to load resource" and is the only console error a test may cause on purpose."""
     context = browser.new_context(viewport={"width": 1400, "height": 1000}, accept_downloads=True)
     pg = context.new_page()
     errors: list[str] = []
+    pg.console_errors = []
+    pg.hosts = set()
     pg.on("pageerror", lambda e: errors.append(str(e)))
+    pg.on("console", lambda m: pg.console_errors.append(m.text) if m.type == "error" else None)
+    pg.on("request", lambda r: pg.hosts.add(urlparse(r.url).hostname or urlparse(r.url).scheme))
     pg.set_default_timeout(60_000)
     yield pg
     context.close()
     assert not errors, f"errors in the page: {errors}"
+    script = [m for m in pg.console_errors if not m.startswith("Failed to load resource")]
+    assert not script, f"console errors: {script}"
 
 
 def screenshot(pg: Any, name: str, full_page: bool = False) -> Path:

@@ -8,6 +8,7 @@ and watch a live session -- and compare what the page shows with what the API an
 
 from __future__ import annotations
 
+import itertools
 import re
 import subprocess
 import sys
@@ -226,6 +227,10 @@ def test_diagnosis_page_shows_the_decision_in_words(page: Any, server: Server, a
     assert report["decision"]["reason"] in decision
     rows = page.query_selector_all("#candidates tbody tr")
     assert len(rows) == len(report["candidates"]) + len(report["pairs"])
+    page.wait_for_selector("main[data-state='ready']")
+    headline = page.text_content("#headline") or ""
+    assert report["decision"]["status"] in headline and len(headline) < 200  # one line; the reason is below it
+    _diagnosis_charts(page, server, did, report)
     if report["decision"]["status"] == "base_parameters":  # the vehicle file is off: no candidate is scored
         card = page.text_content("#base-parameters") or ""
         assert all(p["label"] in card for p in report["decision"]["base_parameters"])
@@ -243,6 +248,11 @@ def test_diagnosis_page_shows_the_decision_in_words(page: Any, server: Server, a
         assert f"{val['events']} events" in (page.text_content("#validation") or "")
         assert f"{100 * val['shrink']['value']:.1f} %" in (page.text_content("#validation") or "")
     screenshot(page, "diagnosis", full_page=True)
+    assert page.console_errors == [] and page.hosts <= {"127.0.0.1", "blob", "data"}
+    # an unknown diagnosis says so in the page
+    page.goto(f"{server.url}/#/diagnosis/an_0123456789abcdef--dg00000000")
+    page.wait_for_selector("main .error")
+    assert "diagnosis_not_found" in (page.text_content("main .error") or "")
 
 
 def test_vehicles_page_compares_two_versions_field_by_field(page: Any, server: Server) -> None:
@@ -331,14 +341,253 @@ def test_live_page_shows_frames_arriving(page: Any, server: Server, hub_port: in
                 time.sleep(0.5)
             assert rows == reported
             screenshot(page, "live")
+            # a reload (or a page opened late) reads the session's history first: every event, newest first
+            page.reload()
+            page.wait_for_selector("main[data-state='ready']")
+            page.wait_for_function(f"document.querySelectorAll('#live-events tbody tr').length >= {reported}")
+            history = api(server, f"/live/sessions/{sid}/events")
+            shown = [int(r.get_attribute("data-event")) for r in page.query_selector_all("#live-events tbody tr")]
+            assert shown == sorted((e["index"] for e in history["events"]), reverse=True)
+            assert "frames" in (page.text_content("#live-status") or "")
         finally:
             replay.join(60)
             link.close()
             httpx.post(f"{server.url}/live/sessions/{sid}/stop", timeout=60.0)
     status = api(server, f"/live/sessions/{sid}")
     assert status["frames_received"] == sum(len(c) for c in open_log(drive).chunks())
+    page.goto(f"{server.url}/#/live/no_such_session")
+    page.wait_for_selector("main .error")
+    assert "no_such_session" in (page.text_content("main .error") or "")
 
 
+def _drag(page: Any, selector: str, a: float, b: float) -> None:
+    box = page.query_selector(selector).bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.move(box["x"] + a * box["width"], y)
+    page.mouse.down()
+    page.mouse.move(box["x"] + b * box["width"], y, steps=5)
+    page.mouse.up()
+
+
+CHART_COLUMN = """name => { const u = document.querySelector('#timeline').chart;
+  const k = u.series.findIndex(s => s.label.split(' ')[0] === name);
+  const t = [], v = [];
+  u.data[k].forEach((x, i) => { if (x != null) { t.push(u.data[0][i]); v.push(x); } });
+  return [t, v]; }"""
+
+
+def test_channel_browser_plots_any_channel_on_its_units_axis(page: Any, server: Server, analysis_id: str) -> None:
+    signals = api(server, f"/analyses/{analysis_id}/signals")["signals"]
+    open_analysis(page, server, analysis_id)
+    page.fill("#channel-search", "wheel")
+    wheels = sorted(n for n in signals if "wheel" in n or "wheel" in signals[n]["unit"])
+    assert len(wheels) == 4  # the reference DBC's four wheel speeds
+    page.wait_for_function(f"document.querySelector('#channel-list').dataset.shown == '{len(wheels)}'")
+    assert [e.get_attribute("data-channel") for e in page.query_selector_all("#channel-list input")] == wheels
+    tl = page.query_selector("#timeline")
+    series0, axes0 = int(tl.get_attribute("data-series")), int(tl.get_attribute("data-axes"))
+    with page.expect_response(lambda r: "/signals/wheel_speed_fl_rpm?" in r.url) as resp:
+        page.check("#channel-list input[data-channel='wheel_speed_fl_rpm']")
+    page.wait_for_function(f"document.querySelector('#timeline').dataset.series == '{series0 + 1}'")
+    assert int(tl.get_attribute("data-axes")) == axes0  # rpm: the motor speed's axis
+    rows = resp.value.json()
+    t, v = page.evaluate(CHART_COLUMN, "wheel_speed_fl_rpm")
+    assert v == rows["wheel_speed_fl_rpm"] and t == rows["t_s"]  # the API's rows, each at its own time
+    assert rows["source_points"] == signals["wheel_speed_fl_rpm"]["samples"]
+    assert float(tl.get_attribute("data-channel-ms")) > 0
+    page.fill("#channel-search", "km/h")  # by unit
+    page.check("#channel-list input[data-channel='vehicle_speed_kmh']")
+    page.wait_for_function(f"document.querySelector('#timeline').dataset.series == '{series0 + 2}'")
+    assert int(tl.get_attribute("data-axes")) == axes0 + 1  # a new unit, a new axis
+    assert page.url.endswith("/ch=wheel_speed_fl_rpm,vehicle_speed_kmh")
+    page.wait_for_selector("#timeline[data-inked]", state="attached")
+    screenshot(page, "analysis-channels")
+    # the address keeps the channels: a reload plots them again
+    page.reload()
+    page.wait_for_selector("main[data-state='ready']")
+    page.wait_for_function(f"document.querySelector('#timeline').dataset.series == '{series0 + 2}'")
+    assert page.is_checked("#channel-list input[data-channel='vehicle_speed_kmh']")
+    # unticked: gone from the chart and from the address
+    page.uncheck("#channel-list input[data-channel='wheel_speed_fl_rpm']")
+    page.wait_for_function(f"document.querySelector('#timeline').dataset.series == '{series0 + 1}'")
+    assert page.url.endswith("/ch=vehicle_speed_kmh")
+    assert page.console_errors == [] and page.hosts <= {"127.0.0.1", "blob", "data"}  # offline, no error
+
+
+def test_a_missing_channel_says_so_and_the_chart_stays(page: Any, server: Server, analysis_id: str) -> None:
+    page.goto(f"{server.url}/#/analysis/{analysis_id}/ch=no_such_channel")
+    page.wait_for_selector("main[data-state='ready']", timeout=120_000)
+    err = page.text_content("#channel-status .error") or ""
+    assert "no_such_channel" in err and "signal_not_found" in err
+    assert int(page.get_attribute("#timeline", "data-inked") or page.wait_for_selector(
+        "#timeline[data-inked]", state="attached").get_attribute("data-inked")) > 2000
+
+
+def test_two_cursors_read_every_series_and_the_delta(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    box = page.query_selector("#timeline .u-over").bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.click(box["x"] + 0.3 * box["width"], y)
+    page.keyboard.down("Shift")
+    page.mouse.click(box["x"] + 0.6 * box["width"], y)
+    page.keyboard.up("Shift")
+    page.wait_for_function("document.querySelector('#cursor-readout').dataset.b")
+    a = float(page.get_attribute("#cursor-readout", "data-a") or "nan")
+    b = float(page.get_attribute("#cursor-readout", "data-b") or "nan")
+    tl = page.query_selector("#timeline")
+    t0, t1 = float(tl.get_attribute("data-t0")), float(tl.get_attribute("data-t1"))
+    assert a == pytest.approx(t0 + 0.3 * (t1 - t0), abs=0.01 * (t1 - t0))
+    assert b == pytest.approx(t0 + 0.6 * (t1 - t0), abs=0.01 * (t1 - t0))
+    text = page.text_content("#cursor-readout") or ""
+    time_row = next(r for r in text.splitlines() if r.startswith("time (s)")).split()
+    assert float(time_row[-1]) == pytest.approx(b - a, abs=2e-3)
+    # each series' values at A and B are the chart's rows nearest the cursors, and B - A their difference
+    meas = next(r for r in text.splitlines() if r.startswith("measured rpm")).split()
+    va, vb, d = (float(x) for x in meas[-3:])
+    assert d == pytest.approx(vb - va, abs=0.011)
+    t, v = page.evaluate(CHART_COLUMN, "measured")
+    near = min(range(len(t)), key=lambda i: abs(t[i] - a))
+    assert va == pytest.approx(v[near], abs=0.006)
+    assert page.is_visible("#timeline .u-over") and text.count("\n") >= 5  # time and every series
+
+
+def test_overlays_follow_the_zoom_on_time_from_the_crossing(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    events = api(server, f"/analyses/{analysis_id}/events")["events"]
+    page.wait_for_function("document.querySelector('#overlays').dataset.ready == '1'")
+    # the panels' time axis is time from the torque zero crossing
+    spans = page.evaluate("[...document.querySelectorAll('#overlays .panel .chart')].map(c => [c.chart.scales.x.min, "
+                          "c.chart.scales.x.max])")
+    assert spans and all(lo < 0 < hi for lo, hi in spans)
+    # the whole-log chart's event labels never overlap
+    boxes = page.evaluate("document.querySelector('#timeline').chart.labelBoxes")
+    assert len(boxes) == len(events)
+    for row in {b["row"] for b in boxes}:
+        xs = sorted((b["x"], b["x"] + b["w"]) for b in boxes if b["row"] == row)
+        assert all(x1 <= x0b for (_, x1), (x0b, _) in itertools.pairwise(xs))
+    _drag(page, "#timeline .u-over", 0.30, 0.55)
+    page.wait_for_function("document.querySelector('#overlays').dataset.focus && "
+                           "document.querySelector('#overlays').dataset.ready == '1'")
+    t0, t1 = (float(x) for x in (page.get_attribute("#overlays", "data-focus") or "").split(","))
+    inside = [e["index"] for e in events if e["has_series"] and t0 <= e["t_cross_s"] <= t1]
+    shown = [int(p.get_attribute("data-event")) for p in page.query_selector_all("#overlays .panel")]
+    assert inside and shown == inside[:12]
+    screenshot(page, "overlays-following-zoom")
+    # and back: "in chart" on a panel zooms the whole-log chart to that event's window
+    first = next(e for e in events if e["index"] == shown[0])
+    page.click(f"#overlays .panel[data-event='{shown[0]}'] button.in-chart")
+    page.wait_for_function(f"Math.abs(document.querySelector('#timeline').dataset.t0 - {first['t_start_s']}) < 1e-6")
+    assert float(page.get_attribute("#timeline", "data-t1") or "nan") == pytest.approx(first["t_end_s"], abs=1e-6)
+
+
+def test_metrics_columns_are_grouped_and_chosen(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    groups = [g.text_content() for g in page.query_selector_all("#metrics-table tr.group th")]
+    assert "fluctuation peak-valley (rpm)" in groups and "aligned error" in groups
+    assert page.query_selector("#metrics-table th[data-key='damping_ratio.measured']") is None
+    page.click("#metrics-chooser summary")
+    page.check("#metrics-chooser input[data-metric='damping_ratio']")
+    page.uncheck("#metrics-chooser input[data-part='simulated']")
+    page.wait_for_selector("#metrics-table th[data-key='damping_ratio.measured']")
+    assert page.query_selector_all("#metrics-table th[data-key$='.simulated']") == []
+    metrics = api(server, f"/analyses/{analysis_id}/metrics")["events"]
+    page.click("#metrics-table th[data-key='damping_ratio.measured']")
+    col = [h.get_attribute("data-key") for h in page.query_selector_all("#metrics-table thead tr:not(.group) th")]
+    k = col.index("damping_ratio.measured") + 1
+    shown = [c.text_content() for c in page.query_selector_all(f"#metrics-table tbody tr td:nth-child({k})")]
+    expected = sorted(m["measured"]["damping_ratio"] for m in metrics if m["measured"].get("damping_ratio") is not None)
+    assert [float(x) for x in shown[:len(expected)]] == pytest.approx(expected, abs=5.1e-4)
+    # the choice is kept in this browser
+    page.reload()
+    page.wait_for_selector("main[data-state='ready']")
+    assert page.query_selector("#metrics-table th[data-key='damping_ratio.measured']") is not None
+    screenshot(page, "metrics-chooser")
+
+
+def test_a_failed_analysis_says_why_in_the_list(page: Any, server: Server, tmp_path: Path) -> None:
+    junk = tmp_path / "other-car.log"  # frames of an id the vehicle's DBC does not know
+    junk.write_text("".join(f"({1 + 0.01 * i:.6f}) can0 7FF#00112233\n" for i in range(300)))
+    with httpx.Client(base_url=server.url, timeout=60.0) as c:
+        with junk.open("rb") as fh:
+            log_id = c.post("/logs", files={"file": (junk.name, fh)}).json()["id"]
+        aid = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
+        deadline = time.monotonic() + 120
+        while (rec := c.get(f"/analyses/{aid}").json())["status"] not in ("done", "failed"):
+            assert time.monotonic() < deadline
+            time.sleep(0.5)
+    assert rec["status"] == "failed"
+    page.goto(f"{server.url}/#/logs")
+    row = page.wait_for_selector(f"tr[data-log='{log_id}']")
+    text = row.query_selector(".failure").text_content() or ""
+    assert rec["job"]["error"]["detail"] in text and f"[{rec['job']['error']['code']}]" in text
+    assert f"{round(100 * rec['progress'])} %" in text
+    page.goto(f"{server.url}/#/analysis/{aid}")
+    page.wait_for_selector("main .error")
+    assert rec["job"]["error"]["detail"] in (page.text_content("main .error") or "")
+    page.goto(f"{server.url}/#/analysis/an_0123456789abcdef")
+    page.wait_for_selector("main .error")
+    assert "an_0123456789abcdef" in (page.text_content("main .error") or "")
+
+
+def _diagnosis_charts(page: Any, server: Server, did: str, report: dict[str, Any]) -> None:
+    """The diagnosis charts show the API's numbers: residual by event and phase, before and after."""
+    charts = api(server, f"/diagnoses/{did}/charts")
+    assert [e["index"] for e in charts["events"]] == report["split"]["heldout"]
+    bars = page.query_selector_all("#residual-by-phase rect.bar")
+    groups = (("before", "before (baseline)"), ("after", f"after: + {charts['fitted']}"))
+    expected = [(p["phase"], g, p[k]) for k, g in groups
+                for p in charts["phases"] if p[k] is not None and p[k] > 0 and (k == "before" or charts["fitted"])]
+    shown = [(b.get_attribute("data-category"), b.get_attribute("data-group"), float(b.get_attribute("data-value")))
+             for b in bars]
+    assert sorted(shown) == sorted(expected)
+    assert len(page.query_selector_all("#residual-by-event rect.bar")) == sum(
+        (e["before"] or 0) > 0 for e in charts["events"]) + sum((e["after"] or 0) > 0 for e in charts["events"])
+    panels = page.query_selector_all("#diagnosis-overlays .panel")
+    assert [int(p.get_attribute("data-event")) for p in panels] == [o["index"] for o in charts["overlays"]]
+    scored = [c for c in report["candidates"] + report["pairs"] if c["heldout"].get("shrink")]
+    assert len(page.query_selector_all("#shrink-chart g.interval")) == len(scored)
+    for g in page.query_selector_all("#shrink-chart g.interval"):
+        c = next(x for x in scored if x["title"] == g.get_attribute("data-label"))
+        assert float(g.get_attribute("data-lo")) == pytest.approx(100 * c["heldout"]["shrink"]["lo"])
+        assert float(g.get_attribute("data-hi")) == pytest.approx(100 * c["heldout"]["shrink"]["hi"])
+
+
+def test_tolerance_band_and_gap_sensitivity_start_from_the_page(page: Any, server: Server, analysis_id: str) -> None:
+    open_analysis(page, server, analysis_id)
+    page.wait_for_selector("#tolerance-out >> text=not computed yet")
+    page.wait_for_selector("#sensitivity-out >> text=not computed yet")
+    page.click("#tolerance-start")
+    page.click("#sensitivity-start")
+    page.wait_for_selector("#tolerance-chart", timeout=600_000)
+    page.wait_for_selector("#sensitivity-chart", timeout=600_000)
+    assert page.get_attribute("#tolerance-out", "data-progress") is not None  # a progress bar was shown
+    band = api(server, f"/analyses/{analysis_id}/tolerance?n=200")
+    ok = [e for e in band["events"] if not e["error"]]
+    items = page.query_selector_all("#tolerance-chart g.band-item")
+    assert len(items) == len(ok)
+    for g, e in zip(items, ok, strict=True):
+        assert g.get_attribute("data-label") == f"#{e['index']}"
+        assert float(g.get_attribute("data-measured")) == pytest.approx(e["measured_fluctuation_rpm"])
+        inside = e["band_rpm"]["p5"] <= e["measured_fluctuation_rpm"] <= e["band_rpm"]["p95"]
+        assert g.get_attribute("data-inside") == str(inside).lower()
+    outside = sum(1 for e in ok if not e["band_rpm"]["p5"] <= e["measured_fluctuation_rpm"] <= e["band_rpm"]["p95"])
+    assert f"{len(ok) - outside} of {len(ok)} events measured inside" in (page.text_content("#tolerance-summary") or "")
+    rec = api(server, f"/analyses/{analysis_id}")
+    sens = api(server, f"/vehicles/{rec['vehicle']}/gap-sensitivity?version={rec['vehicle_version']}")
+    bars = page.query_selector_all("#sensitivity-chart rect.bar")
+    shown = [float(b.get_attribute("data-value")) for b in bars]
+    assert shown == pytest.approx([g["sensitivity"] for g in sens["gaps"]])
+    assert f"per {sens['sensitivity_unit']}" in (page.text_content("#sensitivity-out") or "")
+    screenshot(page, "tolerance-sensitivity", full_page=True)
+    assert page.console_errors == [] and page.hosts <= {"127.0.0.1", "blob", "data"}
+    # computed once: the next visit shows both without starting anything
+    open_analysis(page, server, analysis_id)
+    page.wait_for_selector("#tolerance-chart")
+    page.wait_for_selector("#sensitivity-chart")
+    assert page.query_selector("#tolerance-start") is None
+
+
+# Last: this test leaves the server closed to requests without a key (its last key revoked).
 def _keys(server: Server, *args: str) -> str:
     out = subprocess.run([sys.executable, "-m", "app", "keys", *args, "--data-dir", str(server.data_dir)],
                          capture_output=True, text=True, timeout=120, check=True)

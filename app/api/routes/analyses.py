@@ -9,9 +9,20 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import JSONResponse, PlainTextResponse
 
+from app.analysis.metrics import METRIC_NAMES
 from app.analysis.tolerance import MAX_SAMPLES
 from app.api.deps import ResultsDep, RunnerDep, SettingsDep, StoreDep
-from app.api.schemas import ERRORS, AnalysisCreate, AnalysisOut, EventsOut, MetricsOut, ToleranceOut
+from app.api.schemas import (
+    ERRORS,
+    AnalysisCreate,
+    AnalysisOut,
+    ErrorOut,
+    EventsOut,
+    JobStateOut,
+    MetricsOut,
+    ToleranceOut,
+    unit_of,
+)
 from app.api.tables import events_csv, metrics_csv
 from app.errors import AppError, ConflictError, NotFoundError, QueueFullError
 from app.jobkinds.tolerance import result_path as tolerance_path
@@ -127,7 +138,8 @@ def get_metrics(analysis_id: str, store: StoreDep, cache: ResultsDep, fmt: Table
         return PlainTextResponse(metrics_csv(d["metrics"]), media_type="text/csv")
     return {"analysis_id": analysis_id, "summary": d["summary"], "offset": d["offset"], "whole": d["whole"],
             "events": d["metrics"], "notes": d["notes"], "tracking": d.get("tracking"),
-            "sampling": d.get("sampling")}  # absent from results stored before they existed
+            "sampling": d.get("sampling"),  # absent from results stored before they existed
+            "units": {n: unit_of(n) for n in METRIC_NAMES}}
 
 
 TolN = Annotated[int, Query(ge=1, le=MAX_SAMPLES, description="Monte Carlo variants per event")]
@@ -176,6 +188,26 @@ def start_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, runner
         job = store.create_job("tolerance", subject)
         runner.submit(job.id)
     return _accepted(analysis_id, n, seed, job)
+
+
+@router.get("/{analysis_id}/tolerance/status", response_model=JobStateOut,
+            summary="Whether the tolerance band is computed, computing (with progress) or not started")
+def tolerance_status(analysis_id: str, store: StoreDep, cache: ResultsDep, n: TolN = 200,
+                     seed: TolSeed = 0) -> JobStateOut:
+    rec, _ = finished(store, cache, analysis_id)
+    if tolerance_path(rec.result_dir, n, seed).exists():
+        return JobStateOut(status="done", progress=1.0)
+    return job_state(store.find_job("tolerance", tolerance_subject(analysis_id, n, seed)))
+
+
+def job_state(job: JobRecord | None) -> JobStateOut:
+    """A result's job as a state; ``not_started`` without a job, or when its job is done but the result
+    is gone (the caller checked the result first)."""
+    if job is None or job.status is JobStatus.DONE:
+        return JobStateOut(status="not_started")
+    err = ErrorOut(code=job.error_code or "job_failed", detail=job.error_detail or "") \
+        if job.status is JobStatus.FAILED else None
+    return JobStateOut(status=job.status.value, progress=job.progress, stage=job.stage, job_id=job.id, error=err)
 
 
 def _raise_failed(analysis_id: str, job: JobRecord) -> None:

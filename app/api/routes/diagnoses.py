@@ -5,6 +5,7 @@
     POST /analyses/{analysis_id}/diagnoses   {"candidates": [...], "seed": 0, "model": "multibody"}  -> 202
     GET  /diagnoses/{diagnosis_id}           status and progress; the report (lashscope.diagnosis/1) when done
     GET  /diagnoses/{diagnosis_id}/plots/{events|residual}   PNG
+    GET  /diagnoses/{diagnosis_id}/charts    the plots' numbers as JSON (the dashboard draws them)
     POST /diagnoses/{diagnosis_id}/apply     {"name": optional}  -> 201 new vehicle version with the effect
     POST /diagnoses/{diagnosis_id}/validate  {"log_id": ...}     -> 202; shrink on that drive in the report
 
@@ -29,10 +30,11 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import RunnerDep, SettingsDep, StoreDep
 from app.api.routes.analyses import room_for_a_job
-from app.api.schemas import ERRORS, AppliedOut, DiagnosisOut
+from app.api.schemas import ERRORS, AppliedOut, DiagnosisChartsOut, DiagnosisOut
 from app.errors import ConflictError, NotFoundError
 from app.jobkinds import validation
 from app.jobkinds.diagnosis import (
+    CHARTS,
     PLOTS,
     REPORT,
     SEP,
@@ -152,6 +154,27 @@ def get_plot(diagnosis_id: str, name: str, store: StoreDep) -> FileResponse:
     if not path.is_file():
         raise ConflictError(f"diagnosis {diagnosis_id} has no {name} plot yet", code="diagnosis_not_ready")
     return FileResponse(path, media_type="image/png")
+
+
+@router.get("/diagnoses/{diagnosis_id}/charts", response_model=DiagnosisChartsOut,
+            summary="The numbers behind the diagnosis plots: held-out residual by event, phase and band before "
+                    "and after the chosen fit; measured, baseline and fitted speed of held-out events")
+def get_charts(diagnosis_id: str, store: StoreDep) -> dict[str, Any]:
+    d = _dir(store, diagnosis_id)
+    doc = read_json(d / CHARTS)
+    if doc is not None:
+        return doc
+    state = _read(store, d)
+    if state.get("status") != "done":
+        raise ConflictError(f"diagnosis {diagnosis_id} is {state.get('status')}: no charts yet",
+                            code="diagnosis_not_ready")
+    report = state.get("report") or {}
+    decision = report.get("decision") or {}
+    if report.get("baseline") is None:
+        raise NotFoundError(f"diagnosis {diagnosis_id} has no charts: it decided {decision.get('status')!r} "
+                            "without a calibrated baseline", code="charts_not_found")
+    raise NotFoundError(f"diagnosis {diagnosis_id} was made before its chart numbers were kept; run it again "
+                        "(its PNG plots are at /plots/events and /plots/residual)", code="charts_not_found")
 
 
 def _done_report(store: Store, d: Path, diagnosis_id: str) -> dict[str, Any]:

@@ -8,12 +8,23 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
 
-from app.api.deps import SettingsDep, StoreDep
-from app.api.schemas import ERRORS, GapSensitivityOut, SignalMapProposalOut, VehicleOut
+from app.api.deps import RunnerDep, SettingsDep, StoreDep
+from app.api.routes.analyses import JOB_ERROR_STATUS, job_state, room_for_a_job
+from app.api.schemas import (
+    ERRORS,
+    GapSensitivityJobOut,
+    GapSensitivityOut,
+    JobStateOut,
+    SignalMapProposalOut,
+    VehicleOut,
+)
 from app.api.upload import check_toml, receive_upload, user_file_names
-from app.errors import InputError, UploadTooLargeError
-from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity
+from app.errors import AppError, InputError, NotFoundError, UploadTooLargeError
+from app.jobkinds import gap_sensitivity as gap_job
+from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity_work
+from app.storage.records import JobRecord, JobStatus
 from app.storage.results import json_safe
 from app.storage.sqlstore import check_vehicle_name
 from sim import load_vehicle, preset_names
@@ -126,28 +137,85 @@ def vehicle_driveline(name: str, version: int, store: StoreDep) -> Response:
 
 
 @router.get("/{name}/gap-sensitivity", response_model=GapSensitivityOut,
-            summary="Gap what-ifs and sensitivities S1..S5 for the vehicle")
+            summary="Gap what-ifs and sensitivities S1..S5 for the vehicle",
+            responses={202: {"model": GapSensitivityJobOut,
+                             "description": "computing (started by POST): its progress"}})
 async def vehicle_gap_sensitivity(name: str, store: StoreDep,
-                                  version: Annotated[int | None, Query(ge=1)] = None) -> dict[str, Any]:
+                                  version: Annotated[int | None, Query(ge=1)] = None,
+                                  compute: Annotated[bool, Query(description=(
+                                      "false: only read; 404 gap_sensitivity_not_started when it was never "
+                                      "computed nor started"))] = True) -> Any:
     """Each of the five gaps removed and halved under the paper's tip-in, with the nominal and
-    no-backlash responses; computed on first request and kept beside the vehicle version.
+    no-backlash responses; computed on first request and kept beside the vehicle version. While a
+    job started by ``POST`` computes it, ``202`` with the job's progress instead; ``compute=false``
+    never computes: 404 ``gap_sensitivity_not_started``, or the error of a failed job.
 
     ``sensitivity_unit`` says what ``sensitivity`` is per: ``mm`` of circumferential clearance
     (the paper's definition; the vehicle gives every gap's contact radius) or ``rad`` of gap
     angle; ``sensitivity_per_mm`` (null without radii) and ``sensitivity_per_rad`` are both given."""
     rec = store.get_vehicle(name, version)
-    cached = rec.driveline_path.parent / "gap_sensitivity.json"
+    doc = _cached(rec.driveline_path)
+    if doc is not None:
+        return doc
+    job = store.find_job("gap_sensitivity", gap_job.subject(rec.name, rec.version))
+    if job is not None and job.status in (JobStatus.QUEUED, JobStatus.RUNNING):
+        return _job_answer(rec.name, rec.version, job)
+    if not compute and job is not None and job.status is JobStatus.FAILED:
+        _job_answer(rec.name, rec.version, job)  # its error
+    if not compute:
+        raise NotFoundError(f"the gap sensitivity of {rec.name} v{rec.version} is not computed; start it with POST "
+                            f"/vehicles/{rec.name}/gap-sensitivity?version={rec.version}",
+                            code="gap_sensitivity_not_started")
+    return await run_in_threadpool(gap_job.compute, store, rec.name, rec.version)
+
+
+@router.post("/{name}/gap-sensitivity", status_code=status.HTTP_202_ACCEPTED, response_model=GapSensitivityJobOut,
+             summary="Start computing the gap sensitivity in the background (poll GET for progress)",
+             responses={200: {"model": GapSensitivityOut, "description": "already computed"}})
+def start_gap_sensitivity(name: str, store: StoreDep, runner: RunnerDep, settings: SettingsDep,
+                          version: Annotated[int | None, Query(ge=1)] = None) -> Any:
+    rec = store.get_vehicle(name, version)
+    doc = _cached(rec.driveline_path)
+    if doc is not None:
+        return JSONResponse(doc)
+    gap_sensitivity_work(load_vehicle(rec.driveline_path))  # past the limit: refused now, not in the background
+    subject = gap_job.subject(rec.name, rec.version)
+    job = store.find_job("gap_sensitivity", subject)
+    if job is None or job.status in (JobStatus.FAILED, JobStatus.DONE):
+        room_for_a_job(store, settings.max_queued_jobs)
+        job = store.create_job("gap_sensitivity", subject)
+        runner.submit(job.id)
+    return _job_answer(rec.name, rec.version, job)
+
+
+@router.get("/{name}/gap-sensitivity/status", response_model=JobStateOut,
+            summary="Whether the gap sensitivity is computed, computing (with progress) or not started")
+def gap_sensitivity_status(name: str, store: StoreDep,
+                           version: Annotated[int | None, Query(ge=1)] = None) -> JobStateOut:
+    rec = store.get_vehicle(name, version)
+    if _cached(rec.driveline_path) is not None:
+        return JobStateOut(status="done", progress=1.0)
+    return job_state(store.find_job("gap_sensitivity", gap_job.subject(rec.name, rec.version)))
+
+
+def _cached(driveline_path: Path) -> dict[str, Any] | None:
+    cached = gap_job.cache_path(driveline_path)
     if cached.exists():
         doc: dict[str, Any] = json.loads(cached.read_text(encoding="utf-8"))
         if doc.get("format") == GAP_SENSITIVITY_FORMAT:  # older documents did not state the unit
             return doc
-    vehicle = await run_in_threadpool(load_vehicle, rec.driveline_path)
-    doc = json_safe(await run_in_threadpool(gap_sensitivity, vehicle))
-    doc.update(name=rec.name, version=rec.version)
-    tmp = cached.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc), encoding="utf-8")
-    Path(tmp).replace(cached)
-    return doc
+    return None
+
+
+def _job_answer(name: str, version: int, job: JobRecord) -> JSONResponse:
+    if job.status is JobStatus.FAILED:
+        err = AppError(f"gap sensitivity of {name} v{version} failed: {job.error_detail}",
+                       code=job.error_code or "gap_sensitivity_failed")
+        err.status = JOB_ERROR_STATUS.get(job.error_code or "", 422)
+        raise err
+    return JSONResponse(status_code=status.HTTP_202_ACCEPTED, content=GapSensitivityJobOut(
+        name=name, version=version, job_id=job.id, status=job.status.value, stage=job.stage,
+        progress=job.progress).model_dump())
 
 
 PROPOSAL_DOC = {

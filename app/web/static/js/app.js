@@ -1,4 +1,5 @@
-// The dashboard's router: #/logs, #/analysis/<id>, #/diagnosis/<id>, #/identify[/<id>], #/vehicles, #/live[/<session>].
+// The dashboard's router: #/logs, #/analysis/<id>[/ch=<channels>], #/diagnosis/<id>, #/identify[/<id>],
+// #/vehicles, #/fleet, #/live[/<session>].
 // Each page module exports render(main, ...params) and may return a cleanup function.
 import { apiKey, setApiKey } from "./api.js";
 import { errorBox } from "./util.js";
@@ -9,6 +10,7 @@ const PAGES = {
   diagnosis: () => import("./diagnosis.js"),
   identify: () => import("./identify.js"),
   vehicles: () => import("./vehicles.js"),
+  fleet: () => import("./fleet.js"),
   live: () => import("./live.js"),
 };
 

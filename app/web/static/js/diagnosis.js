@@ -1,10 +1,33 @@
-// Diagnosis view: progress, then the decision in words, where the gap lies (events, phases,
-// bands), the candidates with their held-out scores and fitted parameters, the remainder;
-// apply the effect as a new vehicle version, validate it on another log. When the log says the vehicle
-// file itself is off (base parameters identified first), a card lists them with their ratios to the file.
+// Diagnosis view: progress, then the decision as a headline with its details below, the charts
+// (held-out residual by event, phase and band before and after the chosen fit; measured, baseline
+// and fitted speed of held-out events), the candidates compared on held-out shrink with intervals,
+// the identifiability of the fitted parameters, where the gap lies, the remainder; apply the effect
+// as a new vehicle version, validate it on a withheld drive. When the log says the vehicle file
+// itself is off (base parameters identified first), a card lists them with their ratios to the file.
 import { api } from "./api.js";
+import { lineChart } from "./chart.js";
 import { paramTable } from "./identify.js";
+import { barChart, intervalChart } from "./plots.js";
 import { badge, errorBox, fmt, h, jobError, progressBar, ratioWords, sleep } from "./util.js";
+
+export const DIAG_COLORS = { measured: "#111111", baseline: "#1f77b4", fitted: "#d62728", validation: "#7b2fbe" };
+
+const pct = (iv) => (iv && iv.value != null ? `${fmt(100 * iv.value, 0)} % [${fmt(100 * iv.lo, 0)}, ${fmt(100 * iv.hi, 0)}]` : "-");
+
+// The decision in one line: what explains the gap and by how much (held-out), or why nothing does.
+export function headline(d, titles) {
+  const names = d.top.map((t) => titles[t] || t).join(" + ");
+  switch (d.status) {
+    case "explained": return `Explained by ${names}: removes ${pct(d.heldout_shrink)} of the held-out residual`;
+    case "partial": return `Partly explained by ${names}: removes ${pct(d.heldout_shrink)} of the held-out residual; some is left`;
+    case "ambiguous": return `Ambiguous: ${(d.confusable || d.top).map((t) => titles[t] || t).join(" or ")} fit equally well`;
+    case "none_of_candidates": return "None of the candidate effects explains the gap";
+    case "no_significant_gap": return "No significant gap: the simulation matches the log within noise";
+    case "insufficient_data": return "Not enough events to decide";
+    case "base_parameters": return `The vehicle file is off: ${(d.base_parameters || []).map((p) => p.label).join(", ") || "its base parameters"}`;
+    default: return d.status;
+  }
+}
 
 const interval = (iv, k = 100, unit = " %") => (iv && iv.value != null
   ? `${fmt(iv.value * k, 1)}${unit} [${fmt(iv.lo * k, 1)}, ${fmt(iv.hi * k, 1)}]` : "-");
@@ -29,9 +52,13 @@ export async function render(main, id) {
   }
   const r = doc.report;
   const d = r.decision;
-  head.replaceChildren(
-    h("section", { class: "card", id: "decision" }, h("h2", {}, "Decision"),
-      h("p", { class: "decision" }, badge(d.status), " ", d.reason),
+  const titles = Object.fromEntries([...r.candidates, ...r.pairs].map((c) => [c.id, c.title]));
+  const chartsCard = h("section", { class: "card", id: "diagnosis-charts" }, h("h2", {}, "Held-out residual before and after the fit"),
+    h("p", { class: "muted" }, "loading the charts ..."));
+  head.replaceChildren(...[
+    h("section", { class: "card", id: "decision" },
+      h("p", { class: "headline", id: "headline" }, badge(d.status), " ", headline(d, titles)),
+      h("p", { class: "decision" }, d.reason),
       h("dl", { class: "kv" },
         h("dt", {}, "effect(s)"), h("dd", {}, d.top.length ? d.top.join(" + ") : "none"),
         h("dt", {}, "residual / noise before"), h("dd", {}, interval(d.residual_to_noise_before, 1, "")),
@@ -40,8 +67,12 @@ export async function render(main, id) {
         h("dt", {}, "held-out shrink"), h("dd", {}, interval(d.heldout_shrink)),
         h("dt", {}, "split"), h("dd", {}, `${r.split.calibration.length} calibration, ${r.split.heldout.length} held-out events (seed ${r.split.seed})`),
         h("dt", {}, "noise floor"), h("dd", {}, `${fmt(r.noise_floor.sigma_rpm, 2)} rpm`))),
-    baseParameters(d), identification(r.identification, d.reason), remainder(d), actions(id, d, doc, ctrl), candidates(r),
-    where(r));
+    baseParameters(d), chartsCard, candidates(r), identifiability(r), identification(r.identification, d.reason),
+    remainder(d), actions(id, d, doc, ctrl, r), where(r)].filter(Boolean));
+  await charts(chartsCard, id, r, ctrl.signal);
+  // the first frame with the decision and the charts: ms since navigation start (bench/dashboard.py)
+  await new Promise(requestAnimationFrame);
+  main.dataset.paintedMs = performance.now().toFixed(0);
   main.dataset.state = "ready";
   return () => ctrl.abort();
 }
@@ -93,6 +124,97 @@ function params(fit) {
     Object.entries(ps).map(([k, v]) => `${k} = ${typeof v === "number" ? v.toPrecision(4) : v}`).join(", ")));
 }
 
+// The charts from /diagnoses/{id}/charts; a diagnosis without them says why in the card.
+async function charts(card, id, r, signal) {
+  let c;
+  try {
+    c = await api(`/diagnoses/${id}/charts`, { signal });
+  } catch (err) {
+    card.replaceChildren(h("h2", {}, "Held-out residual before and after the fit"), errorBox(err));
+    return;
+  }
+  const after = c.fitted ? `after: + ${c.fitted}` : "after";
+  const groups = (rows) => [{ label: "before (baseline)", color: DIAG_COLORS.baseline, values: rows.map((x) => x.before) },
+    ...(c.fitted ? [{ label: after, color: DIAG_COLORS.fitted, values: rows.map((x) => x.after) }] : [])];
+  const noise = { value: 1, label: "noise floor" };
+  const overlays = h("div", { class: "grid", id: "diagnosis-overlays" });
+  card.replaceChildren(h("h2", {}, `Held-out residual before and after the fit (${c.heldout} events)`),
+    h("p", { class: "muted" }, "Residual / noise: the residual's energy over what the noise floor ",
+      `(${fmt(c.noise_sigma_rpm, 2)} rpm) alone would leave; 1 is noise. Log scale.`),
+    h("div", { class: "grid" },
+      h("div", {}, h("h3", {}, "by event"), barChart({ id: "residual-by-event", categories: c.events.map((e) => `#${e.index}`),
+        groups: groups(c.events), yLabel: "residual / noise (-)", log: true, ref: noise, width: Math.max(420, 26 * c.events.length + 90) })),
+      h("div", {}, h("h3", {}, "by phase"), barChart({ id: "residual-by-phase", categories: c.phases.map((p) => p.phase),
+        groups: groups(c.phases), yLabel: "residual / noise (-)", log: true, ref: noise, width: 460 })),
+      h("div", {}, h("h3", {}, "by frequency band"), barChart({ id: "residual-by-band", categories: c.bands.map((b) => b.band),
+        groups: groups(c.bands), yLabel: "share of baseline residual (-)", width: 360 }))),
+    h("h3", {}, "Held-out events: measured, baseline and fitted motor speed"),
+    h("p", { class: "muted" }, h("span", { style: `color:${DIAG_COLORS.measured}` }, "● measured"), " · ",
+      h("span", { style: `color:${DIAG_COLORS.baseline}` }, "— baseline (calibrated vehicle)"), " · ",
+      h("span", { style: `color:${DIAG_COLORS.fitted}` }, `— ${c.fitted ? `+ ${c.fitted}` : "no fit"}`),
+      " · shaded: the predicted gap-open span. Time from the torque zero crossing."),
+    overlays);
+  await new Promise(requestAnimationFrame);
+  const cols = Math.max(1, Math.floor((overlays.clientWidth + 12) / 452));
+  const width = Math.max(400, Math.floor((overlays.clientWidth - 12 * (cols - 1)) / cols) - 14);
+  for (const o of c.overlays) {
+    const box = h("div", { class: "chart" });
+    overlays.append(h("div", { class: "panel", dataset: { event: o.index } },
+      h("h3", {}, `#${o.index} ${o.kind.replace("_", "-")}, held out`), box));
+    const data = [o.t_s, o.measured_rpm, o.baseline_rpm, ...(o.fitted_rpm ? [o.fitted_rpm] : [])];
+    const series = [{ label: "measured rpm", color: DIAG_COLORS.measured, points: true },
+      { label: "baseline rpm", color: DIAG_COLORS.baseline, width: 1.5 },
+      ...(o.fitted_rpm ? [{ label: `+ ${c.fitted} rpm`, color: DIAG_COLORS.fitted, width: 1.5 }] : [])];
+    lineChart(box, data, { width, height: 220, series, xLabel: "time from torque zero crossing (s)", yLabel: "motor speed (rpm)",
+      spans: [{ t0: o.gap_open_s, t1: o.gap_close_s, color: "rgba(123,47,190,0.12)" }],
+      markers: () => [{ t: 0, color: "#666", label: "0", dash: true }] });
+  }
+  overlays.dataset.panels = c.overlays.length;
+  if (!c.overlays.length) overlays.append(h("p", { class: "muted" }, "no held-out event to show"));
+}
+
+// The candidates' held-out shrink with 90 % intervals, best first; the chosen one in bold.
+function shrinkChart(r) {
+  const chosen = r.decision.top.join("+");
+  const rows = [...r.candidates, ...r.pairs].filter((c) => c.heldout?.shrink)
+    .sort((a, b) => (b.heldout.shrink.value ?? -1) - (a.heldout.shrink.value ?? -1))
+    .map((c) => ({ label: c.title, value: 100 * c.heldout.shrink.value, lo: 100 * c.heldout.shrink.lo,
+      hi: 100 * c.heldout.shrink.hi, strong: c.id === chosen, color: c.id === chosen ? DIAG_COLORS.fitted : "#555",
+      note: c.heldout.significant ? "significant" : "not significant" }));
+  if (!rows.length) return h("p", { class: "muted" }, "no candidate was scored");
+  return intervalChart({ id: "shrink-chart", rows, xLabel: "held-out shrink of the residual energy (%), 90 % interval" });
+}
+
+// Which fitted parameters the data pin down: at a bound, trading off with another (correlation), or free.
+function identifiability(r) {
+  const chosen = [...r.candidates, ...r.pairs].find((c) => c.id === r.decision.top.join("+"))
+    || [...r.candidates].sort((a, b) => (b.heldout?.shrink?.value ?? -1) - (a.heldout?.shrink?.value ?? -1))[0];
+  if (!chosen) return null;
+  const fit = chosen.fit || {};
+  const atBound = new Set(fit.at_bound || []);
+  const trades = fit.trade_offs || [];
+  const rows = [];
+  for (const [effect, ps] of Object.entries(fit.params || {})) {
+    for (const [name, value] of Object.entries(ps)) {
+      const key = `${effect}.${name}`;
+      const with_ = trades.filter((t) => t.params.some((p) => p === key || p === name || p.endsWith(`.${name}`)));
+      const bound = atBound.has(key) || atBound.has(name);
+      const status = bound ? "at a bound" : with_.length ? "trades off" : "identified";
+      rows.push(h("tr", { dataset: { param: key, status } }, h("td", {}, effect), h("td", {}, name),
+        h("td", { class: "num" }, typeof value === "number" ? value.toPrecision(4) : String(value)),
+        h("td", {}, badge(status === "identified" ? "good" : "partial"), ` ${status}`),
+        h("td", {}, with_.map((t) => `${t.params.join(" ~ ")} (r = ${fmt(t.correlation, 2)})`).join("; ") || "-")));
+    }
+  }
+  const pairs = r.decision.identifiability || [];
+  return h("section", { class: "card", id: "identifiability" }, h("h2", {}, `Identifiability of the fitted parameters (${chosen.title})`),
+    rows.length ? h("table", { id: "identifiability-table" }, h("thead", {}, h("tr", {},
+      ["effect", "parameter", "fitted value (SI)", "identifiable", "trades off with"].map((c) => h("th", {}, c)))), h("tbody", {}, rows))
+      : h("p", { class: "muted" }, "this fit has no parameters"),
+    pairs.length ? h("ul", {}, pairs.map((p) => h("li", {}, `${p.params.join(" and ")} trade off (correlation ${fmt(p.correlation, 2)})`,
+      p.identified ? `; ${p.identified.name} is taken from the identification: ${+Number(p.identified.value).toPrecision(4)} ${p.identified.unit || ""}` : ""))) : null);
+}
+
 function candidates(r) {
   const rows = [...r.candidates, ...r.pairs].map((c) => h("tr", { class: r.decision.top.join("+") === c.id ? "changed" : null },
     h("td", {}, h("strong", {}, c.title), h("div", { class: "muted" }, c.id)),
@@ -103,7 +225,8 @@ function candidates(r) {
     h("td", { class: "num" }, fmt(c.heldout.residual_to_noise, 2)),
     h("td", {}, params(c.fit))));
   const na = Object.entries(r.candidates_not_applicable || {});
-  return h("section", { class: "card" }, h("h2", {}, "Candidates, scored on held-out events"),
+  return h("section", { class: "card", id: "candidates-card" }, h("h2", {}, "Candidates, scored on held-out events"),
+    shrinkChart(r),
     h("div", { class: "scroll" }, h("table", { id: "candidates" }, h("thead", {}, h("tr", {},
       ["effect", "held-out shrink (90 % interval)", "explained share", "events improved", "significant",
         "residual / noise", "fitted parameters"].map((c) => h("th", {}, c)))), h("tbody", {}, rows))),
@@ -128,17 +251,22 @@ function where(r) {
     loc.notes.length ? h("p", { class: "note" }, loc.notes.join(" ")) : null);
 }
 
-// A validation in words: how much of this other drive's gap the frozen effect removes.
-function validationText(v) {
-  return h("div", { id: "validation" }, h("p", {}, `On ${v.log_id} (${v.events} events) the effect with its fitted values `,
+// A validation in words and beside the diagnosed log's own held-out shrink: how much of this other
+// drive's gap the frozen effect removes.
+function validationText(v, r) {
+  const rows = [{ label: "held out, diagnosed log", value: 100 * r.decision.heldout_shrink?.value, lo: 100 * r.decision.heldout_shrink?.lo,
+    hi: 100 * r.decision.heldout_shrink?.hi, color: DIAG_COLORS.fitted },
+  { label: `withheld drive ${v.log_id}`, value: 100 * v.shrink?.value, lo: 100 * v.shrink?.lo, hi: 100 * v.shrink?.hi,
+    color: DIAG_COLORS.validation, strong: true }];
+  return h("div", { id: "validation" }, intervalChart({ id: "validation-chart", rows, xLabel: "shrink of the residual energy (%), 90 % interval" }), h("p", {}, `On ${v.log_id} (${v.events} events) the effect with its fitted values `,
     `shrinks the residual by ${interval(v.shrink)} and explains ${interval(v.explained_share)} of it above noise; `,
     `${fmt(100 * v.improved_fraction, 0)} % of the events improve; residual / noise ${fmt(v.residual_to_noise_baseline, 2)} `,
     `-> ${fmt(v.residual_to_noise_augmented, 2)}.`));
 }
 
-function actions(id, d, doc, ctrl) {
+function actions(id, d, doc, ctrl, r) {
   const out = h("div", { id: "actions-result" });
-  const card = h("section", { class: "card" }, h("h2", {}, "Apply and validate"));
+  const card = h("section", { class: "card", id: "apply-validate" }, h("h2", {}, "Apply, and validate on a withheld drive"));
   if (!["explained", "partial", "ambiguous"].includes(d.status) && !(d.status === "base_parameters" && !d.identify_first)) {
     card.append(h("p", { class: "muted" }, `The decision is ${d.status}: there is no effect to apply.`));
     return card;
@@ -162,7 +290,7 @@ function actions(id, d, doc, ctrl) {
         const v = (await api(`/diagnoses/${id}`, { signal: ctrl.signal })).validation || {};
         out.replaceChildren(h("p", {}, "validation: ", badge(v.status || "queued")));
         if (v.status === "done") {
-          out.append(validationText(v));
+          out.append(validationText(v, r));
           return;
         }
         if (v.status === "failed") {
@@ -177,6 +305,6 @@ function actions(id, d, doc, ctrl) {
   } }, "Validate on this log");
   card.append(h("div", { class: "toolbar" }, apply, applied ? h("span", { class: "muted" }, applied) : null,
     h("span", {}, " · "), logs, validate), out);
-  if (doc.validation?.status === "done") out.append(validationText(doc.validation));
+  if (doc.validation?.status === "done") out.append(validationText(doc.validation, r));
   return card;
 }

@@ -21,7 +21,7 @@ window.lashscopeFirstReads = (id, maxPoints) => {
 // max_points: two rows per pixel of the chart, whose width is the page's (at most 1500 px) less
 // the margins; analysis.js keeps this density for the zooms.
 window.lashscopeEarly = (() => {
-  const m = /^#\/analysis\/([^/]+)$/.exec(location.hash);
+  const m = /^#\/analysis\/([^/]+)(\/ch=[^/]*)?$/.exec(location.hash);
   const width = Math.max(600, Math.min(document.documentElement.clientWidth, 1500) - 82);
   return m ? window.lashscopeFirstReads(decodeURIComponent(m[1]), Math.min(4000, 2 * width)) : null;
 })();

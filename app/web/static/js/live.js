@@ -1,5 +1,7 @@
 // Live: the server's live sessions, start one, and a running session's motor speed and torque
-// streaming over the session's server-sent events, with events appearing as they complete.
+// streaming over the session's server-sent events, with events appearing as they complete. On open
+// (and so after a reload) the session's status and every event it has completed so far are read
+// first (/live/sessions/<id>, /events); the stream then adds to them, one row per event index.
 /* global uPlot */
 import { api, streamEvents } from "./api.js";
 import { COLORS, holdOnto, inkedPixels } from "./chart.js";
@@ -111,21 +113,37 @@ async function session(main, id, signal) {
         requestAnimationFrame(redraw);
       }
     } else if (kind === "event") {
-      // live metrics are the measured ones (no simulation until the stored log is analysed)
-      const m = data.metrics || {};
-      evBody.prepend(h("tr", { dataset: { event: data.index } }, h("td", {}, data.index),
+      upsert(data);
+    } else if (kind === "status") {
+      showStatus(data);
+    } else if (kind === "end") {
+      status.append(" · stream ended");
+    }
+  };
+  const rows = new Map(); // event index -> its row: the history and the stream may both carry an event
+  const upsert = (data) => {
+    // live metrics are the measured ones (no simulation until the stored log is analysed)
+    const m = data.metrics || {};
+    const row = h("tr", { dataset: { event: data.index } }, h("td", {}, data.index),
         h("td", {}, String(data.kind || "").replace("_", "-")),
         h("td", { class: "num" }, fmt(data.t_cross_s, 2)),
         h("td", { class: "num" }, fmt(m.fluctuation_rpm)),
         h("td", { class: "num" }, fmt(m.rise_height_rpm)),
         h("td", { class: "num" }, fmt(m.shuffle_freq_hz, 2)),
-        h("td", {}, data.exclusion ? `excluded: ${data.exclusion}` : m.error || (data.provisional ? "provisional" : "yes"))));
-    } else if (kind === "status") {
-      status.replaceChildren(badge(data.state), ` ${data.bus.interface} ${data.bus.channel ?? ""} · ${fmt(data.frames_per_s, 0)} frames/s · `,
-        `${data.frames_received} frames · ${data.frames_dropped} dropped · ${data.events} events`);
-    } else if (kind === "end") {
-      status.append(" · stream ended");
+        h("td", {}, data.exclusion ? `excluded: ${data.exclusion}` : m.error || (data.provisional ? "provisional" : "yes")));
+    const old = rows.get(data.index);
+    if (old) old.replaceWith(row);
+    else {
+      const after = [...rows.keys()].filter((k) => k > data.index).sort((a, b) => a - b)[0]; // newest first
+      if (after === undefined) evBody.prepend(row);
+      else rows.get(after).after(row);
     }
+    rows.set(data.index, row);
+    evBody.dataset.count = rows.size;
+  };
+  const showStatus = (data) => {
+    status.replaceChildren(badge(data.state), ` ${data.bus.interface} ${data.bus.channel ?? ""} · ${fmt(data.frames_per_s, 0)} frames/s · `,
+      `${data.frames_received} frames · ${data.frames_dropped ?? 0} dropped · ${data.events} events`);
   };
   (async () => {
     try {
@@ -134,4 +152,13 @@ async function session(main, id, signal) {
       if (!signal.aborted) status.append(errorBox(err));
     }
   })();
+  try {
+    const [st, history] = await Promise.all([api(`/live/sessions/${id}`, { signal }), api(`/live/sessions/${id}/events`, { signal })]);
+    if (!status.childNodes.length) showStatus(st);
+    history.events.forEach(upsert);
+    evBody.dataset.history = history.count;
+  } catch (err) {
+    if (!signal.aborted) card.before(errorBox(err));
+  }
+  main.dataset.state = "ready";
 }

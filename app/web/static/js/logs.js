@@ -84,7 +84,11 @@ export async function render(main) {
         h("td", {}, l.issues.length ? `${l.issues.length} read problem(s)` : "none"),
         h("td", {}, runs.length ? runs.map((a) => h("div", {},
           h("a", { href: `#/analysis/${a.id}` }, `${a.vehicle} v${a.vehicle_version}`), " ", badge(a.status),
-          a.status === "done" ? ` ${a.summary.events ?? "?"} events` : ` ${Math.round(100 * a.progress)} %`))
+          a.status === "done" ? ` ${a.summary.events ?? "?"} events`
+            : a.status === "failed" ? h("div", { class: "failure", dataset: { code: a.job?.error?.code || "" } },
+              `stopped at ${Math.round(100 * a.progress)} %: ${a.job?.error?.detail || "no reason recorded"} ` +
+              `[${a.job?.error?.code || "unknown"}]`)
+            : ` ${Math.round(100 * a.progress)} %`))
           : h("span", { class: "muted" }, "none")),
         h("td", {}, vehicles.length ? [pick, " ", start] : h("a", { href: "#/vehicles" }, "register a vehicle"),
           " ", del));

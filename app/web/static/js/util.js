@@ -92,7 +92,8 @@ export function progressBar(fraction, label) {
 
 export const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
-// A table whose columns sort on a click; columns: [{key, label, value(row), render(row), num}]
+// A table whose columns sort on a click; columns: [{key, label, value(row), render(row), num, cls, group}].
+// Columns with a `group` get a header row above theirs naming the group once over its columns.
 export function sortableTable(columns, rows, { id, initial } = {}) {
   const table = h("table", { class: "sortable", id });
   let sortKey = initial ?? null;
@@ -114,14 +115,25 @@ export function sortableTable(columns, rows, { id, initial } = {}) {
       });
     }
     body.replaceChildren(...data.map((r) => h("tr", {}, columns.map((c) =>
-      h("td", { class: c.num ? "num" : null }, c.render ? c.render(r) : fmt((c.value || ((x) => x[c.key]))(r), c.digits ?? 1))))));
+      h("td", { class: [c.num ? "num" : null, c.cls].filter(Boolean).join(" ") || null }, c.render ? c.render(r) : fmt((c.value || ((x) => x[c.key]))(r), c.digits ?? 1))))));
     for (const th of head.children) th.dataset.sorted = th.dataset.key === sortKey ? (dir > 0 ? "asc" : "desc") : "";
   };
   for (const c of columns) {
     head.append(h("th", { dataset: { key: c.key }, title: c.title || "sort", class: c.num ? "num" : null,
       onclick: () => { dir = sortKey === c.key ? -dir : 1; sortKey = c.key; draw(); } }, c.label));
   }
-  table.append(h("thead", {}, head), body);
+  const thead = h("thead", {});
+  if (columns.some((c) => c.group)) {
+    const groups = h("tr", { class: "group" });
+    for (const c of columns) {
+      const prev = groups.lastElementChild;
+      if (prev && prev.dataset.group === (c.group || "") && c.group) prev.colSpan += 1;
+      else groups.append(h("th", { dataset: { group: c.group || "" } }, c.group || ""));
+    }
+    thead.append(groups);
+  }
+  thead.append(head);
+  table.append(thead, body);
   draw();
   return table;
 }
