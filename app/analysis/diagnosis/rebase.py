@@ -138,6 +138,39 @@ def base_only(decision: Decision, ident: Identification, score: CandidateScore, 
                             "residual_to_noise_identified": round(left, 4)})
 
 
+def base_trade(decision: Decision, fit: FitResult | None) -> list[tuple[str, str, float]]:
+    """The trade-offs of the chosen fit between a parameter of the chosen effect(s) and a base parameter
+    (``(effect parameter, base parameter, correlation)``)."""
+    if fit is None or decision.status not in ("explained", "partial"):
+        return []
+    tops = set(decision.top)
+    base_ids = {e.id for e in BASE_EFFECTS.values()}
+    out = []
+    for a, b, r in fit.trade_offs:
+        for x, y in ((a, b), (b, a)):
+            if x.split(".")[0] in tops and y.split(".")[0] in base_ids:
+                out.append((x, y, r))
+    return out
+
+
+def not_separable(decision: Decision, ident: Identification, tangled: Sequence[tuple[str, str, float]],
+                  nominal_gap: Any) -> Decision:
+    """``base_parameters`` for a decision whose effect trades off with a base parameter in their joint fit.
+
+    The effect and the data sheet's error then describe the same change of the log (a mount and a softer shaft
+    both lower the mode): the data cannot tell them apart, and the file being off is the answer that needs no new
+    physics. The effect is reported as what could also explain the remainder, not attributed."""
+    what = "; ".join(f"{x} trades off with {y} (correlation {r:+.2f})" for x, y, r in tangled)
+    effect = "+".join(decision.top)
+    reason = (f"the vehicle file is off: {sentence(ident)}. {effect} would explain what the identified values leave, "
+              f"but in their joint fit {what}: the data cannot tell {effect} from the file's error, so no unmodelled "
+              "effect is attributed")
+    return replace(decision, status=BASE_ID, top=(), reason=reason, gap_ratio=nominal_gap,
+                   details={**decision.details, "base_parameters": base_items(ident), "identify_first": False,
+                            "not_separable": [{"effect_param": x, "base_param": y, "correlation": round(r, 4)}
+                                              for x, y, r in tangled]})
+
+
 def with_base(decision: Decision, ident: Identification, nominal_gap: Any = None) -> Decision:
     """``decision`` (made on the identified vehicle) saying which base parameters were corrected first.
 

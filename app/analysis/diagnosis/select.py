@@ -58,7 +58,16 @@ from app.analysis.diagnosis.localise import (
 )
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.partners import screen_partners
-from app.analysis.diagnosis.rebase import BASE_ID, base_only, joint_with_base, judge, nuisance_only, with_base
+from app.analysis.diagnosis.rebase import (
+    BASE_ID,
+    base_only,
+    base_trade,
+    joint_with_base,
+    judge,
+    not_separable,
+    nuisance_only,
+    with_base,
+)
 from app.analysis.diagnosis.score import EventScore, Interval
 from app.analysis.diagnosis.split import Split, make_split
 from app.analysis.diagnosis.structure import remainder
@@ -399,6 +408,10 @@ def run_diagnosis(
         evals[BASE_ID] = evaluate(nominal, rebased.fit, ho, opts.model, phases, period)
     elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
         ident = joint_ident.get("+".join(decision.top), ident)
+        chosen = evals.get("+".join(decision.top))
+        mixed = base_trade(decision, chosen.fit if chosen is not None else None) if ident.named else []
+        if mixed:
+            decision = not_separable(decision, ident, mixed, nominal_gap)
         decision = with_base(decision, ident, nominal_gap if rebased is not None else None)
         if "+".join(decision.top) not in joint_ident and rebased is None:  # the base played no part in the answer
             decision = replace(decision, details={k: v for k, v in decision.details.items() if k != "base_parameters"})
