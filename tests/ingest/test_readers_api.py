@@ -23,7 +23,8 @@ BLF = blf_file([obj(1, can_msg(1, 0x100, b"\xaa"), 0)])
 
 
 def test_readers_table() -> None:
-    assert set(READERS) == set(FORMATS) == {"blf", "asc", "candump", "trc", "gvret_csv", "mf4", "tcu"}
+    assert set(READERS) == set(FORMATS) == {"blf", "asc", "candump", "trc", "gvret_csv", "mf4", "tcu",
+                                            "analyser_tsv", "serial_dump", "described"}
 
 
 @pytest.mark.parametrize(("head", "fmt"), [(ASC, "asc"), (CANDUMP, "candump"), (TRC, "trc"), (CSV, "gvret_csv"),
