@@ -13,6 +13,7 @@ This module imports nothing heavy: the command line builds its help from it with
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 
 @dataclass(frozen=True)
@@ -51,3 +52,12 @@ def formats_sentence() -> str:
 def supported_list() -> str:
     """The format keys with their labels, for an error that says what is supported."""
     return ", ".join(f"{f.name} ({f.label})" for f in LOG_FORMATS)
+
+
+SIDECAR_SUFFIX = ".format.toml"
+
+
+def sidecar_of(log: Path) -> Path:
+    """Where the format description of a text log lives beside it: ``drive.txt`` -> ``drive.txt.format.toml``
+    (read by ``open_log`` when no format is given; the service stores an uploaded description so)."""
+    return log.with_name(log.name + SIDECAR_SUFFIX)

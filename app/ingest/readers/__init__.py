@@ -27,7 +27,7 @@ from collections.abc import Iterator
 from types import TracebackType
 from typing import BinaryIO, Protocol, runtime_checkable
 
-from app.ingest.formats import LOG_FORMATS
+from app.ingest.formats import LOG_FORMATS, sidecar_of
 from app.ingest.frames import FrameChunk, IngestReport, LogMeta
 from app.ingest.readers._base import BaseReader
 from app.ingest.readers._source import open_source
@@ -87,7 +87,9 @@ def open_log(source: str | os.PathLike[str] | BinaryIO, *, fmt: str | None = Non
         Maximum rows per :class:`~app.ingest.frames.FrameChunk` (memory bound).
     layout : TextLayout or path, optional
         A text format description (:mod:`app.ingest.readers.described`) to read the log with,
-        instead of recognising its format.
+        instead of recognising its format. Without one, a description beside a log file
+        (``drive.txt.format.toml`` for ``drive.txt``) is used; the service stores an uploaded
+        description that way.
 
     Raises
     ------
@@ -106,6 +108,8 @@ def open_log(source: str | os.PathLike[str] | BinaryIO, *, fmt: str | None = Non
         layout = load_layout(layout)
     stream, head, path = open_source(source)
     try:
+        if layout is None and fmt is None and path is not None and (side := sidecar_of(path)).is_file():
+            layout = load_layout(side)
         if layout is not None:
             fmt = "described"
         elif fmt is None:

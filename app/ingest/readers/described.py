@@ -28,8 +28,9 @@ exactly (integer ns, no float rounding) and count from the first frame, as for e
 A description with a mistake raises :class:`~app.errors.FormatFileError` (code ``format_file``)
 naming the file and the field, when it is loaded, before any log is read.
 
-Where descriptions come from: ``open_log(source, layout=...)`` (the command line's
-``--format-file``) forces one; descriptions registered with :func:`register_format_file` or
+Where descriptions come from: ``open_log(source, layout=...)`` forces one; a file beside the
+log named ``<log file name>.format.toml`` is used for that log (the service keeps an uploaded
+description so, next to the stored log); descriptions registered with :func:`register_format_file` or
 listed in ``LASHSCOPE_FORMAT_FILES`` (files or folders of ``*.toml``, separated by the OS path
 separator) also take part in recognising a log by its content: a description whose lines match
 at least half of a log's first lines wins over the built-in formats.
@@ -103,9 +104,10 @@ class TextLayout:
             m = self.regex.match(line)
             return None if m is None else {k: v for k, v in m.groupdict().items() if v is not None}
         parts = line.split() if self.separator is None else line.split(self.separator)
-        if len(parts) <= max(self.columns.values()):
+        need = max((i for k, i in self.columns.items() if not (self.data_to_end and k == "data")), default=0)
+        if len(parts) <= need:
             return None
-        out = {k: parts[i] for k, i in self.columns.items()}
+        out = {k: parts[i] for k, i in self.columns.items() if i < len(parts)}
         if self.data_to_end:
             out["data"] = " ".join(p.strip() for p in parts[self.columns["data"]:])
         return out
