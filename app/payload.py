@@ -81,6 +81,7 @@ def result_payload(res: AnalysisResult) -> tuple[dict[str, Any], dict[str, npt.N
         "findings": [f.to_dict() for f in res.findings],
         "whole_rms_rpm": res.whole_error.rms_rpm if res.whole_error else None,
         "whole_nrmse": res.whole_error.nrmse if res.whole_error else None,
+        "read": res.ingest.get("read"),  # damaged or truncated input: frames and seconds lost, a note
     }
     doc = {
         "schema": 1, "summary": summary, "events": events, "metrics": metrics, "event_rows": rows,

@@ -97,7 +97,7 @@ def tolerance_table(tol: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.cli.report import events_table, finding_lines, metrics_table, summary_line, tracking_lines
+    from app.cli.report import events_table, finding_lines, metrics_table, read_lines, summary_line, tracking_lines
 
     doc = analysis_doc(args)
     text = json.dumps(doc, indent=1)
@@ -106,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(text + "\n")
     else:
+        for line in read_lines(doc["summary"].get("read")):
+            print(line)
         print(summary_line(doc))
         print()
         print(events_table(doc))

@@ -14,7 +14,7 @@ from app.api.schemas import ERRORS, LogOut
 from app.api.timezones import TZ_DOC, time_zone, zoned_start
 from app.api.upload import UploadedFile, receive_upload, user_file_names
 from app.errors import FormatFileError, InputError
-from app.ingest.formats import formats_sentence, sidecar_of
+from app.ingest.formats import LOG_FORMATS, formats_sentence, sidecar_of
 from app.pipeline import inspect_log
 
 router = APIRouter(prefix="/logs", tags=["logs"], responses=ERRORS)
@@ -132,6 +132,11 @@ def _format_file(parts: list[UploadedFile]) -> str | None:
 def list_logs(store: StoreDep, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
               offset: Annotated[int, Query(ge=0, le=2**62)] = 0) -> list[LogOut]:
     return [LogOut.of(r) for r in store.list_logs(limit, offset)]
+
+
+@router.get("/formats", summary="The log formats the service reads (name, label), from app/ingest/formats.py")
+def log_formats() -> list[dict[str, str]]:
+    return [{"name": f.name, "label": f.label} for f in LOG_FORMATS]
 
 
 @router.get("/{log_id}", response_model=LogOut, summary="One log: format, frames, duration, read problems")
