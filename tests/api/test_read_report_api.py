@@ -13,7 +13,7 @@ def test_truncated_log_is_stated_in_the_analysis(tmp_path: Path, demo_log: Path)
     with in_process(tmp_path / "data") as client:
         create_vehicle(client)
         log = client.post("/logs", files={"file": ("cut.blf", cut)}).json()
-        assert [i["kind"] for i in log["issues"]][0] == "truncated"
+        assert log["issues"][0]["kind"] == "truncated"
         aid = client.post("/analyses", json={"log_id": log["id"], "vehicle": "ev"}).json()["id"]
         assert wait_for(client, aid, timeout=300)["status"] == "done"
         read = client.get(f"/analyses/{aid}").json()["summary"]["read"]

@@ -16,8 +16,7 @@ from app.cli.decode import decode_log
 from app.errors import FormatFileError, LogFormatError, UnsupportedFormatError
 from app.ingest.database import load_database
 from app.ingest.frames import FrameChunk, FrameFlag
-from app.ingest.readers import open_log, sniff_format
-from app.ingest.readers import described
+from app.ingest.readers import described, open_log, sniff_format
 from app.ingest.readers.described import ENV, parse_layout, register_format_file
 
 DBC = Path(__file__).resolve().parents[2] / "dbc" / "lashscope_ev.dbc"
@@ -43,9 +42,9 @@ def _frames(n: int = 400, seed: int = 3) -> list[Frame]:
 
 
 def candump(frames: list[Frame]) -> str:
-    return "".join(f"({1_700_000_000 + t / 100:.6f}) can{ch} {i:08X}#{d.hex().upper()}{' T' if tx else ''}\n"
-                   if ext else f"({1_700_000_000 + t / 100:.6f}) can{ch} {i:03X}#{d.hex().upper()}{' T' if tx else ''}\n"
-                   for t, ch, i, ext, tx, d in frames)
+    """Epoch seconds, IDs of 3 (11-bit) or 8 (29-bit) hex digits, `` T`` for a transmitted frame."""
+    return "".join(f"({1_700_000_000 + t // 100}.{t % 100:02d}0000) can{ch} {f'{i:08X}' if ext else f'{i:03X}'}#"
+                   f"{d.hex().upper()}{' T' if tx else ''}\n" for t, ch, i, ext, tx, d in frames)
 
 
 def analyser_tsv(frames: list[Frame]) -> str:
@@ -62,9 +61,11 @@ def serial_dump(frames: list[Frame]) -> str:
                           f"{''.join(f' {b:02X}' for b in d)}\r\n" for t, ch, i, _, tx, d in frames)
 
 
-REGEX_LAYOUT = r"""
+BENCH_REGEX = (r"^(?P<time>\d+\.\d+);(?P<channel>\d);(?P<dir>[RT]x);(?P<id>[0-9A-F]+);(?P<ext>[SX]);"
+               r"(?P<dlc>\d);(?P<data>[0-9A-F]*)$")
+REGEX_LAYOUT = f"""
 name = "bench logger"
-regex = '^(?P<time>\d+\.\d+);(?P<channel>\d);(?P<dir>[RT]x);(?P<id>[0-9A-F]+);(?P<ext>[SX]);(?P<dlc>\d);(?P<data>[0-9A-F]*)$'
+regex = '{BENCH_REGEX}'
 time_unit = "ms"
 data_encoding = "hex_string"
 skip_lines = 2
@@ -209,7 +210,7 @@ def test_described_salvage_and_strict(tmp_path: Path) -> None:
 def test_user_descriptions_join_recognition_by_content(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                        frames: list[Frame]) -> None:
     text = column_logger(frames)
-    with pytest.raises(UnsupportedFormatError, match="supported formats: blf .*analyser_tsv"):
+    with pytest.raises(UnsupportedFormatError, match=r"supported formats: blf .*analyser_tsv"):
         _read(text, "rig.txt")
     folder = tmp_path / "formats"
     folder.mkdir()

@@ -195,7 +195,7 @@ def _fail(source: str, field: str, why: str) -> FormatFileError:
 
 def _get(data: dict[str, Any], source: str, key: str, kind: type | tuple[type, ...], default: Any) -> Any:
     value = data.get(key, default)
-    if value is not default and (not isinstance(value, kind) or isinstance(value, bool) and kind is int):
+    if value is not default and (not isinstance(value, kind) or (isinstance(value, bool) and kind is int)):
         names = " or ".join(k.__name__ for k in (kind if isinstance(kind, tuple) else (kind,)))
         raise _fail(source, key, f"expected {names}, got {value!r}")
     return value
