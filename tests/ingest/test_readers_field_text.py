@@ -7,13 +7,17 @@ from __future__ import annotations
 
 import gzip
 import io
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
+from app.cli import main
 from app.cli.decode import decode_log
-from app.errors import FormatFileError, LogFormatError, UnsupportedFormatError
+from app.errors import AppError, FormatFileError, LogFormatError, UnsupportedFormatError
 from app.ingest.database import load_database
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers import described, open_log, sniff_format
@@ -247,3 +251,41 @@ def test_bad_descriptions_name_the_field(text: str, message: str) -> None:
 def test_missing_description_file(tmp_path: Path) -> None:
     with pytest.raises(FormatFileError, match="cannot read the format description"):
         open_log(io.BytesIO(b"1 2 3\n"), layout=tmp_path / "none.toml")
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(max_size=2000), st.sampled_from([REGEX_LAYOUT, COLUMN_LAYOUT]))
+def test_arbitrary_bytes_with_a_description(payload: bytes, layout: str) -> None:
+    """Whatever the bytes, a described read ends with frames or a typed error, never a crash or a hang."""
+    parsed = parse_layout(layout, "fuzz.toml")
+
+    def work() -> None:
+        try:
+            with open_log(io.BytesIO(payload), layout=parsed, chunk_frames=7) as log:
+                FrameChunk.concat(list(log.chunks()))
+        except AppError:
+            pass
+
+    worker = threading.Thread(target=work, daemon=True)
+    worker.start()
+    worker.join(30)
+    assert not worker.is_alive()
+
+
+def test_cli_format_file(tmp_path: Path, frames: list[Frame], capsys: pytest.CaptureFixture[str],
+                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """``decode --format-file``: the log is read with the description; a wrong one is one line with its code."""
+    monkeypatch.setattr(described, "_registered", [])
+    monkeypatch.setenv(ENV, "")  # restored afterwards: the command adds the description to it
+    (tmp_path / "bench.txt").write_text(regex_logger(frames))
+    (tmp_path / "bench.toml").write_text(REGEX_LAYOUT)
+    assert main(["decode", str(tmp_path / "bench.txt"), "--dbc", str(DBC), "--format-file",
+                 str(tmp_path / "bench.toml")]) == 0
+    out = capsys.readouterr().out
+    assert f"bench.txt (described), database lashscope_ev.dbc\nframes read {len(frames)}, decoded" in out
+    monkeypatch.setattr(described, "_registered", [])
+    (tmp_path / "bad.toml").write_text(REGEX_LAYOUT.replace('time_unit = "ms"', 'time_unit = "msec"'))
+    assert main(["decode", str(tmp_path / "bench.txt"), "--dbc", str(DBC), "--format-file",
+                 str(tmp_path / "bad.toml")]) == 2
+    err = capsys.readouterr().err
+    assert err == "lashscope: error [format_file]: bad.toml: time_unit: 'msec': choose from s, ms, us, ns\n"
