@@ -122,15 +122,15 @@ class TextLayout:
     def parse(self, line: str) -> LineFrame | None:
         """One line as ``(t_ns, channel, id, flags, dlc, payload)``; None for blank and comment lines."""
         s = line.rstrip("\r\n")
-        if not s.strip() or (self.comment and s.lstrip().startswith(self.comment)):
+        if not s or s.isspace() or (self.comment and s.lstrip().startswith(self.comment)):
             return None
         if not printable(s):
             raise BadLine("bad_line", "binary data (non-printable bytes) instead of a log line")
         f = self.fields(s)
         if f is None:
             raise BadLine("bad_line", f"line does not have the shape {self.name!r} describes: {s[:60]!r}")
-        missing = [k for k in REQUIRED if k not in f]
-        if missing:
+        if "time" not in f or "id" not in f or "data" not in f:
+            missing = [k for k in REQUIRED if k not in f]
             raise BadLine("bad_line", f"no {', '.join(missing)} field in {s[:60]!r}")
         t_tok = f["time"].strip()
         if self.time_hex:
@@ -143,34 +143,44 @@ class TextLayout:
         if ident > 0x1FFFFFFF:
             raise BadLine("bad_line", f"identifier {id_tok} is larger than 29 bits")
         data = self._data(f["data"].strip())
-        dlc = parse_int(f["dlc"].strip(), 10, "DLC") if f.get("dlc", "").strip() else len(data)
+        dlc_tok = f.get("dlc", "").strip()
+        dlc = parse_int(dlc_tok, 10, "DLC") if dlc_tok else len(data)
         if dlc > 64 or (dlc > 8 and dlc not in LEN_TO_DLC):
             raise BadLine("bad_line", f"length {dlc} is not a CAN or CAN FD length")
         if len(data) > dlc:
             raise BadLine("bad_line", f"{len(data)} data bytes, but the length says {dlc}")
-        payload = hex_bytes(data, dlc, base=10 if self.data_encoding == "decimal_bytes" else 16)
+        if isinstance(data, bytes) and len(data) == dlc:
+            payload = data
+        else:
+            payload = hex_bytes(data if isinstance(data, list) else [f"{b:02x}" for b in data], dlc,
+                                base=10 if self.data_encoding == "decimal_bytes" else 16)
         channel = 0
-        if f.get("channel", "").strip():
-            channel = parse_int(f["channel"].strip(), 10, "channel") - self.channel_base
+        ch_tok = f.get("channel", "").strip()
+        if ch_tok:
+            channel = parse_int(ch_tok, 10, "channel") - self.channel_base
             if not 0 <= channel <= 32767:
-                raise BadLine("bad_line", f"channel {f['channel'].strip()} out of range")
+                raise BadLine("bad_line", f"channel {ch_tok} out of range")
         fl = FD if dlc > 8 else 0
         if self._extended(ident, digits, f.get("ext", "")):
             fl |= EXT
         elif ident > 0x7FF:
             raise BadLine("bad_line", f"identifier {id_tok} is larger than 11 bits in a standard frame")
-        if f.get("dir", "").strip().lower() in self.tx_values:
+        if "dir" in f and f["dir"].strip().lower() in self.tx_values:
             fl |= TX
         return t, channel, ident, fl, dlc, payload
 
-    def _data(self, text: str) -> list[str]:
+    def _data(self, text: str) -> list[str] | bytes:
+        """The data field as bytes (hex_string that converts whole, in C) or as tokens to check one by one."""
         if self.data_encoding == "hex_string":
             compact = "".join(text.split())
             if compact[:2].lower() == "0x":
                 compact = compact[2:]
             if len(compact) % 2:
                 raise BadLine("short_data", f"data {compact[:40]!r} has an odd number of hex digits (line cut?)")
-            return [compact[i:i + 2] for i in range(0, len(compact), 2)]
+            try:
+                return bytes.fromhex(compact)
+            except ValueError:
+                return [compact[i:i + 2] for i in range(0, len(compact), 2)]
         tokens = text.replace(",", " ").split()
         if tokens and tokens[0][:2].lower() == "0x" and self.data_encoding == "hex_bytes":
             tokens = [t[2:] if t[:2].lower() == "0x" else t for t in tokens]
