@@ -30,6 +30,8 @@ export async function render(main, id) {
   const r = doc.report;
   const d = r.decision;
   head.replaceChildren(
+    r.read && r.read.damaged ? h("div", { class: "note", id: "read-report" },
+      h("strong", {}, r.read.truncated ? "truncated log" : "damaged log"), `: ${r.read.note}`) : "",
     h("section", { class: "card", id: "decision" }, h("h2", {}, "Decision"),
       h("p", { class: "decision" }, badge(d.status), " ", d.reason),
       h("dl", { class: "kv" },
