@@ -47,6 +47,7 @@ def test_described_log_is_stored_with_its_description_and_analysed(tmp_path: Pat
         assert log["format"] == "described" and log["frames"] == frames and log["issues"] == []
         stored = list((data / "logs").glob("*.format.toml"))
         assert len(stored) == 1 and stored[0].read_text() == LAYOUT
+        assert list((data / "tmp").iterdir()) == []
         create_vehicle(client)
         aid = client.post("/analyses", json={"log_id": log["id"], "vehicle": "ev"}).json()["id"]
         done = wait_for(client, aid, timeout=300)
@@ -70,6 +71,7 @@ def test_bad_description_is_refused_naming_the_field(tmp_path: Path, layout: str
         assert message in r.json()["detail"]
         assert client.get("/logs").json() == []
         assert list(data.glob("logs/*")) == []  # neither the log nor its description was kept
+        assert list((data / "tmp").iterdir()) == []  # nor any temporary file
 
 
 def test_a_third_file_field_is_refused(tmp_path: Path) -> None:
@@ -78,3 +80,12 @@ def test_a_third_file_field_is_refused(tmp_path: Path) -> None:
                                         "dbc": ("a.dbc", b"VERSION \"\"\n")})
         assert r.status_code == 400 and r.json()["code"] == "too_many_files", r.text
         assert client.get("/logs").json() == []
+
+
+def test_the_formats_route_lists_the_registry(tmp_path: Path) -> None:
+    from app.ingest.formats import LOG_FORMATS
+
+    with in_process(tmp_path / "data") as client:
+        got = client.get("/logs/formats").json()
+    assert got == [{"name": f.name, "label": f.label} for f in LOG_FORMATS]
+    assert {"analyser_tsv", "serial_dump", "described"} <= {f["name"] for f in got}

@@ -7,6 +7,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
+from pydantic import BaseModel
 
 from app.api.deps import SettingsDep, StoreDep
 from app.api.routes.analyses import deleted
@@ -134,9 +135,15 @@ def list_logs(store: StoreDep, limit: Annotated[int, Query(ge=1, le=1000)] = 100
     return [LogOut.of(r) for r in store.list_logs(limit, offset)]
 
 
-@router.get("/formats", summary="The log formats the service reads (name, label), from app/ingest/formats.py")
-def log_formats() -> list[dict[str, str]]:
-    return [{"name": f.name, "label": f.label} for f in LOG_FORMATS]
+class LogFormatOut(BaseModel):
+    name: str  # a stored log's "format"
+    label: str  # what a user calls it
+
+
+@router.get("/formats", response_model=list[LogFormatOut],
+            summary="The log formats the service reads (name, label), from app/ingest/formats.py")
+def log_formats() -> list[LogFormatOut]:
+    return [LogFormatOut(name=f.name, label=f.label) for f in LOG_FORMATS]
 
 
 @router.get("/{log_id}", response_model=LogOut, summary="One log: format, frames, duration, read problems")
