@@ -289,3 +289,14 @@ def test_cli_format_file(tmp_path: Path, frames: list[Frame], capsys: pytest.Cap
                  str(tmp_path / "bad.toml")]) == 2
     err = capsys.readouterr().err
     assert err == "lashscope: error [format_file]: bad.toml: time_unit: 'msec': choose from s, ms, us, ns\n"
+
+
+def test_the_documented_examples_read_their_example_lines() -> None:
+    import re
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "ingest-readers.md").read_text()
+    bench, rig = (parse_layout(b, "doc.toml") for b in re.findall(r"```toml\n(.*?)```", doc, re.S))
+    assert bench.parse("12.340;1;Rx;1BFFDA00;X;8;E3EA312E80EAF505") == (
+        12_340_000, 0, 0x1BFFDA00, EXT, 8, bytes.fromhex("E3EA312E80EAF505"))
+    assert rig.parse("1700000000123456 0 18FF50E5 rx 01 02 03") == (
+        1_700_000_000_123_456_000, 0, 0x18FF50E5, EXT, 3, b"\x01\x02\x03")
