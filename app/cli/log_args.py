@@ -1,5 +1,5 @@
 """The log arguments every command that reads logs shares: the help line listing the formats (from
-:mod:`app.ingest.formats`, the one list of them) and ``--format-file`` for text formats described in TOML."""
+:mod:`app.log_formats`, the one list of them) and ``--format-file`` for text formats described in TOML."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from app.ingest.formats import formats_sentence
+from app.log_formats import formats_sentence
 
 FORMAT_FILE_HELP = ("TOML description of a text log format (docs/ingest-readers.md, 'Describing a format'); "
                     "logs with its shape are read with it; repeatable")

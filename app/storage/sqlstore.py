@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from app.errors import ConflictError, InputError, NotFoundError, StorageError
-from app.ingest.formats import sidecar_of
+from app.log_formats import sidecar_of
 from app.storage.dialect import Connection, Dialect
 from app.storage.jobtable import JobTable, now
 from app.storage.keys import KeyTable

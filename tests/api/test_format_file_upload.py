@@ -83,7 +83,7 @@ def test_a_third_file_field_is_refused(tmp_path: Path) -> None:
 
 
 def test_the_formats_route_lists_the_registry(tmp_path: Path) -> None:
-    from app.ingest.formats import LOG_FORMATS
+    from app.log_formats import LOG_FORMATS
 
     with in_process(tmp_path / "data") as client:
         got = client.get("/logs/formats").json()

@@ -23,10 +23,10 @@ BLF = blf_file([obj(1, can_msg(1, 0x100, b"\xaa"), 0)])
 
 
 def test_every_format_is_documented_and_named_in_the_help() -> None:
-    """The one list (app/ingest/formats.py) reaches the docs, the help text and the unsupported-format error."""
+    """The one list (app/log_formats.py) reaches the docs, the help text and the unsupported-format error."""
     from app.cli.log_args import log_help
     from app.errors import UnsupportedFormatError
-    from app.ingest.formats import LOG_FORMATS
+    from app.log_formats import LOG_FORMATS
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "ingest-readers.md").read_text()
     with pytest.raises(UnsupportedFormatError) as err:

@@ -1,5 +1,5 @@
 """A damaged log in the dashboard: the analysis view says so, with the frames and seconds lost; the upload
-card lists the formats the service reads (from app/ingest/formats.py) and takes a format description."""
+card lists the formats the service reads (from app/log_formats.py) and takes a format description."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 
 from app.demo.build import build_demo_log
 from app.demo.scenario import Scenario
-from app.ingest.formats import LOG_FORMATS
+from app.log_formats import LOG_FORMATS
 from app.settings import default_dbc_dir
 from tests.api.conftest import Server, wait_for
 

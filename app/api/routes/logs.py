@@ -15,7 +15,7 @@ from app.api.schemas import ERRORS, LogOut
 from app.api.timezones import TZ_DOC, time_zone, zoned_start
 from app.api.upload import UploadedFile, receive_upload, user_file_names
 from app.errors import FormatFileError, InputError
-from app.ingest.formats import LOG_FORMATS, formats_sentence, sidecar_of
+from app.log_formats import LOG_FORMATS, formats_sentence, sidecar_of
 from app.pipeline import inspect_log
 
 router = APIRouter(prefix="/logs", tags=["logs"], responses=ERRORS)
@@ -141,7 +141,7 @@ class LogFormatOut(BaseModel):
 
 
 @router.get("/formats", response_model=list[LogFormatOut],
-            summary="The log formats the service reads (name, label), from app/ingest/formats.py")
+            summary="The log formats the service reads (name, label), from app/log_formats.py")
 def log_formats() -> list[LogFormatOut]:
     return [LogFormatOut(name=f.name, label=f.label) for f in LOG_FORMATS]
 

@@ -1,4 +1,4 @@
-"""CAN log readers, chosen by content (the formats are listed once, in :mod:`app.ingest.formats`).
+"""CAN log readers, chosen by content (the formats are listed once, in :mod:`app.log_formats`).
 
 Usage::
 
@@ -27,12 +27,12 @@ from collections.abc import Iterator
 from types import TracebackType
 from typing import BinaryIO, Protocol, runtime_checkable
 
-from app.ingest.formats import LOG_FORMATS, sidecar_of
 from app.ingest.frames import FrameChunk, IngestReport, LogMeta
 from app.ingest.readers._base import BaseReader
 from app.ingest.readers._source import open_source
 from app.ingest.readers.described import TextLayout, load_layout
 from app.ingest.readers.sniff import FORMATS, sniff_format, sniff_source, unsupported
+from app.log_formats import LOG_FORMATS, sidecar_of
 
 __all__ = ["FORMATS", "READERS", "LogReader", "TextLayout", "load_layout", "open_log", "reader_class", "sniff_format"]
 

@@ -13,10 +13,10 @@ import zlib
 from pathlib import PurePath
 
 from app.errors import LogFormatError, UnsupportedFormatError
-from app.ingest.formats import FORMAT_NAMES, LOG_FORMATS, supported_list
 from app.ingest.readers import analyser_tsv, serial_dump
 from app.ingest.readers.described import TextLayout, user_layouts
 from app.ingest.readers.tcu import LINE_SHAPE as TCU_LINE
+from app.log_formats import FORMAT_NAMES, LOG_FORMATS, supported_list
 
 FORMATS = FORMAT_NAMES
 

@@ -7,7 +7,8 @@ a tie when the content fits several text formats. Help texts, the REST summary, 
 upload card and the "supported formats" part of an :class:`~app.errors.UnsupportedFormatError`
 are all built from it, so adding a reader here is the one place a format gets listed.
 
-This module imports nothing heavy: the command line builds its help from it without numpy.
+It sits outside ``app.ingest`` and imports nothing: the command line builds its help from it without
+loading numpy or cantools (``app.ingest``'s package import prepares cantools).
 """
 
 from __future__ import annotations
