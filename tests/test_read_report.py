@@ -63,7 +63,8 @@ def test_skipped_lines_count_as_frames_lost(tmp_path: Path) -> None:
         read = read_summary(log.meta, log.report, n, 9.99)
     assert n == 997 and read["damaged"] and not read["truncated"]
     assert read["frames_lost"] == 3 and read["problem_count"] == 3
-    assert read["seconds_lost"] == pytest.approx(3 * 9.99 / 997) and read["estimated"]  # at the log's frame rate
+    assert read["seconds_lost"] == pytest.approx(3 * 9.99 / 997) and read["seconds_estimated"]  # at the frame rate
+    assert not read["estimated"] and "; 3 frame(s) (about 0.0 s) lost" in read["note"]  # each skipped line is one
     assert [p["where"] for p in read["problems"]] == ["line 101", "line 201", "line 301"]
 
 
@@ -76,7 +77,7 @@ def test_analyze_states_the_truncation(logs: tuple[Path, Path], capsys: pytest.C
     doc = json.loads(capsys.readouterr().out)
     read = doc["summary"]["read"]
     assert read == doc["ingest"]["read"] and read["truncated"] and read["frames_lost"] > 5000
-    assert f"about {read['frames_lost']} frame(s) (about {read['seconds_lost']:.1f} s) lost" in out[0]
+    assert f"about {read['frames_lost']} frame(s) ({read['seconds_lost']:.1f} s) lost" in out[0]  # s: BLF header
 
 
 def test_diagnose_states_the_truncation(logs: tuple[Path, Path], capsys: pytest.CaptureFixture[str],

@@ -14,8 +14,10 @@ from datetime import datetime
 from typing import Any
 
 from app.ingest.frames import IngestReport, LogMeta, ReadIssue
+from app.ingest.readers._base import INFO_KINDS as READER_INFO
 
-INFO_KINDS = frozenset({"unknown_object", "time_backwards", "dlc_mismatch", "mf4_fallback"})
+# what describes the log rather than damage to it; a logger's own DATA_LOST events count as loss here
+INFO_KINDS = READER_INFO - {"data_lost"}
 LINE_KINDS = frozenset({"bad_line", "non_hex", "short_data", "bad_timestamp"})  # one line = one frame
 MAX_LISTED = 20
 
@@ -50,7 +52,9 @@ def read_summary(meta: LogMeta, report: IngestReport, frames_read: int, duration
     -------
     dict
         ``damaged``, ``truncated`` (bools), ``frames_read``, ``frames_lost`` (None when unknown),
-        ``seconds_lost`` (None when unknown), ``estimated`` (the losses are estimates),
+        ``seconds_lost`` (None when unknown), ``estimated`` (the frames lost are an estimate: a BLF
+        header counts every object, a damaged region's frames come from its size),
+        ``seconds_estimated`` (the seconds come from the frame rate, not from the log's header),
         ``problems`` (kind, where, count, message, frames_lost, bytes_lost; at most 20, first first)
         and ``note`` (one sentence for people; None for an undamaged log).
     """
@@ -65,6 +69,7 @@ def read_summary(meta: LogMeta, report: IngestReport, frames_read: int, duration
         # few, so this is a close upper estimate)
         frames_lost = max(frames_lost or 0, int(declared) - frames_read)
     seconds_lost: float | None = None
+    seconds_estimated = False
     stop = meta.extra.get("stop_time_local")
     if truncated and stop and isinstance(meta.start_time, datetime):
         try:
@@ -75,12 +80,13 @@ def read_summary(meta: LogMeta, report: IngestReport, frames_read: int, duration
             seconds_lost = measured - duration_s
     if seconds_lost is None and frames_lost and frames_read and duration_s > 0:
         seconds_lost = frames_lost * duration_s / frames_read
-        estimated = True
+        seconds_estimated = True
     problems = [{"kind": i.kind, "where": _where(i), "count": i.count, "message": i.message,
                  "frames_lost": _frames_lost(i), "bytes_lost": i.bytes_lost} for i in damage[:MAX_LISTED]]
     summary: dict[str, Any] = {
         "damaged": bool(damage), "truncated": truncated, "frames_read": frames_read, "frames_lost": frames_lost,
-        "seconds_lost": seconds_lost, "estimated": estimated if damage else False, "problems": problems,
+        "seconds_lost": seconds_lost, "estimated": estimated if damage else False,
+        "seconds_estimated": seconds_estimated, "problems": problems,
         "problem_count": sum(i.count for i in damage), "note": None,
     }
     if damage:
@@ -89,9 +95,8 @@ def read_summary(meta: LogMeta, report: IngestReport, frames_read: int, duration
 
 
 def read_note(s: dict[str, Any], duration_s: float) -> str:
-    """One sentence: what is wrong with the log and what it cost, e.g. ``the log is truncated (the file ends
-    inside the object at byte offset 79670 ...); about 9693 frames (19.4 s) lost; the results cover the
-    20.6 s that were read``."""
+    """One sentence: what is wrong with the log and what it cost, e.g. ``the log is truncated (...); about
+    9693 frame(s) (19.4 s) lost; the results cover the 20.6 s that were read``."""
     first = s["problems"][0] if s["problems"] else None
     what = "truncated" if s["truncated"] else "damaged"
     n = s["problem_count"]
@@ -102,7 +107,8 @@ def read_note(s: dict[str, Any], duration_s: float) -> str:
         text += f" ({first['kind']}{where}: {first['message']}{more})"
     about = "about " if s["estimated"] else ""
     if s["frames_lost"] is not None:
-        secs = f" ({about}{s['seconds_lost']:.1f} s)" if s["seconds_lost"] is not None else ""
+        about_s = "about " if s["seconds_estimated"] else ""
+        secs = f" ({about_s}{s['seconds_lost']:.1f} s)" if s["seconds_lost"] is not None else ""
         text += f"; {about}{s['frames_lost']} frame(s){secs} lost"
     else:
         text += "; frames lost: unknown"

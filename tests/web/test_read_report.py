@@ -42,7 +42,7 @@ def test_analysis_view_states_the_truncation(page: Any, server: Server, cut_log:
     page.wait_for_selector("main[data-state='ready']", timeout=120_000)
     note = page.text_content("#read-report") or ""
     assert note.startswith("truncated log: the log is truncated")
-    assert f"{read['frames_lost']} frame(s) (about {read['seconds_lost']:.1f} s) lost" in note
+    assert f"{read['frames_lost']} frame(s) ({read['seconds_lost']:.1f} s) lost" in note
 
 
 def test_upload_card_lists_the_formats_of_the_registry(page: Any, server: Server) -> None:
