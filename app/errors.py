@@ -15,6 +15,7 @@ subclass the matching builtin so generic callers can catch ``ValueError`` etc.::
      |    +-- DecodeError (ValueError)    (422)  frames cannot be decoded
      |    +-- SignalMapError (ValueError) (422)  signal map invalid or does not fit the DBC
      |    +-- MissingSignalError (KeyError)(422) required canonical channels absent
+     |    +-- FormatFileError (ValueError)(422)  a log format description (TOML) is wrong
      +-- AnalysisError                    (422)
      |    +-- InsufficientDataError       (422)
      |    +-- ImplausibleSignalError      (422)  most of a channel beyond what the vehicle can do (wrong DBC)
@@ -177,3 +178,9 @@ class StorageFullError(StorageError):
 class LiveBusError(AppError, ConnectionError):
     code = "live_bus_error"
     status = 503
+
+
+class FormatFileError(IngestError, ValueError):
+    """A log format description (TOML, ``--format-file``) is wrong; the message names the file and field."""
+
+    code = "format_file"

@@ -90,6 +90,7 @@ def result_payload(res: AnalysisResult, ratings: RatingModel | None = None,
         "whole_rms_rpm": res.whole_error.rms_rpm if res.whole_error else None,
         "whole_nrmse": res.whole_error.nrmse if res.whole_error else None,
         "drivability": summarize_feel(feels) if feels else {},
+        "read": res.ingest.get("read"),  # damaged or truncated input: frames and seconds lost, a note
     }
     doc = {
         "schema": 1, "summary": summary, "events": events, "metrics": metrics, "event_rows": rows,

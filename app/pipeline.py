@@ -170,11 +170,14 @@ def decode_log(log: LogSource, database: Path, signal_map: Path,
 
     ``log`` is a path, a binary file object, or an fsspec URL (:mod:`app.log_source`). The DBC is
     parsed once per content per process (:mod:`app.ingest.dbc_cache`). ``ingest["start_time"]`` is
-    the log's absolute start (ISO 8601) when the format records it, else None.
+    the log's absolute start (ISO 8601) when the format records it, else None; ``ingest["read"]`` what
+    reading lost (:func:`app.ingest.readreport.read_summary`: damaged, truncated, frames and seconds lost,
+    a one-sentence ``note``).
     """
     from app.ingest.dbc_cache import cached_database
     from app.ingest.pipeline_signals import load_signals
     from app.ingest.readers import open_log
+    from app.ingest.readreport import read_summary
     from app.ingest.signalmap import load_signal_map
     from app.log_source import opened
 
@@ -189,6 +192,7 @@ def decode_log(log: LogSource, database: Path, signal_map: Path,
         "database": loaded.name, "database_repairs": [asdict(r) for r in loaded.repairs],
         "decode": _plain(report), "channels": sorted(signals),
         "start_time": meta.start_time.isoformat() if meta.start_time else None, "start_clock": meta.start_clock,
+        "read": read_summary(meta, read_report, read_report.frames, report.duration_s),
     }
     return signals, ingest
 

@@ -122,8 +122,10 @@ def _suffix(filename: str) -> str:
 
 
 class _Multipart:
-    def __init__(self, boundary: bytes, new_path: object, cap: int, result: UploadResult, max_files: int) -> None:
+    def __init__(self, boundary: bytes, new_path: object, cap: int, result: UploadResult, max_files: int,
+                 file_fields: tuple[str, ...] | None = None) -> None:
         self.new_path, self.cap, self.result, self.max_files = new_path, cap, result, max_files
+        self.file_fields = file_fields
         self.sinks: list[_Sink] = []
         self.parts = 0
         self.open_part = False
@@ -170,6 +172,9 @@ class _Multipart:
             if any(sink.field_name == (name or "file") for sink in self.sinks):
                 raise InputError(f"file field {name or 'file'!r} given more than once; send each file once",
                                  code="repeated_field")
+            if self.file_fields is not None and (name or "file") not in self.file_fields:
+                raise InputError(f"file field {name or 'file'!r} is not one this upload takes "
+                                 f"({', '.join(self.file_fields)})", code="too_many_files")
             if len(self.sinks) >= self.max_files:
                 raise InputError(f"more than {self.max_files} file(s) in the upload", code="too_many_files")
             filename = _safe_name(opts[b"filename"].decode("utf-8", "replace"))
@@ -255,11 +260,13 @@ async def _chunks(request: Request, idle_s: float | None) -> AsyncIterator[bytes
 
 async def receive_upload(request: Request, new_path: object, cap: int, drain_bytes: int,
                          raw_filename: str | None = None, urlencoded_form: bool = False,
-                         idle_s: float | None = None, max_files: int = 1) -> UploadResult:
+                         idle_s: float | None = None, max_files: int = 1,
+                         file_fields: tuple[str, ...] | None = None) -> UploadResult:
     """Stream the request body into files created by ``new_path(suffix)``; see the module docstring.
 
     A multipart body may carry at most ``max_files`` file parts, each under its own field name; a
-    repeated one or one too many is refused when its headers arrive, before any of it is written.
+    repeated one or one too many is refused when its headers arrive, before any of it is written;
+    so is one under a field name not in ``file_fields`` (when given).
 
     With ``urlencoded_form``, an ``application/x-www-form-urlencoded`` body is read as form
     fields (no files); otherwise such a body is the raw file (curl ``--data-binary`` sends
@@ -288,7 +295,7 @@ async def receive_upload(request: Request, new_path: object, cap: int, drain_byt
                 raise InputError("multipart upload without a boundary in Content-Type")
             if len(boundary) > 200:
                 raise InputError("multipart boundary longer than 200 bytes", code="multipart_error")
-            mp = _Multipart(boundary, new_path, cap, result, max_files)
+            mp = _Multipart(boundary, new_path, cap, result, max_files, file_fields)
             sinks = mp.sinks
             async for chunk in _chunks(request, idle_s):
                 mp.parser.write(chunk)

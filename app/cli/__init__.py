@@ -16,6 +16,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
+from app.cli.log_args import use_format_files
 from app.errors import AppError
 
 # Subcommand modules, in the order they appear in --help.
@@ -54,6 +55,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        if getattr(args, "format_file", None):  # text formats described in TOML
+            use_format_files(args.format_file)
         code = args.func(args)
     except Exception as exc:
         if not isinstance(exc, AppError | _sim_error()):

@@ -125,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
         events_table,
         finding_lines,
         metrics_table,
+        read_lines,
         summary_line,
         tracking_lines,
     )
@@ -136,6 +137,8 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(text + "\n")
     else:
+        for line in read_lines(doc["summary"].get("read")):
+            print(line)
         print(summary_line(doc))
         print()
         print(events_table(doc))

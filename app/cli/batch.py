@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from app.cli.log_args import add_format_file, log_help
 from app.cli.vehicle_args import add_vehicle
 
 
@@ -17,7 +18,8 @@ def register(sub: Any) -> None:
         "cluster or an existing scheduler. Each log gets a record under OUT/logs (failures with their error code; "
         "the batch goes on) and its events go to the Parquet event store OUT/events. Logs already done (same "
         "content) are skipped, so an interrupted batch resumes when run again.")
-    p.add_argument("logs", nargs="+", metavar="LOG_OR_GLOB", help="logs, globs (quote them) or URLs")
+    p.add_argument("logs", nargs="+", metavar="LOG_OR_GLOB", help=log_help("logs, globs (quote them) or URLs"))
+    add_format_file(p)
     add_vehicle(p)
     p.add_argument("--out", type=Path, required=True, help="output directory (records and event store)")
     p.add_argument("--vehicle-id", default=None, metavar="ID",

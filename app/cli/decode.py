@@ -15,6 +15,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from app.cli.log_args import add_format_file, log_help
 from app.errors import InputError, StorageError
 
 if TYPE_CHECKING:  # the command imports numpy, cantools and pyarrow when it runs, not when --help is built
@@ -29,8 +30,8 @@ FORMATS = ("parquet", "csv")  # the same as app.ingest.tables.FORMATS (not impor
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser("decode", help="decode a CAN log with a DBC (and signal map); print the bus report",
                               description=__doc__.split("\n\n", 1)[1] if __doc__ else None)
-    p.add_argument("log", type=Path,
-                   help="BLF, ASC, candump -L, TRC, SavvyCAN CSV, MF4 or TCU text log (format from content)")
+    p.add_argument("log", type=Path, help=log_help())
+    add_format_file(p)
     p.add_argument("--dbc", type=Path, required=True, help="DBC, KCD, SYM or ARXML database")
     p.add_argument("--map", type=Path, default=None, help="signal map TOML (canonical channels)")
     p.add_argument("--out", type=Path, default=None, help="write decoded tables to this folder")

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from app.cli.report import identified_param
+from app.cli.report import identified_param, read_lines
 from app.cli.vehicle_args import add_log_and_vehicle, event_params, vehicle_inputs
 
 
@@ -89,7 +89,9 @@ def _residual_lines(d: dict[str, Any]) -> list[str]:
 
 def summary(doc: dict[str, Any]) -> str:
     d = doc["decision"]
-    lines = [f"WARNING [{f['code']}]: {f['message']}" for f in doc.get("findings") or []]
+    lines = read_lines(doc.get("read"))
+    lines += read_lines((doc.get("validation") or {}).get("read"), "validation log: ")
+    lines += [f"WARNING [{f['code']}]: {f['message']}" for f in doc.get("findings") or []]
     lines += [f"decision: {d['status'].upper()}" + (f"  top: {' + '.join(d['top'])}" if d["top"] else "")
              + (f"  confusable: {' / '.join(d['confusable'])}" if d.get("confusable") else ""),
              f"  {d['reason']}"]
@@ -172,19 +174,21 @@ def run(args: argparse.Namespace) -> int:
                                model_form_rel=args.model_form_tolerance)
     say = _progress(args.quiet)
     say(0.0, f"decoding {args.log}")
-    signals, _ = decode_log(args.log, dbc, smap)
+    signals, ingest = decode_log(args.log, dbc, smap)
     result, checked = diagnose_checked(signals, vehicle, options, say, thresholds)
     validation = None
     if args.validate is not None and (result.decision.top or result.decision.details.get("base_parameters")):
         say(0.0, f"decoding {args.validate}")
-        other, _ = decode_log(args.validate, dbc, smap)
+        other, other_ingest = decode_log(args.validate, dbc, smap)
         other_checked = check_log(other, Limits.for_vehicle(vehicle))
         validation = validate_on(result, other_checked.signals, vehicle, progress=say,
                                  event_params=thresholds).to_dict()
         validation["findings"] = [f.to_dict() for f in other_checked.findings]
+        validation["read"] = other_ingest["read"]
     elif args.validate is not None:
         validation = {"skipped": f"decision {result.decision.status}: no effect to validate"}
     doc = report_dict(result, validation, checked.findings)
+    doc["read"] = ingest["read"]  # damaged or truncated input, stated with the answer
     if args.plots is not None and result.baseline is not None:
         from app.diagnosis_plots import event_overlay_png, residual_chart_png
 

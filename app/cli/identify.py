@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from app.cli.diagnose import _progress
+from app.cli.log_args import add_format_file, log_help
 from app.cli.report import identified_param
 from app.cli.vehicle_args import add_vehicle, event_params, vehicle_inputs
 
@@ -26,7 +27,8 @@ def register(sub: Any) -> None:
         description="Estimate the first torsional mode of the driveline from the tip-in/tip-out windows of the logs "
         "and fit the vehicle file's identifiable base parameters (torsional stiffness, damping, vehicle mass, total "
         "lash; torque gain and road load) with intervals; write the identified vehicle as a new file.")
-    p.add_argument("logs", type=Path, nargs="+", metavar="LOG", help="CAN logs of the same car")
+    p.add_argument("logs", type=Path, nargs="+", metavar="LOG", help=log_help("CAN logs of the same car"))
+    add_format_file(p)
     add_vehicle(p)
     p.add_argument("--out", type=Path, default=None, metavar="TOML",
                    help="write the identified vehicle here (default: <vehicle>_identified.toml in the working "

@@ -16,6 +16,7 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING
 
+from app.cli.log_args import add_format_file, log_help
 from app.errors import InputError
 
 if TYPE_CHECKING:  # python-can and numpy are imported when the command runs, not when --help is built
@@ -85,7 +86,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "replay", help="replay a log onto a CAN bus with its original timing",
         description="Send the frames of LOG onto a CAN bus at their original pace (scaled by --rate). "
                     "Ctrl-C or SIGTERM stops cleanly and prints a summary.")
-    p.add_argument("log", type=Path, help="log file (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4)")
+    p.add_argument("log", type=Path, help=log_help("log file"))
+    add_format_file(p)
     add_bus_arguments(p)
     p.add_argument("--rate", type=float, default=1.0,
                    help="speed factor between 0.001 and 1000: 2 = twice as fast (default 1)")

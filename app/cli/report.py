@@ -150,3 +150,12 @@ def identified_param(p: dict[str, Any]) -> str:
     flag += "  AT PRIOR BOUND" if p["at_bound"] else ""
     return (f"{p['value']:.4g} [{p['lo']:.4g}, {p['hi']:.4g}] {p['unit']}   file {p['nominal']:.4g}   "
             f"{ratio}{flag}")
+
+
+def read_lines(read: dict[str, Any] | None, label: str = "") -> list[str]:
+    """A damaged or truncated log stated before the answer: ``WARNING [log_truncated]: the log is truncated
+    (...); about 9693 frame(s) (19.4 s) lost; ...`` (nothing for an undamaged log)."""
+    if not read or not read.get("damaged"):
+        return []
+    code = "log_truncated" if read.get("truncated") else "log_damaged"
+    return [f"WARNING [{code}]: {label}{read['note']}"]

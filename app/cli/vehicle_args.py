@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from app.cli.log_args import add_format_file, log_help
+
 if TYPE_CHECKING:
     from app.analysis.events import EventParams
     from app.pipeline import VehicleInputs
@@ -28,7 +30,8 @@ EVENT_OPTIONS = (
 
 def add_log_and_vehicle(p: argparse.ArgumentParser) -> None:
     """``LOG --vehicle V [--dbc F] [--signal-map F]``."""
-    p.add_argument("log", type=Path, help="CAN log (BLF, ASC, candump, TRC, SavvyCAN CSV, MF4; gzip accepted)")
+    p.add_argument("log", type=Path, help=log_help())
+    add_format_file(p)
     add_vehicle(p)
 
 

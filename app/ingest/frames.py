@@ -141,7 +141,7 @@ class IngestReport:
 class LogMeta:
     """Log-level facts: the format, the absolute start time and the clock it came from."""
 
-    format: str  # "blf", "asc", "candump", "trc", "gvret_csv", "mf4"
+    format: str  # a name of app.log_formats.LOG_FORMATS: "blf", "asc", "candump", ..., "described"
     start_time: datetime | None = None  # absolute time of t_ns == 0
     start_clock: str = "unknown"  # e.g. "blf_header_local", "asc_date_header_local", "epoch_utc", "unknown"
     channels: dict[int, str] = field(default_factory=dict)  # channel number -> name if the log says

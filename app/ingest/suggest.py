@@ -38,10 +38,12 @@ MIN_FRAMES = 20  # a message seen fewer times in the log cannot carry a channel 
 # channel -> (words that must all be present, any-of groups); each group adds to the score
 _RULES: dict[str, list[tuple[set[str], float]]] = {
     "motor_torque_nm": [({"torque", "trq", "tq", "tork"}, 3.0), ({"motor", "mot", "mtr", "mcu", "di", "dir",
-                        "inv", "inverter", "em", "edu", "drive", "axle"}, 2.0), ({"actual", "act", "est", "estimate",
-                        "ist", "feedback", "fb", "fdbk"}, 1.0)],
-    "motor_speed_rpm": [({"speed", "spd", "rpm", "n", "velocity"}, 3.0), ({"motor", "mot", "mtr", "mcu", "di", "dir",
-                        "rotor", "inv", "em", "edu", "axle", "shaft"}, 2.0), ({"actual", "act", "rpm"}, 1.0)],
+                        "inv", "inverter", "em", "edu", "drive", "axle", "mg", "mgu", "generator", "emachine"}, 2.0),
+                        ({"actual", "act", "est", "estimate", "ist", "feedback", "fb", "fdbk"}, 1.0)],
+    "motor_speed_rpm": [({"speed", "spd", "rpm", "n", "velocity", "revolution", "revolutions", "rev", "revs",
+                          "rotation", "rotational"}, 3.0),
+                        ({"motor", "mot", "mtr", "mcu", "di", "dir", "rotor", "inv", "em", "edu", "axle", "shaft",
+                          "mg", "mgu", "generator", "emachine"}, 2.0), ({"actual", "act", "rpm"}, 1.0)],
     "pedal_pct": [({"pedal", "ped", "accel", "throttle", "accelerator", "apedal"}, 3.0),
                   ({"pos", "position", "pct", "travel", "rate"}, 1.0)],
     "vehicle_speed_kmh": [({"speed", "spd", "velocity", "vel", "kph"}, 3.0),
@@ -58,6 +60,10 @@ _CORNER_CODES = {"fl": "fl", "lf": "fl", "fr": "fr", "rf": "fr", "rl": "rl", "lr
 _AXLE = {"front": "f", "frt": "f", "rear": "r", "rr": "r"}
 _SIDE = {"left": "l", "lh": "l", "right": "r", "rh": "r"}
 _NODE = re.compile(r"[A-Z]{2,}(FL|FR|RL|RR)(?![A-Za-z])")  # a node name ending in a corner code: WSBFL
+# a rotational speed written in a name or comment: "[rpm]", "in 1/min", "U/min", "rev/min", "rad/s"
+_SPEED_UNIT_TEXT = re.compile(r"(?<![A-Za-z])(rpm|1/min|u/min|r/min|rev/min|min-1|min\^-1|rad/s)(?![A-Za-z])", re.I)
+# channels whose defining word a rotational-speed unit stands in for (a speed named "Revolution", "N_Out" ...)
+_SPEED_CHANNELS = ("motor_speed_rpm",)
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,6 +107,17 @@ def _corner_of(msg: Message, sig: CanSignal) -> str | None:
     return corner(sig.name) or corner(msg.name)
 
 
+def _speed_unit(sig: CanSignal, comment: str) -> str | None:
+    """Why a signal is a rotational speed by its unit (``unit 'rpm'``), or by a speed unit written in its name
+    (``MG_OutputRevolution [rpm]``) or comment; None when neither says so."""
+    if sig.unit and unit_factor(sig.unit, "rpm") is not None:
+        return f"unit {sig.unit!r} is a rotational speed"
+    for where, text in (("name", sig.name), ("comment", comment)):
+        if text and (m := _SPEED_UNIT_TEXT.search(text)):
+            return f"{where} gives the unit {m.group(1)!r}"
+    return None
+
+
 def _score(channel: str, msg: Message, sig: CanSignal, period_s: float | None) -> tuple[float, list[str]]:
     words = _words(sig.name) | {f"msg:{w}" for w in _words(msg.name)}
     plain = {w for w in words if not w.startswith("msg:")}
@@ -113,13 +130,21 @@ def _score(channel: str, msg: Message, sig: CanSignal, period_s: float | None) -
             return 0.0, []  # another corner, an axle or side only, or no corner at all
         score += 3.0
         reasons.append(f"corner {want.upper()}")
-    for group, weight in _RULES[channel]:
+    comment = sig.comment if isinstance(sig.comment, str) else ""
+    note_words = _words(comment) if comment else set()
+    for k, (group, weight) in enumerate(_RULES[channel]):
         if plain & group:
             score += weight
             reasons.append(f"name has {sorted(plain & group)[0]!r}")
+        elif k == 0 and channel in _SPEED_CHANNELS and (speed_unit := _speed_unit(sig, comment)):
+            score += weight  # the unit says what the name does not: a rotational speed
+            reasons.append(speed_unit)
         elif msg_words & group:
             score += weight * 0.5
             reasons.append(f"message name has {sorted(msg_words & group)[0]!r}")
+        elif note_words & group:
+            score += weight * 0.5
+            reasons.append(f"comment has {sorted(note_words & group)[0]!r}")
     if score < 3.0:
         return 0.0, []  # the defining keyword is missing
     unit, _, _ = CANONICAL[channel]

@@ -75,15 +75,16 @@ def options(opts: dict[str, Any], model: str) -> Any:
         raise InputError(f"diagnosis options unreadable: {exc}") from exc
 
 
-def decode(store: Store, log_id: str, vehicle_name: str, version: int) -> tuple[Any, Any]:
-    """A stored log's signals decoded with a stored vehicle's DBC and map, and that vehicle's driveline."""
+def decode(store: Store, log_id: str, vehicle_name: str, version: int) -> tuple[Any, Any, dict[str, Any]]:
+    """A stored log's signals decoded with a stored vehicle's DBC and map, that vehicle's driveline, and what
+    reading the log lost (``app.ingest.readreport``)."""
     from app.pipeline import decode_log
     from sim import load_vehicle
 
     logrec = store.get_log(log_id)
     veh = store.get_vehicle(vehicle_name, version)
-    signals, _ = decode_log(logrec.path, veh.database_path, veh.signal_map_path)
-    return signals, load_vehicle(veh.driveline_path)
+    signals, ingest = decode_log(logrec.path, veh.database_path, veh.signal_map_path)
+    return signals, load_vehicle(veh.driveline_path), ingest["read"]
 
 
 def chosen(report: dict[str, Any]) -> dict[str, dict[str, float]]:
@@ -126,10 +127,11 @@ def run(store: Store, job: JobRecord) -> None:
     progress = progress_reporter(store, job.id)
     progress("decoding", 0.0)
     rec = store.get_analysis(analysis_id)
-    signals, vehicle = decode(store, rec.log_id, st["vehicle"]["name"], st["vehicle"]["version"])
+    signals, vehicle, read = decode(store, rec.log_id, st["vehicle"]["name"], st["vehicle"]["version"])
     result, checked = diagnose_checked(signals, vehicle, opts,
                                        lambda fraction, message: progress(message, 0.95 * fraction))
     doc = report_dict(result, findings=checked.findings)
+    doc["read"] = read  # a damaged or truncated log, stated with the answer
     store.update_job(job.id, 0.97, "saving")
     if result.baseline is not None:
         event_overlay_png(result, d / PLOTS["events"])

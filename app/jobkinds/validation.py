@@ -42,7 +42,7 @@ def run(store: Store, job: JobRecord) -> None:
     opts = options(report["options"], report["model"])
     progress = progress_reporter(store, job.id)
     progress("decoding", 0.0)
-    signals, vehicle = decode(store, val["log_id"], st["vehicle"]["name"], st["vehicle"]["version"])
+    signals, vehicle, read = decode(store, val["log_id"], st["vehicle"]["name"], st["vehicle"]["version"])
     result = validate_effects(effects, signals, vehicle, opts, lambda fraction, message: progress(message, fraction),
                               base_ratios=base_ratios(report))
-    write_json(d / VALIDATION, {"log_id": val["log_id"], "job_id": val.get("job_id"), **result.to_dict()})
+    write_json(d / VALIDATION, {"log_id": val["log_id"], "job_id": val.get("job_id"), **result.to_dict(), "read": read})

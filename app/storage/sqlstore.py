@@ -5,6 +5,7 @@ Layout of the files directory (``root``)::
     <root>/tmp/                       temporary files: uploads in progress, inflated logs (app.tempfiles;
                                       removed on failure, at startup and when their writer is gone)
     <root>/logs/<sha256><.ext>        uploaded logs, one file per distinct content
+    <root>/logs/<sha256><.ext>.format.toml  the format description uploaded with a text log (if any)
     <root>/vehicles/<name>/v<N>/      driveline.toml, database<.ext>, signals.map.toml
     <root>/analyses/<id>/             results written by the pipeline (atomic rename on completion)
     <root>/jobs/<id>/                 results of other jobs (gap sensitivity)
@@ -31,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from app.errors import ConflictError, InputError, NotFoundError, StorageError
+from app.log_formats import sidecar_of
 from app.storage.dialect import Connection, Dialect
 from app.storage.jobtable import JobTable, now
 from app.storage.keys import KeyTable
@@ -201,6 +203,7 @@ class SQLStore(JobTable, KeyTable):
         for aid in ids:
             shutil.rmtree(self.analysis_dir(aid), ignore_errors=True)
         log.path.unlink(missing_ok=True)
+        sidecar_of(log.path).unlink(missing_ok=True)  # its format description, when it came with one
         return ids
 
     # -- vehicles ----------------------------------------------------------------------

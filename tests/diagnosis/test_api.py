@@ -75,6 +75,7 @@ def test_diagnosis_lifecycle(client: TestClient) -> None:
     assert rep["decision"]["status"] == "explained" and rep["decision"]["top"] == ["torque_lag"]
     assert rep["split"]["seed"] == 3
     assert rep["findings"] == []  # the log checks ran and found nothing wrong with the log
+    assert rep["read"]["damaged"] is False and rep["read"]["frames_read"] > 1000  # the read report came along
     assert rep["decision"]["residual_rms_rpm_before"] > rep["decision"]["residual_rms_rpm_after"] > 0
     for name in ("events", "residual"):
         png = client.get(f"/diagnoses/{did}/plots/{name}")
@@ -105,6 +106,7 @@ def test_diagnosis_lifecycle(client: TestClient) -> None:
     val = doc["validation"]
     assert val["status"] == "done", val
     assert val["shrink"]["value"] > 0.7
+    assert val["read"]["damaged"] is False and val["read"]["note"] is None
 
 
 def test_bad_requests(client: TestClient) -> None:

@@ -228,7 +228,8 @@ def test_arbitrary_bytes_after_a_blf_header(payload: bytes) -> None:
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.binary(min_size=0, max_size=2000),
-       st.sampled_from([None, "blf", "asc", "candump", "trc", "gvret_csv", "mf4"]))
+       st.sampled_from([None, "blf", "asc", "candump", "trc", "gvret_csv", "mf4", "tcu", "analyser_tsv",
+                        "serial_dump"]))
 def test_arbitrary_bytes_any_reader(payload: bytes, fmt: str | None) -> None:
     run_bounded(payload, fmt=fmt)
 

@@ -98,6 +98,9 @@ def test_asc_gzip_truncated_salvages_and_reports() -> None:
     assert isinstance(run_bounded(packed[: len(packed) * 2 // 3], strict=True).error, TruncatedLogError)
 
 
+TSV_HEAD = "ParserFlags\tCh\tCounter\tT/R\tTime\tFlags\tCAN ID\tLen\tData\tParser Name\tdefault\n"
+
+
 @pytest.mark.parametrize(("fmt_text", "bad", "kind"), [
     ("(1.000001) can0 123#00\n", "(abc) can0 123#00\n", "bad_timestamp"),
     ("(1.000001) can0 123#00\n", "(1.000002) can0 12G#00\n", "non_hex"),
@@ -118,6 +121,17 @@ def test_asc_gzip_truncated_salvages_and_reports() -> None:
     ("000000EAx0CFFAC0100007B0000000000\n", "000000EBx0CFFAC0100007B00000000000000\n", "bad_line"),
     ("000000EAx0CFFAC0100007B0000000000\n", "0000G0EBx0CFFAC0100007B0000000000\n", "bad_timestamp"),
     ("000000EAx0CFFAC0100007B0000000000\n", "000000EBx0CFFAC\n", "bad_line"),
+    (TSV_HEAD + "1\t0\t1\tRX\t100\t\t0x00000100\t1\t0xaa \tDefault Parser\t\n",
+     "1\t0\t2\tRX\t101\t\t0x00000100\t3\t0xaa bb \tDefault Parser\t\n", "short_data"),
+    (TSV_HEAD + "1\t0\t1\tRX\t100\t\t0x00000100\t1\t0xaa \tDefault Parser\t\n",
+     "1\t0\t2\tRX\t10x1\t\t0x00000100\t1\t0xaa \tDefault Parser\t\n", "bad_timestamp"),
+    (TSV_HEAD + "1\t0\t1\tRX\t100\t\t0x00000100\t1\t0xaa \tDefault Parser\t\n",
+     "1\t0\t2\tRX\t101\t\t0x00000100\t1\t0xag \tDefault Parser\t\n", "non_hex"),
+    ("(566.87) RX0 3BE [2] FD 0B\n", "(566.88) RX0 3BE [2] FD\n", "short_data"),
+    ("(566.87) RX0 3BE [2] FD 0B\n", "(566.88) RX0 3XE [2] FD 0B\n", "non_hex"),
+    ("(566.87) RX0 3BE [2] FD 0B\n", "(566.88) RX0 3BE [9] FD 0B\n", "bad_line"),
+    ("(566.87) RX0 3BE [2] FD 0B\n", "(56x.88) RX0 3BE [2] FD 0B\n", "bad_timestamp"),
+    ("(566.87) RX0 3BE [2] FD 0B\n", " 00 10 00 00\n", "bad_line"),
 ])
 def test_other_text_formats_damage(fmt_text: str, bad: str, kind: str) -> None:
     good_line = fmt_text.splitlines()[-1] + "\n"

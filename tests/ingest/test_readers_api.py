@@ -22,8 +22,24 @@ CSV = b"Time Stamp,ID,Extended,Bus,LEN,D1,D2,D3,D4,D5,D6,D7,D8\n100,00000100,fal
 BLF = blf_file([obj(1, can_msg(1, 0x100, b"\xaa"), 0)])
 
 
+def test_every_format_is_documented_and_named_in_the_help() -> None:
+    """The one list (app/log_formats.py) reaches the docs, the help text and the unsupported-format error."""
+    from app.cli.log_args import log_help
+    from app.errors import UnsupportedFormatError
+    from app.log_formats import LOG_FORMATS
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "ingest-readers.md").read_text()
+    with pytest.raises(UnsupportedFormatError) as err:
+        sniff_format(b"nothing a reader knows\n", "x.txt")
+    for f in LOG_FORMATS:
+        assert f'`"{f.name}"`' in doc, f.name
+        assert f.label in " ".join(log_help().split()), f.label
+        assert f"{f.name} ({f.label})" in str(err.value), f.name
+
+
 def test_readers_table() -> None:
-    assert set(READERS) == set(FORMATS) == {"blf", "asc", "candump", "trc", "gvret_csv", "mf4", "tcu"}
+    assert set(READERS) == set(FORMATS) == {"blf", "asc", "candump", "trc", "gvret_csv", "mf4", "tcu",
+                                            "analyser_tsv", "serial_dump", "described"}
 
 
 @pytest.mark.parametrize(("head", "fmt"), [(ASC, "asc"), (CANDUMP, "candump"), (TRC, "trc"), (CSV, "gvret_csv"),

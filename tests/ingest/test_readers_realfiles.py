@@ -28,9 +28,13 @@ def test_kona_gvret_csv(path: Path) -> None:
     assert log.meta.format == "gvret_csv"
     assert log.meta.start_time is None and log.meta.start_clock == "unknown"  # device clock, not an epoch
     assert len(chunk) == len(rows) > 10_000
-    # timestamps: microseconds of the logger clock, kept in logged order (not monotonic across buses)
+    # timestamps: microseconds of the logger clock, kept in logged order (not monotonic across buses), counted
+    # from the log's start (the earliest of the first rows) like a BLF's; the logger clock there is kept
     t_us = np.array([int(r[0]) for r in rows], np.int64)
-    assert (chunk.t_ns == t_us * 1000).all()
+    t0_us = int(t_us[:999].min())
+    assert log.meta.extra["clock_at_start_s"] == f"{t0_us // 10**6}.{t0_us % 10**6:06d}".rstrip("0").rstrip(".")
+    assert (chunk.t_ns == (t_us - t0_us) * 1000).all()
+    assert int(chunk.t_ns.min()) == 0 and int(chunk.t_ns.max()) < 60 * 10**9  # seconds of log, charted from 0
     backwards = int((np.diff(t_us) < 0).sum())
     issues = {i.kind: i for i in log.report.issues}
     assert set(issues) == {"time_backwards"} and issues["time_backwards"].count == backwards > 100

@@ -43,7 +43,9 @@ def test_frames_times_and_ids() -> None:
     chunk, log = _read(raw)
     assert log.meta.format == "tcu" and log.meta.start_clock == "unknown"  # type: ignore[attr-defined]
     assert len(chunk) == len(frames) == 300
-    assert chunk.t_ns.tolist() == [t * 1_000_000 for t, _, _ in frames]  # the logger clock, 1 ms per count
+    t0 = frames[0][0]
+    assert chunk.t_ns.tolist() == [(t - t0) * 1_000_000 for t, _, _ in frames]  # from the first frame, 1 ms per count
+    assert log.meta.extra["clock_at_start_s"] == f"{t0 / 1000:g}"  # type: ignore[attr-defined]  # the logger clock there
     assert chunk.arb_id.tolist() == [i for _, i, _ in frames]
     assert np.all(chunk.flags == FrameFlag.EXTENDED) and np.all(chunk.dlc == 8) and np.all(chunk.channel == 0)
     assert [bytes(row) for row in chunk.data] == [d for _, _, d in frames]
@@ -53,7 +55,7 @@ def test_frames_times_and_ids() -> None:
 def test_short_frames_and_crlf() -> None:
     chunk, _ = _read(b"0000000Ax0404FF01\r\n0000000Bx0404FF0201\r\n0000000Cx0404FF03A1B2C3\r\n")
     assert chunk.dlc.tolist() == [0, 1, 3]
-    assert chunk.t_ns.tolist() == [10_000_000, 11_000_000, 12_000_000]  # 0x0A..0x0C ms
+    assert chunk.t_ns.tolist() == [0, 1_000_000, 2_000_000]  # 0x0A..0x0C ms, from the first frame
     assert chunk.data[2, :4].tolist() == [0xA1, 0xB2, 0xC3, 0]
 
 
@@ -86,7 +88,7 @@ def test_gzip_and_file_path(tmp_path: Path) -> None:
     with open_log(path) as log:
         chunk = FrameChunk.concat(list(log.chunks()))
     assert log.meta.format == "tcu" and len(chunk) == 50
-    assert chunk.t_ns[-1] == frames[-1][0] * 1_000_000
+    assert chunk.t_ns[-1] == (frames[-1][0] - frames[0][0]) * 1_000_000
 
 
 def test_id_wider_than_29_bits_is_reported() -> None:

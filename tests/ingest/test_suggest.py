@@ -165,3 +165,55 @@ def test_decode_report_sampling_per_channel(car: tuple[LoadedDatabase, Path], tm
     assert plain["ids"][0]["median_gap_ms"] is not None
     assert "motor_torque_nm: median spacing 1 ms" in format_channels(signals)
     assert "MC_Torque_And_Timer_Info: median spacing 1 ms" in format_report(report)
+
+
+
+def _mg_dbc(speed: str) -> str:
+    """A motor-generator's messages with its speed signal written as ``speed`` (a DBC SG_ line's name..unit
+    part, optionally followed by a comment line)."""
+    line, _, comment = speed.partition("\n")
+    return f'''VERSION ""
+
+NS_ :
+
+BS_:
+
+BU_: MG VCU
+
+BO_ 272 MG_Status: 8 MG
+ SG_ {line} VCU
+ SG_ MG_OutputTorque : 16|16@1- (0.1,0) [-3276.8|3276.7] "Nm" VCU
+ SG_ MG_Temperature : 32|8@1+ (1,-40) [-40|215] "degC" VCU
+ SG_ MG_Voltage : 40|16@1+ (0.1,0) [0|1000] "V" VCU
+
+BO_ 784 VCU_Vehicle: 8 VCU
+ SG_ VehicleSpeed : 0|16@1+ (0.01,0) [0|300] "km/h" MG
+
+{comment}
+BA_DEF_ BO_  "GenMsgCycleTime" INT 0 10000;
+BA_ "GenMsgCycleTime" BO_ 272 10;
+BA_ "GenMsgCycleTime" BO_ 784 100;
+'''
+
+
+@pytest.mark.parametrize(("speed", "signal", "why"), [
+    ('MG_OutputRevolution : 0|16@1- (1,0) [-20000|20000] "rpm"', "MG_OutputRevolution", "name has 'revolution'"),
+    ('MG_Out1 : 0|16@1- (1,0) [-20000|20000] "rpm"', "MG_Out1", "unit 'rpm' is a rotational speed"),
+    ('MG_Out1 : 0|16@1- (0.1,0) [-2000|2000] "rad/s"', "MG_Out1", "unit 'rad/s' is a rotational speed"),
+    ('MG_Out1 : 0|16@1- (1,0) [-20000|20000] ""\nCM_ SG_ 272 MG_Out1 "Motor-generator output shaft, in 1/min";',
+     "MG_Out1", "comment gives the unit '1/min'"),
+])
+def test_rotational_speed_units_find_the_motor_speed(tmp_path: Path, speed: str, signal: str, why: str) -> None:
+    """``MG_OutputRevolution [rpm]`` was missed: no speed word the suggester knew, and the unit was not read as
+    the speed it is. A rotational-speed unit (the signal's, or written in its comment) now stands in for the
+    word; torque, temperature, voltage and the vehicle speed stay out of the motor speed's candidates."""
+    dbc = tmp_path / "mg.dbc"
+    dbc.write_text(_mg_dbc(speed))
+    db = load_database(dbc).db
+    cands = suggest_candidates(db)["motor_speed_rpm"]
+    assert cands[0].signal == signal and why in cands[0].reasons, cands[0]
+    assert {c.signal for c in cands} <= {signal}  # nothing else of the motor-generator is a speed
+    smap = suggest_signal_map(db)
+    assert smap.channels["motor_speed_rpm"].signal == signal
+    assert smap.channels["motor_torque_nm"].signal == "MG_OutputTorque"
+    assert smap.channels["vehicle_speed_kmh"].signal == "VehicleSpeed"

@@ -1,4 +1,4 @@
-"""CAN log readers, chosen by content: BLF, ASC, candump -L, PEAK TRC, SavvyCAN/GVRET CSV, MF4, TCU text.
+"""CAN log readers, chosen by content (the formats are listed once, in :mod:`app.log_formats`).
 
 Usage::
 
@@ -30,9 +30,11 @@ from typing import BinaryIO, Protocol, runtime_checkable
 from app.ingest.frames import FrameChunk, IngestReport, LogMeta
 from app.ingest.readers._base import BaseReader
 from app.ingest.readers._source import open_source
-from app.ingest.readers.sniff import FORMATS, sniff_format, unsupported
+from app.ingest.readers.described import TextLayout, load_layout
+from app.ingest.readers.sniff import FORMATS, sniff_format, sniff_source, unsupported
+from app.log_formats import LOG_FORMATS, sidecar_of
 
-__all__ = ["FORMATS", "READERS", "LogReader", "open_log", "reader_class", "sniff_format"]
+__all__ = ["FORMATS", "READERS", "LogReader", "TextLayout", "load_layout", "open_log", "reader_class", "sniff_format"]
 
 
 @runtime_checkable
@@ -59,15 +61,7 @@ class LogReader(Protocol):
                  tb: TracebackType | None) -> None: ...
 
 
-READERS: dict[str, str] = {  # format -> "module:class"; a reader's module is imported when a log needs it
-    "blf": "blf:BLFReader",
-    "asc": "asc:ASCReader",
-    "candump": "candump:CandumpReader",
-    "trc": "trc:TRCReader",
-    "gvret_csv": "gvret_csv:GvretCsvReader",
-    "mf4": "mf4:MF4Reader",
-    "tcu": "tcu:TcuReader",
-}
+READERS: dict[str, str] = {f.name: f.reader for f in LOG_FORMATS}  # format -> "module:class", imported when needed
 
 
 def reader_class(fmt: str) -> type[BaseReader]:
@@ -78,7 +72,7 @@ def reader_class(fmt: str) -> type[BaseReader]:
 
 
 def open_log(source: str | os.PathLike[str] | BinaryIO, *, fmt: str | None = None, strict: bool = False,
-             chunk_frames: int = 65536) -> LogReader:
+             chunk_frames: int = 65536, layout: TextLayout | str | os.PathLike[str] | None = None) -> LogReader:
     """Open a CAN log for streaming.
 
     Parameters
@@ -91,6 +85,11 @@ def open_log(source: str | os.PathLike[str] | BinaryIO, *, fmt: str | None = Non
         Raise at the first problem instead of salvaging and reporting.
     chunk_frames : int
         Maximum rows per :class:`~app.ingest.frames.FrameChunk` (memory bound).
+    layout : TextLayout or path, optional
+        A text format description (:mod:`app.ingest.readers.described`) to read the log with,
+        instead of recognising its format. Without one, a description beside a log file
+        (``drive.txt.format.toml`` for ``drive.txt``) is used; the service stores an uploaded
+        description that way.
 
     Raises
     ------
@@ -100,17 +99,28 @@ def open_log(source: str | os.PathLike[str] | BinaryIO, *, fmt: str | None = Non
         The content matches no supported format, or ``fmt`` is unknown.
     LogNotFoundError
         No file at the path (code ``file_not_found``).
+    FormatFileError
+        ``layout`` names a description file that is missing or wrong (code ``format_file``).
     StorageError
         The path cannot be opened otherwise.
     """
+    if layout is not None and not isinstance(layout, TextLayout):
+        layout = load_layout(layout)
     stream, head, path = open_source(source)
     try:
-        if fmt is None:
-            fmt = sniff_format(head, stream.name)
+        if layout is None and fmt is None and path is not None and (side := sidecar_of(path)).is_file():
+            layout = load_layout(side)
+        if layout is not None:
+            fmt = "described"
+        elif fmt is None:
+            fmt, layout = sniff_source(head, stream.name)
         elif fmt not in READERS:
             raise unsupported(stream.name, f"unknown format {fmt!r}")
+        elif fmt == "described":
+            raise unsupported(stream.name, "format 'described' needs a format description (layout=, --format-file)")
         cls = reader_class(fmt)
-        reader: LogReader = cls(stream, head, strict=strict, chunk_frames=chunk_frames, path=path)
+        extra = {"layout": layout} if layout is not None else {}
+        reader: LogReader = cls(stream, head, strict=strict, chunk_frames=chunk_frames, path=path, **extra)
         return reader
     except BaseException:
         stream.close()

@@ -62,6 +62,14 @@ def hex_bytes(tokens: list[str], n: int, *, base: int = 16, what: str = "data by
     The tokens present are checked before their count, so a line with a garbled byte names
     that byte (``non_hex``) rather than reporting it one byte short (``short_data``).
     """
+    if base == 16 and len(tokens) >= n:
+        try:  # the common case, in C: every token two hex digits
+            fast = bytes.fromhex(" ".join(tokens[:n]))
+        except ValueError:
+            pass
+        else:
+            if len(fast) == n:
+                return fast
     out = bytearray(n)
     for i in range(min(n, len(tokens))):
         tok = tokens[i]
@@ -90,7 +98,7 @@ def parse_int(tok: str, base: int, what: str) -> int:
 
 def printable(line: str) -> bool:
     """False for lines with control characters other than tab: binary garbage."""
-    return line.isprintable() or all(c.isprintable() or c == "\t" for c in line)
+    return line.isprintable() or line.replace("\t", " ").isprintable()  # in C: tab-separated lines are common
 
 
 class LineSource:
@@ -164,32 +172,39 @@ EPOCH_2000_NS = 946_684_800 * 10**9
 
 
 def epoch_origin(meta: LogMeta, t_ns: int) -> int:
-    """Time origin for a text log whose stamps may be epoch times.
+    """Time origin of a text log: its first stamp, so ``t_ns`` counts from the log's start as for BLF.
 
-    A first stamp after the year 2000 is taken as epoch time: it becomes the origin and sets
-    ``meta.start_time`` (UTC, microseconds) with ``start_clock = "epoch_utc"``. Anything smaller
-    is a device or relative clock: the origin stays 0 and no absolute start is claimed.
+    A first stamp after the year 2000 is taken as epoch time and sets ``meta.start_time`` (UTC,
+    microseconds) with ``start_clock = "epoch_utc"``. Anything smaller is a device or relative clock:
+    no absolute start is claimed, and the clock's reading at the first frame is kept as
+    ``meta.extra["clock_at_start_s"]`` (a string, exact to the ns) so times as the logger printed them
+    can be recovered.
     """
     if t_ns < EPOCH_2000_NS:
-        return 0
+        whole, frac = divmod(t_ns, 10**9)
+        meta.extra["clock_at_start_s"] = f"{whole}.{frac:09d}".rstrip("0").rstrip(".")
+        return t_ns
     meta.start_time = datetime.fromtimestamp(t_ns // 10**9, tz=UTC) + timedelta(microseconds=(t_ns % 10**9) // 1000)
     meta.start_clock = "epoch_utc"
     return t_ns
 
 
 def first_stamp(lines: Iterable[str], parse: Callable[[str], tuple[Any, ...] | None]) -> int | None:
-    """Time stamp (ns, the first field of a parsed frame) of the first line that parses as a frame.
+    """The earliest time stamp (ns, the first field of a parsed frame) among the lines that parse as frames.
 
-    Lines that are not frames (``None``) or are damaged (:class:`BadLine`) are passed over.
+    The earliest rather than the first: logs of several buses interleave with small backwards
+    steps, and the origin should not leave the frames just before it at negative times. Lines that
+    are not frames (``None``) or are damaged (:class:`BadLine`) are passed over.
     """
+    earliest: int | None = None
     for line in lines:
         try:
             frame = parse(line)
         except BadLine:
             continue
-        if frame is not None:
-            return int(frame[0])
-    return None
+        if frame is not None and (earliest is None or int(frame[0]) < earliest):
+            earliest = int(frame[0])
+    return earliest
 
 
 LineFrame = tuple[int, int, int, int, int, bytes]  # absolute t_ns, channel, arb_id, flags, dlc, payload
@@ -200,8 +215,8 @@ class LineFrameReader(BaseReader):
 
     Subclasses turn a line into a :data:`LineFrame` in :meth:`_frame` (None for lines that
     carry no frame, :class:`BadLine` for damage, reported with the line number as a skipped
-    ``unit``). The first frame's time sets the origin through :meth:`_set_origin` (an epoch
-    stamp becomes ``start_time``; a device clock stays as logged).
+    ``unit``). The first frame's time is the origin (:meth:`_set_origin`): ``t_ns`` starts at 0; an
+    epoch stamp becomes ``start_time``, a device clock's reading is kept in ``meta.extra``.
     """
 
     unit = "line"  # what a skipped line is called in the report ("row" for CSV)

@@ -58,13 +58,13 @@ class GvretCsvReader(LineFrameReader):
         elif len(fields := first.split(",")) > 4 and fields[3].strip() in ("Rx", "Tx"):
             self._layout = (0, 1, 2, 3, 4, 5)
         self.meta.extra["time_base"] = "GVRET device clock (microseconds)"
-        t = first_stamp(self._head.decode("latin-1").splitlines()[1:50], self.parse_line)
+        t = first_stamp(self._head.decode("latin-1").splitlines()[1:1000], self.parse_line)
         if t is not None:
             self._set_origin(t)
 
     def _set_origin(self, t: int) -> None:
         super()._set_origin(t)
-        if self._t0:
+        if self.meta.start_clock == "epoch_utc":
             self.meta.extra["time_base"] = "epoch microseconds (system clock)"
 
     def parse_line(self, line: str) -> Frame | None:

@@ -13,14 +13,14 @@ import zlib
 from pathlib import PurePath
 
 from app.errors import LogFormatError, UnsupportedFormatError
+from app.ingest.readers import analyser_tsv, serial_dump
+from app.ingest.readers.described import TextLayout, user_layouts
 from app.ingest.readers.tcu import LINE_SHAPE as TCU_LINE
+from app.log_formats import FORMAT_NAMES, LOG_FORMATS, supported_list
 
-FORMATS = ("blf", "asc", "candump", "trc", "gvret_csv", "mf4", "tcu")
+FORMATS = FORMAT_NAMES
 
-SUFFIXES = {
-    ".blf": "blf", ".asc": "asc", ".log": "candump", ".trc": "trc", ".csv": "gvret_csv",
-    ".mf4": "mf4", ".mdf": "mf4",
-}
+SUFFIXES = {suffix: f.name for f in LOG_FORMATS for suffix in f.suffixes}
 
 _LINE_RULES: dict[str, tuple[re.Pattern[str], ...]] = {
     "asc": (
@@ -42,6 +42,8 @@ _LINE_RULES: dict[str, tuple[re.Pattern[str], ...]] = {
                    re.I),
     ),
     "tcu": (re.compile(TCU_LINE),),
+    "analyser_tsv": (analyser_tsv.HEADER, re.compile(analyser_tsv.ROW, re.I)),
+    "serial_dump": (re.compile(serial_dump.LINE_SHAPE),),
 }
 
 
@@ -65,8 +67,50 @@ def _suffix_format(name: str | None) -> str | None:
 
 def unsupported(name: str | None, why: str) -> UnsupportedFormatError:
     label = f"{name}: " if name else ""
-    return UnsupportedFormatError(f"{label}{why}; supported formats: {', '.join(FORMATS)} "
-                                  "(BLF, ASC and others also gzip-compressed)")
+    return UnsupportedFormatError(f"{label}{why}; supported formats: {supported_list()}; any of them "
+                                  "gzip-compressed")
+
+
+def _head_lines(head: bytes) -> list[str]:
+    lines = head.decode("latin-1").splitlines()[:200]
+    if len(head) >= 65536 and len(lines) > 1:
+        lines = lines[:-1]  # the last line may be cut
+    return lines
+
+
+def _text_head(head: bytes) -> bytes | None:
+    """The bytes to look at for text lines: ``head`` itself, inflated for gzip; None for binary formats."""
+    if head[:2] == b"\x1f\x8b":
+        try:
+            return _inflate_head(head)
+        except LogFormatError:
+            return None
+    if head[:4] == b"LOGG" or head[:8] in (b"MDF     ", b"UnFinMF ") or head[:12] == b"Generic File":
+        return None
+    return head
+
+
+def described_match(head: bytes, layouts: list[TextLayout]) -> TextLayout | None:
+    """The first user description whose shape at least half of the log's first lines have (and one at least)."""
+    text = _text_head(head) if layouts and head else None
+    if not text:
+        return None
+    lines = [line for line in _head_lines(text) if line.strip()]
+    for layout in layouts:
+        body = lines[layout.skip_lines:]
+        hits = sum(1 for line in body if layout.matches(line))
+        if hits and 2 * hits >= len(body):
+            return layout
+    return None
+
+
+def sniff_source(head: bytes, name: str | None = None) -> tuple[str, TextLayout | None]:
+    """The format of a log, user descriptions first (:func:`described_match`), then :func:`sniff_format`;
+    with the description when one matched."""
+    layout = described_match(head, user_layouts())
+    if layout is not None:
+        return "described", layout
+    return sniff_format(head, name), None
 
 
 def sniff_format(head: bytes, name: str | None = None) -> str:
@@ -106,10 +150,7 @@ def sniff_format(head: bytes, name: str | None = None) -> str:
     if head[:12] == b"Generic File":
         raise unsupported(name, "this is a CANedge compressed or encrypted MF4 container (MFC/MFE), which needs "
                           "the vendor's decompression/decryption first")
-    text = head.decode("latin-1")
-    lines = text.splitlines()[:200]
-    if len(head) >= 65536 and len(lines) > 1:
-        lines = lines[:-1]  # the last line may be cut
+    lines = _head_lines(head)
     scores = {fmt: sum(1 for line in lines if any(r.match(line) for r in rules))
               for fmt, rules in _LINE_RULES.items()}
     best = max(scores.values())

@@ -326,6 +326,8 @@ function summary(rec, log, metrics, start, id, ctrl) {
       h("dt", {}, "torque-to-speed offset"), h("dd", {}, `${fmt(s.offset_ms, 1)} ms` + (s.offset_applied ? "" : " (not applied)")),
       h("dt", {}, "whole-log RMS error"), h("dd", {}, `${fmt(s.whole_rms_rpm, 1)} rpm (NRMSE ${fmt(s.whole_nrmse, 3)})`),
       h("dt", {}, "finished"), h("dd", {}, utc(rec.job.finished_at))),
+    s.read && s.read.damaged ? h("div", { class: "note", id: "read-report" },
+      h("strong", {}, s.read.truncated ? "truncated log" : "damaged log"), `: ${s.read.note}`) : null,
     (s.findings || []).length ? h("div", { class: "note", id: "findings" },
       ...s.findings.map((f) => h("p", {}, h("strong", {}, f.code), `: ${f.message}`))) : null,
     (metrics.notes || []).length ? h("div", { class: "note" }, metrics.notes.join(" ")) : null,

@@ -56,6 +56,8 @@ export async function render(main, id) {
   const chartsCard = h("section", { class: "card", id: "diagnosis-charts" }, h("h2", {}, "Held-out residual before and after the fit"),
     h("p", { class: "muted" }, "loading the charts ..."));
   head.replaceChildren(...[
+    r.read && r.read.damaged ? h("div", { class: "note", id: "read-report" },
+      h("strong", {}, r.read.truncated ? "truncated log" : "damaged log"), `: ${r.read.note}`) : "",
     h("section", { class: "card", id: "decision" },
       h("p", { class: "headline", id: "headline" }, badge(d.status), " ", headline(d, titles)),
       h("p", { class: "decision" }, d.reason),

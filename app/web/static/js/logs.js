@@ -9,14 +9,21 @@ export async function render(main) {
   const file = h("input", { type: "file", id: "upload-file", name: "file" });
   const zone = h("input", { type: "text", id: "upload-tz", name: "tz", size: 16, placeholder: "e.g. Europe/Berlin",
     title: "time zone of the log's clock, for logs that do not record one: their start is then shown in UTC" });
+  const described = h("input", { type: "file", id: "upload-format", name: "format_file", accept: ".toml",
+    title: "only for a text log lashscope has no reader for: the TOML file describing its lines " +
+      "(docs/ingest-readers.md, 'Describing a format'); kept with the log" });
   const send = h("button", { class: "primary", id: "upload-button", type: "submit" }, "Upload");
   const form = h("form", { class: "toolbar", id: "upload-form" }, file,
-    h("label", {}, "log clock zone ", zone), send, status);
+    h("label", {}, "log clock zone ", zone), h("label", {}, "format description (optional) ", described), send, status);
   const list = h("div", { id: "logs" });
+  const formats = h("p", { class: "muted", id: "log-formats" }, "The same bytes are stored once.");
+  api("/logs/formats", { signal: ctrl.signal }).then((fs) => {
+    const labels = fs.map((f) => f.label);
+    formats.textContent = `${labels.slice(0, -1).join(", ")} or ${labels.at(-1)}; gzip accepted. ` +
+      "The same bytes are stored once.";
+  }).catch(() => {});
   main.append(h("h1", {}, "Logs"),
-    h("section", { class: "card" }, h("h2", {}, "Upload a CAN log"),
-      h("p", { class: "muted" }, "BLF, ASC, candump, TRC, SavvyCAN CSV, MF4, TCU text; gzip accepted. " +
-        "The same bytes are stored once."), form),
+    h("section", { class: "card" }, h("h2", {}, "Upload a CAN log"), formats, form),
     h("section", { class: "card" }, h("h2", {}, "Stored logs"), list));
 
   form.addEventListener("submit", async (e) => {
@@ -27,6 +34,7 @@ export async function render(main) {
     status.replaceChildren(progressBar(0, `${f.name}: 0 %`));
     try {
       const fields = zone.value.trim() ? { tz: zone.value.trim(), file: f } : { file: f };
+      if (described.files.length) fields.format_file = described.files[0];
       const rec = await upload("/logs", fields, (frac, done, total) => {
         status.replaceChildren(progressBar(frac, `${f.name}: ${bytes(done)} of ${bytes(total)}`));
       });
