@@ -123,8 +123,9 @@ def foreign_drive(seconds: float, db) -> list[tuple[np.ndarray, int, np.ndarray]
         init = t < 0.2  # the ECUs start with "signal not available"
         noise = rng.integers(0, 256, n).astype(np.float64)
         if msg.name == "INV_Fast":
-            values = {"INV_RotorSpeed": np.where(init, -8192.0, speed), "INV_TorqueAct": np.where(init, -1024.0, torque),
-                      "INV_FastMode": np.where(init, 0, 2), "INV_FastCounter": i % 256,
+            values = {"INV_RotorSpeed": np.where(init, -8192.0, speed),
+                      "INV_TorqueAct": np.where(init, -1024.0, torque), "INV_FastMode": np.where(init, 0, 2),
+                      "INV_FastCounter": i % 256,
                       "INV_TorqueCmd": torque * 1.02, "INV_FastChecksum": noise}
         elif msg.name == "INV_Status":
             start = int(np.searchsorted(t, 77.0))  # the inverter restarts: its counter begins at 0 again
@@ -412,7 +413,8 @@ def main() -> None:
     ap.add_argument("--log", type=Path)
     ap.add_argument("--extra", default="")
     ap.add_argument("--dbc", type=Path, default=DBC)
-    ap.add_argument("--logs", default="own,foreign", help="own: dbc/lashscope_ev.dbc; foreign: bench/data/foreign_ev.dbc")
+    ap.add_argument("--logs", default="own,foreign",
+                    help="own: dbc/lashscope_ev.dbc; foreign: bench/data/foreign_ev.dbc")
     args = ap.parse_args()
     if args.child:
         if args.child == "lashscope":
