@@ -45,7 +45,7 @@ from cantools.database.can import Signal as CanSignal
 from cantools.database.conversion import BaseConversion, IdentityConversion, LinearIntegerConversion
 
 from app.ingest.bitfields import SignalLayout, extract_raw
-from app.ingest.frames import FrameChunk, FrameFlag, group_rows
+from app.ingest.frames import FrameChunk, FrameFlag, distinct, group_rows
 from app.ingest.j1939 import j1939_messages, pgn
 
 F64 = npt.NDArray[np.float64]
@@ -429,7 +429,7 @@ class VectorDecoder:
                 finite = np.isfinite(mux_val)
                 bad = ~finite
                 number = np.trunc(np.where(finite, mux_val, 0.0))
-                for value in np.unique(number[finite]):
+                for value in distinct(number[finite]):
                     branch = branches.get(int(value))
                     hit = finite & (number == value)
                     if branch is None:

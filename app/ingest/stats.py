@@ -31,7 +31,7 @@ from cantools.database.can import Signal as CanSignal
 from app.ingest.counters import CounterGaps, CounterTrack, dbc_modulus
 from app.ingest.database import Repair
 from app.ingest.decode import EXTENDED_KEY, DecodedMessage
-from app.ingest.frames import FrameChunk, FrameFlag, ReadIssue, group_rows
+from app.ingest.frames import FrameChunk, FrameFlag, ReadIssue, distinct, group_rows
 from app.ingest.j1939 import database_is_j1939, j1939_messages, pgn
 from app.signals.sampling import Spacing, burst_reason
 
@@ -249,7 +249,7 @@ class StatsAccumulator:
 
     def _timestamps(self, chunk: FrameChunk, start: int) -> None:
         lo, hi = int(chunk.channel.min()), int(chunk.channel.max())
-        for ch in [lo] if lo == hi else np.unique(chunk.channel).tolist():
+        for ch in [lo] if lo == hi else distinct(chunk.channel):
             rows = np.flatnonzero(chunk.channel == ch)
             t = chunk.t_ns[rows]
             prev = self._last_t.get(ch)
@@ -280,7 +280,7 @@ class StatsAccumulator:
                 values = dm.signals.get(sig)
                 if values is None or not len(dm):
                     continue
-                for ch in np.unique(dm.channel).tolist():
+                for ch in distinct(dm.channel):
                     m = (dm.channel == ch) & np.isfinite(values)
                     key = (dm.name, sig, int(ch))
                     track = self._tracks.get(key)
