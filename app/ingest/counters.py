@@ -421,8 +421,9 @@ class CounterTrack:
                     beaten = _step_candidate_normal(rows, self.width, self.hint) > n_normal[maybe]
                     beaten |= _sequence_may_win(rows, normal[maybe], self.width)
                     ok[maybe[~beaten]] = True
-        cum = [np.r_[0, np.cumsum(x)] for x in (n_normal, n_gaps, n_missed, n_repeats)]
-        return _Plan(pattern, self._bv, self._off, ok, *cum, first_gap)
+        normal_c, gaps_c, missed_c, repeats_c = (np.r_[0, np.cumsum(x)]
+                                                 for x in (n_normal, n_gaps, n_missed, n_repeats))
+        return _Plan(pattern, self._bv, self._off, ok, normal_c, gaps_c, missed_c, repeats_c, first_gap)
 
     def finish(self) -> CounterGaps:
         """Judge what is still buffered and summarise (call once, at the end)."""

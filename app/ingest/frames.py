@@ -165,7 +165,7 @@ def distinct(values: npt.NDArray[np.generic]) -> list[Any]:
     if not values.size:
         return []
     ordered = np.sort(values)
-    return ordered[np.concatenate(([True], ordered[1:] != ordered[:-1]))].tolist()  # type: ignore[no-any-return]
+    return ordered[np.concatenate(([True], ordered[1:] != ordered[:-1]))].tolist()
 
 
 def group_rows(key: npt.NDArray[np.integer]) -> list[tuple[int, npt.NDArray[np.intp]]]:
