@@ -164,6 +164,9 @@ def distinct(values: npt.NDArray[np.generic]) -> list[Any]:
     """The distinct values, ascending, as Python numbers (a sort; ``np.unique`` would load ``numpy.ma``)."""
     if not values.size:
         return []
+    lo, hi = values.min(), values.max()
+    if lo == hi:
+        return [lo.item()]
     ordered = np.sort(values)
     return ordered[np.concatenate(([True], ordered[1:] != ordered[:-1]))].tolist()
 

@@ -127,8 +127,13 @@ class GapHistogram:
     def add(self, dt_ns: np.ndarray) -> None:
         if not dt_ns.size:
             return
-        safe = np.maximum(dt_ns, 1.0)
-        b = np.where(dt_ns > 0, np.floor(np.log10(safe) * BINS_PER_DECADE), -1).astype(np.int64)
+        b = np.maximum(dt_ns, 1.0)  # in place from here: the same arithmetic as floor(log10(..) * BINS_PER_DECADE)
+        np.log10(b, out=b)
+        b *= BINS_PER_DECADE
+        np.floor(b, out=b)
+        if float(dt_ns.min()) <= 0:
+            b[dt_ns <= 0] = -1
+        b = b.astype(np.int64)
         lo = int(b.min())
         span = int(b.max()) - lo + 1
         if span <= 4 * b.size + 4096:  # a periodic message's gaps fill a narrow band: count without sorting
@@ -250,20 +255,22 @@ class StatsAccumulator:
     def _timestamps(self, chunk: FrameChunk, start: int) -> None:
         lo, hi = int(chunk.channel.min()), int(chunk.channel.max())
         for ch in [lo] if lo == hi else distinct(chunk.channel):
-            rows = np.flatnonzero(chunk.channel == ch)
-            t = chunk.t_ns[rows]
+            rows = None if lo == hi else np.flatnonzero(chunk.channel == ch)  # None: every row
+            t = chunk.t_ns if rows is None else chunk.t_ns[rows]
             prev = self._last_t.get(ch)
-            full = t if prev is None else np.r_[prev, t]
-            dt = np.diff(full)
+            dt = np.diff(t) if prev is None else np.diff(t, prepend=prev)
             base = 0 if prev is None else 1
-            for kind, hit in (("backwards", dt < 0), ("jump", dt > self.jump_s * 1e9)):
-                idx = np.flatnonzero(hit)
-                if not idx.size:
+            limit = self.jump_s * 1e9
+            back, jump = (bool(dt.min() < 0), bool(dt.max() > limit)) if dt.size else (False, False)
+            for kind, found in (("backwards", back), ("jump", jump)):
+                if not found:  # one reduction instead of a comparison per row
                     continue
+                idx = np.flatnonzero(dt < 0 if kind == "backwards" else dt > limit)
                 self._anomaly_counts[kind] = self._anomaly_counts.get(kind, 0) + int(idx.size)
                 for i in idx[: max(0, MAX_LISTED - len(self._anomalies))].tolist():
                     r = i + 1 - base
-                    self._anomalies.append(TimestampAnomaly(kind, int(ch), start + int(rows[r]),
+                    row = r if rows is None else int(rows[r])
+                    self._anomalies.append(TimestampAnomaly(kind, int(ch), start + row,
                                                             float(t[r]) / 1e9, float(dt[i]) / 1e9))
             self._last_t[ch] = int(t[-1])
 
