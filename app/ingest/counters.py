@@ -52,20 +52,23 @@ def dbc_modulus(sig: CanSignal) -> int:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Pattern:
-    """A counting pattern: the values in counting order and a value -> position table."""
+    """A counting pattern: the values in counting order, a value -> position and a value -> next value table."""
 
     kind: str  # "step", "sequence" or "constant"
     cycle: I64  # (P,) values in counting order
     pos: I64  # (2**length,) position of each value in ``cycle``; -1 off the cycle
     modulus: int  # step: the counting range; sequence/constant: P
     step: int | None  # step: signed advance per frame (modulo ``modulus``); else None
+    succ: I64  # (2**length,) the value that follows each value of ``cycle``; -1 off the cycle
 
     @staticmethod
     def of(kind: str, cycle: list[int] | I64, width: int, modulus: int, step: int | None = None) -> Pattern:
         values = np.asarray(cycle, np.int64)
         pos = np.full(width, -1, np.int64)
         pos[values] = np.arange(values.size)
-        return Pattern(kind, values, pos, modulus, step)
+        succ = np.full(width, -1, np.int64)
+        succ[values] = np.roll(values, -1)
+        return Pattern(kind, values, pos, modulus, step, succ)
 
     def same(self, other: Pattern | None) -> bool:
         return other is not None and self.kind == other.kind and np.array_equal(self.cycle, other.cycle)
@@ -396,31 +399,29 @@ class CounterTrack:
         seq = np.empty(m * WINDOW + 1, np.int64)
         seq[0] = anchor[0]
         seq[1:] = self._bv[self._off:self._off + m * WINDOW]
-        p = pattern.pos[seq]
-        size = pattern.cycle.size
-        on = (p[1:] >= 0) & (p[:-1] >= 0)
-        k = np.where(on, np.mod(p[1:] - p[:-1], size), -1)
-        normal = (k == (1 if size > 1 else 0)).reshape(m, WINDOW)
+        normal = (seq[1:] == pattern.succ[seq[:-1]]).reshape(m, WINDOW)  # the step Steps.of calls normal
         n_normal = normal.sum(axis=1)
         ok = n_normal == WINDOW  # perfect: best_pattern keeps the pattern at once
-        zeros = np.zeros(m, np.int64)
-        n_gaps, n_missed, n_repeats, first_gap = zeros, zeros, zeros, np.full(m, -1, np.int64)
-        if not ok.all():
-            repeat = ((seq[1:] == seq[:-1]).reshape(m, WINDOW)) & ~normal
-            gap = ~normal & ~repeat
-            n_gaps, n_repeats = gap.sum(axis=1), repeat.sum(axis=1)
-            n_missed = np.where(gap & (k.reshape(m, WINDOW) > 1), k.reshape(m, WINDOW) - 1, 0).sum(axis=1)
-            has = n_gaps > 0
-            first_gap = np.where(has, self._off + np.arange(m) * WINDOW + gap.argmax(axis=1), -1)
+        n_gaps, n_missed, n_repeats = np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64)
+        first_gap = np.full(m, -1, np.int64)
+        bad = np.flatnonzero(~ok)
+        if bad.size:  # the deviating windows only: what Steps.of counts, then whether the pattern stays
+            rows = seq[(bad * WINDOW)[:, None] + np.arange(WINDOW + 1)]
+            a, b, nb = rows[:, :-1], rows[:, 1:], normal[bad]
+            p = pattern.pos[rows]
+            size = pattern.cycle.size
+            k = np.where((p[:, 1:] >= 0) & (p[:, :-1] >= 0), np.mod(p[:, 1:] - p[:, :-1], size), -1)
+            repeat = (a == b) & ~nb
+            gap = ~nb & ~repeat
+            n_gaps[bad], n_repeats[bad] = gap.sum(axis=1), repeat.sum(axis=1)
+            n_missed[bad] = np.where(gap & (k > 1), k - 1, 0).sum(axis=1)
+            first_gap[bad] = np.where(n_gaps[bad] > 0, self._off + bad * WINDOW + gap.argmax(axis=1), -1)
             if size > 1:  # a constant pattern that deviates: window by window
-                maybe = np.flatnonzero(~ok & (n_normal / WINDOW >= MIN_FIT) & ~gap[:, -1])
+                maybe = np.flatnonzero((n_normal[bad] / WINDOW >= MIN_FIT) & ~gap[:, -1] & ~_runs_at_least(gap, RUN))
                 if maybe.size:
-                    maybe = maybe[~_runs_at_least(gap[maybe], RUN)]
-                if maybe.size:
-                    rows = seq[(maybe * WINDOW)[:, None] + np.arange(WINDOW + 1)]
-                    beaten = _step_candidate_normal(rows, self.width, self.hint) > n_normal[maybe]
-                    beaten |= _sequence_may_win(rows, normal[maybe], self.width)
-                    ok[maybe[~beaten]] = True
+                    beaten = _step_candidate_normal(rows[maybe], self.width, self.hint) > n_normal[bad[maybe]]
+                    beaten |= _sequence_may_win(rows[maybe], nb[maybe], self.width)
+                    ok[bad[maybe[~beaten]]] = True
         normal_c, gaps_c, missed_c, repeats_c = (np.r_[0, np.cumsum(x)]
                                                  for x in (n_normal, n_gaps, n_missed, n_repeats))
         return _Plan(pattern, self._bv, self._off, ok, normal_c, gaps_c, missed_c, repeats_c, first_gap)
