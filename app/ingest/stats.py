@@ -25,6 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 from cantools.database.can import Database as CanDatabase
 from cantools.database.can import Signal as CanSignal
 
@@ -103,6 +104,7 @@ def counter_modulus(sig: CanSignal) -> int | None:
     return dbc_modulus(sig)
 
 
+_EXTENDED_BIT = np.array([EXTENDED_KEY if f & FrameFlag.EXTENDED else 0 for f in range(256)], np.uint32)  # by flags
 BINS_PER_DECADE = 5000  # bin width 0.046 %: 1000 and 1001 ms fall into different bins
 
 
@@ -229,16 +231,20 @@ class StatsAccumulator:
         lo, hi = int(t.min()), int(t.max())
         self._t_first = lo if self._t_first is None else min(self._t_first, lo)
         self._t_last = hi if self._t_last is None else max(self._t_last, hi)
-        self._error += int(np.count_nonzero(chunk.flags & FrameFlag.ERROR))
-        self._remote += int(np.count_nonzero(chunk.flags & FrameFlag.REMOTE))
-        self._timestamps(chunk, start)
-        usable = (chunk.flags & np.uint8(FrameFlag.ERROR)) == 0
-        key = chunk.arb_id.astype(np.int64) | np.where(chunk.flags & FrameFlag.EXTENDED, EXTENDED_KEY, 0)
-        key = (chunk.channel.astype(np.int64) + 1) << 33 | key
-        if not usable.all():
+        error = chunk.flags & np.uint8(FrameFlag.ERROR)
+        errors = int(np.count_nonzero(error))
+        self._error += errors
+        self._remote += int(np.count_nonzero(chunk.flags & np.uint8(FrameFlag.REMOTE)))
+        c_lo, c_hi = int(chunk.channel.min()), int(chunk.channel.max())
+        self._timestamps(chunk, start, c_lo, c_hi)
+        key: npt.NDArray[np.integer] = chunk.arb_id | _EXTENDED_BIT[chunk.flags]  # ID | extended << 31
+        if c_lo != c_hi:  # several buses: the bus goes into the key
+            key = (chunk.channel.astype(np.int64) + 1) << 33 | key.astype(np.int64)
+        if errors:
+            usable = error == 0
             key, t = key[usable], t[usable]
         for k, rows in group_rows(key):
-            run = self._runs.setdefault(((k >> 33) - 1, k & ((1 << 33) - 1)), _Run())
+            run = self._runs.setdefault(((k >> 33) - 1, k & ((1 << 33) - 1)) if c_lo != c_hi else (c_lo, k), _Run())
             seg = t[rows]
             dt = np.diff(seg) if run.last is None else np.diff(seg, prepend=run.last)
             dt = dt.astype(np.float64)
@@ -252,8 +258,8 @@ class StatsAccumulator:
                 run.max = max(run.max, float(dt.max()))
                 run.hist.add(dt)
 
-    def _timestamps(self, chunk: FrameChunk, start: int) -> None:
-        lo, hi = int(chunk.channel.min()), int(chunk.channel.max())
+    def _timestamps(self, chunk: FrameChunk, start: int, lo: int, hi: int) -> None:
+        """Backward and jumping time stamps, per bus (``lo``, ``hi``: the chunk's smallest and largest bus)."""
         for ch in [lo] if lo == hi else distinct(chunk.channel):
             rows = None if lo == hi else np.flatnonzero(chunk.channel == ch)  # None: every row
             t = chunk.t_ns if rows is None else chunk.t_ns[rows]
