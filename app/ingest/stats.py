@@ -293,12 +293,17 @@ class StatsAccumulator:
                 values = dm.signals.get(sig)
                 if values is None or not len(dm):
                     continue
-                for ch in distinct(dm.channel):
-                    m = (dm.channel == ch) & np.isfinite(values)
+                finite = np.isfinite(values)
+                buses = distinct(dm.channel)
+                for ch in buses:
                     key = (dm.name, sig, int(ch))
                     track = self._tracks.get(key)
                     if track is None:
                         track = self._tracks[key] = CounterTrack(dm.name, sig, int(ch), bits, hint)
+                    if len(buses) == 1 and finite.all():  # every row: no copies
+                        track.feed(values, dm.t_ns)
+                        continue
+                    m = (dm.channel == ch) & finite
                     track.feed(values[m], dm.t_ns[m])
 
     def _unknown_hint(self, report: DecodeReport, unknown_ids: set[int], pgn_hits: dict[str, int]) -> str:
