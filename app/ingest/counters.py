@@ -396,16 +396,18 @@ class CounterTrack:
         pattern, anchor = self._pattern, self._anchor
         assert pattern is not None and anchor is not None
         m = (self._bv.size - self._off) // WINDOW
-        seq = np.empty(m * WINDOW + 1, np.int64)
-        seq[0] = anchor[0]
-        seq[1:] = self._bv[self._off:self._off + m * WINDOW]
-        normal = (seq[1:] == pattern.succ[seq[:-1]]).reshape(m, WINDOW)  # the step Steps.of calls normal
-        n_normal = normal.sum(axis=1)
+        vals = self._bv[self._off:self._off + m * WINDOW]
+        flat = np.empty(vals.size, bool)  # each step follows the pattern (what Steps.of calls normal)
+        flat[0] = vals[0] == pattern.succ[anchor[0]]
+        np.equal(vals[1:], pattern.succ[vals[:-1]], out=flat[1:])
+        normal = flat.reshape(m, WINDOW)
+        n_normal = WINDOW - np.bincount(np.flatnonzero(~flat) // WINDOW, minlength=m)  # deviations are few
         ok = n_normal == WINDOW  # perfect: best_pattern keeps the pattern at once
         n_gaps, n_missed, n_repeats = np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64)
         first_gap = np.full(m, -1, np.int64)
         bad = np.flatnonzero(~ok)
         if bad.size:  # the deviating windows only: what Steps.of counts, then whether the pattern stays
+            seq = np.concatenate(([anchor[0]], vals))
             rows = seq[(bad * WINDOW)[:, None] + np.arange(WINDOW + 1)]
             a, b, nb = rows[:, :-1], rows[:, 1:], normal[bad]
             p = pattern.pos[rows]
