@@ -346,8 +346,11 @@ class CounterTrack:
     def _join(self) -> None:
         """Move what was fed into the buffer (one array from ``_off``)."""
         if self._pv:
-            self._bv = np.concatenate([self._bv[self._off:], *self._pv])
-            self._bt = np.concatenate([self._bt[self._off:], *self._pt])
+            if self._off >= self._bv.size and len(self._pv) == 1:  # nothing left over: no copy
+                self._bv, self._bt = self._pv[0], self._pt[0]
+            else:
+                self._bv = np.concatenate([self._bv[self._off:], *self._pv])
+                self._bt = np.concatenate([self._bt[self._off:], *self._pt])
             self._off = 0
             self._pv, self._pt = [], []
 
