@@ -23,6 +23,11 @@ steps in a row are re-examined the same way: they are a different pattern, not l
 With a pattern of ``P`` values each step advances ``k`` positions along the cycle: ``k == 1``
 is normal, ``k == 0`` a repeat, ``k > 1`` a gap of ``k - 1`` missed frames; a value off the
 cycle is a gap of unknown size.
+
+Learning is done window by window only where a counter starts or changes its pattern; the other
+windows are judged in bulk, a whole chunk at once, against the current pattern
+(:meth:`CounterTrack._verify_in_bulk`): a window is counted there only when the window-by-window
+learning provably keeps the pattern and counts it as it stands, so the result is the same.
 """
 
 from __future__ import annotations
