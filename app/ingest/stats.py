@@ -231,16 +231,20 @@ class StatsAccumulator:
         lo, hi = int(t.min()), int(t.max())
         self._t_first = lo if self._t_first is None else min(self._t_first, lo)
         self._t_last = hi if self._t_last is None else max(self._t_last, hi)
-        error = chunk.flags & np.uint8(FrameFlag.ERROR)
-        errors = int(np.count_nonzero(error))
+        seen = int(np.bitwise_or.reduce(chunk.flags))  # every flag some frame of the chunk carries
+        error = chunk.flags & np.uint8(FrameFlag.ERROR) if seen & FrameFlag.ERROR else None
+        errors = 0 if error is None else int(np.count_nonzero(error))
         self._error += errors
-        self._remote += int(np.count_nonzero(chunk.flags & np.uint8(FrameFlag.REMOTE)))
+        if seen & FrameFlag.REMOTE:
+            self._remote += int(np.count_nonzero(chunk.flags & np.uint8(FrameFlag.REMOTE)))
         c_lo, c_hi = int(chunk.channel.min()), int(chunk.channel.max())
         self._timestamps(chunk, start, c_lo, c_hi)
-        key: npt.NDArray[np.integer] = chunk.arb_id | _EXTENDED_BIT[chunk.flags]  # ID | extended << 31
+        key: npt.NDArray[np.integer] = chunk.arb_id  # ID | extended << 31
+        if seen & FrameFlag.EXTENDED:
+            key = key | _EXTENDED_BIT[chunk.flags]
         if c_lo != c_hi:  # several buses: the bus goes into the key
             key = (chunk.channel.astype(np.int64) + 1) << 33 | key.astype(np.int64)
-        if errors:
+        if error is not None and errors:
             usable = error == 0
             key, t = key[usable], t[usable]
         for k, rows in group_rows(key):
