@@ -104,7 +104,7 @@ def counter_modulus(sig: CanSignal) -> int | None:
     return dbc_modulus(sig)
 
 
-_EXTENDED_BIT = np.array([EXTENDED_KEY if f & FrameFlag.EXTENDED else 0 for f in range(256)], np.uint32)  # by flags
+_EXTENDED_BIT = np.where(np.arange(256) & FrameFlag.EXTENDED, EXTENDED_KEY, 0).astype(np.uint32)  # by flags byte
 BINS_PER_DECADE = 5000  # bin width 0.046 %: 1000 and 1001 ms fall into different bins
 
 
