@@ -77,3 +77,18 @@ def test_per_id_report_across_chunks() -> None:
     assert s.count == 600 and s.median_gap_ms == 1.0 and s.p95_gap_ms == 61.0 and s.max_gap_ms == 61.0
     assert s.period_ms == pytest.approx(63.0 * 199 / 599 + 2 / 599)
     assert s.bursty and "samples come in bursts" in s.bursty_reason
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_median_p95_is_numpys_percentile_bit_for_bit(seed: int) -> None:
+    from app.signals.sampling import median_p95
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 3000)) if seed % 4 else int(rng.integers(1, 25))
+    x = rng.normal(10.0, 3.0, n) if seed % 3 else rng.integers(0, 5, n).astype(np.float64)  # ties too
+    if seed % 5 == 0:
+        x = np.round(x, 1) * 1e-3
+    expected = np.percentile(x, [50.0, 95.0])
+    assert median_p95(x) == (float(expected[0]), float(expected[1]))
+    assert median_p95(np.r_[x, np.nan]) == pytest.approx(tuple(np.percentile(np.r_[x, np.nan], [50.0, 95.0])),
+                                                           nan_ok=True)

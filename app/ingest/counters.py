@@ -23,6 +23,11 @@ steps in a row are re-examined the same way: they are a different pattern, not l
 With a pattern of ``P`` values each step advances ``k`` positions along the cycle: ``k == 1``
 is normal, ``k == 0`` a repeat, ``k > 1`` a gap of ``k - 1`` missed frames; a value off the
 cycle is a gap of unknown size.
+
+Learning is done window by window only where a counter starts or changes its pattern; the other
+windows are judged in bulk, a whole chunk at once, against the current pattern
+(:meth:`CounterTrack._verify_in_bulk`): a window is counted there only when the window-by-window
+learning provably keeps the pattern and counts it as it stands, so the result is the same.
 """
 
 from __future__ import annotations
@@ -52,20 +57,23 @@ def dbc_modulus(sig: CanSignal) -> int:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Pattern:
-    """A counting pattern: the values in counting order and a value -> position table."""
+    """A counting pattern: the values in counting order, a value -> position and a value -> next value table."""
 
     kind: str  # "step", "sequence" or "constant"
     cycle: I64  # (P,) values in counting order
     pos: I64  # (2**length,) position of each value in ``cycle``; -1 off the cycle
     modulus: int  # step: the counting range; sequence/constant: P
     step: int | None  # step: signed advance per frame (modulo ``modulus``); else None
+    succ: I64  # (2**length,) the value that follows each value of ``cycle``; -1 off the cycle
 
     @staticmethod
     def of(kind: str, cycle: list[int] | I64, width: int, modulus: int, step: int | None = None) -> Pattern:
         values = np.asarray(cycle, np.int64)
         pos = np.full(width, -1, np.int64)
         pos[values] = np.arange(values.size)
-        return Pattern(kind, values, pos, modulus, step)
+        succ = np.full(width, -1, np.int64)
+        succ[values] = np.roll(values, -1)
+        return Pattern(kind, values, pos, modulus, step, succ)
 
     def same(self, other: Pattern | None) -> bool:
         return other is not None and self.kind == other.kind and np.array_equal(self.cycle, other.cycle)
@@ -210,65 +218,227 @@ class CounterGaps:
     unchecked: int = 0  # steps in stretches no pattern explains: not judged
 
 
+@dataclass(slots=True)
+class _Plan:
+    """The windows of one buffer judged at once against one pattern (see :meth:`CounterTrack._verify_in_bulk`).
+
+    Window ``w`` holds the values ``base[off + w * WINDOW : off + (w + 1) * WINDOW]`` and its
+    steps start from the value before it. Per window: whether the window-by-window learning
+    would simply count it under ``pattern`` (``ok``), and cumulative sums (one leading zero) of
+    what it counts, so a run of windows is counted with two lookups.
+    """
+
+    pattern: Pattern
+    base: I64
+    off: int
+    ok: npt.NDArray[np.bool_]
+    normal: I64
+    gaps: I64
+    missed: I64
+    repeats: I64
+    first_gap: I64  # per window: index in ``base`` of the value after its first gap; -1 without gaps
+
+    @property
+    def windows(self) -> int:
+        return int(self.ok.size)
+
+
+def _runs_at_least(flags: npt.NDArray[np.bool_], length: int) -> npt.NDArray[np.bool_]:
+    """Per row of ``flags`` (2-D): True when the row holds a run of at least ``length`` True values."""
+    rows, cols = flags.shape
+    padded = np.zeros((rows, cols + 2), np.int8)
+    padded[:, 1:-1] = flags
+    edges = np.diff(padded.ravel())
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    out = np.zeros(rows, bool)
+    out[starts[stops - starts >= length] // (cols + 2)] = True
+    return out
+
+
+def _step_candidate_normal(rows: I64, width: int, hint: int) -> I64:
+    """Per row of ``rows`` (values, 2-D): steps the :func:`_step_pattern` candidate of that row explains.
+
+    The same arithmetic as :func:`_step_pattern` (most common non-zero step, modulus from the
+    wrap-arounds else the DBC hint, the orbit through the most common value), for many windows
+    in one pass; -1 where it builds no candidate.
+    """
+    r = rows.shape[0]
+    a, b = rows[:, :-1], rows[:, 1:]
+    ri = np.arange(r, dtype=np.int64)[:, None]
+    d = np.mod(b - a, width)
+    hist = np.bincount((ri * width + d).ravel(), minlength=r * width).reshape(r, width)
+    hist[:, 0] = 0  # zero steps do not vote
+    moved = hist.any(axis=1)
+    s_w = hist.argmax(axis=1)  # ties: the smallest step, as bincount().argmax()
+    top = rows.max(axis=1)
+    up = s_w <= width // 2
+    cand = np.where(up[:, None], a + s_w[:, None] - b, b - a + (width - s_w)[:, None])
+    valid = np.where(up[:, None], b < a, b > a) & (cand > top[:, None]) & (cand <= width)
+    votes = np.bincount((ri * (width + 1) + cand)[valid], minlength=r * (width + 1)).reshape(r, width + 1)
+    modulus = np.where(votes.any(axis=1), votes.argmax(axis=1), np.minimum(width, np.maximum(hint, top + 1)))
+    step = np.where(up, np.mod(s_w, modulus), np.mod(modulus - (width - s_w), modulus))
+    g = np.gcd(step, modulus)
+    mode = np.bincount((ri * width + rows).ravel(), minlength=r * width).reshape(r, width).argmax(axis=1)
+    start = np.mod(mode, modulus)
+    m, s, st, gg = modulus[:, None], step[:, None], start[:, None], np.maximum(g, 1)[:, None]
+    on_orbit = (a < m) & (np.mod(a - st, gg) == 0)
+    normal = (on_orbit & (b == np.mod(a + s, m))).sum(axis=1)
+    return np.where(moved & (step != 0), normal, -1)
+
+
+def _sequence_may_win(rows: I64, normal: npt.NDArray[np.bool_], width: int) -> npt.NDArray[np.bool_]:
+    """Per row: False when no :func:`_sequence_pattern` candidate can explain more steps than the pattern.
+
+    A sequence links each value to one successor seen at least twice; it explains more steps
+    than the pattern only if some value's other successor (a deviating, moving step) is seen
+    at least twice and more often than the pattern's successor of that value.
+    """
+    r = rows.shape[0]
+    a, b = rows[:, :-1], rows[:, 1:]
+    ri = np.broadcast_to(np.arange(r, dtype=np.int64)[:, None], a.shape)
+    dev = ~normal & (a != b)
+    codes = (ri[dev] * width + a[dev]) * width + b[dev]
+    if codes.size < 2:
+        return np.zeros(r, bool)
+    pairs, counts = np.unique(codes, return_counts=True)
+    twice = counts >= 2
+    if not twice.any():
+        return np.zeros(r, bool)
+    pairs, counts = pairs[twice], counts[twice]
+    src = pairs // width  # row * width + value
+    own = np.bincount((ri * width + a)[normal], minlength=r * width)  # the pattern's successor, per value
+    out = np.zeros(r, bool)
+    out[(src // width)[counts > own[src]]] = True
+    return out
+
+
 class CounterTrack:
-    """Streamed values of one counter on one bus -> :class:`CounterGaps` (memory: one window)."""
+    """Streamed values of one counter on one bus -> :class:`CounterGaps` (memory: what one chunk brings).
+
+    The pattern is learned window by window (:meth:`_flush`) where the counter starts and where
+    it changes; every other window is judged in bulk against the current pattern
+    (:meth:`_verify_in_bulk`), with the same result.
+    """
 
     def __init__(self, message: str, signal: str, channel: int, length: int, hint: int) -> None:
         self.width = 1 << length
         self.hint = hint
-        self._v: list[I64] = []
-        self._t: list[I64] = []
-        self._n = 0
+        self._pv: list[I64] = []  # fed, not yet joined to the buffer
+        self._pt: list[I64] = []
+        self._bv: I64 = np.empty(0, np.int64)  # buffer: values from ``_off`` on are not judged yet
+        self._bt: I64 = np.empty(0, np.int64)
+        self._off = 0
+        self._n = 0  # values not judged yet
         self._anchor: tuple[int, int] | None = None  # last value and time of the previous window
         self._pattern: Pattern | None = None
         self._by_pattern: dict[str, tuple[Pattern, int]] = {}  # description -> (pattern, steps checked)
         self._normal = 0
+        self._plan: _Plan | None = None
         self.result = CounterGaps(message, signal, channel, 0, hint, 0, 0, 0, None)
 
     def feed(self, values: npt.NDArray[np.floating], t_ns: I64) -> None:
         """Append finite counter values (raw integers as floats) and their times (ns)."""
         if not values.size:
             return
-        self._v.append(values.astype(np.int64))
-        self._t.append(np.asarray(t_ns, np.int64))
+        self._pv.append(values.astype(np.int64))
+        self._pt.append(np.asarray(t_ns, np.int64))
         self._n += values.size
         self.result.frames += int(values.size)
         while self._n >= WINDOW:
             if not self._verify_in_bulk():
                 self._flush(WINDOW)
 
-    def _verify_in_bulk(self) -> bool:
-        """Count the whole windows that follow the current pattern perfectly, all at once.
+    def _join(self) -> None:
+        """Move what was fed into the buffer (one array from ``_off``)."""
+        if self._pv:
+            if self._off >= self._bv.size and len(self._pv) == 1:  # nothing left over: no copy
+                self._bv, self._bt = self._pv[0], self._pt[0]
+            else:
+                self._bv = np.concatenate([self._bv[self._off:], *self._pv])
+                self._bt = np.concatenate([self._bt[self._off:], *self._pt])
+            self._off = 0
+            self._pv, self._pt = [], []
 
-        Window by window, each of them would choose the current pattern (it explains every
-        step, and ties go to it) and count no gap, so counting them together gives the same
-        result. Returns False when not even the first buffered window is perfect.
+    def _verify_in_bulk(self) -> bool:
+        """Count, all at once, the whole windows that window-by-window learning would count under the current pattern.
+
+        Such a window keeps the current pattern because no candidate of :func:`best_pattern`
+        explains more of its steps (the step candidate is built and scored for each window
+        in one pass; the sequence and constant candidates are bounded by the transition
+        counts), the pattern explains ``MIN_FIT`` of them, its last step is no gap and it
+        holds no run of ``RUN`` gaps. Counting those windows together gives the same
+        result. Returns False when the first buffered window is not one of them.
         """
         if self._pattern is None or self._anchor is None:
             return False
-        v = self._v[0] if len(self._v) == 1 else np.concatenate(self._v)
-        pos = self._pattern.pos
-        p = pos[v]
-        prev = np.r_[pos[self._anchor[0]], p[:-1]]
-        size = self._pattern.cycle.size
-        normal = (p >= 0) & (prev >= 0) & (np.mod(p - prev, size) == (1 if size > 1 else 0))
-        bad = np.flatnonzero(~normal)
-        perfect = int(bad[0]) if bad.size else v.size
-        done = min(perfect, v.size) // WINDOW * WINDOW
-        if not done:
-            if len(self._v) > 1:
-                self._v, self._t = [v], [np.concatenate(self._t)]
+        self._join()
+        plan = self._plan
+        if (plan is None or plan.pattern is not self._pattern or plan.base is not self._bv
+                or (self._off - plan.off) % WINDOW or self._off >= plan.off + plan.windows * WINDOW):
+            plan = self._plan = self._make_plan()
+        w0 = (self._off - plan.off) // WINDOW
+        bad = np.flatnonzero(~plan.ok[w0:])
+        w1 = w0 + int(bad[0]) if bad.size else plan.windows
+        if w1 == w0:
             return False
-        t = self._t[0] if len(self._t) == 1 else np.concatenate(self._t)
-        self._normal += done  # no gaps, repeats or pattern changes in a perfect stretch
+        r = self.result
+        r.gaps += int(plan.gaps[w1] - plan.gaps[w0])
+        r.missed += int(plan.missed[w1] - plan.missed[w0])
+        r.repeats += int(plan.repeats[w1] - plan.repeats[w0])
+        if r.first_gap_s is None:
+            first = plan.first_gap[w0:w1]
+            hit = first[first >= 0]
+            if hit.size:
+                r.first_gap_s = float(self._bt[int(hit[0])]) / 1e9
+        self._normal += int(plan.normal[w1] - plan.normal[w0])
+        done = (w1 - w0) * WINDOW
         key = self._pattern.describe()
         self._by_pattern[key] = (self._pattern, self._by_pattern[key][1] + done)
-        self._v, self._t, self._n = [v[done:]], [t[done:]], v.size - done
-        self._anchor = (int(v[done - 1]), int(t[done - 1]))
+        self._off += done
+        self._n -= done
+        self._anchor = (int(self._bv[self._off - 1]), int(self._bt[self._off - 1]))
         return True
+
+    def _make_plan(self) -> _Plan:
+        """Judge every whole window of the buffer against the current pattern (see :class:`_Plan`)."""
+        pattern, anchor = self._pattern, self._anchor
+        assert pattern is not None and anchor is not None
+        m = (self._bv.size - self._off) // WINDOW
+        vals = self._bv[self._off:self._off + m * WINDOW]
+        flat = np.empty(vals.size, bool)  # each step follows the pattern (what Steps.of calls normal)
+        flat[0] = vals[0] == pattern.succ[anchor[0]]
+        np.equal(vals[1:], pattern.succ[vals[:-1]], out=flat[1:])
+        normal = flat.reshape(m, WINDOW)
+        n_normal = WINDOW - np.bincount(np.flatnonzero(~flat) // WINDOW, minlength=m)  # deviations are few
+        ok = n_normal == WINDOW  # perfect: best_pattern keeps the pattern at once
+        n_gaps, n_missed, n_repeats = np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64)
+        first_gap = np.full(m, -1, np.int64)
+        bad = np.flatnonzero(~ok)
+        if bad.size:  # the deviating windows only: what Steps.of counts, then whether the pattern stays
+            seq = np.concatenate(([anchor[0]], vals))
+            rows = seq[(bad * WINDOW)[:, None] + np.arange(WINDOW + 1)]
+            a, b, nb = rows[:, :-1], rows[:, 1:], normal[bad]
+            p = pattern.pos[rows]
+            size = pattern.cycle.size
+            k = np.where((p[:, 1:] >= 0) & (p[:, :-1] >= 0), np.mod(p[:, 1:] - p[:, :-1], size), -1)
+            repeat = (a == b) & ~nb
+            gap = ~nb & ~repeat
+            n_gaps[bad], n_repeats[bad] = gap.sum(axis=1), repeat.sum(axis=1)
+            n_missed[bad] = np.where(gap & (k > 1), k - 1, 0).sum(axis=1)
+            first_gap[bad] = np.where(n_gaps[bad] > 0, self._off + bad * WINDOW + gap.argmax(axis=1), -1)
+            if size > 1:  # a constant pattern that deviates: window by window
+                maybe = np.flatnonzero((n_normal[bad] / WINDOW >= MIN_FIT) & ~gap[:, -1] & ~_runs_at_least(gap, RUN))
+                if maybe.size:
+                    beaten = _step_candidate_normal(rows[maybe], self.width, self.hint) > n_normal[bad[maybe]]
+                    beaten |= _sequence_may_win(rows[maybe], nb[maybe], self.width)
+                    ok[bad[maybe[~beaten]]] = True
+        normal_c, gaps_c, missed_c, repeats_c = (np.r_[0, np.cumsum(x)]
+                                                 for x in (n_normal, n_gaps, n_missed, n_repeats))
+        return _Plan(pattern, self._bv, self._off, ok, normal_c, gaps_c, missed_c, repeats_c, first_gap)
 
     def finish(self) -> CounterGaps:
         """Judge what is still buffered and summarise (call once, at the end)."""
+        self._join()
         if self._n:
             self._flush(self._n, final=True)
         r = self.result
@@ -282,7 +452,9 @@ class CounterTrack:
         return r
 
     def _flush(self, n: int, final: bool = False) -> None:
-        v, t = np.concatenate(self._v), np.concatenate(self._t)
+        """Learn and judge the next ``n`` buffered values window by window (the reference algorithm)."""
+        self._join()
+        v, t = self._bv[self._off:], self._bt[self._off:]
         seq, ts = v[:n], t[:n]
         if self._anchor is not None:
             seq, ts = np.r_[self._anchor[0], seq], np.r_[self._anchor[1], ts]
@@ -290,7 +462,8 @@ class CounterTrack:
         if carry >= n:  # cannot happen (a carry is at most a tenth of a fitting piece); never loop
             carry = self._examine(seq, ts, True)
         done = n - carry
-        self._v, self._t, self._n = [v[done:]], [t[done:]], v.size - done
+        self._off += done
+        self._n -= done
         self._anchor = (int(v[done - 1]), int(t[done - 1]))
 
     def _examine(self, seq: I64, ts: I64, final: bool) -> int:

@@ -45,7 +45,7 @@ from cantools.database.can import Signal as CanSignal
 from cantools.database.conversion import BaseConversion, IdentityConversion, LinearIntegerConversion
 
 from app.ingest.bitfields import SignalLayout, extract_raw
-from app.ingest.frames import FrameChunk, FrameFlag, group_rows
+from app.ingest.frames import FrameChunk, FrameFlag, distinct, group_rows
 from app.ingest.j1939 import j1939_messages, pgn
 
 F64 = npt.NDArray[np.float64]
@@ -54,8 +54,9 @@ EXTENDED_KEY = 0x8000_0000  # key bit for extended IDs, as cantools uses interna
 _IDENTITY, _PYTHON, _INTEGER, _FLOAT = range(4)  # scaling arithmetic, see _scale
 _SMALL = 64  # batches up to this many frames take the per-call-cheap paths
 # frame flags byte -> key bits: extended ID -> bit 31 (EXTENDED_KEY), error/remote -> bit 30 (never a message)
-_KEY_BITS = np.array([(EXTENDED_KEY if f & FrameFlag.EXTENDED else 0)
-                      | (1 << 30 if f & (FrameFlag.ERROR | FrameFlag.REMOTE) else 0) for f in range(256)], np.uint32)
+_FLAGS = np.arange(256)  # every flags byte (numpy: 256 enum operations would cost a millisecond of start-up)
+_KEY_BITS = (np.where(_FLAGS & FrameFlag.EXTENDED, EXTENDED_KEY, 0)
+             | np.where(_FLAGS & (FrameFlag.ERROR | FrameFlag.REMOTE), 1 << 30, 0)).astype(np.uint32)
 
 NA_LABELS: tuple[str, ...] = (
     "sna", "signal not available", "not available", "n/a", "na", "unavailable",
@@ -429,7 +430,7 @@ class VectorDecoder:
                 finite = np.isfinite(mux_val)
                 bad = ~finite
                 number = np.trunc(np.where(finite, mux_val, 0.0))
-                for value in np.unique(number[finite]):
+                for value in distinct(number[finite]):
                     branch = branches.get(int(value))
                     hit = finite & (number == value)
                     if branch is None:

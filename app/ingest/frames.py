@@ -26,6 +26,7 @@ import enum
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import datetime
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -157,6 +158,17 @@ def iter_frames_py(chunks: Iterable[FrameChunk]) -> Iterator[tuple[int, int, int
 
 
 MASK_GROUPS = 24  # up to this many distinct keys, rows are grouped by one comparison per key (no sort)
+
+
+def distinct(values: npt.NDArray[np.generic]) -> list[Any]:
+    """The distinct values, ascending, as Python numbers (a sort; ``np.unique`` would load ``numpy.ma``)."""
+    if not values.size:
+        return []
+    lo, hi = values.min(), values.max()
+    if lo == hi:
+        return [lo.item()]
+    ordered = np.sort(values)
+    return ordered[np.concatenate(([True], ordered[1:] != ordered[:-1]))].tolist()
 
 
 def group_rows(key: npt.NDArray[np.integer]) -> list[tuple[int, npt.NDArray[np.intp]]]:

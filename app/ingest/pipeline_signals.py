@@ -24,7 +24,7 @@ from app.ingest.frames import FrameChunk
 from app.ingest.readers import LogReader, open_log
 from app.ingest.signalmap import ResolvedChannel, SignalMap
 from app.ingest.stats import DecodeReport, StatsAccumulator
-from app.signals.sampling import spacing
+from app.signals.sampling import Spacing, spacing
 from app.signals.signal import Interp, Signal, SignalSet
 
 Progress = Callable[[float, str], None]
@@ -150,6 +150,7 @@ def load_signals(
         if own:
             reader.close()
     signals = SignalSet()
+    spaced: list[tuple[npt.NDArray[np.float64], Spacing]] = []  # channels of one message share their times
     for channel, r in resolved.items():
         got = parts[channel]
         t_ns = np.concatenate([p[0] for p in got]) if got else np.empty(0, np.int64)
@@ -157,7 +158,12 @@ def load_signals(
         labels = {int(k): str(v) for k, v in (r.signal.choices or {}).items()} if r.interp is Interp.PREVIOUS else {}
         signals.add(Signal.from_samples(channel, t_ns / 1e9, values, r.unit, r.interp, labels))
         report.channels[channel] = len(signals[channel])
-        report.sampling[channel] = spacing(signals[channel].t)
+        t_s = signals[channel].t
+        same = next((sp for t_o, sp in spaced if t_o.size == t_s.size and np.array_equal(t_o, t_s)), None)
+        if same is None:
+            same = spacing(t_s)
+            spaced.append((t_s, same))
+        report.sampling[channel] = same
     report_progress(1.0, f"{report.frames_read} frames read, {len(signals)} channels")
     missing = {c: ("not in the signal map" if c not in resolved else
                    f"no frames of {resolved[c].message.name}" + (f" on bus {resolved[c].spec.bus}"

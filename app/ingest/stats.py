@@ -25,13 +25,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 from cantools.database.can import Database as CanDatabase
 from cantools.database.can import Signal as CanSignal
 
 from app.ingest.counters import CounterGaps, CounterTrack, dbc_modulus
 from app.ingest.database import Repair
 from app.ingest.decode import EXTENDED_KEY, DecodedMessage
-from app.ingest.frames import FrameChunk, FrameFlag, ReadIssue, group_rows
+from app.ingest.frames import FrameChunk, FrameFlag, ReadIssue, distinct, group_rows
 from app.ingest.j1939 import database_is_j1939, j1939_messages, pgn
 from app.signals.sampling import Spacing, burst_reason
 
@@ -103,6 +104,7 @@ def counter_modulus(sig: CanSignal) -> int | None:
     return dbc_modulus(sig)
 
 
+_EXTENDED_BIT = np.where(np.arange(256) & FrameFlag.EXTENDED, EXTENDED_KEY, 0).astype(np.uint32)  # by flags byte
 BINS_PER_DECADE = 5000  # bin width 0.046 %: 1000 and 1001 ms fall into different bins
 
 
@@ -127,8 +129,13 @@ class GapHistogram:
     def add(self, dt_ns: np.ndarray) -> None:
         if not dt_ns.size:
             return
-        safe = np.maximum(dt_ns, 1.0)
-        b = np.where(dt_ns > 0, np.floor(np.log10(safe) * BINS_PER_DECADE), -1).astype(np.int64)
+        b = np.maximum(dt_ns, 1.0)  # in place from here: the same arithmetic as floor(log10(..) * BINS_PER_DECADE)
+        np.log10(b, out=b)
+        b *= BINS_PER_DECADE
+        np.floor(b, out=b)
+        if float(dt_ns.min()) <= 0:
+            b[dt_ns <= 0] = -1
+        b = b.astype(np.int64)
         lo = int(b.min())
         span = int(b.max()) - lo + 1
         if span <= 4 * b.size + 4096:  # a periodic message's gaps fill a narrow band: count without sorting
@@ -224,16 +231,24 @@ class StatsAccumulator:
         lo, hi = int(t.min()), int(t.max())
         self._t_first = lo if self._t_first is None else min(self._t_first, lo)
         self._t_last = hi if self._t_last is None else max(self._t_last, hi)
-        self._error += int(np.count_nonzero(chunk.flags & FrameFlag.ERROR))
-        self._remote += int(np.count_nonzero(chunk.flags & FrameFlag.REMOTE))
-        self._timestamps(chunk, start)
-        usable = (chunk.flags & np.uint8(FrameFlag.ERROR)) == 0
-        key = chunk.arb_id.astype(np.int64) | np.where(chunk.flags & FrameFlag.EXTENDED, EXTENDED_KEY, 0)
-        key = (chunk.channel.astype(np.int64) + 1) << 33 | key
-        if not usable.all():
+        seen = int(np.bitwise_or.reduce(chunk.flags))  # every flag some frame of the chunk carries
+        error = chunk.flags & np.uint8(FrameFlag.ERROR) if seen & FrameFlag.ERROR else None
+        errors = 0 if error is None else int(np.count_nonzero(error))
+        self._error += errors
+        if seen & FrameFlag.REMOTE:
+            self._remote += int(np.count_nonzero(chunk.flags & np.uint8(FrameFlag.REMOTE)))
+        c_lo, c_hi = int(chunk.channel.min()), int(chunk.channel.max())
+        self._timestamps(chunk, start, c_lo, c_hi)
+        key: npt.NDArray[np.integer] = chunk.arb_id  # ID | extended << 31
+        if seen & FrameFlag.EXTENDED:
+            key = key | _EXTENDED_BIT[chunk.flags]
+        if c_lo != c_hi:  # several buses: the bus goes into the key
+            key = (chunk.channel.astype(np.int64) + 1) << 33 | key.astype(np.int64)
+        if error is not None and errors:
+            usable = error == 0
             key, t = key[usable], t[usable]
         for k, rows in group_rows(key):
-            run = self._runs.setdefault(((k >> 33) - 1, k & ((1 << 33) - 1)), _Run())
+            run = self._runs.setdefault(((k >> 33) - 1, k & ((1 << 33) - 1)) if c_lo != c_hi else (c_lo, k), _Run())
             seg = t[rows]
             dt = np.diff(seg) if run.last is None else np.diff(seg, prepend=run.last)
             dt = dt.astype(np.float64)
@@ -247,23 +262,25 @@ class StatsAccumulator:
                 run.max = max(run.max, float(dt.max()))
                 run.hist.add(dt)
 
-    def _timestamps(self, chunk: FrameChunk, start: int) -> None:
-        lo, hi = int(chunk.channel.min()), int(chunk.channel.max())
-        for ch in [lo] if lo == hi else np.unique(chunk.channel).tolist():
-            rows = np.flatnonzero(chunk.channel == ch)
-            t = chunk.t_ns[rows]
+    def _timestamps(self, chunk: FrameChunk, start: int, lo: int, hi: int) -> None:
+        """Backward and jumping time stamps, per bus (``lo``, ``hi``: the chunk's smallest and largest bus)."""
+        for ch in [lo] if lo == hi else distinct(chunk.channel):
+            rows = None if lo == hi else np.flatnonzero(chunk.channel == ch)  # None: every row
+            t = chunk.t_ns if rows is None else chunk.t_ns[rows]
             prev = self._last_t.get(ch)
-            full = t if prev is None else np.r_[prev, t]
-            dt = np.diff(full)
+            dt = np.diff(t) if prev is None else np.diff(t, prepend=prev)
             base = 0 if prev is None else 1
-            for kind, hit in (("backwards", dt < 0), ("jump", dt > self.jump_s * 1e9)):
-                idx = np.flatnonzero(hit)
-                if not idx.size:
+            limit = self.jump_s * 1e9
+            back, jump = (bool(dt.min() < 0), bool(dt.max() > limit)) if dt.size else (False, False)
+            for kind, found in (("backwards", back), ("jump", jump)):
+                if not found:  # one reduction instead of a comparison per row
                     continue
+                idx = np.flatnonzero(dt < 0 if kind == "backwards" else dt > limit)
                 self._anomaly_counts[kind] = self._anomaly_counts.get(kind, 0) + int(idx.size)
                 for i in idx[: max(0, MAX_LISTED - len(self._anomalies))].tolist():
                     r = i + 1 - base
-                    self._anomalies.append(TimestampAnomaly(kind, int(ch), start + int(rows[r]),
+                    row = r if rows is None else int(rows[r])
+                    self._anomalies.append(TimestampAnomaly(kind, int(ch), start + row,
                                                             float(t[r]) / 1e9, float(dt[i]) / 1e9))
             self._last_t[ch] = int(t[-1])
 
@@ -280,12 +297,17 @@ class StatsAccumulator:
                 values = dm.signals.get(sig)
                 if values is None or not len(dm):
                     continue
-                for ch in np.unique(dm.channel).tolist():
-                    m = (dm.channel == ch) & np.isfinite(values)
+                finite = np.isfinite(values)
+                buses = distinct(dm.channel)
+                for ch in buses:
                     key = (dm.name, sig, int(ch))
                     track = self._tracks.get(key)
                     if track is None:
                         track = self._tracks[key] = CounterTrack(dm.name, sig, int(ch), bits, hint)
+                    if len(buses) == 1 and finite.all():  # every row: no copies
+                        track.feed(values, dm.t_ns)
+                        continue
+                    m = (dm.channel == ch) & finite
                     track.feed(values[m], dm.t_ns[m])
 
     def _unknown_hint(self, report: DecodeReport, unknown_ids: set[int], pgn_hits: dict[str, int]) -> str:

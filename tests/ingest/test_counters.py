@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -159,3 +161,130 @@ def test_bulk_verification_equals_window_by_window(seed: int, monkeypatch: pytes
     windows = run_track(values, 4, splits=splits)
     assert bulk == windows
     assert bulk.gaps >= 6 and bulk.pattern_changes >= 2
+
+
+def faults(kind: str, rng: np.random.Generator) -> tuple[np.ndarray, int, int]:
+    """A counter with one kind of injected fault: (values, bits, DBC modulus hint)."""
+    if kind == "dropped":  # single frames and short runs lost, 0..14 counter
+        v, _ = drop(counting(WINDOW * 12, 1, 15), rng, clusters=20, max_len=3)
+        return v, 4, 15
+    if kind == "dropped_255":  # an 8-bit counter that loses frames, some of them the value 255
+        v = counting(WINDOW * 12, 1, 256, start=7)
+        lost = np.r_[np.flatnonzero(v == 255)[[1, 4]], rng.choice(np.arange(300, v.size - 300), 15, replace=False)]
+        return np.delete(v, lost), 8, 256
+    if kind == "repeats":  # a late task sends its value twice, a down counter
+        v = counting(WINDOW * 10, 15, 16)
+        at = rng.choice(np.arange(1, v.size), 12, replace=False)
+        v[at] = v[at - 1]
+        return v, 4, 16
+    if kind == "wrap":  # frames lost exactly where the counter wraps
+        v = counting(WINDOW * 10, 1, 16)
+        wraps = np.flatnonzero(v == 15)[::7]
+        return np.delete(v, np.r_[wraps, wraps + 1]), 4, 16
+    if kind == "reset":  # the ECU restarts: its counter begins at 0 again, twice
+        v = np.r_[counting(1000, 1, 15, start=4), counting(1700, 1, 15), counting(900, 1, 15)]
+        return v, 4, 15
+    if kind == "stuck":  # the counter stops for a while, then counts on
+        v = counting(WINDOW * 9, 1, 16)
+        return np.r_[v[:1000], np.full(600, v[999]), v[1000:]], 4, 16
+    raise AssertionError(kind)
+
+
+@pytest.mark.parametrize("kind", ["dropped", "dropped_255", "repeats", "wrap", "reset", "stuck"])
+@pytest.mark.parametrize("seed", range(3))
+def test_bulk_equals_window_by_window_on_injected_faults(kind: str, seed: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The bulk-verified summary is the window-by-window learning's, whatever fault the counter shows."""
+    rng = np.random.default_rng(seed)
+    values, bits, hint = faults(kind, rng)
+    splits = int(rng.integers(1, 9))
+    flushes = []
+    flush = CounterTrack._flush
+    monkeypatch.setattr(CounterTrack, "_flush", lambda self, *a, **k: (flushes.append(1), flush(self, *a, **k))[1])
+    bulk = run_track(values, bits, hint, splits=splits)
+    bulk_flushes = len(flushes)
+    monkeypatch.setattr(CounterTrack, "_verify_in_bulk", lambda self: False)
+    windows = run_track(values, bits, hint, splits=splits)
+    assert bulk == windows
+    assert bulk_flushes < len(flushes) - bulk_flushes  # the bulk path judged windows of its own
+    expected = {"dropped": ("step +1 mod 15", 20, 0), "repeats": ("step -1 mod 16", bulk.repeats, bulk.repeats),
+                "wrap": ("step +1 mod 16", 23, 0), "reset": ("step +1 mod 15", 2, 0),
+                "stuck": ("step +1 mod 16", 0, 24),
+                "dropped_255": ("step +1 mod 256", bulk.gaps, 0)}[kind]
+    assert (bulk.pattern, bulk.gaps, bulk.repeats) == expected
+    if kind == "wrap":  # both values around the wrap lost each time
+        assert bulk.missed == 2 * 23
+    elif kind == "repeats":  # a repeated value stands where the next one should be: a repeat, then a gap of one
+        assert bulk.repeats >= 11 and bulk.missed == bulk.repeats
+    elif kind == "stuck":  # the stretch is learned as a constant pattern of its own
+        assert bulk.pattern_changes == 2
+    elif kind == "dropped_255":
+        assert bulk.gaps >= 14
+
+
+MUX_DBC = """VERSION ""
+NS_ :
+BS_:
+BU_: ECU
+BO_ 2566831883 CHS_Mux: 8 ECU
+ SG_ MuxIndex M : 1|2@0+ (1,0) [0|3] "" ECU
+ SG_ MuxAlive : 7|4@0+ (1,0) [0|15] "" ECU
+ SG_ WheelFL m0 : 15|16@0+ (0.1,0) [0|6553.4] "rpm" ECU
+ SG_ PageCounter m1 : 15|4@0+ (1,0) [0|14] "" ECU
+ SG_ VehSpeed m1 : 31|16@0+ (0.01,0) [0|655.34] "km/h" ECU
+BO_ 2364539905 INV_Fast: 8 ECU
+ SG_ RotorSpeed : 7|16@0- (0.25,0) [-8192|8191.75] "rpm" ECU
+ SG_ FastCounter : 39|8@0+ (1,0) [0|255] "" ECU
+VAL_ 2566831883 PageCounter 15 "SNA" ;
+VAL_ 2364539905 RotorSpeed -32768 "SNA" ;
+"""
+
+
+def test_bulk_equals_window_by_window_on_a_logged_bus(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A BLF with Motorola 29-bit messages: a counter across the pages of a multiplexed message, one in a
+    page (with SNA values), an 8-bit one; frames lost, repeated and a reset. The bus report's counter
+    findings are the same with and without the bulk verification."""
+    import can
+    import cantools
+
+    from app.cli.decode import decode_log
+    from app.ingest.database import load_database
+
+    dbc = tmp_path / "mux.dbc"
+    dbc.write_text(MUX_DBC)
+    db = cantools.database.load_file(str(dbc))
+    mux, fast = db.get_message_by_name("CHS_Mux"), db.get_message_by_name("INV_Fast")
+    rng = np.random.default_rng(5)
+    frames = []
+    for i in range(4500):  # 2 ms, pages 0 and 1 alternate; the page-1 counter counts page-1 frames
+        page = i % 2
+        values = {"MuxIndex": page, "MuxAlive": i % 16, "WheelFL": 100.0, "PageCounter": (i // 2) % 15,
+                  "VehSpeed": 50.0}
+        if page == 1 and 3000 <= i < 3040:
+            values["PageCounter"] = 15  # not available for a while: those frames carry no counter value
+        frames.append((i * 0.002, mux, values))
+    reset = 2600
+    for i in range(9000):  # 1 ms; the ECU restarts at frame 2600
+        frames.append((i * 0.001 + 0.0003, fast, {"RotorSpeed": 1000.0,
+                                                  "FastCounter": (i if i < reset else i - reset) % 256}))
+    frames.sort(key=lambda f: f[0])
+    lost = set(rng.choice(len(frames), 40, replace=False).tolist())
+    with_page_counter = 0  # frames written that carry a page-1 counter value
+    with can.BLFWriter(str(tmp_path / "bus.blf")) as w:
+        for j, (t, msg, values) in enumerate(frames):
+            if j in lost:
+                continue
+            data = msg.encode(values, strict=False)
+            for _ in range(2 if j % 997 == 0 else 1):  # now and then a frame is sent twice
+                with_page_counter += msg is mux and values["MuxIndex"] == 1 and values["PageCounter"] != 15
+                w.on_message_received(can.Message(timestamp=1.7e9 + t, arbitration_id=msg.frame_id,
+                                                  is_extended_id=True, data=data, channel=0))
+    loaded = load_database(dbc)
+    bulk = decode_log(tmp_path / "bus.blf", loaded).counter_gaps
+    monkeypatch.setattr(CounterTrack, "_verify_in_bulk", lambda self: False)
+    windows = decode_log(tmp_path / "bus.blf", loaded).counter_gaps
+    assert bulk == windows
+    got = {g.signal: g for g in bulk}
+    assert set(got) == {"MuxAlive", "PageCounter", "FastCounter"}
+    assert got["MuxAlive"].pattern == "step +1 mod 16" and got["MuxAlive"].gaps > 0
+    assert got["PageCounter"].pattern == "step +1 mod 15" and got["PageCounter"].frames == with_page_counter
+    assert got["FastCounter"].pattern == "step +1 mod 256" and got["FastCounter"].gaps >= 1

@@ -17,7 +17,9 @@ import contextlib
 import gzip
 import io
 import os
+import re
 import stat
+import sys
 import zlib
 from collections.abc import Callable
 from pathlib import Path
@@ -39,12 +41,30 @@ def inflate_cap(compressed: int | None = None) -> tuple[int, str]:
     if MAX_INFLATED_BYTES is not None:
         cap, why = MAX_INFLATED_BYTES, "LASHSCOPE_MAX_INFLATED_MB"
     else:
-        from app.settings import get_settings
-
-        cap, why = int(get_settings().max_inflated_mb * 2**20), "LASHSCOPE_MAX_INFLATED_MB"
+        cap, why = int(_max_inflated_mb() * 2**20), "LASHSCOPE_MAX_INFLATED_MB"
     if compressed is not None and max(MIN_INFLATED_BYTES, MAX_INFLATE_RATIO * compressed) < cap:
         cap, why = max(MIN_INFLATED_BYTES, MAX_INFLATE_RATIO * compressed), f"{MAX_INFLATE_RATIO}x its compressed size"
     return cap, why
+
+
+def _max_inflated_mb() -> float:
+    """``LASHSCOPE_MAX_INFLATED_MB`` as the settings read it.
+
+    A command-line run that reads one log should not pay for loading the service's settings
+    (a tenth of a second): where the settings are not loaded yet and the variable is unset or a
+    plain positive decimal number, it is read here; anything else goes through the settings (and
+    their error for a bad value). ``tests/ingest/test_inflate_cap.py`` holds both to the same answers.
+    """
+    if "app.settings" not in sys.modules:
+        name = "lashscope_max_inflated_mb"  # the settings match environment names case-insensitively
+        found = [v for k, v in os.environ.items() if k.lower() == name]
+        if not found:
+            return 4096.0  # the settings' default
+        if len(found) == 1 and re.fullmatch(r"[0-9]{1,9}(\.[0-9]{1,9})?", found[0]) and float(found[0]) > 0:
+            return float(found[0])
+    from app.settings import get_settings
+
+    return get_settings().max_inflated_mb
 
 
 def too_large(name: str, cap: int, why: str) -> InflatedTooLargeError:
