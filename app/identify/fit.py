@@ -450,12 +450,16 @@ def _t(level: float, n_events: int) -> float:
 
 
 def refined(vehicle: Vehicle, names: Sequence[str], joint: FitResult, events: Sequence[DiagEvent],
-            chi2_before: float, level: float = 0.9) -> Identification:
-    """The identification a joint fit of base parameters *and* an effect gives (base effects first in the fit)."""
+            chi2_before: float, level: float = 0.9, held: Identification | None = None) -> Identification:
+    """The identification a joint fit of base parameters *and* an effect gives (base effects first in the fit).
+
+    ``held``: the identification the joint fit started from; what it could not identify keeps its reason."""
     cov, t = _cov(joint, events, level)
     steps = [float(np.median(np.diff(ev.speed_t))) for ev in events if ev.speed_t.size > 1]
     period = float(np.median(steps)) if steps else 0.0
-    return assemble(vehicle, names, (), joint, cov, t, chi2_before, len(events), period_s=period)
+    why = {k: p.note for k, p in held.params.items() if k in BASE_NAMES and k not in names and not p.identified
+           and p.note} if held is not None else {}
+    return assemble(vehicle, names, (), joint, cov, t, chi2_before, len(events), unresolved=why, period_s=period)
 
 
 def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joint: FitResult, cov: FloatArray,

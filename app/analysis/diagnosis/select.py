@@ -400,7 +400,8 @@ def run_diagnosis(
                 again = held_out(top, (top,), joint, on=nominal)
                 singles = [again if c.id == top else c for c in singles]
                 fitted_base = [k for k in refit_with.ratios if BASE_EFFECTS[k].id in joint.values]
-                joint_ident[top] = identified_with(nominal, fitted_base, joint, cal, refit_with.chi2_before)
+                joint_ident[top] = identified_with(nominal, fitted_base, joint, cal, refit_with.chi2_before,
+                                                   held=refit_with)
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     if rebased is not None and ident_score is not None and decision.status == "none_of_candidates":
