@@ -73,7 +73,7 @@ const PRESETS = ["paper", "single_reduction", "chain_drive", "paper_fitted"];
 
 // The registration form: every file goes up through the page (POST /vehicles, multipart).
 async function registration(onStored) {
-  const name = h("input", { id: "vehicle-name", placeholder: "name, e.g. my-ev", required: true, pattern: "[a-z0-9_-]+" });
+  const name = h("input", { id: "vehicle-name", placeholder: "name, e.g. my-ev", required: true, pattern: "[a-z0-9_\\-]+" });
   const preset = h("select", { id: "vehicle-preset" }, PRESETS.map((p) => h("option", { value: p }, p)));
   const driveline = h("input", { id: "vehicle-driveline", type: "file", accept: ".toml" });
   const dbc = h("input", { id: "vehicle-dbc", type: "file", accept: ".dbc,.kcd,.sym,.arxml,.xml" });
