@@ -246,6 +246,7 @@ def pool_lines(car: str, drives: list[LogEntry]) -> list[str]:
                                                           f"{_f(pooled.modal.zeta, 3)}" if pooled.modal else ""))
     consistent = identified = 0
     improved = 0
+    holds: dict[str, list[bool]] = {k: [] for k in ids}
     for d in drives:
         own = _identify([d.path], d, [])
         if isinstance(own, str):
@@ -253,6 +254,8 @@ def pool_lines(car: str, drives: list[LogEntry]) -> list[str]:
         else:
             held = {k: own.params[k] for k in ids if k in own.params and own.params[k].identified}
             ok = bool(held) and all(p.lo <= ids[k].value <= p.hi for k, p in held.items())
+            for k, p in held.items():
+                holds[k].append(bool(p.lo <= ids[k].value <= p.hi))
             identified += bool(held)
             consistent += ok
             lines.append(f"  {d.name:24s} own: " + ("; ".join(f"{k} {_g(p.value)} [{_g(p.lo)}, {_g(p.hi)}]"
@@ -268,6 +271,8 @@ def pool_lines(car: str, drives: list[LogEntry]) -> list[str]:
         improved += better
         lines.append(f"  {'':24s} left out: tracking {v.get('verdict_before')} -> {v.get('verdict_after')}, "
                      f"NRMSE {_f(v.get('nrmse_before'), 3)} -> {_f(v.get('nrmse_after'), 3)}")
+    lines.append("  per parameter, drives whose own interval holds the pooled value: " + ", ".join(
+        f"{k} {sum(v)} of {len(v)}" for k, v in holds.items()))
     lines.append(f"  consistent with the pooled values: {consistent} of {identified} drives identified on their own "
                  f"({len(drives)} drives); left-out drive tracked better: {improved} of {len(drives)}")
     return lines
