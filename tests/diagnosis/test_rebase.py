@@ -66,3 +66,51 @@ def test_an_effect_on_a_car_whose_data_sheet_is_off_is_still_named() -> None:
     o = charts["overlays"][0]
     sq = lambda a: sum((m - x) ** 2 for m, x in zip(o["measured_rpm"], a, strict=True))  # noqa: E731
     assert sq(o["fitted_rpm"]) < sq(o["baseline_rpm"])
+
+
+def test_backlash_is_left_out_when_the_lash_traverse_falls_between_samples() -> None:
+    """The chain-drive car logged at 20 Hz crosses its lash between two samples: where the lash sits cannot be
+    told, so backlash is not a candidate (said why); at 100 Hz it is."""
+    from app.analysis.diagnosis.synthetic import CanSampling
+    from sim import load_vehicle
+    from tests.identify.drives import drive_signals
+
+    why = {}
+    for period in (0.05, 0.01):
+        sig = drive_signals({}, seed=13, duration_s=60.0, vehicle="chain_drive",
+                            sampling=CanSampling(period_s=period, jitter_s=0.001, drop_fraction=0.0))
+        res = diagnose_signals(sig, load_vehicle("chain_drive"),
+                               DiagnosisOptions(seed=0, candidates=("backlash", "torque_lag")))
+        why[period] = report_dict(res)["candidates_not_applicable"]
+    assert why[0.05]["backlash"].startswith("the lash traverse spans 0 speed samples in the median event (under 2)")
+    assert "backlash" not in why[0.01]
+
+
+def test_an_effect_that_trades_off_with_a_base_parameter_is_not_attributed() -> None:
+    """A mount whose stiffness trades off with the identified chain stiffness in their joint fit: base_parameters,
+    naming the trade-off; a trade-off between two effects' parameters, or an undecided answer, is left alone."""
+    from dataclasses import replace
+
+    from app.analysis.diagnosis.calibrate import FitResult
+    from app.analysis.diagnosis.decide import Decision
+    from app.analysis.diagnosis.forward import Nuisance
+    from app.analysis.diagnosis.rebase import base_trade, not_separable
+    from app.identify.fit import identify_events
+    from sim import load_vehicle
+    from tests.identify.drives import drive_signals, prepared
+
+    fit = replace(FitResult(("base_stiffness", "housing_mount"), Nuisance(0.0, 1.0, 0.0), {}, 0.0, 0, 0),
+                  trade_offs=(("base_stiffness.log2_scale", "housing_mount.stiffness_log2", -0.94),
+                              ("housing_mount.damping_log2", "torque_lag.tau_s", 0.95)))
+    partial = Decision("partial", top=("housing_mount",), reason="r")
+    assert base_trade(partial, fit) == [("housing_mount.stiffness_log2", "base_stiffness.log2_scale", -0.94)]
+    assert base_trade(replace(partial, status="ambiguous"), fit) == []
+    assert base_trade(replace(partial, top=("torque_lag",)), fit) == []
+    events, noise = prepared(drive_signals({"stiffness": 0.75}, seed=12, duration_s=40.0))
+    ident = identify_events(events, noise, load_vehicle("paper"))
+    d = not_separable(partial, ident, base_trade(partial, fit), None)
+    assert d.status == "base_parameters" and d.top == ()
+    assert "torsional stiffness at the motor 0.7" in d.reason and "cannot tell housing_mount" in d.reason
+    assert d.details["not_separable"] == [{"effect_param": "housing_mount.stiffness_log2",
+                                           "base_param": "base_stiffness.log2_scale", "correlation": -0.94}]
+    assert [i["name"] for i in d.details["base_parameters"]] == ["stiffness"]
