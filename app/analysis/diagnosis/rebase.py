@@ -154,18 +154,19 @@ def base_trade(decision: Decision, fit: FitResult | None) -> list[tuple[str, str
 
 
 def not_separable(decision: Decision, ident: Identification, tangled: Sequence[tuple[str, str, float]],
-                  nominal_gap: Any) -> Decision:
+                  nominal_gap: Any, score: CandidateScore | None = None) -> Decision:
     """``base_parameters`` for a decision whose effect trades off with a base parameter in their joint fit.
 
     The effect and the data sheet's error then describe the same change of the log (a mount and a softer shaft
     both lower the mode): the data cannot tell them apart, and the file being off is the answer that needs no new
-    physics. The effect is reported as what could also explain the remainder, not attributed."""
+    physics. The effect is reported as what could also explain the remainder, not attributed; the held-out figures
+    are the identified base's (``score``), not the effect's."""
     what = "; ".join(f"{x} trades off with {y} (correlation {r:+.2f})" for x, y, r in tangled)
     effect = "+".join(decision.top)
     reason = (f"the vehicle file is off: {sentence(ident)}. {effect} would explain what the identified values leave, "
               f"but in their joint fit {what}: the data cannot tell {effect} from the file's error, so no unmodelled "
               "effect is attributed")
-    return replace(decision, status=BASE_ID, top=(), reason=reason, gap_ratio=nominal_gap,
+    return replace(decision, status=BASE_ID, top=(), reason=reason, gap_ratio=nominal_gap, best=score,
                    details={**decision.details, "base_parameters": base_items(ident), "identify_first": False,
                             "not_separable": [{"effect_param": x, "base_param": y, "correlation": round(r, 4)}
                                               for x, y, r in tangled]})

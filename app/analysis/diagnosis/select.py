@@ -411,11 +411,13 @@ def run_diagnosis(
         ident = joint_ident.get("+".join(decision.top), ident)
         chosen = evals.get("+".join(decision.top))
         mixed = base_trade(decision, chosen.fit if chosen is not None else None) if ident.named else []
-        if mixed:
-            decision = not_separable(decision, ident, mixed, nominal_gap)
-        decision = with_base(decision, ident, nominal_gap if rebased is not None else None)
-        if "+".join(decision.top) not in joint_ident and rebased is None:  # the base played no part in the answer
-            decision = replace(decision, details={k: v for k, v in decision.details.items() if k != "base_parameters"})
+        if mixed:  # the effect cannot be told from the base: the base is the answer
+            decision = not_separable(decision, ident, mixed, nominal_gap, ident_score)
+        else:
+            decision = with_base(decision, ident, nominal_gap if rebased is not None else None)
+            if "+".join(decision.top) not in joint_ident and rebased is None:  # the base played no part in the answer
+                decision = replace(decision, details={k: v for k, v in decision.details.items()
+                                                      if k != "base_parameters"})
     decision = with_tones(decision, noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
