@@ -393,8 +393,9 @@ def _short_traverse(vehicle: Vehicle, events: Sequence[DiagEvent], base: FitResu
     The traverse is the predicted one (``vehicle`` with the baseline's nuisance): from the loss of load at the torque
     reversal to the impact, as the diagnosis' phases (:func:`~app.analysis.diagnosis.localise.phase_times`)."""
     outs = simulate_events(events, vehicle_with(vehicle, base.nuisance, ()), base.nuisance.gain, (), model)
-    spans = [(lambda ph: ph.t_close - ph.t_open)(phase_times(ev, prediction(ev, out, base.nuisance.offset_s)))
-             for ev, out in zip(events, outs, strict=True)]
+    phases = [phase_times(ev, prediction(ev, out, base.nuisance.offset_s))
+              for ev, out in zip(events, outs, strict=True)]
+    spans = [ph.t_close - ph.t_open for ph in phases]
     med = float(np.median(spans)) if spans else 0.0
     if med >= MIN_LASH_SAMPLES * period_s:
         return ""
