@@ -91,8 +91,10 @@ def diagnose(case: Case, folder: Path) -> Result:
     rep = report_dict(res)
     rem = (rep.get("decision") or {}).get("remainder") or {}
     remainder = str(rem.get("status", "")) if isinstance(rem, dict) else str(rem)
-    details = (rep.get("decision") or {}).get("details") or {}
-    base_named = tuple(str(b["name"]) for b in details.get("base_parameters", ())) if isinstance(details, dict) else ()
+    # the decision's details are merged into its dict (``Decision.to_dict``): the corrected base parameters are a
+    # top-level ``base_parameters`` list
+    items = (rep.get("decision") or {}).get("base_parameters") or ()
+    base_named = tuple(str(b["name"]) for b in items if isinstance(b, dict))
     shrink_b = float("nan")
     if d.top and d.status in (*CONFIDENT, "ambiguous"):
         try:

@@ -69,7 +69,7 @@ from app.analysis.diagnosis.rebase import (
     with_base,
 )
 from app.analysis.diagnosis.score import EventScore, Interval
-from app.analysis.diagnosis.split import Split, make_split
+from app.analysis.diagnosis.split import Split, make_split, restricted, stratified_order
 from app.analysis.diagnosis.structure import remainder
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.errors import InputError, InsufficientDataError, NotIdentifiableError
@@ -82,6 +82,8 @@ from sim.effects import EFFECTS, get_effect
 FloatArray = npt.NDArray[np.float64]
 Progress = Callable[[float, str], None]
 PAIR_PASSES_PER_PARAM = 10  # a pair's refinement starts near its solution (the single fit + the screen's step)
+STAGE_EVENTS = 24  # events per side in the sequential design's first stage (the calibration side of a 60 s drive)
+STAGE_COVER = 0.75  # a stage that would take this share of a side or more takes all of it
 JOINT_REFITS = 2  # best single effects refitted jointly with the identified base parameters
 
 
@@ -100,6 +102,10 @@ class DiagnosisOptions:
     # attributions on the independent generator's no-effect drives but also hid clean 15 ms torque lags
     # (docs/diagnosis.md, "Model-form tolerance")
     model_form_rel: float = 0.0
+    # the sequential design of run_diagnosis (stratified stages of 24, 48, ... events per side, stopped once two
+    # stages agree); False: every event in one stage, whatever the drive's length
+    sequential: bool = True
+    stage_events: int = STAGE_EVENTS  # events per side of the sequential design's first stage
     rules: DecisionRules = field(default_factory=DecisionRules)
 
     def __post_init__(self) -> None:
@@ -114,6 +120,9 @@ class DiagnosisOptions:
             raise InputError(f"unknown candidate effects {unknown}; known: {list(EFFECTS)}")
         if len(set(self.candidates)) != len(self.candidates):
             raise InputError(f"candidate effects repeat: {list(self.candidates)}")
+        if self.stage_events < self.rules.min_events_per_side:
+            raise InputError(f"stage_events = {self.stage_events}: a stage needs at least "
+                             f"{self.rules.min_events_per_side} events per side")
         if self.model not in ("multibody", "two_inertia"):
             raise InputError(f"model {self.model!r}: must be 'multibody' or 'two_inertia'")
 
@@ -199,6 +208,27 @@ def _refit_first(vehicle: Vehicle, cal: Sequence[DiagEvent], split: Split, first
     return again if again.chi2 < single.chi2 else None
 
 
+def stage_sizes(n_side: int, first: int = STAGE_EVENTS) -> list[int]:
+    """Events per side of each stage of the sequential design for a side of ``n_side`` events: ``first``, twice
+    that, ... (24, 48, 96, ...) while a stage takes under :data:`STAGE_COVER` of the side, then all of it."""
+    out: list[int] = []
+    n = first
+    while n < STAGE_COVER * n_side:
+        out.append(n)
+        n *= 2
+    return [*out, n_side]
+
+
+def with_eta(say: Progress, t0: float) -> Progress:
+    """``say`` with the time left appended, from the elapsed time and the fraction done (once 5 % is done)."""
+    def out(frac: float, msg: str) -> None:
+        spent = time.perf_counter() - t0
+        if 0.05 <= frac < 1.0 and spent > 0.0:
+            msg = f"{msg} (about {max(spent / frac - spent, 0.0):.0f} s left)"
+        say(frac, msg)
+    return out
+
+
 def run_diagnosis(
     events: Sequence[DiagEvent],
     noise: NoiseFloor,
@@ -207,7 +237,15 @@ def run_diagnosis(
     progress: Progress | None = None,
     skipped: Sequence[dict[str, object]] = (),
 ) -> DiagnosisResult:
-    """Diagnose the sim-to-real gap of one log.
+    """Diagnose the sim-to-real gap of one log, in stages whose cost does not grow with the drive.
+
+    The sequential design: the frozen split is made on every event; each side is taken in a stratified order
+    (:func:`.split.stratified_order`: every prefix covers tip-ins and tip-outs in proportion and spans their
+    speeds and torque steps), and stage *k* diagnoses the first 24 x 2^k events of each side
+    (:func:`stage_sizes`). The design stops after the first stage whose decision (status and effects) equals the
+    previous stage's, or when a stage holds every event. A log of up to about 32 events per side (a 60 s drive)
+    is one stage of all its events, as before. The events a stopped design did not need are reported under
+    ``events_skipped`` with the reason.
 
     Parameters
     ----------
@@ -215,13 +253,61 @@ def run_diagnosis(
     noise : model-free noise floor of the speed channel.
     vehicle : the diagnosed vehicle (its effects as the file says).
     options : candidate subset, split seed, model, decision rules.
-    progress : ``progress(fraction in [0, 1], message)``.
+    progress : ``progress(fraction in [0, 1], message)``; messages carry the time left.
     skipped : events left out upstream, reported as such.
     """
     opts = options or DiagnosisOptions()
-    say = progress or (lambda f, m: None)
-    t_start = time.perf_counter()
+    t0 = time.perf_counter()
+    say = with_eta(progress or (lambda f, m: None), t0)
     split = make_split(events, opts.seed)
+    cal = stratified_order(split.calibration_events(events))
+    ho = stratified_order(split.heldout_events(events))
+    sizes = stage_sizes(max(len(cal), len(ho)), opts.stage_events)
+    if len(sizes) == 1 or not opts.sequential:
+        return _diagnose(events, noise, vehicle, opts, say, skipped, split)
+    planned = float(sizes[0] + sizes[1])  # the stages' cost grows with their events; at least two stages run
+    done = 0.0
+    history: list[tuple[int, str]] = []
+    res: DiagnosisResult | None = None
+    for k, n in enumerate(sizes):
+        keep = {e.index for e in (*cal[:n], *ho[:n])}
+        sub = [e for e in events if e.index in keep]
+
+        def staged(frac: float, msg: str, k: int = k, n: int = n, done: float = done, planned: float = planned) -> None:
+            say(min((done + frac * n) / planned, 0.99), f"stage {k + 1} ({n} events per side): {msg}")
+
+        res = _diagnose(sub, noise, vehicle, opts, staged, skipped, restricted(split, sub))
+        d = res.decision
+        history.append((n, f"{d.status} {'+'.join(d.top)}".rstrip()))
+        done += n
+        if k == len(sizes) - 1 or (k >= 1 and history[-1][1] == history[-2][1]):
+            break
+        planned = max(planned, done + sizes[k + 1])
+    assert res is not None
+    used = {e.index for e in res.events}
+    stable = len(history) < len(sizes) or history[-1][1] == history[-2][1]
+    why = (f"not needed: the sequential design stopped at {history[-1][0]} events per side, where the decision "
+           f"({history[-1][1]}) equals the previous stage's" if stable else "")
+    res.skipped.extend({"index": e.index, "reason": why} for e in events if e.index not in used)
+    res.fit_order.insert(0, "sequential design (events per side: decision): "
+                         + "; ".join(f"{n}: {dec}" for n, dec in history)
+                         + (" -- stable, stopped" if stable and len(history) < len(sizes) else " -- all events"))
+    res.elapsed_s = time.perf_counter() - t0
+    progress and progress(1.0, f"decision: {res.decision.status} {' + '.join(res.decision.top)}".rstrip())
+    return res
+
+
+def _diagnose(
+    events: Sequence[DiagEvent],
+    noise: NoiseFloor,
+    vehicle: Vehicle,
+    opts: DiagnosisOptions,
+    say: Progress,
+    skipped: Sequence[dict[str, object]],
+    split: Split,
+) -> DiagnosisResult:
+    """One stage of :func:`run_diagnosis`: the diagnosis of ``events`` on ``split``."""
+    t_start = time.perf_counter()
     cal = split.calibration_events(events)
     ho = split.heldout_events(events)
     ho_idx = [e.index for e in ho]
