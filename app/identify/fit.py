@@ -582,7 +582,8 @@ def _nuisance_dict(n: Nuisance) -> dict[str, float]:
 
 
 IDENT_STAGE_EVENTS = 48  # events in the first stage of a staged identification (about a 60 s drive's)
-STABLE_SHARE = 0.25  # a parameter is stable when it moved by less than this share of its 90 % half-width
+STABLE_SHARE = 1.0  # a parameter is stable when it moved by less than this share of its 90 % half-width (the
+# previous stage's value lies inside the new stage's interval)
 
 
 def _moved(a: Identification, b: Identification) -> list[str]:
@@ -609,8 +610,8 @@ def identify_staged(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
 
     The events are taken in the stratified order of :func:`app.analysis.diagnosis.split.stratified_order`; stage
     *k* identifies on the first ``first`` x 2^k of them (a stage that would take 75 % of them or more takes all),
-    and the design stops after the first stage whose every base parameter moved by less than a quarter of its
-    90 % half-width from the previous stage's, with the same parameters named, or when a stage holds every event.
+    and the design stops after the first stage whose 90 % intervals hold the previous stage's values of every base
+    parameter, with the same parameters named, or when a stage holds every event.
     Up to about 64 events (a 60 s drive) it is one stage of all of them, as :func:`identify_events`."""
     say = progress or (lambda f, m: None)
     order = stratified_order(events)

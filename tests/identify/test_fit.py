@@ -147,8 +147,8 @@ def test_the_model_form_floor_widens_below_ten_samples_per_mode_period() -> None
 
 
 def test_staged_identification_stops_once_two_stages_agree() -> None:
-    """Stages of 8, 16, ... of a 2-minute drive's events in the stratified order: the design stops when every
-    parameter stays within a quarter of its half-width and the same ones are named, and holds the truth."""
+    """Stages of 8, 16, ... of a 2-minute drive's events in the stratified order: the design stops when the new
+    stage's intervals hold the previous stage's values and the same parameters are named, and holds the truth."""
     from app.identify import identify_staged
     events, noise = prepared(drive_signals(OFF, seed=5, duration_s=120.0))
     said: list[str] = []

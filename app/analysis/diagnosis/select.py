@@ -73,7 +73,7 @@ from app.analysis.diagnosis.split import Split, make_split, restricted, stratifi
 from app.analysis.diagnosis.structure import remainder
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.errors import InputError, InsufficientDataError, NotIdentifiableError
-from app.identify.base import BASE_EFFECTS
+from app.identify.base import BASE_EFFECTS, BASE_NAMES
 from app.identify.fit import FitOptions, Identification, identify_events
 from app.identify.fit import refined as identified_with
 from sim import Vehicle
@@ -374,6 +374,7 @@ def _diagnose(
     nominal_gap = gap_ratio(b, n, draws, rules.level)
     nominal = vehicle
     ident, ident_score, rebased, ident_note, file_eval = None, None, None, "", None
+    bound_stop: Decision | None = None  # "identify the vehicle first", unless an effect brings the base inside
     refit_with: Identification | None = None  # base parameters the best effects are refitted with
     joint_ident: dict[str, Identification] = {}  # candidate -> the base parameters identified jointly with it
     say(step[0] / n_steps, "identifying the vehicle's base parameters on calibration events")
@@ -390,14 +391,25 @@ def _diagnose(
                                       remainder(ho, id_eval.scores, id_eval.predictions, period))
         outcome = judge(ident, ident_score, n, draws, rules, nominal_gap)
         ident_note = outcome.note
-        if outcome.stop is not None:
+        if outcome.stop is not None and outcome.stop.details.get("identify_first"):
+            # a base parameter on its prior bound: either the file is further off than the priors allow, or missing
+            # physics pushed the base there (a tyre's compliance taken as a lighter car with more lash). The
+            # candidates are fitted on the file's vehicle and the best refitted jointly with the base parameters;
+            # an effect is named only if, fitted with it, every base parameter comes back inside its prior
+            # (below); otherwise the answer stays "identify the vehicle first"
+            bound_stop = outcome.stop
+            refit_with = ident
+            ident = replace(ident, params={k: replace(p, named=False) for k, p in ident.params.items()})
+            fit_order.append("identification: a base parameter on its prior bound; candidates fitted on the file's "
+                             "vehicle, an effect named only with every base parameter inside its prior")
+        elif outcome.stop is not None:
             decision = with_tones(outcome.stop, noise.tones)
             say(1.0, f"decision: {decision.status}")
             return result(decision, baseline=base_eval, candidates={BASE_ID: id_eval}, phases=phases, draws=draws,
                           fit_order=fit_order, not_applicable=not_applicable, identification=ident,
                           identified_score=ident_score,
                           nominal_gap=nominal_gap, identification_note=ident_note)
-        if outcome.use:  # the candidates explain only what the identified vehicle cannot
+        elif outcome.use:  # the candidates explain only what the identified vehicle cannot
             rebased, file_eval, refit_with = ident, base_eval, ident
             vehicle = ident.vehicle
             base_fit = nuisance_only(ident)
@@ -490,13 +502,33 @@ def _diagnose(
                                                    held=refit_with)
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
+    if bound_stop is not None:
+        top = "+".join(decision.top)
+        jointly = joint_ident.get(top)
+        inside = jointly is not None and not any(p.at_bound for k, p in jointly.params.items() if k in BASE_NAMES)
+        if decision.status in ("explained", "partial") and inside:
+            fit_order.append(f"{top}: with it every base parameter is inside its prior; attributed")
+        else:
+            why = ("no effect was attributed" if decision.status not in ("explained", "partial") else
+                   f"{top} did not bring every base parameter inside its prior")
+            fit_order.append(f"identify the vehicle first: {why}")
+            decision = with_tones(bound_stop, noise.tones)
+            say(1.0, f"decision: {decision.status}")
+            evals[BASE_ID] = id_eval
+            return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
+                          draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=ident,
+                          identified_score=ident_score, nominal_gap=nominal_gap, identification_note=ident_note)
     if rebased is not None and ident_score is not None and decision.status == "none_of_candidates":
         decision = base_only(decision, rebased, ident_score, nominal_gap)
         evals[BASE_ID] = evaluate(nominal, rebased.fit, ho, opts.model, phases, period)
     elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
         ident = joint_ident.get("+".join(decision.top), ident)
         chosen = evals.get("+".join(decision.top))
-        mixed = base_trade(decision, chosen.fit if chosen is not None else None) if ident.named else []
+        # (after an identification on a prior bound the base alone was shown unable to explain the log: a trade-off
+        # inside the joint fit then says how the effect's and the base's values share the fit, not that the base
+        # could stand in for the effect)
+        mixed = base_trade(decision, chosen.fit if chosen is not None else None) \
+            if ident.named and bound_stop is None else []
         if mixed:  # the effect cannot be told from the base: the base is the answer
             decision = not_separable(decision, ident, mixed, nominal_gap, ident_score)
         else:
