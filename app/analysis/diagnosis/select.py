@@ -36,6 +36,7 @@ from app.analysis.diagnosis.decide import (
     gap_ratio,
     has_gap,
     score_candidate,
+    separation,
     structured,
     with_tones,
 )
@@ -66,6 +67,7 @@ from app.analysis.diagnosis.rebase import (
     judge,
     not_separable,
     nuisance_only,
+    told_apart,
     with_base,
 )
 from app.analysis.diagnosis.score import EventScore, Interval
@@ -524,18 +526,22 @@ def _diagnose(
     elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
         ident = joint_ident.get("+".join(decision.top), ident)
         chosen = evals.get("+".join(decision.top))
-        # (after an identification on a prior bound the base alone was shown unable to explain the log: a trade-off
-        # inside the joint fit then says how the effect's and the base's values share the fit, not that the base
-        # could stand in for the effect)
-        mixed = base_trade(decision, chosen.fit if chosen is not None else None) \
-            if ident.named and bound_stop is None else []
-        if mixed:  # the effect cannot be told from the base: the base is the answer
+        mixed = base_trade(decision, chosen.fit if chosen is not None else None) if ident.named else []
+        # a trade-off inside the joint fit says the file's error *could* take part of the effect; whether it can
+        # stand in for it is the held-out comparison of the effect with the identified base alone (rule 4)
+        apart = None
+        if mixed and ident_score is not None and decision.best is not None:
+            preferred, p_better, gap = separation(decision.best, ident_score, n, draws, rules)
+            apart = (p_better, gap) if preferred else None
+        if mixed and apart is None:  # the effect cannot be told from the base: the base is the answer
             decision = not_separable(decision, ident, mixed, nominal_gap, ident_score)
         else:
             decision = with_base(decision, ident, nominal_gap if rebased is not None else None)
             if "+".join(decision.top) not in joint_ident and rebased is None:  # the base played no part in the answer
                 decision = replace(decision, details={k: v for k, v in decision.details.items()
                                                       if k != "base_parameters"})
+            if mixed and apart is not None:
+                decision = told_apart(decision, mixed, *apart)
     decision = with_tones(decision, noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
