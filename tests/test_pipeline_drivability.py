@@ -91,6 +91,11 @@ def test_payload_csv_and_event_store_rows_carry_the_criteria(with_accelerometer:
     assert doc["acceleration"]["kind"] == "accelerometer"
     summ = doc["summary"]["drivability"]
     assert set(summ) == set(CRITERIA_NAMES) and summ["shuffle_pp_ms2"]["events"] >= 6
+    settled = summ["settled_accel_ms2"]  # forward after a tip-in, backward after a tip-out: medians per kind only
+    assert settled["measured_median"] is None and settled["simulated_median"] is None
+    assert settled["tip_in"]["measured_median"] > 0.5 and settled["tip_out"]["measured_median"] < -0.5
+    assert settled["tip_in"]["events"] + settled["tip_out"]["events"] == settled["events"] >= 6
+    assert summ["kick_ms2"]["measured_median"] > 0 and summ["kick_ms2"]["tip_in"]["events"] >= 3
     row = next(m for m in doc["metrics"] if m["drivability"])
     assert set(row["drivability"]["measured"]) >= set(CRITERIA_NAMES)
     text = metrics_csv(doc["metrics"])

@@ -104,16 +104,38 @@ def _band_limit(t: FloatArray, a: FloatArray, period_s: float) -> FloatArray:
     return zero_phase(butter_sos(4, float(f"{0.45 / period_s:.4g}"), "low", fs), a)
 
 
-def summarize_feel(rows: list[FeelComparison]) -> dict[str, dict[str, float]]:
-    """Per criterion: median measured, simulated and difference over events, and how many events count."""
-    out: dict[str, dict[str, float]] = {}
+#: criteria signed in the vehicle's frame (forward positive) rather than along the torque change: a tip-in
+#: settles forward, a tip-out backward, so a median over both kinds of event describes neither
+SIGNED_CRITERIA: tuple[str, ...] = ("settled_accel_ms2",)
+EVENT_KINDS: tuple[str, ...] = ("tip_in", "tip_out")
+
+
+def summarize_feel(rows: list[FeelComparison], kinds: list[str] | None = None) -> dict[str, dict[str, object]]:
+    """Per criterion: median measured, simulated and difference over events, and how many events count; with
+    ``kinds`` (each row's event kind, ``tip_in`` or ``tip_out``) the same per kind under ``tip_in`` and
+    ``tip_out``. Drivability is judged per manoeuvre: the per-kind medians are the ones to read, and for a
+    criterion in :data:`SIGNED_CRITERIA` the medians over all events are NaN (null), only its count is kept."""
+    out: dict[str, dict[str, object]] = {}
+    kind_of = np.array(kinds if kinds is not None else [""] * len(rows), dtype=object)
+    if kind_of.size != len(rows):
+        raise ValueError(f"{kind_of.size} event kinds for {len(rows)} rows")
     for k in CRITERIA_NAMES:
         meas = np.array([getattr(r.measured, k) for r in rows], float)
         sim = np.array([getattr(r.simulated, k) for r in rows], float)
-        diff = sim - meas
-        out[k] = {"measured_median": _med(meas), "simulated_median": _med(sim), "difference_median": _med(diff),
-                  "events": int(np.isfinite(meas).sum())}
+        row: dict[str, object] = dict(_medians(meas, sim))
+        if k in SIGNED_CRITERIA:
+            row.update(measured_median=math.nan, simulated_median=math.nan, difference_median=math.nan)
+        if kinds is not None:
+            for kind in EVENT_KINDS:
+                sel = kind_of == kind
+                row[kind] = _medians(meas[sel], sim[sel])
+        out[k] = row
     return out
+
+
+def _medians(meas: FloatArray, sim: FloatArray) -> dict[str, float]:
+    return {"measured_median": _med(meas), "simulated_median": _med(sim), "difference_median": _med(sim - meas),
+            "events": int(np.isfinite(meas).sum())}
 
 
 def _med(x: FloatArray) -> float:
