@@ -107,15 +107,16 @@ class DrivabilityParams:
     derive_cutoff_hz: float = 15.0  # low pass of the speed differentiator (app.analysis.accel)
     bandwidth_factor: float = 1.5  # a derived acceleration resolves the shuffle below bandwidth / this (gain >= 0.96)
     max_fit_error: float = 0.05  # ... and (speed-derived: kick, p-p from the fit) the fit's amplitude within this
+    compare_with: str = "body"  # simulated side compared with the measurement: "body" (an ESP sensor) or "seat_rail"
 
     def __post_init__(self) -> None:
         lo, hi = self.clunk_band_hz
         if not (self.lowpass_hz >= 1.0 and 1.0 <= lo < hi and 1 <= self.order <= 8 and 0 < self.final_fraction <= 1
                 and self.max_extrema >= 2 and self.derive_cutoff_hz >= 1.0 and self.bandwidth_factor >= 1
-                and self.max_fit_error > 0):
+                and self.max_fit_error > 0 and self.compare_with in ("body", "seat_rail")):
             raise ValueError("drivability parameters: cut-offs must be at least 1 Hz (clunk band low < high), "
                              "1 <= order <= 8, 0 < final_fraction <= 1, max_extrema >= 2, bandwidth_factor >= 1, "
-                             "max_fit_error > 0")
+                             "max_fit_error > 0, compare_with 'body' or 'seat_rail'")
 
 
 @dataclass(frozen=True)

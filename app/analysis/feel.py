@@ -35,21 +35,31 @@ PAD_S = 0.3  # filter run-in on each side of the event window
 class FeelComparison:
     source: str  # accelerometer | vehicle_speed | wheel_speed
     measured: Drivability
-    simulated: Drivability
+    simulated: Drivability  # the simulated side compared (difference): the body's, or the seat rail's on request
     difference: dict[str, float]
+    simulated_at: str = "body"  # body | seat_rail: where ``simulated`` was taken
+    simulated_seat: Drivability | None = None  # the seat rail's criteria where the simulation has them
 
     def to_dict(self) -> dict[str, object]:
-        return {"source": self.source, "measured": self.measured.to_dict(), "simulated": self.simulated.to_dict(),
-                "difference": dict(self.difference)}
+        out: dict[str, object] = {"source": self.source, "measured": self.measured.to_dict(),
+                                  "simulated": self.simulated.to_dict(), "difference": dict(self.difference),
+                                  "simulated_at": self.simulated_at}
+        if self.simulated_seat is not None:
+            out["simulated_seat"] = self.simulated_seat.to_dict()
+        return out
 
 
 def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, sim_accel_ms2: FloatArray,
                t_start: float, t_end: float, t_cross: float, direction: float, params: DrivabilityParams, *,
                pedal: Signal | None = None, t_close_measured: float = math.nan,
-               t_close_simulated: float = math.nan, shuffle_hint_hz: float = math.nan) -> FeelComparison:
+               t_close_simulated: float = math.nan, shuffle_hint_hz: float = math.nan,
+               sim_seat_ms2: FloatArray | None = None) -> FeelComparison:
     """Criteria of the measured and simulated acceleration of one event window (times already offset-corrected).
 
-    ``sim_t`` (s), ``sim_speed_ms`` (m/s), ``sim_accel_ms2`` (m/s^2), shape (n,) each: the simulation of the window.
+    ``sim_t`` (s), ``sim_speed_ms`` (m/s), ``sim_accel_ms2`` (m/s^2), shape (n,) each: the simulation of the window;
+    ``sim_seat_ms2`` (n,) its seat-rail acceleration (:attr:`sim.SimResult.seat_rail_accel_ms2`) or None. The
+    seat rail is read like an accelerometer at the measured side's sample times (band-limited to their rate);
+    it is the compared side when ``params.compare_with`` is ``"seat_rail"``, otherwise reported beside.
     """
     moved = pedal_move(pedal, t_start, t_cross, params)  # the same driver input for both sides
     m = (src.t >= t_start - PAD_S) & (src.t <= t_end + PAD_S)
@@ -69,7 +79,14 @@ def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, si
     simulated = drivability_criteria(ts, a_sim, t_start, t_end, t_cross, direction, params, pedal_time=moved,
                                      t_close=t_close_simulated, bandwidth_hz=src.bandwidth_hz,
                                      shuffle_hint_hz=shuffle_hint_hz)
-    return FeelComparison(src.kind, measured, simulated, difference(measured, simulated))
+    seat = None
+    if sim_seat_ms2 is not None and ts.size:
+        seat = drivability_criteria(ts, np.interp(ts, sim_t, _band_limit(sim_t, sim_seat_ms2, src.period_s)), t_start,
+                                    t_end, t_cross, direction, params, pedal_time=moved, t_close=t_close_simulated,
+                                    shuffle_hint_hz=shuffle_hint_hz)
+    if params.compare_with == "seat_rail" and seat is not None:
+        return FeelComparison(src.kind, measured, seat, difference(measured, seat), "seat_rail", seat)
+    return FeelComparison(src.kind, measured, simulated, difference(measured, simulated), "body", seat)
 
 
 def run_feel(t: FloatArray, accel_ms2: FloatArray, torque_nm: FloatArray,
