@@ -51,12 +51,20 @@ saturated sensor in the window, or an acceleration derived from speed whose band
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from scipy import optimize
 
-from app.analysis.feel_kernels import FIT_OK, damped_sine_fit, max_abs_slope, median, zigzag
+from app.analysis.feel_kernels import (
+    FIT_OK,
+    damped_sine_fit,
+    max_abs_slope,
+    median,
+    residual_rms,
+    sinc_refine,
+    zigzag,
+)
 from app.analysis.iso2631 import vdv
 from app.analysis.series import FloatArray, parabolic_vertex
 from app.analysis.zerophase import butter_sos, zero_phase
@@ -147,7 +155,15 @@ class Drivability:
 
 
 def _rate(fs: float) -> float:
-    return float(f"{fs:.6g}")  # jitter in the last digits of a period must not defeat the design cache
+    rate = _RATES.get(fs)
+    if rate is None:  # jitter in the last digits of a period must not defeat the design cache
+        if len(_RATES) > 1024:
+            _RATES.clear()
+        rate = _RATES[fs] = float(f"{fs:.6g}")
+    return rate
+
+
+_RATES: dict[float, float] = {}
 
 
 def _lowpass(a: FloatArray, fs: float, fc: float, order: int) -> FloatArray:
@@ -173,19 +189,13 @@ def _crossing(t: FloatArray, y: FloatArray, level: float, i0: int) -> float:
 
 def _sinc_vertices(y: FloatArray, idx: list[int]) -> list[tuple[float, float]]:
     """Sub-sample offset and value of the extremum of ``y`` near each index of ``idx`` from a windowed-sinc
-    interpolation over +-8 samples (all interior ones in one product); the parabolic vertex at the edges.
-    A maximum or a minimum as the sample and its neighbours say."""
-    inner = [k for k, i in enumerate(idx) if 8 <= i <= y.size - 9]
-    out: list[tuple[float, float]] = [(0.0, 0.0) if 8 <= i <= y.size - 9 else parabolic_vertex(y, i) for i in idx]
-    if inner:
-        centres = np.array([idx[k] for k in inner])
-        interp = _SINC @ y[centres[None, :] + _TAPS[:, None]]  # (offsets, extrema)
-        mid, side = y[centres], 0.5 * (y[centres - 1] + y[centres + 1])
-        sign = np.where(mid >= side, 1.0, -1.0)
-        best = np.argmax(sign[None, :] * interp, axis=0)
-        for col, k in enumerate(inner):
-            out[k] = (float(_OFFSETS[best[col]]), float(interp[best[col], col]))
-    return out
+    interpolation over +-8 samples (:func:`app.analysis.feel_kernels.sinc_refine`); the parabolic vertex at the
+    edges. A maximum or a minimum as the sample and its neighbours say."""
+    inner = [i for i in idx if 8 <= i <= y.size - 9]
+    if len(inner) == len(idx):
+        off, val = sinc_refine(y, np.array(idx, dtype=np.int64), _SINC, _OFFSETS)
+        return list(zip(off.tolist(), val.tolist(), strict=True))
+    return [_sinc_vertices(y, [i])[0] if 8 <= i <= y.size - 9 else parabolic_vertex(y, i) for i in idx]
 
 
 def _extrema(y: FloatArray, i0: int, prominence: float) -> list[int]:
@@ -338,7 +348,7 @@ def drivability_criteria(
     if iw.size < 8:
         return _with(nan_all, {k: "the acceleration does not cover the event window" for k in CRITERIA_NAMES})
     i_a, i_b = int(iw[0]), int(iw[-1]) + 1
-    noise = float(np.std(a[i_a:i_b] - lp[i_a:i_b]))
+    noise = residual_rms(a[i_a:i_b], lp[i_a:i_b])
     tw, lw = t[i_a:i_b], lp[i_a:i_b]
     pre_m = tw <= t_cross - p.pre_gap_s
     a_pre = median(lw[pre_m]) if pre_m.any() else float(lw[0])
@@ -449,7 +459,9 @@ def drivability_criteria(
 
 def _with(d: Drivability, reasons: dict[str, str]) -> Drivability:
     """``d`` with the criteria named in ``reasons`` set to NaN (a reason marks the value as not supported)."""
-    return replace(d, **{k: NAN for k in reasons if k in CRITERIA}, resolution=dict(reasons))
+    values = dict(d.__dict__)  # dataclasses.replace, without its per-call field checks
+    values.update({k: NAN for k in reasons if k in CRITERIA}, resolution=dict(reasons))
+    return Drivability(**values)
 
 
 def difference(measured: Drivability, simulated: Drivability) -> dict[str, float]:

@@ -283,3 +283,44 @@ def max_abs_slope(y: FloatArray, dt: float, k0: int, k1: int) -> float:  # pragm
         if abs(g) > best:
             best = abs(g)
     return best
+
+
+@njit(cache=True, nogil=True)
+def sinc_refine(y: FloatArray, idx: npt.NDArray[np.int64], weights: FloatArray,
+                offsets: FloatArray) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
+    """Offset (samples) and value of the extremum near each ``y[idx[j]]`` (``8 <= idx[j] <= y.size - 9``) on the
+    interpolation ``sum_k weights[r, k] y[i - 8 + k]`` at ``offsets[r]``: the largest value for a maximum, the
+    smallest for a minimum (as ``y[i]`` against the mean of its neighbours says); the first of equal ones."""
+    m = idx.size
+    off = np.empty(m)
+    val = np.empty(m)
+    taps = weights.shape[1]
+    half = taps // 2
+    for j in range(m):
+        i = idx[j]
+        sign = 1.0 if y[i] >= 0.5 * (y[i - 1] + y[i + 1]) else -1.0
+        best = -math.inf
+        for r in range(weights.shape[0]):
+            v = 0.0
+            for k in range(taps):
+                v += weights[r, k] * y[i - half + k]
+            if sign * v > best:
+                best = sign * v
+                off[j] = offsets[r]
+                val[j] = v
+    return off, val
+
+
+@njit(cache=True, nogil=True)
+def residual_rms(a: FloatArray, b: FloatArray) -> float:  # pragma: no cover - compiled
+    """``np.std(a - b)`` (the mean removed, divided by n)."""
+    n = a.size
+    s = 0.0
+    for k in range(n):
+        s += a[k] - b[k]
+    mean = s / n
+    q = 0.0
+    for k in range(n):
+        d = a[k] - b[k] - mean
+        q += d * d
+    return math.sqrt(q / n)
