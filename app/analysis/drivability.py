@@ -304,7 +304,8 @@ def pedal_move(pedal: Signal | None, t_start: float, t_cross: float, p: Drivabil
     t, v = w.t[ok], w.values[ok]
     if t.size < 3:
         return NAN, "too few pedal samples in the window"
-    pre = float(np.median(v[t <= t_start + 0.15])) if (t <= t_start + 0.15).any() else float(v[0])
+    n_pre = int(np.count_nonzero(t <= t_start + 0.15))
+    pre = median(np.ascontiguousarray(v[t <= t_start + 0.15])) if n_pre else float(v[0])
     step = float(v[-1] - pre)
     thr = max(p.pedal_min_pct, p.pedal_fraction * abs(step))
     moved = np.nonzero(np.abs(v - pre) >= thr)[0]

@@ -62,14 +62,14 @@ def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, si
     it is the compared side when ``params.compare_with`` is ``"seat_rail"``, otherwise reported beside.
     """
     moved = pedal_move(pedal, t_start, t_cross, params)  # the same driver input for both sides
-    m = (src.t >= t_start - PAD_S) & (src.t <= t_end + PAD_S)
-    t = src.t[m]
-    measured = drivability_criteria(t, src.a[m], t_start, t_end, t_cross, direction, params, pedal_time=moved,
+    # src.t is a uniform grid: the window is a slice
+    i0, i1 = int(np.searchsorted(src.t, t_start - PAD_S)), int(np.searchsorted(src.t, t_end + PAD_S, side="right"))
+    t = src.t[i0:i1]
+    measured = drivability_criteria(t, src.a[i0:i1], t_start, t_end, t_cross, direction, params, pedal_time=moved,
                                     t_close=t_close_measured, bandwidth_hz=src.bandwidth_hz,
                                     shuffle_hint_hz=shuffle_hint_hz, saturated=src.saturated_in(t_start, t_end),
                                     noise_ms2=src.noise_ms2)
-    inside = (t >= sim_t[0]) & (t <= sim_t[-1])
-    ts = t[inside]
+    ts = t[int(np.searchsorted(t, sim_t[0], side="left")):int(np.searchsorted(t, sim_t[-1], side="right"))]
     if src.kind == "accelerometer":
         a_sim = np.interp(ts, sim_t, _band_limit(sim_t, sim_accel_ms2, src.period_s))
     elif ts.size > 8:
