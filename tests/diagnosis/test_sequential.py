@@ -99,3 +99,24 @@ def test_staged_diagnosis_stops_when_two_stages_agree_and_matches_all_events(
     assert len(staged.split.calibration) < len(whole.split.calibration)
     assert any(m.startswith("stage 2 (8 events per side)") for m in said)
     assert any(m.endswith("s left)") for m in said)
+
+
+def test_clusters_simulated_side_by_side_give_the_serial_result(signals_for: Callable[..., SignalSet],
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """The integrator runs without the interpreter lock, so the clusters of a pass run on threads; the outputs are
+    the serial ones, bit for bit and in the events' order."""
+    import app.analysis.diagnosis.forward as forward
+    from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, prepare
+    from app.analysis.events import detect_events
+
+    sig = signals_for("drag", (("coulomb_nm", 3.0), ("viscous_nms", 0.005)), 5, 60.0)
+    events, _, _ = prepare(sig, detect_events(sig, DIAGNOSIS_EVENTS))
+    assert len(forward.clusters(events)) > 2
+    monkeypatch.setattr(forward, "SIM_THREADS", 1)
+    serial = forward.simulate_events(events, paper(), 0.97)
+    monkeypatch.setattr(forward, "SIM_THREADS", 3)
+    threaded = forward.simulate_events(events, paper(), 0.97)
+    assert len(serial) == len(threaded) == len(events)
+    for a, b in zip(serial, threaded, strict=True):
+        np.testing.assert_array_equal(a.t, b.t)
+        np.testing.assert_array_equal(a.speed, b.speed)
