@@ -71,6 +71,31 @@ def _run(signals: SignalSet, vehicle: Vehicle, options: DiagnosisOptions) -> Run
     return Run(used, used + left, cpu, wall, label, stages)
 
 
+def threads_line(signals: SignalSet, vehicle: Vehicle, repeat: int = 5) -> str:
+    """One simulator pass over the log's event clusters, serial against side by side on threads (wall and CPU)."""
+    import app.analysis.diagnosis.forward as forward
+    from app.analysis.diagnosis.prepare import prepare
+    from app.analysis.events import detect_events
+
+    events, _, _ = prepare(signals, detect_events(signals, DIAGNOSIS_EVENTS))
+    forward.simulate_events(events, vehicle, 1.0)  # compiled and warm
+    keep = forward.SIM_THREADS
+    got = {}
+    try:
+        for threads in (1, max(keep, 2)):
+            forward.SIM_THREADS = threads
+            c0, w0 = time.process_time(), time.perf_counter()
+            for _ in range(repeat):
+                forward.simulate_events(events, vehicle, 1.0)
+            got[threads] = (time.perf_counter() - w0, time.process_time() - c0)
+    finally:
+        forward.SIM_THREADS = keep
+    (w1, c1), (wn, cn) = got[1], got[max(keep, 2)]
+    return (f"simulator pass over {len(forward.clusters(events))} clusters ({len(events)} events), {repeat} passes: "
+            f"serial {w1:.2f} s wall {c1:.2f} s CPU, {max(keep, 2)} threads {wn:.2f} s wall {cn:.2f} s CPU: "
+            f"wall ratio {w1 / max(wn, 1e-9):.2f}")
+
+
 def measure(truths: Sequence[tuple[str, Callable[[float], SignalSet]]], vehicle: Vehicle, options: DiagnosisOptions,
             lengths: Sequence[float] = LENGTHS_S, whole: bool = True) -> list[Row]:
     """Each truth's log of each length (``make(length_s)``) diagnosed staged and, with ``whole``, on all events."""
@@ -78,6 +103,8 @@ def measure(truths: Sequence[tuple[str, Callable[[float], SignalSet]]], vehicle:
     for name, make in truths:
         for length in lengths:
             signals = make(length)
+            if not rows:
+                print("  " + threads_line(signals, vehicle), flush=True)
             staged = _run(signals, vehicle, replace(options, sequential=True))
             every = _run(signals, vehicle, replace(options, sequential=False)) if whole else None
             try:
