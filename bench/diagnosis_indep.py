@@ -35,12 +35,12 @@ sys.path.insert(0, str(REPO))
 
 from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, validate_on  # noqa: E402
 from app.analysis.diagnosis.report import report_dict  # noqa: E402
-from app.analysis.diagnosis.truthlog import read_log  # noqa: E402
 from bench.diagnosis_report import CONFIDENT, pct  # noqa: E402
 from bench.indep.car import vehicle_source  # noqa: E402
 from bench.indep.cases import FAINT_SIGMA, LIBRARY, Case, build, plan, read_manifest, write_manifest  # noqa: E402
 from bench.indep.record import DBC, MAP  # noqa: E402
 from sim import load_vehicle  # noqa: E402
+from tests.support.truthlog import read_log  # noqa: E402
 
 OUT = REPO / "bench" / "out" / "indep"
 

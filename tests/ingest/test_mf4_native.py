@@ -21,9 +21,9 @@ from app.ingest.frames import FrameChunk, IngestReport
 from app.ingest.readers import mf4 as mf4_module
 from app.ingest.readers import open_log
 from app.ingest.readers.mf4_blocks import MdfFile
-from tests.conftest import DATA
+from tests.conftest import sample_files, shared_file
 
-MF4 = sorted((DATA / "css-electronics-mf4").rglob("*.MF4")) if DATA.is_dir() else []
+MF4 = sample_files("css-electronics-mf4", "**/*.MF4")
 pytestmark = pytest.mark.skipif(not MF4, reason="CANedge MF4 files not found (set LASHSCOPE_SHARED)")
 COLUMNS = ("t_ns", "channel", "arb_id", "flags", "dlc", "data")
 
@@ -119,7 +119,10 @@ def test_truncated_canedge_file_keeps_every_whole_record(tmp_path: Path) -> None
 
 
 def _damaged_deflate(tmp_path: Path, garbage_tail: bool) -> tuple[Path, FrameChunk]:
-    f = resaved(MF4[1], tmp_path / "z.mf4", 1)
+    # the 215 kB CANedge file (only under ../shared/data): where its stream is damaged is tuned to its data
+    src = shared_file("css-electronics-mf4", "examples", "data-processing", "LOG", "2F6913DB", "00000004",
+                      "00000001.MF4")
+    f = resaved(src, tmp_path / "z.mf4", 1)
     data = bytearray(f.read_bytes())
     dz = _blocks(bytes(data), b"DZ")[0]
     zlen = int.from_bytes(data[dz + 24 + 16:dz + 24 + 24], "little")

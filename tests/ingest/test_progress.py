@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from app.ingest.readers import LogReader, open_log
-from tests.conftest import shared_file
+from tests.conftest import sample_files
 
 
 def candump(n: int) -> bytes:
@@ -64,7 +64,7 @@ def test_pipe_has_no_size() -> None:
 
 
 def test_mf4_position_from_records() -> None:
-    path = next(iter(sorted(shared_file("css-electronics-mf4").rglob("*.MF4"))), None)
+    path = next(iter(sample_files("css-electronics-mf4", "**/*.MF4")), None)
     if path is None:
         pytest.skip("no MF4 file in the shared data")
     with open_log(path, chunk_frames=2000) as reader:
