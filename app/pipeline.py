@@ -450,16 +450,14 @@ def _event_feel(accel: AccelSource, res: SimResult, lag: float, ev: Event, signa
 def run_analysis(log_path: LogSource, vehicle: VehicleInputs, options: AnalysisOptions | None = None,
                  progress: ProgressFn = _no_progress) -> AnalysisResult:
     """Decode ``log_path`` (a path, file object or URL) with the vehicle's DBC and signal map, then
-    :func:`analyze_signals`; then the event-store hook (:func:`app.fleet.hook.after_analysis`)."""
+    :func:`analyze_signals`. No side effects: the caller stores the result and runs the event-store hook
+    (:func:`app.fleet.hook.after_analysis`), as the ``analysis`` job kind and ``lashscope analyze`` do."""
     clock = time.perf_counter()
     signals, ingest = decode_log(log_path, vehicle.database, vehicle.signal_map,
                                  lambda s, f: progress(s, 0.4 * f))
     decode_s = time.perf_counter() - clock
     result = analyze_signals(signals, vehicle.vehicle, options, progress, start=0.4)
     result = replace(result, ingest=ingest, timings_s={"decode": decode_s, **result.timings_s})
-    from app.fleet.hook import after_analysis
-
-    after_analysis(log_path, vehicle, result)
     return result
 
 

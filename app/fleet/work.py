@@ -6,9 +6,8 @@ picklable dict -- never raises for a problem with the log: a typed error becomes
 error code crosses the process boundary as data. The caller (:mod:`app.fleet.batch`) writes the
 results; the task touches no output, so a task re-run after a worker died is harmless.
 
-The pipeline is called as :func:`app.pipeline.decode_log` + :func:`app.pipeline.analyze_signals`
-(not ``run_analysis``): the batch writes its own event rows, and the service's event-store hook
-must not write them a second time.
+The pipeline is called as :func:`app.pipeline.decode_log` + :func:`app.pipeline.analyze_signals`; the
+batch writes its own event rows (the service's event-store hook runs only where the service calls it).
 """
 
 from __future__ import annotations
