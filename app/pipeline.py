@@ -49,7 +49,6 @@ from sim.metrics import unloaded_time
 
 ProgressFn = Callable[[str, float], None]
 REQUIRED = (TORQUE, SPEED)
-RPM_PER_RAD_S = 30.0 / np.pi
 MAX_OPTION_S = 10.0  # a duration option beyond this is a mistake: windows and arrays are sized by it
 RATE_SUFFIXES = ("_nm_s", "_rpm_s")  # fields ending in _s that are rates (min_rate_nm_s), not durations
 

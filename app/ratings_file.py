@@ -12,6 +12,7 @@ import json
 import os
 from pathlib import Path
 
+from app import atomic
 from app.analysis.ratings import RatingModel
 from app.errors import InputError, StorageError
 
@@ -34,9 +35,7 @@ def save_model(model: RatingModel, path: str | os.PathLike[str]) -> Path:
     p = Path(path)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
-        tmp = p.with_name(f".{p.name}.tmp")
-        tmp.write_text(json.dumps(model.to_dict(), indent=1) + "\n", encoding="utf-8")
-        tmp.replace(p)
+        atomic.write_text(p, json.dumps(model.to_dict(), indent=1) + "\n")
     except OSError as exc:
         raise StorageError(f"rating model {p}: cannot write ({exc.strerror or exc})") from exc
     return p

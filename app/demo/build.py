@@ -18,6 +18,7 @@ from pathlib import Path
 import can
 import numpy as np
 
+from app import atomic
 from app.demo.scenario import Channel, Scenario, measured_channels
 from app.errors import DatabaseError
 from sim import load_vehicle
@@ -69,12 +70,10 @@ def encode_blf(path: Path, channels: Mapping[str, Channel], routes: Mapping[str,
             frames.append((float(t[k]), int(msg.frame_id), bool(msg.is_extended_frame), bytes(data)))
     frames.sort(key=lambda f: (f[0], f[1]))
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    with can.BLFWriter(str(tmp)) as writer:
+    with atomic.atomic_path(path) as tmp, can.BLFWriter(str(tmp)) as writer:
         for ts, arb, ext, data in frames:
             writer.on_message_received(can.Message(timestamp=start_epoch_s + ts, arbitration_id=arb,
                                                    is_extended_id=ext, data=data, channel=0))
-    tmp.replace(path)
     return len(frames)
 
 

@@ -28,6 +28,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TextIO
 
+from app import atomic
 from app.errors import AppError, InputError
 from app.fleet.work import BatchSpec, analyse_log
 from app.log_source import content_hash, is_url, source_name
@@ -80,9 +81,7 @@ def expand_sources(patterns: Sequence[str]) -> list[str]:
 
 def _write_json(path: Path, doc: dict[str, Any]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(doc, indent=1, allow_nan=False), encoding="utf-8")
-    tmp.replace(path)
+    atomic.write_text(path, json.dumps(doc, indent=1, allow_nan=False))
 
 
 def record_path(out: Path, key: str) -> Path:

@@ -39,6 +39,7 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
+from app import atomic
 from app.errors import StorageError
 from app.fleet.rows import FLOAT_COLUMNS, STRING_COLUMNS
 
@@ -62,9 +63,8 @@ def partition_dir(root: Path, vehicle: str, date: str) -> Path:
 
 
 def _replace(table: pa.Table, final: Path) -> None:
-    tmp = final.parent / f".{final.name}.{uuid.uuid4().hex}.tmp"
-    pq.write_table(table, tmp)
-    tmp.replace(final)
+    with atomic.atomic_path(final) as tmp:
+        pq.write_table(table, tmp)
 
 
 def _drop_logs(folder: Path, logs: set[tuple[str, str]]) -> None:

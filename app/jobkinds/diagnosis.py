@@ -16,6 +16,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from app import atomic
 from app.errors import AnalysisError, InputError
 from app.jobkinds import progress_reporter
 from app.storage.base import Store
@@ -43,10 +44,8 @@ def write_json(path: Path, doc: dict[str, Any]) -> None:
 
 
 def write_text(path: Path, text: str) -> None:
-    """Write ``text`` to a temporary sibling and rename it into place."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    """Write ``text`` to a temporary sibling and rename it into place (:func:`app.atomic.write_text`)."""
+    atomic.write_text(path, text)
 
 
 def read_json(path: Path) -> dict[str, Any] | None:

@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from app import atomic
 from app.jobkinds import progress_reporter
 from app.storage.base import Store
 from app.storage.records import JobRecord
@@ -25,10 +26,7 @@ def cache_path(driveline_path: Path) -> Path:
 
 
 def write_cached(driveline_path: Path, doc: dict[str, Any]) -> None:
-    out = cache_path(driveline_path)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc), encoding="utf-8")
-    tmp.replace(out)
+    atomic.write_text(cache_path(driveline_path), json.dumps(doc))
 
 
 def compute(store: Store, name: str, version: int | None, progress: Any = None) -> dict[str, Any]:

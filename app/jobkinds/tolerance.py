@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from app import atomic
 from app.jobkinds import progress_reporter
 from app.storage.base import Store
 from app.storage.records import JobRecord
@@ -36,7 +37,4 @@ def run(store: Store, job: JobRecord) -> None:
     doc = tolerance_for_result(ResultFiles(rec.result_dir), load_vehicle(veh.driveline_path), n, seed,
                                lambda f: progress("tolerance", f))
     doc.update(analysis_id=analysis_id, vehicle=rec.vehicle_name, vehicle_version=rec.vehicle_version)
-    out = result_path(rec.result_dir, n, seed)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(json_safe(doc)), encoding="utf-8")
-    tmp.replace(out)
+    atomic.write_text(result_path(rec.result_dir, n, seed), json.dumps(json_safe(doc)))
