@@ -15,6 +15,7 @@ from pathlib import Path
 from app import atomic
 from app.analysis.ratings import RatingModel
 from app.errors import InputError, StorageError
+from app.settings import Settings
 
 ENV = "LASHSCOPE_RATINGS"
 
@@ -42,6 +43,6 @@ def save_model(model: RatingModel, path: str | os.PathLike[str]) -> Path:
 
 
 def model_from_env() -> RatingModel | None:
-    """The model ``LASHSCOPE_RATINGS`` names, or None when it is unset."""
-    value = os.environ.get(ENV, "").strip()
+    """The model ``LASHSCOPE_RATINGS`` names (``Settings.ratings``, read now), or None when it is unset."""
+    value = Settings().ratings.strip()
     return load_model(value) if value else None

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from app.fleet.rows import event_rows
 from app.log_source import LogSource, content_hash, source_name
+from app.settings import Settings
 from app.storage.results import json_safe
 
 if TYPE_CHECKING:
@@ -36,8 +37,8 @@ log = logging.getLogger(__name__)
 
 
 def store_dir() -> Path | None:
-    """The event store the hook writes to, or None when it is off."""
-    value = os.environ.get(ENV, "").strip()
+    """The event store the hook writes to (``Settings.event_store``, read now), or None when it is off."""
+    value = Settings().event_store.strip()
     return None if value.lower() in OFF else Path(value)
 
 
