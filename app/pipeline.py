@@ -11,8 +11,8 @@
       align      common time base; torque-to-speed offset = lag of measured behind simulated speed
       metrics    ripple metrics of measured and (offset-corrected) simulated speed, differences
 
-Progress goes to ``progress(stage, fraction)`` with ``fraction`` in 0..1 over the whole run;
-nothing here prints. Results are plain dataclasses; :func:`app.pipeline_results.result_payload`
+Progress goes to ``progress(fraction, stage)`` (:class:`app.progress.Progress`), ``fraction`` in 0..1 over
+the whole run; nothing here prints. Results are plain dataclasses; :func:`app.pipeline_results.result_payload`
 turns them into JSON + arrays for storage.
 """
 
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -43,18 +42,14 @@ from app.analysis.slip import Drive, log_ratio_scale
 from app.analysis.tracking import TrackingParams, Verdict, event_verdict, log_verdict
 from app.errors import InputError, InsufficientDataError, MissingSignalError
 from app.log_source import LogSource
+from app.progress import Progress, no_progress, within
 from app.signals import Signal, SignalSet
 from sim import SimError, SimResult, Vehicle, simulate
 from sim.metrics import unloaded_time
 
-ProgressFn = Callable[[str, float], None]
 REQUIRED = (TORQUE, SPEED)
 MAX_OPTION_S = 10.0  # a duration option beyond this is a mistake: windows and arrays are sized by it
 RATE_SUFFIXES = ("_nm_s", "_rpm_s")  # fields ending in _s that are rates (min_rate_nm_s), not durations
-
-
-def _no_progress(stage: str, fraction: float) -> None:
-    return None
 
 
 @dataclass(frozen=True)
@@ -164,7 +159,7 @@ class AnalysisResult:
 
 
 def decode_log(log: LogSource, database: Path, signal_map: Path,
-               progress: ProgressFn = _no_progress) -> tuple[SignalSet, dict[str, Any]]:
+               progress: Progress = no_progress) -> tuple[SignalSet, dict[str, Any]]:
     """Read and decode a log into canonical signals; returns the signals and an ingest summary.
 
     ``log`` is a path, a binary file object, or an fsspec URL (:mod:`app.log_source`). The DBC is
@@ -183,7 +178,7 @@ def decode_log(log: LogSource, database: Path, signal_map: Path,
     loaded = cached_database(database)
     smap = load_signal_map(signal_map)
     with opened(log) as src, open_log(src) as reader:
-        signals, report = load_signals(reader, loaded, smap, progress=lambda f: progress("decode", f),
+        signals, report = load_signals(reader, loaded, smap, progress=within(progress, 0.0, 1.0, "decode"),
                                        require=REQUIRED)
         meta, read_report = reader.meta, reader.report
     ingest = {
@@ -290,7 +285,7 @@ def _pooled_lag(pairs: list[tuple[FloatArray, FloatArray]], dt: float, max_lag_s
 
 
 def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptions | None = None,
-                    progress: ProgressFn = _no_progress, start: float = 0.0) -> AnalysisResult:
+                    progress: Progress = no_progress, start: float = 0.0) -> AnalysisResult:
     """Events, simulation, alignment and metrics for decoded signals (see the module docstring)."""
     opts = options or AnalysisOptions()
     if opts.metrics.free_rotor_inertia_kgm2 is None:
@@ -298,8 +293,10 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     clock = time.perf_counter()
     timings: dict[str, float] = {}
 
+    part = within(progress, start, 1.0 - start)
+
     def stage(name: str, frac: float) -> None:
-        progress(name, start + (1.0 - start) * frac)
+        part(frac, name)
 
     for name in REQUIRED:
         if name not in signals:
@@ -447,20 +444,20 @@ def _event_feel(accel: AccelSource, res: SimResult, lag: float, ev: Event, signa
 
 
 def run_analysis(log_path: LogSource, vehicle: VehicleInputs, options: AnalysisOptions | None = None,
-                 progress: ProgressFn = _no_progress) -> AnalysisResult:
+                 progress: Progress = no_progress) -> AnalysisResult:
     """Decode ``log_path`` (a path, file object or URL) with the vehicle's DBC and signal map, then
     :func:`analyze_signals`. No side effects: the caller stores the result and runs the event-store hook
     (:func:`app.fleet.hook.after_analysis`), as the ``analysis`` job kind and ``lashscope analyze`` do."""
     clock = time.perf_counter()
     signals, ingest = decode_log(log_path, vehicle.database, vehicle.signal_map,
-                                 lambda s, f: progress(s, 0.4 * f))
+                                 within(progress, 0.0, 0.4))
     decode_s = time.perf_counter() - clock
     result = analyze_signals(signals, vehicle.vehicle, options, progress, start=0.4)
     result = replace(result, ingest=ingest, timings_s={"decode": decode_s, **result.timings_s})
     return result
 
 
-def inspect_log(path: Path, progress: ProgressFn = _no_progress, cpu_s: float | None = None) -> dict[str, Any]:
+def inspect_log(path: Path, progress: Progress = no_progress, cpu_s: float | None = None) -> dict[str, Any]:
     """Read a whole log once (salvaging) to count frames and collect what was damaged.
 
     Raises the reader's typed errors (UnsupportedFormatError, LogFormatError) when nothing
@@ -520,7 +517,7 @@ def gap_sensitivity_work(vehicle: Vehicle) -> float:
     return work
 
 
-def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> dict[str, Any]:
+def gap_sensitivity(vehicle: Vehicle, progress: Progress = no_progress) -> dict[str, Any]:
     """Gap what-ifs for a vehicle under the paper's scripted tip-in (see :mod:`sim.paper`).
 
     For each of the five gaps: the speed fluctuation and impact-induced fluctuation with the
@@ -546,7 +543,7 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
                                                                               WhatIf(gap_scale={"all": 0.0}))}
     gaps: list[dict[str, Any]] = []
     for i, g in enumerate(names, start=1):
-        progress("gap_sensitivity", i / (len(names) + 1))
+        progress(i / (len(names) + 1), "gap_sensitivity")
         removed = cases[f"no_gap{i}"] = run_case(vehicle, f"no_gap{i}", WhatIf(gap_scale={g: 0.0}))
         halved = run_case(vehicle, f"half_gap{i}", WhatIf(gap_scale={g: 0.5}))
         gap = vehicle.gap(g)
@@ -584,7 +581,7 @@ def _case(c: Any) -> dict[str, float]:
 
 
 def tolerance_for_result(files: Any, vehicle: Vehicle, n: int, seed: int,
-                         progress: Callable[[float], None] = lambda f: None, lead_s: float = 0.05) -> dict[str, Any]:
+                         progress: Progress = no_progress, lead_s: float = 0.05) -> dict[str, Any]:
     """The tolerance band of every analysed event of a stored result (:mod:`app.analysis.tolerance`).
 
     ``files`` is a :class:`app.storage.results.ResultFiles` (or anything with ``doc`` and

@@ -58,11 +58,11 @@ def run(store: Store, job: JobRecord) -> None:
     cfg = BatchConfig(out=d / "out", spec=spec, vehicle_id=req["vehicle_id"], workers=0)
     progress = progress_reporter(store, job.id)
     done = [len(records(cfg.out))]  # logs finished by an earlier, cut-off attempt are skipped
-    progress("analysing", done[0] / len(logs))
+    progress(done[0] / len(logs), "analysing")
 
     def on_record(record: dict[str, Any]) -> None:
         done[0] += 1
-        progress("analysing", min(done[0], len(logs)) / len(logs))
+        progress(min(done[0], len(logs)) / len(logs), "analysing")
 
     summary = run_batch([str(rec.path) for rec in logs], cfg, stream=None, on_record=on_record)
     store.update_job(job.id, 0.99, "saving")

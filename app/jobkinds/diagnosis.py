@@ -19,6 +19,7 @@ from typing import Any
 from app import atomic
 from app.errors import AnalysisError, InputError
 from app.jobkinds import progress_reporter
+from app.progress import within
 from app.storage.base import Store
 from app.storage.records import JobRecord
 
@@ -124,11 +125,11 @@ def run(store: Store, job: JobRecord) -> None:
         raise InputError(f"diagnosis {diagnosis_id} has no {STATUS}", code="diagnosis_not_found")
     opts = options(st["options"], st["options"]["model"])
     progress = progress_reporter(store, job.id)
-    progress("decoding", 0.0)
+    progress(0.0, "decoding")
     rec = store.get_analysis(analysis_id)
     signals, vehicle, read = decode(store, rec.log_id, st["vehicle"]["name"], st["vehicle"]["version"])
     result, checked = diagnose_checked(signals, vehicle, opts,
-                                       lambda fraction, message: progress(message, 0.95 * fraction))
+                                       within(progress, 0.0, 0.95))
     doc = report_dict(result, findings=checked.findings)
     doc["read"] = read  # a damaged or truncated log, stated with the answer
     store.update_job(job.id, 0.97, "saving")

@@ -50,7 +50,7 @@ def run(store: Store, job: JobRecord) -> None:
     options = IdentifyOptions(dbc=veh.database_path, signal_map=veh.signal_map_path, seed=int(req["seed"]),
                               params=tuple(req["params"]))
     result = identify_logs(logs, load_vehicle(veh.driveline_path), options, withheld,
-                           lambda fraction, message: progress(message, fraction))
+                           progress)
     store.update_job(job.id, 0.99, "saving")
     val = result.validation
     for item in [*result.logs, *val.get("before", []), *val.get("after", [])]:

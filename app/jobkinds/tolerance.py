@@ -35,6 +35,6 @@ def run(store: Store, job: JobRecord) -> None:
     veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
     progress = progress_reporter(store, job.id)
     doc = tolerance_for_result(ResultFiles(rec.result_dir), load_vehicle(veh.driveline_path), n, seed,
-                               lambda f: progress("tolerance", f))
+                               progress)
     doc.update(analysis_id=analysis_id, vehicle=rec.vehicle_name, vehicle_version=rec.vehicle_version)
     atomic.write_text(result_path(rec.result_dir, n, seed), json.dumps(json_safe(doc)))

@@ -41,8 +41,8 @@ def run(store: Store, job: JobRecord) -> None:
     effects = chosen(report)
     opts = options(report["options"], report["model"])
     progress = progress_reporter(store, job.id)
-    progress("decoding", 0.0)
+    progress(0.0, "decoding")
     signals, vehicle, read = decode(store, val["log_id"], st["vehicle"]["name"], st["vehicle"]["version"])
-    result = validate_effects(effects, signals, vehicle, opts, lambda fraction, message: progress(message, fraction),
+    result = validate_effects(effects, signals, vehicle, opts, progress,
                               base_ratios=base_ratios(report))
     write_json(d / VALIDATION, {"log_id": val["log_id"], "job_id": val.get("job_id"), **result.to_dict(), "read": read})

@@ -88,7 +88,7 @@ def test_load_signals_progress_uses_the_public_position(tmp_path: Path) -> None:
                              for i in range(100_000)))  # ~4 MB
     fractions: list[float] = []
     signals, _ = load_signals(log, LoadedDatabase(db, log, "dbc"), smap,
-                              progress=fractions.append, chunk_frames=4096)
+                              progress=lambda f, _frames: fractions.append(f), chunk_frames=4096)
     assert len(signals["motor_speed_rpm"]) == 100_000
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
     assert len({f for f in fractions if 0.0 < f < 1.0}) >= 2  # progress moves while reading, not only at the end
