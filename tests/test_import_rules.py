@@ -31,7 +31,7 @@ FORBIDDEN = {
 }
 
 # what app.analysis may import from the project: itself, the layers below it and the simulator
-ANALYSIS_MAY_IMPORT = ("app.analysis", "app.errors", "app.signals", "app.identify", "sim")
+ANALYSIS_MAY_IMPORT = ("app.analysis", "app.errors", "app.progress", "app.signals", "app.identify", "sim")
 
 
 def _module_name(path: Path) -> str:
