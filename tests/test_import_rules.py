@@ -4,7 +4,8 @@ The layers, from the bottom (docs/architecture.md draws them): ``sim`` (pure lib
 ``app.signals`` | ``app.ingest`` | ``app.identify`` and ``app.analysis`` (pure functions) | ``app.pipeline``
 (the analysis chained; no side effects) | ``app.payload``, ``app.fleet``, ``app.storage``, ``app.jobkinds``
 (what is stored and written, and who runs it) | ``app.api``, ``app.cli`` (the two front doors).
-Imports inside functions count as much as those at the top; only ``if TYPE_CHECKING:`` blocks are left out.
+Imports inside functions count as much as those at the top; ``if TYPE_CHECKING:`` blocks count for the layering,
+not for cycles (they do not run).
 """
 
 from __future__ import annotations
