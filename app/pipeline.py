@@ -32,20 +32,38 @@ from app.analysis.compare import EventComparison, SpeedError, compare_event, spe
 from app.analysis.diagnosis.uncertainty import rigid_inertia
 from app.analysis.drivability import DrivabilityParams
 from app.analysis.events import SPEED, TORQUE, Event, EventParams, find_events
-from app.analysis.feel import FeelComparison, event_feel
+from app.analysis.feel import FeelComparison, event_feel, run_feel
 from app.analysis.lash import LashParams
 from app.analysis.logchecks import CheckParams, Finding, Limits, check_log
 from app.analysis.metrics import MetricParams, ripple_metrics
 from app.analysis.sampling import sample_period
 from app.analysis.series import FloatArray, finite_signal
 from app.analysis.slip import Drive, log_ratio_scale
+from app.analysis.tolerance import EventWindow, check_request, tolerance_doc
 from app.analysis.tracking import TrackingParams, Verdict, event_verdict, log_verdict
-from app.errors import InputError, InsufficientDataError, MissingSignalError
-from app.log_source import LogSource
+from app.errors import (
+    InputError,
+    InsufficientDataError,
+    LogFormatError,
+    MissingSignalError,
+    SignalMapError,
+    WorkLimitError,
+)
+from app.ingest.database import load_database
+from app.ingest.dbc_cache import cached_database
+from app.ingest.pipeline_signals import load_signals
+from app.ingest.readers import open_log
+from app.ingest.readreport import read_summary
+from app.ingest.signalmap import load_signal_map
+from app.log_source import LogSource, opened
 from app.progress import Progress, no_progress, within
 from app.signals import Signal, SignalSet
-from sim import SimError, SimResult, Vehicle, simulate
+from app.vehicle_check import steps_per_second, trial_vehicle
+from sim import SimError, SimResult, Vehicle, WhatIf, load_vehicle, simulate
+from sim.layout import shaft_gap
 from sim.metrics import unloaded_time
+from sim.model import build_chain
+from sim.paper import run_case, sensitivities, sensitivity_unit
 
 REQUIRED = (TORQUE, SPEED)
 MAX_OPTION_S = 10.0  # a duration option beyond this is a mistake: windows and arrays are sized by it
@@ -168,13 +186,6 @@ def decode_log(log: LogSource, database: Path, signal_map: Path,
     reading lost (:func:`app.ingest.readreport.read_summary`: damaged, truncated, frames and seconds lost,
     a one-sentence ``note``).
     """
-    from app.ingest.dbc_cache import cached_database
-    from app.ingest.pipeline_signals import load_signals
-    from app.ingest.readers import open_log
-    from app.ingest.readreport import read_summary
-    from app.ingest.signalmap import load_signal_map
-    from app.log_source import opened
-
     loaded = cached_database(database)
     smap = load_signal_map(signal_map)
     with opened(log) as src, open_log(src) as reader:
@@ -193,8 +204,6 @@ def decode_log(log: LogSource, database: Path, signal_map: Path,
 
 def _plain(obj: Any) -> Any:
     """A report object as JSON-friendly data (dataclass, mapping or its public attributes)."""
-    from dataclasses import is_dataclass
-
     if is_dataclass(obj) and not isinstance(obj, type):
         return asdict(obj)
     if isinstance(obj, dict):
@@ -208,15 +217,11 @@ def check_vehicle_files(driveline: Path, database: Path, signal_map: Path) -> di
     The driveline must also pass a cheap simulation trial (:func:`app.vehicle_check.trial_vehicle`).
     Raises ParameterError (driveline), DatabaseError, SignalMapError; returns a summary.
     """
-    from app.vehicle_check import trial_vehicle
-    from sim import load_vehicle
-
     vehicle = load_vehicle(driveline)
     steps = trial_vehicle(vehicle, driveline.name)
     loaded, routes = signal_routes(database, signal_map)
     missing = [c for c in REQUIRED if c not in routes]
     if missing:
-        from app.errors import SignalMapError
         raise SignalMapError(f"signal map {signal_map.name} does not map {missing}, which every analysis needs")
     return {"vehicle": vehicle.name, "description": vehicle.description, "ratio": vehicle.ratio,
             "stages": [f"{s.name} ({s.kind})" for s in vehicle.chain], "housing": vehicle.housing.enabled,
@@ -226,9 +231,6 @@ def check_vehicle_files(driveline: Path, database: Path, signal_map: Path) -> di
 
 def signal_routes(database: Path, signal_map: Path) -> tuple[Any, dict[str, tuple[str, str]]]:
     """The loaded database and, per canonical channel, the (message, signal) the map reads it from."""
-    from app.ingest.database import load_database
-    from app.ingest.signalmap import load_signal_map
-
     loaded = load_database(database)
     smap = load_signal_map(signal_map)
     routes = smap.routes(loaded.db)
@@ -251,9 +253,6 @@ def free_rotor_inertia(vehicle: Vehicle) -> float:
     ratio to the rotor. With the reducer gaps open as well only the rotor moves freely; the
     gap-open estimate fits a rescaling of this inertia (``MetricParams.lash.inertia_range``).
     """
-    from sim.layout import shaft_gap
-    from sim.model import build_chain
-
     chain = build_chain(vehicle)
     last = int(chain.ca[chain.gap_coupling[shaft_gap(vehicle)]])
     return float(sum(chain.inertia[b] * chain.speed_ratio[b] ** 2 for b in range(last + 1)))
@@ -464,9 +463,6 @@ def inspect_log(path: Path, progress: Progress = no_progress, cpu_s: float | Non
     usable is there, and :class:`~app.errors.WorkLimitError` (``validation_limit``) once reading
     has taken more than ``cpu_s`` seconds of this thread's CPU (checked after each chunk).
     """
-    from app.errors import WorkLimitError
-    from app.ingest.readers import open_log
-
     frames = 0
     t_first: int | None = None
     t_last = 0
@@ -483,7 +479,6 @@ def inspect_log(path: Path, progress: Progress = no_progress, cpu_s: float | Non
                 t_last = max(t_last, int(chunk.t_ns.max()))
         meta, report = reader.meta, reader.report
     if frames == 0:
-        from app.errors import LogFormatError
         raise LogFormatError(f"{path.name}: no CAN frames could be read ({len(report.issues)} problems found)")
     return {
         "format": meta.format, "frames": frames,
@@ -505,9 +500,6 @@ def gap_sensitivity_work(vehicle: Vehicle) -> float:
     """What :func:`gap_sensitivity` will cost, in stage-steps, from the vehicle alone (no simulation).
 
     Raises :class:`~app.errors.WorkLimitError` past :data:`MAX_GAP_SENSITIVITY_WORK`, before any work."""
-    from app.errors import WorkLimitError
-    from app.vehicle_check import steps_per_second
-
     chain = vehicle.chain
     work = (2 + 2 * len(vehicle.gap_names)) * steps_per_second(vehicle) * len(chain)
     if work > MAX_GAP_SENSITIVITY_WORK:
@@ -532,10 +524,6 @@ def gap_sensitivity(vehicle: Vehicle, progress: Progress = no_progress) -> dict[
     ``sensitivity_per_mm`` (None without radii) and ``sensitivity_per_rad`` per gap.
     ``sensitivity`` is the one in ``sensitivity_unit``.
     """
-    from sim import WhatIf
-    from sim.layout import shaft_gap
-    from sim.paper import run_case, sensitivities, sensitivity_unit
-
     gap_sensitivity_work(vehicle)  # past its limit: refused before any simulation
     names = vehicle.gap_names  # the classic five, or the stage chain's gaps
 
@@ -571,8 +559,6 @@ def gap_sensitivity(vehicle: Vehicle, progress: Progress = no_progress) -> dict[
 
 def _case(c: Any) -> dict[str, float]:
     """One what-if case: the speed metrics and what the occupants feel (body acceleration criteria)."""
-    from app.analysis.feel import run_feel
-
     res = c.result
     feel = run_feel(res.t, res.vehicle_accel_ms2, res.airgap_torque_nm)
     return {"unloaded_ms": c.unloaded_ms, "fluctuation_rpm": c.fluct_rpm, "impact_rpm": c.impact_rpm,
@@ -588,8 +574,6 @@ def tolerance_for_result(files: Any, vehicle: Vehicle, n: int, seed: int,
     ``array``); the decoded torque and speed stored with the result drive the Monte Carlo,
     each event simulated from ``lead_s`` before its window (the analysis' offset search span).
     """
-    from app.analysis.tolerance import EventWindow, check_request, tolerance_doc
-
     check_request(n, seed)
     doc = files.doc
     sigs: dict[str, Signal] = {}

@@ -21,6 +21,8 @@ import numpy as np
 from app import atomic
 from app.demo.scenario import Channel, Scenario, measured_channels
 from app.errors import DatabaseError
+from app.ingest.stats import counter_modulus
+from app.pipeline import signal_routes
 from sim import load_vehicle
 
 DEMO_START_EPOCH_S = 1_718_000_000.0  # fixed absolute start so the same content gives the same file
@@ -33,8 +35,6 @@ def encode_blf(path: Path, channels: Mapping[str, Channel], routes: Mapping[str,
     Returns the number of frames written (``drops`` per message fewer than were sent). The log starts
     at ``start_epoch_s`` (s since the epoch; fixed by default so the same content gives the same file).
     """
-    from app.ingest.stats import counter_modulus
-
     db = database
     by_message: dict[str, list[str]] = {}
     for ch, (msg, _sig) in routes.items():
@@ -80,8 +80,6 @@ def encode_blf(path: Path, channels: Mapping[str, Channel], routes: Mapping[str,
 def build_demo_log(path: Path, dbc: Path, signal_map: Path, scenario: Scenario | None = None,
                    start_epoch_s: float = DEMO_START_EPOCH_S) -> int:
     """Simulate the scripted drive (paper preset truth) and write it to ``path``; returns the frame count."""
-    from app.pipeline import signal_routes
-
     loaded, routes = signal_routes(dbc, signal_map)
     channels = measured_channels(load_vehicle("paper"), scenario)
     return encode_blf(path, channels, routes, loaded.db, drops=(scenario or Scenario()).dropped_frames,

@@ -152,7 +152,7 @@ def point_colour(vehicle: dict[str, Any], quantity: str) -> str:
 
 def report_png(report: dict[str, Any], path: Path) -> Path:
     """Two panels: total lash per vehicle with intervals and the fleet band; weekly median ripple over time."""
-    import matplotlib
+    import matplotlib  # lazy: matplotlib only for the PNG; the server imports this module for the report's numbers
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

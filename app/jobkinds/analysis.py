@@ -10,16 +10,15 @@ from __future__ import annotations
 
 from app.fleet.hook import after_analysis
 from app.jobkinds import progress_reporter
+from app.payload import result_payload
+from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
 from app.storage.base import Store
 from app.storage.records import JobRecord
+from app.storage.results import write_result
+from sim import load_vehicle
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.payload import result_payload
-    from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
-    from app.storage.results import write_result
-    from sim import load_vehicle
-
     rec = store.get_analysis(job.subject)
     logrec = store.get_log(rec.log_id)
     veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)

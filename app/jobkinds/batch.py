@@ -16,8 +16,14 @@ from pathlib import Path
 from typing import Any
 
 from app.errors import InputError
+from app.fleet.batch import BatchConfig, run_batch
+from app.fleet.work import BatchSpec
+from app.jobkinds import progress_reporter
+from app.jobkinds.diagnosis import write_json
+from app.pipeline import AnalysisOptions, VehicleInputs
 from app.storage.base import Store
 from app.storage.records import JobRecord
+from sim import load_vehicle
 
 REQUEST, SUMMARY = "request.json", "summary.json"
 
@@ -39,13 +45,6 @@ def records(out: Path) -> dict[str, dict[str, Any]]:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.fleet.batch import BatchConfig, run_batch
-    from app.fleet.work import BatchSpec
-    from app.jobkinds import progress_reporter
-    from app.jobkinds.diagnosis import write_json
-    from app.pipeline import AnalysisOptions, VehicleInputs
-    from sim import load_vehicle
-
     d = directory(store, job.subject)
     try:
         req = json.loads((d / REQUEST).read_text(encoding="utf-8"))

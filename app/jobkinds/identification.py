@@ -14,8 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from app.errors import InputError
+from app.jobkinds import progress_reporter
+from app.jobkinds.diagnosis import write_json, write_text
 from app.storage.base import Store
 from app.storage.records import JobRecord
+from sim import load_vehicle
 
 REQUEST, RESULT, IDENTIFIED = "request.json", "result.json", "identified.toml"
 
@@ -34,10 +37,7 @@ def request(store: Store, identification_id: str) -> dict[str, Any]:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.identify.logs import IdentifyOptions, identify_logs
-    from app.jobkinds import progress_reporter
-    from app.jobkinds.diagnosis import write_json, write_text
-    from sim import load_vehicle
+    from app.identify.logs import IdentifyOptions, identify_logs  # lazy: the fit library loads in the worker only
 
     d = directory(store, job.subject)
     req = request(store, job.subject)

@@ -11,8 +11,11 @@ from pathlib import Path
 
 from app import atomic
 from app.jobkinds import progress_reporter
+from app.pipeline import tolerance_for_result
 from app.storage.base import Store
 from app.storage.records import JobRecord
+from app.storage.results import ResultFiles, json_safe
+from sim import load_vehicle
 
 
 def subject(analysis_id: str, n: int, seed: int) -> str:
@@ -25,10 +28,6 @@ def result_path(result_dir: Path, n: int, seed: int) -> Path:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.pipeline import tolerance_for_result
-    from app.storage.results import ResultFiles, json_safe
-    from sim import load_vehicle
-
     analysis_id, n_part, seed_part = job.subject.split("/")
     n, seed = int(n_part.removeprefix("n=")), int(seed_part.removeprefix("seed="))
     rec = store.get_analysis(analysis_id)

@@ -9,6 +9,7 @@ done (one atomic rewrite), so a re-run after a crash leaves one answer.
 from __future__ import annotations
 
 from app.errors import InputError
+from app.jobkinds import progress_reporter
 from app.jobkinds.diagnosis import (
     REPORT,
     STATUS,
@@ -30,8 +31,7 @@ def subject(analysis_id: str, diagnosis_id: str) -> str:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.analysis.diagnosis import validate_effects
-    from app.jobkinds import progress_reporter
+    from app.analysis.diagnosis import validate_effects  # lazy: the diagnosis library loads in the worker only
 
     analysis_id, _, diagnosis_id, _ = job.subject.split("/")
     d = store.analysis_dir(analysis_id) / "diagnoses" / diagnosis_id

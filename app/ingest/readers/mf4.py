@@ -121,7 +121,7 @@ class MF4Reader(BaseReader):
                 self._native = None
                 self.problem("mf4_fallback", f"read through asammdf: {why}")
             try:
-                import asammdf
+                import asammdf  # lazy: the fallback for other MF4 layouts
             except ImportError as exc:
                 raise LogFormatError(f"{self.name}: this MF4 layout needs the asammdf package") from exc
             self._load(asammdf, source)
