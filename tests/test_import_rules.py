@@ -175,3 +175,35 @@ def test_analysis_imports_only_what_it_may(path: Path) -> None:
     project = sorted(m for m in _imports(path) if m.split(".")[0] in ("app", "sim"))
     bad = [m for m in project if not any(m == ok or m.startswith(ok + ".") for ok in ANALYSIS_MAY_IMPORT)]
     assert not bad, f"{path.relative_to(REPO)} imports {bad}; app.analysis may import only {ANALYSIS_MAY_IMPORT}"
+
+
+MAX_IN_FUNCTION_IMPORTS = 32  # outside app/cli (which registers every command on each run, so imports late); falls
+
+
+def _in_function_imports() -> list[tuple[Path, int]]:
+    """(file, line) of every import inside a function of app (but app/cli) and sim, TYPE_CHECKING blocks left out."""
+    found: list[tuple[Path, int]] = []
+    for path in MODULES.values():
+        if path.is_relative_to(REPO / "app" / "cli"):
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        funcs = [n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef)]
+        nodes = {id(n) for f in funcs for n in _import_nodes(f, typing=False)}
+        found.extend((path, n.lineno) for n in _import_nodes(tree, typing=False) if id(n) in nodes)
+    return sorted(set(found))
+
+
+def test_an_import_inside_a_function_says_why() -> None:
+    """A late import hides an arrow; each one left names its reason on its line or on the comment line above
+    the run of imports it belongs to (an optional extra, a start-up cost, what a worker times)."""
+    found = _in_function_imports()
+    silent = []
+    for path, line in found:
+        lines = path.read_text(encoding="utf-8").splitlines()
+        k = line - 1
+        while k > 0 and "#" not in lines[k] and lines[k - 1].strip().startswith(("import ", "from ")):
+            k -= 1  # up through the run of imports
+        if "#" not in lines[k] and not lines[k - 1].strip().startswith("#"):
+            silent.append(f"{path.relative_to(REPO)}:{line}")
+    assert not silent, f"in-function imports without a reason: {silent}"
+    assert len(found) <= MAX_IN_FUNCTION_IMPORTS, f"{len(found)} in-function imports; move new ones to the top"

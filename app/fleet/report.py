@@ -155,7 +155,7 @@ def report_png(report: dict[str, Any], path: Path) -> Path:
     import matplotlib  # lazy: matplotlib only for the PNG; the server imports this module for the report's numbers
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # after choosing the Agg backend
 
     vehicles = report["vehicles"]
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7.5))

@@ -97,7 +97,7 @@ def warm_kernels() -> float:
     # lazy: the kernels' module, loaded outside warm_kernels' clock
     import numpy as np
 
-    from sim import load_vehicle, simulate
+    from sim import load_vehicle, simulate  # lazy, as numpy above
 
     clock = time.perf_counter()
     vehicle = load_vehicle("paper")
