@@ -76,6 +76,7 @@ def result_payload(res: AnalysisResult, ratings: RatingModel | None = None,
                          "t_end_s": float(sig.t[-1]) if len(sig) else None}
     comparisons = [er.comparison for er in res.event_results if er.comparison is not None]
     feels = [er.feel for er in res.event_results if er.feel is not None]
+    feel_kinds = [er.event.kind.value for er in res.event_results if er.feel is not None]
     included = sum(1 for e in res.events if e.included)
     summary = {
         "events": len(res.events), "included": included, "excluded": len(res.events) - included,
@@ -89,7 +90,7 @@ def result_payload(res: AnalysisResult, ratings: RatingModel | None = None,
         "findings": [f.to_dict() for f in res.findings],
         "whole_rms_rpm": res.whole_error.rms_rpm if res.whole_error else None,
         "whole_nrmse": res.whole_error.nrmse if res.whole_error else None,
-        "drivability": summarize_feel(feels) if feels else {},
+        "drivability": summarize_feel(feels, feel_kinds) if feels else {},
         "read": res.ingest.get("read"),  # damaged or truncated input: frames and seconds lost, a note
     }
     doc = {

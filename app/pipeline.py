@@ -439,7 +439,7 @@ def _event_feel(accel: AccelSource, res: SimResult, lag: float, ev: Event, signa
     return event_feel(accel, res.t + lag, res.vehicle_speed_kmh / 3.6, res.vehicle_accel_ms2, ev.t_start_s,
                       ev.t_end_s, ev.t_cross_s + lag, ev.direction, params, pedal=signals.get("pedal_pct"),
                       t_close_measured=closure(m_meas), t_close_simulated=closure(m_sim),
-                      shuffle_hint_hz=float(m_meas.shuffle_freq_hz))
+                      shuffle_hint_hz=float(m_meas.shuffle_freq_hz), sim_seat_ms2=res.seat_rail_accel_ms2)
 
 
 def run_analysis(log_path: LogSource, vehicle: VehicleInputs, options: AnalysisOptions | None = None,

@@ -45,6 +45,9 @@ from app.ingest.database import load_database  # noqa: E402
 from app.ingest.signalmap import load_signal_map  # noqa: E402
 from app.signals import SignalSet  # noqa: E402
 from bench.diagnosis_report import Outcome, report, report_rates  # noqa: E402
+from bench.lengths import LENGTHS_S  # noqa: E402
+from bench.lengths import measure as measure_lengths  # noqa: E402
+from bench.lengths import report as report_lengths  # noqa: E402
 from sim import Vehicle, load_vehicle  # noqa: E402
 from sim.effects import EFFECTS, apply_effects  # noqa: E402
 from tests.support.synthetic import (  # noqa: E402
@@ -234,6 +237,28 @@ def cases(seeds: int, n_none: int, loo_seeds: int, faint_seeds: int, rates: bool
     return out
 
 
+LENGTH_TRUTHS = (("drag", {"coulomb_nm": 3.0, "viscous_nms": 0.005}),
+                 ("torque_lag", {"tau_s": 0.015, "delay_s": 0.004}), ("tyre_slip", None), (None, {}))
+
+
+def lengths_benchmark(whole: bool) -> int:
+    """``--lengths``: diagnosis cost per log length, the sequential design against all events (bench/lengths.py)."""
+    vehicle = load_vehicle("paper")
+    print(f"diagnosis cost per log length: {len(LENGTH_TRUTHS)} truths x {[f'{x:.0f} s' for x in LENGTHS_S]}, the "
+          "paper car through the reference DBC at 100 Hz")
+    with tempfile.TemporaryDirectory() as d:
+        maker = LogMaker(vehicle, Path(d))
+        truths = []
+        for i, (name, values) in enumerate(LENGTH_TRUTHS):
+            eff = EFFECTS[name] if name else None
+            vals = values if values is not None or eff is None else \
+                {p.name: p.lo + 0.6 * (p.hi - p.lo) for p in eff.params}
+            case = Case("in_library" if name else "none", name, 7000 + i, dict(vals or {}), tuple(EFFECTS))
+            truths.append((name or "none", lambda length, case=case: maker.make(case, case.seed, length)[0]))
+        report_lengths(measure_lengths(truths, vehicle, DiagnosisOptions(seed=1), whole=whole))
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true",
@@ -242,7 +267,12 @@ def main() -> int:
     ap.add_argument("--no-timing", action="store_true", help="skip the 60 s timing comparison")
     ap.add_argument("--timing-only", action="store_true", help="only the 60 s timing comparison")
     ap.add_argument("--dump", type=Path, default=None, help="pickle (outcome, diagnosis result) per case here")
+    ap.add_argument("--lengths", action="store_true",
+                    help="only the cost per log length (60 s, 10 min, 30 min), staged against all events")
+    ap.add_argument("--lengths-staged-only", action="store_true", help="with --lengths: skip the all-events runs")
     args = ap.parse_args()
+    if args.lengths:
+        return lengths_benchmark(not args.lengths_staged_only)
     seeds, faint, n_none, loo_seeds = (2, 1, 3, 1) if args.quick else (5, 3, 5, 2)
     duration = args.duration or (40.0 if args.quick else 60.0)
     vehicle = load_vehicle("paper")

@@ -25,7 +25,7 @@ import sys
 import time
 from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,10 +35,14 @@ sys.path.insert(0, str(REPO))
 
 from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, validate_on  # noqa: E402
 from app.analysis.diagnosis.report import report_dict  # noqa: E402
+from app.signals import SignalSet  # noqa: E402
 from bench.diagnosis_report import CONFIDENT, pct  # noqa: E402
 from bench.indep.car import vehicle_source  # noqa: E402
 from bench.indep.cases import FAINT_SIGMA, LIBRARY, Case, build, plan, read_manifest, write_manifest  # noqa: E402
 from bench.indep.record import DBC, MAP  # noqa: E402
+from bench.lengths import LENGTHS_S  # noqa: E402
+from bench.lengths import measure as measure_lengths  # noqa: E402
+from bench.lengths import report as report_lengths  # noqa: E402
 from sim import load_vehicle  # noqa: E402
 from tests.support.truthlog import read_log  # noqa: E402
 
@@ -91,8 +95,10 @@ def diagnose(case: Case, folder: Path) -> Result:
     rep = report_dict(res)
     rem = (rep.get("decision") or {}).get("remainder") or {}
     remainder = str(rem.get("status", "")) if isinstance(rem, dict) else str(rem)
-    details = (rep.get("decision") or {}).get("details") or {}
-    base_named = tuple(str(b["name"]) for b in details.get("base_parameters", ())) if isinstance(details, dict) else ()
+    # the decision's details are merged into its dict (``Decision.to_dict``): the corrected base parameters are a
+    # top-level ``base_parameters`` list
+    items = (rep.get("decision") or {}).get("base_parameters") or ()
+    base_named = tuple(str(b["name"]) for b in items if isinstance(b, dict))
     shrink_b = float("nan")
     if d.top and d.status in (*CONFIDENT, "ambiguous"):
         try:
@@ -192,7 +198,13 @@ def main() -> int:
     ap.add_argument("--only", default=None, choices=("none", "single", "faint", "pair", "ool"), help="one case kind")
     ap.add_argument("--case", action="append", default=[], help="only the case of this name (repeatable)")
     ap.add_argument("--generate-only", action="store_true", help="make (or check) the cached drives and stop")
+    ap.add_argument("--lengths", action="store_true",
+                    help="only the cost per log length (60 s, 10 min, 30 min) of the set's first single-effect cases "
+                         "and a no-effect case, staged against all events")
+    ap.add_argument("--lengths-staged-only", action="store_true", help="with --lengths: skip the all-events runs")
     args = ap.parse_args()
+    if args.lengths:
+        return lengths_benchmark(args.which, not args.lengths_staged_only)
     folder, todo = generate(args.which, args.quick, args.jobs, args.case)
     if args.case and not todo:
         print(f"no case named {args.case}", file=sys.stderr)
@@ -217,6 +229,35 @@ def main() -> int:
                   + (f"  {r.error}" if r.error else ""), flush=True)
     confusion(results)
     targets(results)
+    return 0
+
+
+LENGTH_EFFECTS = ("drag", "torque_lag", "tyre_slip")
+
+
+def lengths_benchmark(which: str, whole: bool) -> int:
+    """``--lengths``: the set's first single case of each of :data:`LENGTH_EFFECTS` and its first no-effect case,
+    driven for 60 s, 10 and 30 minutes (cached under ``lengths/``), diagnosed staged and on all events."""
+    plan_all = plan(which, False)
+    picked = [next(c for c in plan_all if c.kind == "single" and c.expected == [e]) for e in LENGTH_EFFECTS]
+    picked.append(next(c for c in plan_all if c.kind == "none"))
+    folder = OUT / which / "lengths"
+    folder.mkdir(parents=True, exist_ok=True)
+    manifest = folder / "manifest.json"
+    done = {c.name: c for c in read_manifest(manifest)} if manifest.exists() else {}
+    print(f"diagnosis cost per log length, set {which}: {[c.name for c in picked]} x "
+          f"{[f'{x:.0f} s' for x in LENGTHS_S]}, BLF through {DBC.name}")
+
+    def make(case: Case, length: float) -> SignalSet:
+        name = f"{case.name}_{length:.0f}s"
+        if name not in done or not (folder / done[name].drive_a).exists():
+            done[name] = build(replace(case, name=name, duration_s=length, recorded={}), folder)
+            write_manifest(manifest, list(done.values()))
+        return read_log(folder / done[name].drive_a, DBC, MAP)
+
+    truths = [(c.name, lambda length, c=c: make(c, length)) for c in picked]
+    report_lengths(measure_lengths(truths, load_vehicle(vehicle_source("paper")), DiagnosisOptions(seed=1),
+                                   whole=whole))
     return 0
 
 

@@ -82,6 +82,7 @@ class ChainModel:
     cb2: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     wheel2: int = -1  # second wheel body (unequal shafts): each wheel carries half the car and road load
     wheel_drag: F64 = field(default_factory=lambda: np.zeros(2))  # (2,) per wheel body: N m s/rad, N m
+    wheel_sense: float = 1.0  # true turning sense of the wheels in the rotor's (and the housing angle's) frame
 
     def __post_init__(self) -> None:
         if self.cb2.size != self.ca.size:
@@ -207,10 +208,10 @@ def build_chain(v: Vehicle) -> ChainModel:
     else:  # the last stage drives the wheels directly
         bld.names[cur] = "wheels"
         bld.inertia[cur] += own + (0.0 if tyre.enabled else vehicle_j)
-    return _finish(v, bld, wheel, wheel2, own / v.wheel.inertia)
+    return _finish(v, bld, wheel, wheel2, own / v.wheel.inertia, sense)
 
 
-def _finish(v: Vehicle, bld: _Builder, wheel: int, wheel2: int, per_body: float) -> ChainModel:
+def _finish(v: Vehicle, bld: _Builder, wheel: int, wheel2: int, per_body: float, sense: float = 1.0) -> ChainModel:
     """Vehicle body, housing and mount, ratios and road data around the built chain."""
     tyre = v.effects.tyre_slip
     vehicle = bld.body("vehicle", v.body.mass * v.wheel.radius**2) if tyre.enabled else -1
@@ -257,6 +258,7 @@ def _finish(v: Vehicle, bld: _Builder, wheel: int, wheel2: int, per_body: float)
         rotor_drag=np.array([v.motor.viscous_damping + eff.viscous_nms, v.motor.coulomb_drag + eff.coulomb_nm]),
         wheel_drag=np.array([per_body * v.wheel.viscous_drag, per_body * v.wheel.coulomb_drag]),
         vehicle=vehicle,
+        wheel_sense=sense,
         tyre=np.array([n * tyre.slip_stiffness * v.wheel.radius**2 / tyre.relaxation_length,
                        v.wheel.radius / tyre.relaxation_length]) if tyre.enabled else np.zeros(2),
     )

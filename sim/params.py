@@ -128,6 +128,19 @@ class Housing:
     mount_damping: float = _f("N m s/rad", NONNEG, 150.0, DAMPING)
 
 
+@dataclass(frozen=True, kw_only=True)
+class BodyPitch:
+    """The sprung body pitching on its suspension, for the seat-rail acceleration (``sim.seat``). Off by default:
+    the driveline model does not need it and the paper gives none of it. Heights above the road."""
+
+    enabled: bool = flag(False)
+    inertia: float = _f("kg m^2 (pitch, about the centre of gravity)", POS, 2500.0, (1.0, 1e6))
+    frequency_hz: float = _f("Hz (pitch on the suspension)", POS, 1.3, (0.1, 10.0))
+    damping_ratio: float = _f("-", NONNEG, 0.3, (0.0, 2.0))
+    cg_height: float = _f("m", POS, 0.55, (0.05, 5.0))
+    seat_rail_height: float = _f("m", NONNEG, 0.3, (0.0, 5.0))
+
+
 GAP_NAMES: tuple[str, ...] = ("spline", "mesh1", "mesh2", "differential", "halfshaft")
 
 
@@ -163,6 +176,7 @@ class Vehicle:
     stages: tuple[Stage, ...] = ()
     housing: Housing = field(default_factory=Housing)
     effects: Effects = field(default_factory=Effects)
+    body_pitch: BodyPitch = field(default_factory=BodyPitch)
     description: str = ""
     # dotted field -> (min, max): uncertain non-gap parameters for tolerance analysis
     tolerances: Mapping[str, tuple[float, float]] = field(default_factory=dict)
@@ -384,7 +398,7 @@ def _cross_checks(obj: Any, prefix: str) -> None:
 
 _TABLES: dict[str, type] = {c.__name__: c for c in (
     Motor, Reducer, Halfshaft, Wheel, Body, Gaps, Gap, Housing, Effects, TorqueLag, SpeedSensor, Drag,
-    ProgressiveStiffness, TyreSlip,
+    ProgressiveStiffness, TyreSlip, BodyPitch,
 )}
 
 
@@ -406,6 +420,6 @@ def _preprocess(sub: type, value: Any, path: str) -> Any:
 
 
 __all__ = [
-    "ANY", "GAP_NAMES", "Body", "Drag", "Effects", "Gap", "Gaps", "Halfshaft", "Housing", "Motor",
+    "ANY", "GAP_NAMES", "Body", "BodyPitch", "Drag", "Effects", "Gap", "Gaps", "Halfshaft", "Housing", "Motor",
     "ProgressiveStiffness", "Reducer", "SpeedSensor", "TorqueLag", "TyreSlip", "Vehicle", "Wheel",
 ]

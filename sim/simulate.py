@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -15,6 +15,7 @@ from sim.linear import step_limit, tangent_stiffness
 from sim.model import ChainModel, build_chain, quasi_static_full
 from sim.params import Vehicle
 from sim.runner import MAX_EVENTS, raise_status, run_from_state
+from sim.seat import seat_rail_acceleration
 from sim.sensor import delay_sample_quantize
 from sim.two_inertia import pack, project, quasi_static, run_two_inertia
 from sim.units import RPM_PER_RAD_S
@@ -37,6 +38,9 @@ class SimResult:
         optional speed-sensor effect)
     rotor_speed_rpm, wheel_speed_rpm, vehicle_speed_kmh : (n,) absolute
     vehicle_accel_ms2 : (n,) m/s^2, the body's longitudinal acceleration (property, from vehicle_speed_kmh)
+    seat_rail_accel_ms2 : (n,) m/s^2, what an accelerometer on the seat rail reads: the body's acceleration
+        plus the rail's fore-aft motion as the body pitches under the mount reaction and the load transfer,
+        and its tilt in gravity (:mod:`sim.seat`); None without a housing on mounts or without ``[body_pitch]``
     airgap_torque_nm : (n,) torque acting on the rotor (after the optional torque lag)
     coupling_torques : name -> (n,) N m at the driven member (gear pairs: the large gear;
         half-shafts: per shaft; ``mount``: housing roll reaction; ``tyre``: all driven tyres at
@@ -59,6 +63,7 @@ class SimResult:
     dt: float
     input_gaps: tuple[tuple[float, float], ...] = ()
     body_speeds_rpm: dict[str, F64] = field(default_factory=dict)
+    seat_rail_accel_ms2: F64 | None = None
 
     @property
     def vehicle_accel_ms2(self) -> F64:
@@ -186,13 +191,17 @@ def simulate(
                           {g: bool(raw.is_open[0, chain.gap_coupling[g]]) for g in gaps}, t0)
     w_wheel = raw.omega[:, chain.wheel]
     w_vehicle = raw.omega[:, chain.vehicle] if chain.vehicle >= 0 else w_wheel
-    return SimResult(
+    res = SimResult(
         t=t, motor_speed_rpm=speed, rotor_speed_rpm=raw.omega[:, chain.rotor] * RPM,
         wheel_speed_rpm=w_wheel * RPM, vehicle_speed_kmh=w_vehicle * vehicle.wheel.radius * 3.6,
         airgap_torque_nm=raw.torque, coupling_torques=torques, gap_open=gap_open, gap_events=events,
         model="multibody", dt=step, input_gaps=inp.gaps,
         body_speeds_rpm={name: raw.omega[:, b] * RPM for b, name in enumerate(chain.body_names)},
     )
+    if chain.housing >= 0 and vehicle.body_pitch.enabled:  # the mount is the last coupling (sim.model)
+        seat = seat_rail_acceleration(vehicle, chain, output_dt, res.vehicle_accel_ms2, raw.tau[:, -1])
+        res = replace(res, seat_rail_accel_ms2=seat)
+    return res
 
 
 def _pair_events(

@@ -91,6 +91,11 @@ def test_payload_csv_and_event_store_rows_carry_the_criteria(with_accelerometer:
     assert doc["acceleration"]["kind"] == "accelerometer"
     summ = doc["summary"]["drivability"]
     assert set(summ) == set(CRITERIA_NAMES) and summ["shuffle_pp_ms2"]["events"] >= 6
+    settled = summ["settled_accel_ms2"]  # forward after a tip-in, backward after a tip-out: medians per kind only
+    assert settled["measured_median"] is None and settled["simulated_median"] is None
+    assert settled["tip_in"]["measured_median"] > 0.5 and settled["tip_out"]["measured_median"] < -0.5
+    assert settled["tip_in"]["events"] + settled["tip_out"]["events"] == settled["events"] >= 6
+    assert summ["kick_ms2"]["measured_median"] > 0 and summ["kick_ms2"]["tip_in"]["events"] >= 3
     row = next(m for m in doc["metrics"] if m["drivability"])
     assert set(row["drivability"]["measured"]) >= set(CRITERIA_NAMES)
     text = metrics_csv(doc["metrics"])
@@ -124,3 +129,33 @@ def test_no_accelerometer_and_no_road_speed_leaves_the_criteria_out_with_a_note(
     assert res.acceleration is None and all(er.feel is None for er in res.event_results)
     assert any(n.startswith("no acceleration") for n in res.notes)
     assert any(er.comparison is not None for er in res.event_results)  # the speed metrics are there as before
+
+
+def test_a_vehicle_with_a_body_pitch_reports_the_seat_rail_beside_and_compares_it_on_request() -> None:
+    signals = _signals(replace(SCENARIO, duration_s=12.0))
+    pitched = load_vehicle("paper").with_changes({"body_pitch.enabled": True})
+    body = analyze_signals(signals, pitched, AnalysisOptions())
+    seat = analyze_signals(signals, pitched, AnalysisOptions(drivability=DrivabilityParams(compare_with="seat_rail")))
+    pairs = [(b.feel, s.feel) for b, s in zip(body.event_results, seat.event_results, strict=True)
+             if b.feel is not None and s.feel is not None]
+    assert len(pairs) >= 2  # a tip-in and a tip-out
+    for fb, fs in pairs:
+        assert fb.simulated_at == "body" and fb.simulated_seat is not None
+        assert fs.simulated_at == "seat_rail" and fs.simulated == fs.simulated_seat == fb.simulated_seat
+        assert fs.measured == fb.measured  # the measurement does not depend on which simulated side is compared
+        assert fs.difference["shuffle_pp_ms2"] == pytest.approx(
+            fs.simulated.shuffle_pp_ms2 - fs.measured.shuffle_pp_ms2, rel=1e-12)
+        # the seat rail below the centre of gravity swings more than the body, at the same frequency
+        assert fb.simulated_seat.shuffle_pp_ms2 > fb.simulated.shuffle_pp_ms2
+        assert fb.simulated_seat.shuffle_freq_hz == pytest.approx(fb.simulated.shuffle_freq_hz, rel=0.02)
+    doc = dict(json_safe(result_payload(body)[0]))
+    row = next(m for m in doc["metrics"] if m["drivability"])
+    assert row["drivability"]["simulated_at"] == "body"
+    assert set(row["drivability"]["simulated_seat"]) >= set(CRITERIA_NAMES)
+    plain = analyze_signals(signals, load_vehicle("paper"), AnalysisOptions(
+        drivability=DrivabilityParams(compare_with="seat_rail")))  # no [body_pitch]: the body, said so
+    feel = next(er.feel for er in plain.event_results if er.feel is not None)
+    assert feel.simulated_at == "body" and feel.simulated_seat is None
+    assert "simulated_seat" not in feel.to_dict()
+    with pytest.raises(ValueError, match="compare_with"):
+        DrivabilityParams(compare_with="head_rest")

@@ -51,11 +51,20 @@ saturated sensor in the window, or an acceleration derived from speed whose band
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from scipy import optimize
 
+from app.analysis.feel_kernels import (
+    FIT_OK,
+    damped_sine_fit,
+    max_abs_slope,
+    median,
+    residual_rms,
+    sinc_refine,
+    zigzag,
+)
 from app.analysis.iso2631 import vdv
 from app.analysis.series import FloatArray, parabolic_vertex
 from app.analysis.zerophase import butter_sos, zero_phase
@@ -82,6 +91,7 @@ _TAPS = np.arange(-8, 9)
 _OFFSETS = np.linspace(-1.0, 1.0, 81)
 # windowed-sinc interpolation weights, (offsets, taps): value at i + offset = sum_k y[i + k] w[offset, k]
 _SINC = np.sinc(_OFFSETS[:, None] - _TAPS[None, :]) * np.kaiser(_TAPS.size + 2, 6.0)[1:-1][None, :]
+_SINC /= _SINC.sum(axis=1)[:, None]  # unit gain at every offset
 
 
 @dataclass(frozen=True)
@@ -105,15 +115,16 @@ class DrivabilityParams:
     derive_cutoff_hz: float = 15.0  # low pass of the speed differentiator (app.analysis.accel)
     bandwidth_factor: float = 1.5  # a derived acceleration resolves the shuffle below bandwidth / this (gain >= 0.96)
     max_fit_error: float = 0.05  # ... and (speed-derived: kick, p-p from the fit) the fit's amplitude within this
+    compare_with: str = "body"  # simulated side compared with the measurement: "body" (an ESP sensor) or "seat_rail"
 
     def __post_init__(self) -> None:
         lo, hi = self.clunk_band_hz
         if not (self.lowpass_hz >= 1.0 and 1.0 <= lo < hi and 1 <= self.order <= 8 and 0 < self.final_fraction <= 1
                 and self.max_extrema >= 2 and self.derive_cutoff_hz >= 1.0 and self.bandwidth_factor >= 1
-                and self.max_fit_error > 0):
+                and self.max_fit_error > 0 and self.compare_with in ("body", "seat_rail")):
             raise ValueError("drivability parameters: cut-offs must be at least 1 Hz (clunk band low < high), "
                              "1 <= order <= 8, 0 < final_fraction <= 1, max_extrema >= 2, bandwidth_factor >= 1, "
-                             "max_fit_error > 0")
+                             "max_fit_error > 0, compare_with 'body' or 'seat_rail'")
 
 
 @dataclass(frozen=True)
@@ -144,7 +155,15 @@ class Drivability:
 
 
 def _rate(fs: float) -> float:
-    return float(f"{fs:.6g}")  # jitter in the last digits of a period must not defeat the design cache
+    rate = _RATES.get(fs)
+    if rate is None:  # jitter in the last digits of a period must not defeat the design cache
+        if len(_RATES) > 1024:
+            _RATES.clear()
+        rate = _RATES[fs] = float(f"{fs:.6g}")
+    return rate
+
+
+_RATES: dict[float, float] = {}
 
 
 def _lowpass(a: FloatArray, fs: float, fc: float, order: int) -> FloatArray:
@@ -168,17 +187,15 @@ def _crossing(t: FloatArray, y: FloatArray, level: float, i0: int) -> float:
     return float(t[i - 1] + (level - y[i - 1]) / (y[i] - y[i - 1]) * (t[i] - t[i - 1]))
 
 
-def _sinc_vertex(y: FloatArray, i: int) -> tuple[float, float]:
-    """Sub-sample offset and value of the extremum of ``y`` near index ``i`` (a maximum: ``y`` is signed so
-    that the caller's extrema of both kinds are refined by looking at ``sign * y``) from a windowed-sinc
-    interpolation over +-8 samples; the parabolic vertex at the edges."""
-    if i < 8 or i > y.size - 9:
-        return parabolic_vertex(y, i)
-    seg = y[i - 8:i + 9]
-    interp = _SINC @ seg / _SINC.sum(axis=1)
-    sign = 1.0 if y[i] >= 0.5 * (y[i - 1] + y[i + 1]) else -1.0
-    k = int(np.argmax(sign * interp))
-    return float(_OFFSETS[k]), float(interp[k])
+def _sinc_vertices(y: FloatArray, idx: list[int]) -> list[tuple[float, float]]:
+    """Sub-sample offset and value of the extremum of ``y`` near each index of ``idx`` from a windowed-sinc
+    interpolation over +-8 samples (:func:`app.analysis.feel_kernels.sinc_refine`); the parabolic vertex at the
+    edges. A maximum or a minimum as the sample and its neighbours say."""
+    inner = [i for i in idx if 8 <= i <= y.size - 9]
+    if len(inner) == len(idx):
+        off, val = sinc_refine(y, np.array(idx, dtype=np.int64), _SINC, _OFFSETS)
+        return list(zip(off.tolist(), val.tolist(), strict=True))
+    return [_sinc_vertices(y, [i])[0] if 8 <= i <= y.size - 9 else parabolic_vertex(y, i) for i in idx]
 
 
 def _extrema(y: FloatArray, i0: int, prominence: float) -> list[int]:
@@ -186,26 +203,10 @@ def _extrema(y: FloatArray, i0: int, prominence: float) -> list[int]:
     away from the one before (a zig-zag filter over the local extrema: a smaller reversal is passed over and
     the larger of two same-kind extrema kept). The start of the segment counts as a minimum, so the first
     maximum must rise ``prominence`` above what precedes it."""
-    seg = y[i0:]
+    seg = np.ascontiguousarray(y[i0:])
     if seg.size < 3:
         return []
-    d = np.diff(seg)
-    maxima = np.nonzero((d[:-1] > 0) & (d[1:] <= 0))[0] + 1
-    minima = np.nonzero((d[:-1] < 0) & (d[1:] >= 0))[0] + 1
-    kinds = np.concatenate((np.ones(maxima.size), -np.ones(minima.size)))
-    idx = np.concatenate((maxima, minima))
-    order = np.argsort(idx, kind="stable")
-    out: list[tuple[int, float]] = [(int(np.argmin(seg[: int(maxima[0]) + 1])) if maxima.size else 0, -1.0)]
-    for k, kind in zip(idx[order].tolist(), kinds[order].tolist(), strict=True):
-        last, last_kind = out[-1]
-        if k <= last:
-            continue
-        if kind == last_kind:
-            if kind * seg[k] > kind * seg[last]:
-                out[-1] = (k, kind)
-        elif abs(seg[k] - seg[last]) >= prominence:
-            out.append((k, kind))
-    return [i0 + k for k, _ in out[1:]]
+    return [i0 + int(k) for k in zigzag(seg, prominence)]
 
 
 @dataclass(frozen=True)
@@ -239,14 +240,39 @@ class _Fit:
 def _damped_fit(t: FloatArray, y: FloatArray, t0: float, c0: float, a0: float, f0: float,
                 zeta0: float) -> _Fit | None:
     """The damped sine fitted by least squares from the kick peak ``t0`` on, over at most ``FIT_PERIODS``
-    periods (None: no convergence inside the bounds)."""
+    periods (None: no convergence inside the bounds).
+
+    Levenberg-Marquardt with the analytic Jacobian, compiled (:func:`app.analysis.feel_kernels.damped_sine_fit`,
+    some 10 us per event); where it does not converge inside the bounds (a start far from the minimum, as
+    on a small kick in noise, can send its first steps elsewhere) MINPACK's trust-region variant from the
+    same start, whose bounded first steps stay nearer the start, has the last word."""
     m = (t >= t0) & (t <= t0 + FIT_PERIODS / f0)  # the first periods carry the shuffle; later ones mostly noise
     if m.sum() < 8:
         return None
-    tau, ym = t[m] - t0, y[m]
+    tau, ym = np.ascontiguousarray(t[m] - t0), np.ascontiguousarray(y[m])
     w0 = 2 * math.pi * f0
     s0 = (zeta0 if math.isfinite(zeta0) else 0.15) * w0
+    x0 = np.array([c0, a0, s0, w0, 0.0])
+    status, x, cost, var_amp = damped_sine_fit(tau, ym, x0)
+    fit = _accepted(x, cost, var_amp, tau.size, w0) if status == FIT_OK else None
+    return fit if fit is not None else _minpack_fit(tau, ym, x0, w0)
 
+
+def _accepted(x: FloatArray, cost: float, var_amp: float, n: int, w0: float) -> _Fit | None:
+    """The fit of parameters ``x`` (sum of squares ``cost`` over ``n`` samples, ``(J^T J)^-1`` of the amplitude
+    ``var_amp``), or None outside the bounds: frequency within 0.6-1.6 x the start, damping below 2 x it."""
+    c, amp, sig, w, phi = (float(v) for v in x)
+    if w < 0:
+        w, phi = -w, -phi
+    if not (0.6 * w0 < w < 1.6 * w0) or not 0.0 <= sig < 2.0 * w0 or amp == 0:
+        return None
+    var = cost / max(1, n - 5)
+    rel = math.sqrt(max(var_amp * var, 0.0)) / abs(amp) if math.isfinite(var_amp) else math.inf
+    return _Fit(c, amp, sig, w, phi, rel)
+
+
+def _minpack_fit(tau: FloatArray, ym: FloatArray, x0: FloatArray, w0: float) -> _Fit | None:
+    """:func:`_damped_fit` by MINPACK (``scipy.optimize.leastsq``, relative tolerances 1e-6)."""
     def resid(x: FloatArray) -> FloatArray:
         c, amp, sig, w, phi = x
         return np.asarray(c + amp * np.exp(-sig * tau) * np.cos(w * tau + phi) - ym, dtype=np.float64)
@@ -258,20 +284,15 @@ def _damped_fit(t: FloatArray, y: FloatArray, t0: float, c0: float, a0: float, f
         return np.column_stack((np.ones_like(tau), e * cos, -amp * tau * e * cos, -amp * tau * e * sin,
                                 -amp * e * sin))
 
-    try:  # Levenberg-Marquardt (MINPACK) with the analytic Jacobian: a fraction of a millisecond per event
-        x, cov, info, _, ier = optimize.leastsq(resid, np.array([c0, a0, s0, w0, 0.0]), Dfun=jac, full_output=True,
-                                                maxfev=100, ftol=1e-6, xtol=1e-6)
+    try:
+        x, cov, info, _, ier = optimize.leastsq(resid, x0, Dfun=jac, full_output=True, maxfev=100, ftol=1e-6,
+                                                xtol=1e-6)
     except (ValueError, TypeError, np.linalg.LinAlgError):
         return None
-    c, amp, sig, w, phi = (float(v) for v in x)
-    if w < 0:
-        w, phi = -w, -phi
-    if ier not in (1, 2, 3, 4) or not (0.6 * w0 < w < 1.6 * w0) or not 0.0 <= sig < 2.0 * w0 or amp == 0:
+    if ier not in (1, 2, 3, 4):
         return None
-    dof = max(1, tau.size - 5)
-    var = float(np.sum(info["fvec"] ** 2)) / dof
-    rel = math.sqrt(max(float(cov[1, 1]) * var, 0.0)) / abs(amp) if cov is not None else math.inf
-    return _Fit(c, amp, sig, w, phi, rel)
+    var_amp = float(cov[1, 1]) if cov is not None else math.inf
+    return _accepted(x, float(np.sum(info["fvec"] ** 2)), var_amp, tau.size, w0)
 
 
 def pedal_move(pedal: Signal | None, t_start: float, t_cross: float, p: DrivabilityParams) -> tuple[float, str]:
@@ -283,7 +304,8 @@ def pedal_move(pedal: Signal | None, t_start: float, t_cross: float, p: Drivabil
     t, v = w.t[ok], w.values[ok]
     if t.size < 3:
         return NAN, "too few pedal samples in the window"
-    pre = float(np.median(v[t <= t_start + 0.15])) if (t <= t_start + 0.15).any() else float(v[0])
+    n_pre = int(np.count_nonzero(t <= t_start + 0.15))
+    pre = median(np.ascontiguousarray(v[t <= t_start + 0.15])) if n_pre else float(v[0])
     step = float(v[-1] - pre)
     thr = max(p.pedal_min_pct, p.pedal_fraction * abs(step))
     moved = np.nonzero(np.abs(v - pre) >= thr)[0]
@@ -327,12 +349,12 @@ def drivability_criteria(
     if iw.size < 8:
         return _with(nan_all, {k: "the acceleration does not cover the event window" for k in CRITERIA_NAMES})
     i_a, i_b = int(iw[0]), int(iw[-1]) + 1
-    noise = float(np.std(a[i_a:i_b] - lp[i_a:i_b]))
+    noise = residual_rms(a[i_a:i_b], lp[i_a:i_b])
     tw, lw = t[i_a:i_b], lp[i_a:i_b]
     pre_m = tw <= t_cross - p.pre_gap_s
-    a_pre = float(np.median(lw[pre_m])) if pre_m.any() else float(lw[0])
+    a_pre = median(lw[pre_m]) if pre_m.any() else float(lw[0])
     n_final = max(2, round(p.final_fraction * tw.size))
-    a_set = float(np.median(lw[-n_final:]))
+    a_set = median(np.ascontiguousarray(lw[-n_final:]))
     y = direction * lw
     prom = max(p.min_prominence_ms2, 4.0 * noise, p.relative_prominence * abs(a_set - a_pre))
     i0 = int(np.searchsorted(tw, t_cross - p.peak_lead_s))
@@ -343,23 +365,23 @@ def drivability_criteria(
     else:
         # a 100 Hz trace has 12 samples per cycle of an 8 Hz shuffle, too few for a parabolic vertex within 1 %:
         # below REFINE_BELOW_HZ each extremum is refined on a band-limited (windowed-sinc) interpolation
-        refine = _sinc_vertex if fs < REFINE_BELOW_HZ else parabolic_vertex
-        verts = [refine(y, i) for i in ext[: p.max_extrema]]
+        verts = (_sinc_vertices(y, ext[: p.max_extrema]) if fs < REFINE_BELOW_HZ
+                 else [parabolic_vertex(y, i) for i in ext[: p.max_extrema]])
         times = np.array([tw[i] + off * dt for i, (off, _) in zip(ext, verts, strict=False)])
         vals = np.array([v for _, v in verts])
-        swings = np.abs(np.diff(vals))
+        swings = np.abs(vals[1:] - vals[:-1])
         if swings.size:  # later swings drowned in noise would bias the frequency and the decay
             keep = int(np.argmax(np.concatenate((swings < p.min_swing_fraction * swings[0], [True]))))
             times, vals = times[: keep + 1], vals[: keep + 1]
         t_kick = float(times[0])
         kick = float(vals[0] - direction * a_set)
-        swings = np.abs(np.diff(vals))
+        swings = np.abs(vals[1:] - vals[:-1])
         if swings.size:
             pp = float(swings.max())
         else:
             reasons["shuffle_pp_ms2"] = "no swing after the kick peak"
         if times.size >= 2:
-            freq = float(1.0 / (2.0 * np.mean(np.diff(times))))
+            freq = float(1.0 / (2.0 * np.mean(times[1:] - times[:-1])))
         else:
             reasons["shuffle_freq_hz"] = "fewer than two extrema"
         if swings.size >= 2 and (swings > 0).all():
@@ -397,9 +419,8 @@ def drivability_criteria(
         height = float(vals[0] - direction * a_pre)
         if height > 0:
             t_rise = _crossing(tw, y, direction * a_pre + p.rise_fraction * height, i0)
-    jerk = np.gradient(lp, dt)[i_a:i_b]
-    k0 = int(np.searchsorted(t[i_a:i_b], t_cross - p.peak_lead_s))
-    max_jerk = float(np.max(np.abs(jerk[k0:]))) if k0 < jerk.size else NAN
+    # max |d a_lp / dt| over the window from i0 (np.gradient's differences: central, one-sided at lp's ends)
+    max_jerk = max_abs_slope(lp, dt, i_a + i0, i_b) if i0 < i_b - i_a else NAN
     lo, hi = p.clunk_band_hz
     clunk = NAN
     if lo >= 0.9 * 0.45 * fs:
@@ -439,7 +460,9 @@ def drivability_criteria(
 
 def _with(d: Drivability, reasons: dict[str, str]) -> Drivability:
     """``d`` with the criteria named in ``reasons`` set to NaN (a reason marks the value as not supported)."""
-    return replace(d, **{k: NAN for k in reasons if k in CRITERIA}, resolution=dict(reasons))
+    values = dict(d.__dict__)  # dataclasses.replace, without its per-call field checks
+    values.update({k: NAN for k in reasons if k in CRITERIA}, resolution=dict(reasons))
+    return Drivability(**values)
 
 
 def difference(measured: Drivability, simulated: Drivability) -> dict[str, float]:

@@ -35,31 +35,41 @@ PAD_S = 0.3  # filter run-in on each side of the event window
 class FeelComparison:
     source: str  # accelerometer | vehicle_speed | wheel_speed
     measured: Drivability
-    simulated: Drivability
+    simulated: Drivability  # the simulated side compared (difference): the body's, or the seat rail's on request
     difference: dict[str, float]
+    simulated_at: str = "body"  # body | seat_rail: where ``simulated`` was taken
+    simulated_seat: Drivability | None = None  # the seat rail's criteria where the simulation has them
 
     def to_dict(self) -> dict[str, object]:
-        return {"source": self.source, "measured": self.measured.to_dict(), "simulated": self.simulated.to_dict(),
-                "difference": dict(self.difference)}
+        out: dict[str, object] = {"source": self.source, "measured": self.measured.to_dict(),
+                                  "simulated": self.simulated.to_dict(), "difference": dict(self.difference),
+                                  "simulated_at": self.simulated_at}
+        if self.simulated_seat is not None:
+            out["simulated_seat"] = self.simulated_seat.to_dict()
+        return out
 
 
 def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, sim_accel_ms2: FloatArray,
                t_start: float, t_end: float, t_cross: float, direction: float, params: DrivabilityParams, *,
                pedal: Signal | None = None, t_close_measured: float = math.nan,
-               t_close_simulated: float = math.nan, shuffle_hint_hz: float = math.nan) -> FeelComparison:
+               t_close_simulated: float = math.nan, shuffle_hint_hz: float = math.nan,
+               sim_seat_ms2: FloatArray | None = None) -> FeelComparison:
     """Criteria of the measured and simulated acceleration of one event window (times already offset-corrected).
 
-    ``sim_t`` (s), ``sim_speed_ms`` (m/s), ``sim_accel_ms2`` (m/s^2), shape (n,) each: the simulation of the window.
+    ``sim_t`` (s), ``sim_speed_ms`` (m/s), ``sim_accel_ms2`` (m/s^2), shape (n,) each: the simulation of the window;
+    ``sim_seat_ms2`` (n,) its seat-rail acceleration (:attr:`sim.SimResult.seat_rail_accel_ms2`) or None. The
+    seat rail is read like an accelerometer at the measured side's sample times (band-limited to their rate);
+    it is the compared side when ``params.compare_with`` is ``"seat_rail"``, otherwise reported beside.
     """
     moved = pedal_move(pedal, t_start, t_cross, params)  # the same driver input for both sides
-    m = (src.t >= t_start - PAD_S) & (src.t <= t_end + PAD_S)
-    t = src.t[m]
-    measured = drivability_criteria(t, src.a[m], t_start, t_end, t_cross, direction, params, pedal_time=moved,
+    # src.t is a uniform grid: the window is a slice
+    i0, i1 = int(np.searchsorted(src.t, t_start - PAD_S)), int(np.searchsorted(src.t, t_end + PAD_S, side="right"))
+    t = src.t[i0:i1]
+    measured = drivability_criteria(t, src.a[i0:i1], t_start, t_end, t_cross, direction, params, pedal_time=moved,
                                     t_close=t_close_measured, bandwidth_hz=src.bandwidth_hz,
                                     shuffle_hint_hz=shuffle_hint_hz, saturated=src.saturated_in(t_start, t_end),
                                     noise_ms2=src.noise_ms2)
-    inside = (t >= sim_t[0]) & (t <= sim_t[-1])
-    ts = t[inside]
+    ts = t[int(np.searchsorted(t, sim_t[0], side="left")):int(np.searchsorted(t, sim_t[-1], side="right"))]
     if src.kind == "accelerometer":
         a_sim = np.interp(ts, sim_t, _band_limit(sim_t, sim_accel_ms2, src.period_s))
     elif ts.size > 8:
@@ -69,7 +79,14 @@ def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, si
     simulated = drivability_criteria(ts, a_sim, t_start, t_end, t_cross, direction, params, pedal_time=moved,
                                      t_close=t_close_simulated, bandwidth_hz=src.bandwidth_hz,
                                      shuffle_hint_hz=shuffle_hint_hz)
-    return FeelComparison(src.kind, measured, simulated, difference(measured, simulated))
+    seat = None
+    if sim_seat_ms2 is not None and ts.size:
+        seat = drivability_criteria(ts, np.interp(ts, sim_t, _band_limit(sim_t, sim_seat_ms2, src.period_s)), t_start,
+                                    t_end, t_cross, direction, params, pedal_time=moved, t_close=t_close_simulated,
+                                    shuffle_hint_hz=shuffle_hint_hz)
+    if params.compare_with == "seat_rail" and seat is not None:
+        return FeelComparison(src.kind, measured, seat, difference(measured, seat), "seat_rail", seat)
+    return FeelComparison(src.kind, measured, simulated, difference(measured, simulated), "body", seat)
 
 
 def run_feel(t: FloatArray, accel_ms2: FloatArray, torque_nm: FloatArray,
@@ -104,16 +121,38 @@ def _band_limit(t: FloatArray, a: FloatArray, period_s: float) -> FloatArray:
     return zero_phase(butter_sos(4, float(f"{0.45 / period_s:.4g}"), "low", fs), a)
 
 
-def summarize_feel(rows: list[FeelComparison]) -> dict[str, dict[str, float]]:
-    """Per criterion: median measured, simulated and difference over events, and how many events count."""
-    out: dict[str, dict[str, float]] = {}
+#: criteria signed in the vehicle's frame (forward positive) rather than along the torque change: a tip-in
+#: settles forward, a tip-out backward, so a median over both kinds of event describes neither
+SIGNED_CRITERIA: tuple[str, ...] = ("settled_accel_ms2",)
+EVENT_KINDS: tuple[str, ...] = ("tip_in", "tip_out")
+
+
+def summarize_feel(rows: list[FeelComparison], kinds: list[str] | None = None) -> dict[str, dict[str, object]]:
+    """Per criterion: median measured, simulated and difference over events, and how many events count; with
+    ``kinds`` (each row's event kind, ``tip_in`` or ``tip_out``) the same per kind under ``tip_in`` and
+    ``tip_out``. Drivability is judged per manoeuvre: the per-kind medians are the ones to read, and for a
+    criterion in :data:`SIGNED_CRITERIA` the medians over all events are NaN (null), only its count is kept."""
+    out: dict[str, dict[str, object]] = {}
+    kind_of = np.array(kinds if kinds is not None else [""] * len(rows), dtype=object)
+    if kind_of.size != len(rows):
+        raise ValueError(f"{kind_of.size} event kinds for {len(rows)} rows")
     for k in CRITERIA_NAMES:
         meas = np.array([getattr(r.measured, k) for r in rows], float)
         sim = np.array([getattr(r.simulated, k) for r in rows], float)
-        diff = sim - meas
-        out[k] = {"measured_median": _med(meas), "simulated_median": _med(sim), "difference_median": _med(diff),
-                  "events": int(np.isfinite(meas).sum())}
+        row: dict[str, object] = dict(_medians(meas, sim))
+        if k in SIGNED_CRITERIA:
+            row.update(measured_median=math.nan, simulated_median=math.nan, difference_median=math.nan)
+        if kinds is not None:
+            for kind in EVENT_KINDS:
+                sel = kind_of == kind
+                row[kind] = _medians(meas[sel], sim[sel])
+        out[k] = row
     return out
+
+
+def _medians(meas: FloatArray, sim: FloatArray) -> dict[str, float]:
+    return {"measured_median": _med(meas), "simulated_median": _med(sim), "difference_median": _med(sim - meas),
+            "events": int(np.isfinite(meas).sum())}
 
 
 def _med(x: FloatArray) -> float:

@@ -32,6 +32,7 @@ import math
 import numpy as np
 from scipy import signal as sps
 
+from app.analysis.feel_kernels import fourth_power_dose
 from app.analysis.series import FloatArray
 from app.analysis.zerophase import sections
 
@@ -80,5 +81,5 @@ def vdv(a: FloatArray, fs_hz: float) -> float:
     a = np.asarray(a, dtype=np.float64)
     if a.size < 2 or not np.isfinite(a).all():
         return float("nan")
-    aw = weighted(a, fs_hz)
-    return float((np.sum(aw**4) / fs_hz) ** 0.25)
+    rate = float(f"{fs_hz:.6g}")
+    return float(fourth_power_dose(wd_sos(rate), _zi(rate), np.ascontiguousarray(a), fs_hz))

@@ -1,9 +1,9 @@
 """Zero-phase Butterworth filtering for the short windows of the drivability criteria.
 
-Designs are cached (every event of a log, and its simulation, uses the same few), and the filter runs as
-a cascade of ``lfilter`` calls, one per second-order section: the same arithmetic as
-``scipy.signal.sosfilt``/``sosfiltfilt`` (odd extension at both ends, steady-state initial conditions),
-with a tenth of their per-call overhead, which dominates on windows of a few hundred samples.
+Designs are cached (every event of a log, and its simulation, uses the same few), and the filter runs in
+one compiled call (:mod:`app.analysis.feel_kernels`): the arithmetic of ``scipy.signal.sosfilt``/``sosfiltfilt``
+(odd extension at both ends, steady-state initial conditions) without their per-call overhead, which
+dominates on windows of a few hundred samples.
 """
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ import functools
 import numpy as np
 import numpy.typing as npt
 from scipy import signal as sps
+
+from app.analysis.feel_kernels import cascade, filtfilt
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -51,19 +53,10 @@ def zero_phase(design: tuple[FloatArray, FloatArray], a: FloatArray) -> FloatArr
     n = min(a.size - 1, 3 * (order + 1))
     if n < 1:
         return np.asarray(a, dtype=np.float64)
-    ext = np.concatenate((2 * a[0] - a[n:0:-1], a, 2 * a[-1] - a[-2:-n - 2:-1]))
-    y = sections(sos, zi, ext)
-    y = sections(sos, zi, y[::-1])
-    return np.asarray(y[::-1][n:n + a.size], dtype=np.float64)
+    return np.asarray(filtfilt(sos, zi, np.ascontiguousarray(a, dtype=np.float64), n), dtype=np.float64)
 
 
 def sections(sos: FloatArray, zi: FloatArray, x: FloatArray) -> FloatArray:
-    """``scipy.signal.sosfilt(sos, x, zi=zi * x[0])`` as a cascade of ``lfilter`` calls, one per row (a
-    second-order section, or one merged transfer function): the same arithmetic with a tenth of ``sosfilt``'s
-    per-call overhead on the short event windows."""
-    y = np.asarray(x, dtype=np.float64)
-    x0 = float(y[0])
-    half = sos.shape[1] // 2
-    for k in range(sos.shape[0]):
-        y, _ = sps.lfilter(sos[k, :half], sos[k, half:], y, zi=zi[k] * x0)
-    return np.asarray(y, dtype=np.float64)
+    """``scipy.signal.sosfilt(sos, x, zi=zi * x[0])``, row by row (a second-order section, or one merged
+    transfer function) in one compiled call."""
+    return np.asarray(cascade(sos, zi, np.ascontiguousarray(x, dtype=np.float64)), dtype=np.float64)

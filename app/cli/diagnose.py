@@ -35,6 +35,10 @@ def register(sub: Any) -> None:
     p.add_argument("--model-form-tolerance", type=float, default=0.0, metavar="F",
                    help="residual under F x the local predicted oscillation is no evidence of a gap (0..1; "
                         "default 0: sensor noise alone; see docs/diagnosis.md)")
+    p.add_argument("--all-events", action="store_true",
+                   help="diagnose every event in one stage (default: the sequential design, which stops adding "
+                        "events once two stratified stages of 24, 48, ... events per side agree; see "
+                        "docs/diagnosis.md)")
     p.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write overlay and residual PNGs here")
     p.add_argument("--out", type=Path, default=None, help="also write the JSON report to this file")
     p.add_argument("--json", action="store_true", help="print the JSON report instead of the summary")
@@ -171,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
     inputs = vehicle_inputs(args)
     vehicle, dbc, smap = inputs.vehicle, inputs.database, inputs.signal_map
     options = DiagnosisOptions(candidates=candidates, seed=args.seed, model=args.model,
-                               model_form_rel=args.model_form_tolerance)
+                               model_form_rel=args.model_form_tolerance, sequential=not args.all_events)
     say = _progress(args.quiet)
     say(0.0, f"decoding {args.log}")
     signals, ingest = decode_log(args.log, dbc, smap)

@@ -77,7 +77,7 @@ DRIVABILITY_ROWS = (
     ("max_jerk_ms3", "maximum jerk", "m/s^3", 1.0),
     ("clunk_ms2", "clunk (HF peak at closure)", "m/s^2", 1.0),
     ("vdv_ms175", "VDV (ISO 2631-1 Wd)", "m/s^1.75", 1.0),
-    ("settled_accel_ms2", "settled acceleration", "m/s^2", 1.0),
+    ("settled_accel_ms2", "settled accel.", "m/s^2", 1.0),
 )
 
 
@@ -100,9 +100,14 @@ def drivability_table(doc: dict[str, Any]) -> str:
         if not row:
             continue
         digits = 0 if unit == "ms" else (1 if unit == "m/s^3" else 3 if unit == "-" else 2)
-        lines.append(f"{label:<30} {_f(row['measured_median'], scale, digits):>10} "
-                     f"{_f(row['simulated_median'], scale, digits):>10} "
-                     f"{_f(row['difference_median'], scale, digits):>10}  {unit}")
+        # a criterion signed in the vehicle's frame (the settled acceleration) has medians per event kind only
+        parts = ([(f"{label} ({kind.replace('_', '-')})", row[kind]) for kind in ("tip_in", "tip_out")
+                  if isinstance(row.get(kind), dict) and row[kind].get("events")]
+                 if _f(row.get("measured_median")) == "-" and "tip_in" in row else [(label, row)])
+        for text, r in parts:
+            lines.append(f"{text:<30} {_f(r['measured_median'], scale, digits):>10} "
+                         f"{_f(r['simulated_median'], scale, digits):>10} "
+                         f"{_f(r['difference_median'], scale, digits):>10}  {unit}")
     rating = doc["summary"].get("rating")
     if rating:
         lines.append(f"rating (model {rating['model']}, CV RMS {rating['cv_rms']:.2f}): median "

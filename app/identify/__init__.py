@@ -3,6 +3,7 @@
 Public entry points::
 
     ident = identify_events(events, noise, vehicle, FitOptions(), progress, modal)   # prepared events
+    ident = identify_staged(events, noise, vehicle, FitOptions(), progress)          # ... in stages on a long drive
     res = identify_logs([log], vehicle, IdentifyOptions(dbc=..., signal_map=...), validate=[other])
 
 Modules: :mod:`.base` (the identifiable base parameters and their physical figures), :mod:`.modal`
@@ -16,13 +17,13 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 from app.identify.base import BASE_NAMES, Physical, physical, with_base
-from app.identify.fit import FitOptions, Identification, Param, identify_events
+from app.identify.fit import FitOptions, Identification, Param, identify_events, identify_staged
 
 if TYPE_CHECKING:
     from app.identify.logs import IdentifyOptions, IdentifyResult, identify_logs
 
 __all__ = ["BASE_NAMES", "FitOptions", "Identification", "IdentifyOptions", "IdentifyResult", "Param", "Physical",
-           "identify_events", "identify_logs", "physical", "with_base"]
+           "identify_events", "identify_logs", "identify_staged", "physical", "with_base"]
 _LOGS = ("IdentifyOptions", "IdentifyResult", "identify_logs")
 
 

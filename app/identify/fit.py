@@ -36,7 +36,7 @@ from app.analysis.diagnosis.calibrate import GAIN_BOUNDS, Bounds, FitResult, fit
 from app.analysis.diagnosis.forward import DiagEvent, Nuisance, prediction, simulate_events, vehicle_with
 from app.analysis.diagnosis.localise import MIN_TRAVERSE_SAMPLES, phase_times
 from app.analysis.diagnosis.noise import NoiseFloor
-from app.analysis.diagnosis.split import Split
+from app.analysis.diagnosis.split import Split, stratified_order
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.errors import InsufficientDataError, NotIdentifiableError
 from app.identify.base import (
@@ -579,3 +579,75 @@ def mode_pins(vehicle: Vehicle, names: Sequence[str], modal: ModalEstimate | Non
 
 def _nuisance_dict(n: Nuisance) -> dict[str, float]:
     return {"offset_s": n.offset_s, "torque_gain": n.gain, "road_load_grade_pct": n.grade_pct}
+
+
+IDENT_STAGE_EVENTS = 48  # events in the first stage of a staged identification (about a 60 s drive's)
+STABLE_SHARE = 1.0  # a parameter is stable when it moved by less than this share of its 90 % half-width (the
+# previous stage's value lies inside the new stage's interval)
+
+
+def _moved(a: Identification, b: Identification) -> list[str]:
+    """The base parameters whose identified value differs between ``a`` and ``b`` by :data:`STABLE_SHARE` of
+    ``b``'s 90 % interval half-width or more (on the log scale), or that one identified and the other did not."""
+    out = []
+    for k in BASE_NAMES:
+        p, q = a.params.get(k), b.params.get(k)
+        if p is None or q is None or p.identified != q.identified:
+            out.append(k)
+            continue
+        if not q.identified:
+            continue
+        half = 0.5 * float(np.log(q.ratio_hi / q.ratio_lo)) if q.ratio_lo > 0 else float("inf")
+        if abs(float(np.log(q.ratio / p.ratio))) >= STABLE_SHARE * half:
+            out.append(k)
+    return out
+
+
+def identify_staged(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Vehicle,
+                    options: FitOptions | None = None, progress: Progress | None = None,
+                    first: int = IDENT_STAGE_EVENTS) -> Identification:
+    """:func:`identify_events` whose cost does not grow with the drive: the sequential design of the diagnosis.
+
+    The events are taken in the stratified order of :func:`app.analysis.diagnosis.split.stratified_order`; stage
+    *k* identifies on the first ``first`` x 2^k of them (a stage that would take 75 % of them or more takes all),
+    and the design stops after the first stage whose 90 % intervals hold the previous stage's values of every base
+    parameter, with the same parameters named, or when a stage holds every event.
+    Up to about 64 events (a 60 s drive) it is one stage of all of them, as :func:`identify_events`."""
+    say = progress or (lambda f, m: None)
+    order = stratified_order(events)
+    sizes: list[int] = []
+    n = first
+    while n < 0.75 * len(order):
+        sizes.append(n)
+        n *= 2
+    sizes.append(len(order))
+    if len(sizes) == 1:
+        return identify_events(events, noise, vehicle, options, progress)
+    clock = time.process_time()
+    done, planned = 0.0, float(sizes[0] + sizes[1])
+    history: list[str] = []
+    prev: Identification | None = None
+    cur: Identification | None = None
+    for k, n in enumerate(sizes):
+        keep = {e.index for e in order[:n]}
+        sub = [e for e in events if e.index in keep]
+
+        def staged(f: float, m: str, k: int = k, n: int = n, done: float = done, planned: float = planned) -> None:
+            say(min((done + f * n) / planned, 0.99), f"stage {k + 1} ({n} events): {m}")
+
+        prev, cur = cur, identify_events(sub, noise, vehicle, options, staged)
+        done += n
+        moved = _moved(prev, cur) if prev is not None else list(BASE_NAMES)
+        history.append(f"{n}: " + (", ".join(cur.named) or "nothing off the file")
+                       + (f" (moved: {', '.join(moved)})" if prev is not None and moved else ""))
+        if prev is not None and not moved and prev.named == cur.named:
+            break
+        if k + 1 < len(sizes):
+            planned = max(planned, done + sizes[k + 1])
+    assert cur is not None
+    stopped = len(history) < len(sizes)
+    cur.fit_log.insert(0, "sequential design (events: named): " + "; ".join(history)
+                       + (f" -- stable, stopped; {len(events) - sizes[len(history) - 1]} events not needed"
+                          if stopped else " -- all events"))
+    cur.elapsed_s = time.process_time() - clock
+    return cur

@@ -144,3 +144,23 @@ def test_the_model_form_floor_widens_below_ten_samples_per_mode_period() -> None
     assert model_form_scale(7.7, 0.01) == 1.0 and model_form_scale(7.7, 0.001) == 1.0  # the paper car, 100 Hz, 1 kHz
     assert model_form_scale(5.5, 0.04) == pytest.approx(5.5 * 0.04 * MODE_SAMPLES)  # 25 Hz: 2.2x
     assert model_form_scale(float("nan"), 0.04) == 1.0 and model_form_scale(5.5, 0.0) == 1.0
+
+
+def test_staged_identification_stops_once_two_stages_agree() -> None:
+    """Stages of 8, 16, ... of a 2-minute drive's events in the stratified order: the design stops when the new
+    stage's intervals hold the previous stage's values and the same parameters are named, and holds the truth."""
+    from app.identify import identify_staged
+    events, noise = prepared(drive_signals(OFF, seed=5, duration_s=120.0))
+    said: list[str] = []
+    res = identify_staged(events, noise, load_vehicle("paper"), progress=lambda f, m: said.append(m), first=8)
+    head = res.fit_log[0]
+    assert head.startswith("sequential design (events: named): 8: "), head
+    assert "stable, stopped" in head and res.n_events < len(events), head
+    assert sorted(res.named) == ["damping", "lash", "mass", "stiffness"]
+    truth = physical(with_base(load_vehicle("paper"), OFF))
+    for name in ("stiffness", "mass", "lash"):
+        p = res.params[name]
+        assert p.lo <= truth.value(name) <= p.hi, (name, p)
+    assert any(m.startswith("stage 2 (16 events)") for m in said)
+    # a drive no longer than a first stage is one identification of all its events
+    assert identify_staged(events[:12], noise, load_vehicle("paper"), first=12).n_events == 12

@@ -25,7 +25,9 @@ touching the transient.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,13 +35,25 @@ import numpy as np
 import numpy.typing as npt
 from scipy.interpolate import PchipInterpolator
 
-from sim import Vehicle, simulate
+from sim import SimResult, Vehicle, simulate
 from sim.effects.base import Effect
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 FINE_DT = 0.001  # s: grid of the simulated torque input and output
+# clusters simulated side by side (the integrator runs without the interpreter lock); at most the usable cores
+SIM_THREADS = max(1, min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1))
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
+
+
+def _sim_pool() -> ThreadPoolExecutor:
+    """This process's pool of simulation threads (a forked child never reuses its parent's, whose threads it
+    does not have)."""
+    global _POOL
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(max_workers=SIM_THREADS, thread_name_prefix="lashscope-sim"))
+    return _POOL[1]
 MARGIN_S = 0.03  # s: simulated beyond the window so the output can be shifted by the offset
 
 
@@ -273,12 +287,17 @@ def simulate_events(events: Sequence[DiagEvent], vehicle: Vehicle, gain: float,
     gets the run's output over its own fine-grid span.
     """
     outs: list[SimOut | None] = [None] * len(events)
-    for group in clusters(events):
-        first = events[group[0]]
+    groups = clusters(events)
+
+    def run(group: list[int]) -> SimResult:
         grid, raw = _run_torque(events, group, interp)
         tq = _gained(grid, raw, gain, effects)
-        res = simulate(vehicle, grid, tq, model=model, speed0_rpm=first.speed0(), interp="linear",
-                       output_dt=FINE_DT)
+        return simulate(vehicle, grid, tq, model=model, speed0_rpm=events[group[0]].speed0(), interp="linear",
+                        output_dt=FINE_DT)
+
+    # the integrator releases the interpreter lock: clusters run side by side on the machine's cores
+    runs = list(_sim_pool().map(run, groups)) if SIM_THREADS > 1 and len(groups) > 1 else [run(g) for g in groups]
+    for group, res in zip(groups, runs, strict=True):
         t_out = np.asarray(res.t, dtype=np.float64)
         sp = np.asarray(res.motor_speed_rpm, dtype=np.float64)
         for eff, vals in effects:

@@ -172,6 +172,21 @@ def not_separable(decision: Decision, ident: Identification, tangled: Sequence[t
                                               for x, y, r in tangled]})
 
 
+def told_apart(decision: Decision, tangled: Sequence[tuple[str, str, float]], p_better: float, gap: float
+               ) -> Decision:
+    """``decision`` kept although its effect trades off with a base parameter in their joint fit: held-out events
+    prefer the effect (fitted with the base) to the identified base alone, with probability ``p_better`` and a
+    residual-to-noise gap of ``gap`` -- the file's error cannot stand in for it."""
+    what = "; ".join(f"{x} trades off with {y} (correlation {r:+.2f})" for x, y, r in tangled)
+    reason = (f"{decision.reason}. In the joint fit {what}, but held-out events prefer {'+'.join(decision.top)} to "
+              f"the identified base alone (probability {p_better:.2f}, {gap:.2f}x the noise floor less left): the "
+              "file's error does not stand in for it")
+    return replace(decision, reason=reason, details={
+        **decision.details, "base_trade_off": [{"effect_param": x, "base_param": y, "correlation": round(r, 4)}
+                                               for x, y, r in tangled],
+        "preferred_to_base": {"probability": round(p_better, 4), "separation": round(gap, 4)}})
+
+
 def with_base(decision: Decision, ident: Identification, nominal_gap: Any = None) -> Decision:
     """``decision`` (made on the identified vehicle) saying which base parameters were corrected first.
 

@@ -36,6 +36,7 @@ from app.analysis.diagnosis.decide import (
     gap_ratio,
     has_gap,
     score_candidate,
+    separation,
     structured,
     with_tones,
 )
@@ -66,14 +67,15 @@ from app.analysis.diagnosis.rebase import (
     judge,
     not_separable,
     nuisance_only,
+    told_apart,
     with_base,
 )
 from app.analysis.diagnosis.score import EventScore, Interval
-from app.analysis.diagnosis.split import Split, make_split
+from app.analysis.diagnosis.split import Split, make_split, restricted, stratified_order
 from app.analysis.diagnosis.structure import remainder
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.errors import InputError, InsufficientDataError, NotIdentifiableError
-from app.identify.base import BASE_EFFECTS
+from app.identify.base import BASE_EFFECTS, BASE_NAMES
 from app.identify.fit import FitOptions, Identification, identify_events
 from app.identify.fit import refined as identified_with
 from sim import Vehicle
@@ -82,6 +84,8 @@ from sim.effects import EFFECTS, get_effect
 FloatArray = npt.NDArray[np.float64]
 Progress = Callable[[float, str], None]
 PAIR_PASSES_PER_PARAM = 10  # a pair's refinement starts near its solution (the single fit + the screen's step)
+STAGE_EVENTS = 24  # events per side in the sequential design's first stage (the calibration side of a 60 s drive)
+STAGE_COVER = 0.75  # a stage that would take this share of a side or more takes all of it
 JOINT_REFITS = 2  # best single effects refitted jointly with the identified base parameters
 
 
@@ -100,6 +104,10 @@ class DiagnosisOptions:
     # attributions on the independent generator's no-effect drives but also hid clean 15 ms torque lags
     # (docs/diagnosis.md, "Model-form tolerance")
     model_form_rel: float = 0.0
+    # the sequential design of run_diagnosis (stratified stages of 24, 48, ... events per side, stopped once two
+    # stages agree); False: every event in one stage, whatever the drive's length
+    sequential: bool = True
+    stage_events: int = STAGE_EVENTS  # events per side of the sequential design's first stage
     rules: DecisionRules = field(default_factory=DecisionRules)
 
     def __post_init__(self) -> None:
@@ -114,6 +122,9 @@ class DiagnosisOptions:
             raise InputError(f"unknown candidate effects {unknown}; known: {list(EFFECTS)}")
         if len(set(self.candidates)) != len(self.candidates):
             raise InputError(f"candidate effects repeat: {list(self.candidates)}")
+        if self.stage_events < self.rules.min_events_per_side:
+            raise InputError(f"stage_events = {self.stage_events}: a stage needs at least "
+                             f"{self.rules.min_events_per_side} events per side")
         if self.model not in ("multibody", "two_inertia"):
             raise InputError(f"model {self.model!r}: must be 'multibody' or 'two_inertia'")
 
@@ -199,6 +210,27 @@ def _refit_first(vehicle: Vehicle, cal: Sequence[DiagEvent], split: Split, first
     return again if again.chi2 < single.chi2 else None
 
 
+def stage_sizes(n_side: int, first: int = STAGE_EVENTS) -> list[int]:
+    """Events per side of each stage of the sequential design for a side of ``n_side`` events: ``first``, twice
+    that, ... (24, 48, 96, ...) while a stage takes under :data:`STAGE_COVER` of the side, then all of it."""
+    out: list[int] = []
+    n = first
+    while n < STAGE_COVER * n_side:
+        out.append(n)
+        n *= 2
+    return [*out, n_side]
+
+
+def with_eta(say: Progress, t0: float) -> Progress:
+    """``say`` with the time left appended, from the elapsed time and the fraction done (once 5 % is done)."""
+    def out(frac: float, msg: str) -> None:
+        spent = time.perf_counter() - t0
+        if 0.05 <= frac < 1.0 and spent > 0.0:
+            msg = f"{msg} (about {max(spent / frac - spent, 0.0):.0f} s left)"
+        say(frac, msg)
+    return out
+
+
 def run_diagnosis(
     events: Sequence[DiagEvent],
     noise: NoiseFloor,
@@ -207,7 +239,15 @@ def run_diagnosis(
     progress: Progress | None = None,
     skipped: Sequence[dict[str, object]] = (),
 ) -> DiagnosisResult:
-    """Diagnose the sim-to-real gap of one log.
+    """Diagnose the sim-to-real gap of one log, in stages whose cost does not grow with the drive.
+
+    The sequential design: the frozen split is made on every event; each side is taken in a stratified order
+    (:func:`.split.stratified_order`: every prefix covers tip-ins and tip-outs in proportion and spans their
+    speeds and torque steps), and stage *k* diagnoses the first 24 x 2^k events of each side
+    (:func:`stage_sizes`). The design stops after the first stage whose decision (status and effects) equals the
+    previous stage's, or when a stage holds every event. A log of up to about 32 events per side (a 60 s drive)
+    is one stage of all its events, as before. The events a stopped design did not need are reported under
+    ``events_skipped`` with the reason.
 
     Parameters
     ----------
@@ -215,13 +255,61 @@ def run_diagnosis(
     noise : model-free noise floor of the speed channel.
     vehicle : the diagnosed vehicle (its effects as the file says).
     options : candidate subset, split seed, model, decision rules.
-    progress : ``progress(fraction in [0, 1], message)``.
+    progress : ``progress(fraction in [0, 1], message)``; messages carry the time left.
     skipped : events left out upstream, reported as such.
     """
     opts = options or DiagnosisOptions()
-    say = progress or (lambda f, m: None)
-    t_start = time.perf_counter()
+    t0 = time.perf_counter()
+    say = with_eta(progress or (lambda f, m: None), t0)
     split = make_split(events, opts.seed)
+    cal = stratified_order(split.calibration_events(events))
+    ho = stratified_order(split.heldout_events(events))
+    sizes = stage_sizes(max(len(cal), len(ho)), opts.stage_events)
+    if len(sizes) == 1 or not opts.sequential:
+        return _diagnose(events, noise, vehicle, opts, say, skipped, split)
+    planned = float(sizes[0] + sizes[1])  # the stages' cost grows with their events; at least two stages run
+    done = 0.0
+    history: list[tuple[int, str]] = []
+    res: DiagnosisResult | None = None
+    for k, n in enumerate(sizes):
+        keep = {e.index for e in (*cal[:n], *ho[:n])}
+        sub = [e for e in events if e.index in keep]
+
+        def staged(frac: float, msg: str, k: int = k, n: int = n, done: float = done, planned: float = planned) -> None:
+            say(min((done + frac * n) / planned, 0.99), f"stage {k + 1} ({n} events per side): {msg}")
+
+        res = _diagnose(sub, noise, vehicle, opts, staged, skipped, restricted(split, sub))
+        d = res.decision
+        history.append((n, f"{d.status} {'+'.join(d.top)}".rstrip()))
+        done += n
+        if k == len(sizes) - 1 or (k >= 1 and history[-1][1] == history[-2][1]):
+            break
+        planned = max(planned, done + sizes[k + 1])
+    assert res is not None
+    used = {e.index for e in res.events}
+    stable = len(history) < len(sizes) or history[-1][1] == history[-2][1]
+    why = (f"not needed: the sequential design stopped at {history[-1][0]} events per side, where the decision "
+           f"({history[-1][1]}) equals the previous stage's" if stable else "")
+    res.skipped.extend({"index": e.index, "reason": why} for e in events if e.index not in used)
+    res.fit_order.insert(0, "sequential design (events per side: decision): "
+                         + "; ".join(f"{n}: {dec}" for n, dec in history)
+                         + (" -- stable, stopped" if stable and len(history) < len(sizes) else " -- all events"))
+    res.elapsed_s = time.perf_counter() - t0
+    progress and progress(1.0, f"decision: {res.decision.status} {' + '.join(res.decision.top)}".rstrip())
+    return res
+
+
+def _diagnose(
+    events: Sequence[DiagEvent],
+    noise: NoiseFloor,
+    vehicle: Vehicle,
+    opts: DiagnosisOptions,
+    say: Progress,
+    skipped: Sequence[dict[str, object]],
+    split: Split,
+) -> DiagnosisResult:
+    """One stage of :func:`run_diagnosis`: the diagnosis of ``events`` on ``split``."""
+    t_start = time.perf_counter()
     cal = split.calibration_events(events)
     ho = split.heldout_events(events)
     ho_idx = [e.index for e in ho]
@@ -288,6 +376,7 @@ def run_diagnosis(
     nominal_gap = gap_ratio(b, n, draws, rules.level)
     nominal = vehicle
     ident, ident_score, rebased, ident_note, file_eval = None, None, None, "", None
+    bound_stop: Decision | None = None  # "identify the vehicle first", unless an effect brings the base inside
     refit_with: Identification | None = None  # base parameters the best effects are refitted with
     joint_ident: dict[str, Identification] = {}  # candidate -> the base parameters identified jointly with it
     say(step[0] / n_steps, "identifying the vehicle's base parameters on calibration events")
@@ -304,14 +393,25 @@ def run_diagnosis(
                                       remainder(ho, id_eval.scores, id_eval.predictions, period))
         outcome = judge(ident, ident_score, n, draws, rules, nominal_gap)
         ident_note = outcome.note
-        if outcome.stop is not None:
+        if outcome.stop is not None and outcome.stop.details.get("identify_first"):
+            # a base parameter on its prior bound: either the file is further off than the priors allow, or missing
+            # physics pushed the base there (a tyre's compliance taken as a lighter car with more lash). The
+            # candidates are fitted on the file's vehicle and the best refitted jointly with the base parameters;
+            # an effect is named only if, fitted with it, every base parameter comes back inside its prior
+            # (below); otherwise the answer stays "identify the vehicle first"
+            bound_stop = outcome.stop
+            refit_with = ident
+            ident = replace(ident, params={k: replace(p, named=False) for k, p in ident.params.items()})
+            fit_order.append("identification: a base parameter on its prior bound; candidates fitted on the file's "
+                             "vehicle, an effect named only with every base parameter inside its prior")
+        elif outcome.stop is not None:
             decision = with_tones(outcome.stop, noise.tones)
             say(1.0, f"decision: {decision.status}")
             return result(decision, baseline=base_eval, candidates={BASE_ID: id_eval}, phases=phases, draws=draws,
                           fit_order=fit_order, not_applicable=not_applicable, identification=ident,
                           identified_score=ident_score,
                           nominal_gap=nominal_gap, identification_note=ident_note)
-        if outcome.use:  # the candidates explain only what the identified vehicle cannot
+        elif outcome.use:  # the candidates explain only what the identified vehicle cannot
             rebased, file_eval, refit_with = ident, base_eval, ident
             vehicle = ident.vehicle
             base_fit = nuisance_only(ident)
@@ -404,6 +504,22 @@ def run_diagnosis(
                                                    held=refit_with)
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
+    if bound_stop is not None:
+        top = "+".join(decision.top)
+        jointly = joint_ident.get(top)
+        inside = jointly is not None and not any(p.at_bound for k, p in jointly.params.items() if k in BASE_NAMES)
+        if decision.status in ("explained", "partial") and inside:
+            fit_order.append(f"{top}: with it every base parameter is inside its prior; attributed")
+        else:
+            why = ("no effect was attributed" if decision.status not in ("explained", "partial") else
+                   f"{top} did not bring every base parameter inside its prior")
+            fit_order.append(f"identify the vehicle first: {why}")
+            decision = with_tones(bound_stop, noise.tones)
+            say(1.0, f"decision: {decision.status}")
+            evals[BASE_ID] = id_eval
+            return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
+                          draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=ident,
+                          identified_score=ident_score, nominal_gap=nominal_gap, identification_note=ident_note)
     if rebased is not None and ident_score is not None and decision.status == "none_of_candidates":
         decision = base_only(decision, rebased, ident_score, nominal_gap)
         evals[BASE_ID] = evaluate(nominal, rebased.fit, ho, opts.model, phases, period)
@@ -411,13 +527,21 @@ def run_diagnosis(
         ident = joint_ident.get("+".join(decision.top), ident)
         chosen = evals.get("+".join(decision.top))
         mixed = base_trade(decision, chosen.fit if chosen is not None else None) if ident.named else []
-        if mixed:  # the effect cannot be told from the base: the base is the answer
+        # a trade-off inside the joint fit says the file's error *could* take part of the effect; whether it can
+        # stand in for it is the held-out comparison of the effect with the identified base alone (rule 4)
+        apart = None
+        if mixed and ident_score is not None and decision.best is not None:
+            preferred, p_better, gap = separation(decision.best, ident_score, n, draws, rules)
+            apart = (p_better, gap) if preferred else None
+        if mixed and apart is None:  # the effect cannot be told from the base: the base is the answer
             decision = not_separable(decision, ident, mixed, nominal_gap, ident_score)
         else:
             decision = with_base(decision, ident, nominal_gap if rebased is not None else None)
             if "+".join(decision.top) not in joint_ident and rebased is None:  # the base played no part in the answer
                 decision = replace(decision, details={k: v for k, v in decision.details.items()
                                                       if k != "base_parameters"})
+            if mixed and apart is not None:
+                decision = told_apart(decision, mixed, *apart)
     decision = with_tones(decision, noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,

@@ -150,3 +150,52 @@ def make_split(events: Sequence[SplitEvent], seed: int = 0) -> Split:
     cal.sort()
     ho.sort()
     return Split(seed, tuple(cal), tuple(ho), _digest(seed, events, cal, ho), strata)
+
+
+def _radical_inverse(i: int) -> float:
+    """Van der Corput radical inverse of ``i`` in base 2 (0, 0.5, 0.25, 0.75, 0.125, ...)."""
+    out, f = 0.0, 0.5
+    while i:
+        out += f * (i & 1)
+        i >>= 1
+        f *= 0.5
+    return out
+
+
+def spread_order(m: int) -> list[int]:
+    """Positions ``0..m-1`` in an order whose every prefix spreads over the whole range (van der Corput)."""
+    seen: set[int] = set()
+    out: list[int] = []
+    i = 0
+    while len(out) < m:
+        p = min(int(_radical_inverse(i) * m), m - 1)
+        i += 1
+        if p not in seen:
+            seen.add(p)
+            out.append(p)
+    return out
+
+
+def stratified_order(events: Sequence[E]) -> list[E]:
+    """``events`` in the order a sequential design takes them: every prefix covers each kind in proportion and
+    spans its speeds and torque steps.
+
+    Within a kind the events are sorted by speed and torque step (as the split pairs them) and taken in the
+    van der Corput order of their ranks; the kinds are merged by each event's place in its own order as a share
+    of the kind's size, so a prefix of ``n`` events holds about ``n`` times each kind's share."""
+    keyed: list[tuple[float, str, int, E]] = []
+    for kind in sorted({e.kind for e in events}):
+        group = sorted((e for e in events if e.kind == kind),
+                       key=lambda e: (float(e.speed_rpm), abs(float(e.torque_step_nm)), e.index))
+        for j, p in enumerate(spread_order(len(group))):
+            keyed.append(((j + 0.5) / len(group), kind, group[p].index, group[p]))
+    return [k[3] for k in sorted(keyed, key=lambda k: k[:3])]
+
+
+def restricted(split: Split, events: Sequence[SplitEvent]) -> Split:
+    """``split`` on a subset of its events (each keeps its side), with the digest of that subset."""
+    keep = {e.index for e in events}
+    cal = tuple(i for i in split.calibration if i in keep)
+    ho = tuple(i for i in split.heldout if i in keep)
+    strata = {k: sum(1 for e in events if e.kind == k) for k in sorted({e.kind for e in events})}
+    return Split(split.seed, cal, ho, _digest(split.seed, events, cal, ho), strata)

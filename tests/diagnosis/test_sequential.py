@@ -1,0 +1,122 @@
+"""The sequential design: stratified stages whose decision must agree before the design stops adding events."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals
+from app.analysis.diagnosis.select import stage_sizes
+from app.analysis.diagnosis.split import make_split, restricted, spread_order, stratified_order
+from app.errors import InputError
+from app.signals import SignalSet
+from tests.diagnosis.conftest import paper
+
+
+@dataclass(frozen=True)
+class Ev:
+    index: int
+    kind: str
+    t_event: float
+    speed_rpm: float
+    torque_step_nm: float
+
+
+def _events(n_in: int, n_out: int) -> list[Ev]:
+    rng = np.random.default_rng(3)
+    kinds = ["tip_in"] * n_in + ["tip_out"] * n_out
+    return [Ev(i, k, float(i), float(rng.uniform(500, 5000)), float(rng.uniform(-200, 200)))
+            for i, k in enumerate(kinds)]
+
+
+def test_spread_order_is_a_permutation_whose_prefixes_span_the_range() -> None:
+    for m in (1, 2, 7, 24, 100):
+        order = spread_order(m)
+        assert sorted(order) == list(range(m))
+    order = spread_order(100)
+    assert order[:4] == [0, 50, 25, 75]
+    # every prefix of 8 leaves no gap of more than a quarter of the range
+    gaps = np.diff(sorted([0, *order[:8], 99]))
+    assert gaps.max() <= 25
+
+
+def test_stratified_order_takes_kinds_in_proportion_and_spans_their_speeds() -> None:
+    events = _events(60, 30)
+    order = stratified_order(events)
+    assert sorted(e.index for e in order) == list(range(90))
+    for n in (6, 12, 24, 48):
+        ins = sum(e.kind == "tip_in" for e in order[:n])
+        assert abs(ins - 2 * n / 3) <= 1, (n, ins)
+    speeds = sorted(e.speed_rpm for e in events if e.kind == "tip_in")
+    first = [e.speed_rpm for e in order[:12] if e.kind == "tip_in"]
+    assert min(first) <= speeds[len(speeds) // 8] and max(first) >= speeds[-len(speeds) // 8]
+
+
+def test_stage_sizes_double_until_a_stage_would_take_most_of_a_side() -> None:
+    assert stage_sizes(23) == [23]
+    assert stage_sizes(32) == [32]  # 24 is 75 % of it: one stage of all events, as a 60 s drive
+    assert stage_sizes(72) == [24, 48, 72]
+    assert stage_sizes(215) == [24, 48, 96, 215]
+    assert stage_sizes(40, first=8) == [8, 16, 40]
+
+
+def test_restricted_split_keeps_each_event_on_its_side_with_its_own_digest() -> None:
+    events = _events(40, 40)
+    split = make_split(events, seed=5)
+    sub = stratified_order(split.calibration_events(events))[:10] + stratified_order(split.heldout_events(events))[:10]
+    part = restricted(split, sub)
+    assert set(part.calibration) <= set(split.calibration) and set(part.heldout) <= set(split.heldout)
+    assert len(part.calibration) == 10 and len(part.heldout) == 10
+    assert part.digest != split.digest
+    assert restricted(split, events).digest == split.digest
+
+
+def test_stage_events_below_the_decision_minimum_is_refused() -> None:
+    with pytest.raises(InputError, match="stage_events"):
+        DiagnosisOptions(stage_events=1)
+
+
+def test_staged_diagnosis_stops_when_two_stages_agree_and_matches_all_events(
+        signals_for: Callable[..., SignalSet]) -> None:
+    """A clear torque lag over a 120 s drive (about 18 events per side), with stages of 4, 8, ... events per side:
+    the design stops once two stages agree, says which events it did not need and why, and names what the
+    one-stage diagnosis names."""
+    sig = signals_for("torque_lag", (("tau_s", 0.015), ("delay_s", 0.0)), 21, 120.0)
+    base = dict(candidates=("torque_lag", "drag"), seed=2, max_pairs=0)
+    said: list[str] = []
+    staged = diagnose_signals(sig, paper(), DiagnosisOptions(**base, stage_events=4),  # type: ignore[arg-type]
+                              progress=lambda f, m: said.append(m))
+    whole = diagnose_signals(sig, paper(), DiagnosisOptions(**base, sequential=False))  # type: ignore[arg-type]
+    assert whole.decision.status == "explained" and whole.decision.top == ("torque_lag",)
+    assert (staged.decision.status, staged.decision.top) == (whole.decision.status, whole.decision.top)
+    assert staged.fit_order[0].startswith("sequential design (events per side: decision): 4: ")
+    assert "stable, stopped" in staged.fit_order[0]
+    left = [s for s in staged.skipped if "sequential design stopped" in str(s["reason"])]
+    assert left and len(staged.events) + len(left) == len(whole.events)
+    assert len(staged.split.calibration) < len(whole.split.calibration)
+    assert any(m.startswith("stage 2 (8 events per side)") for m in said)
+    assert any(m.endswith("s left)") for m in said)
+
+
+def test_clusters_simulated_side_by_side_give_the_serial_result(signals_for: Callable[..., SignalSet],
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """The integrator runs without the interpreter lock, so the clusters of a pass run on threads; the outputs are
+    the serial ones, bit for bit and in the events' order."""
+    import app.analysis.diagnosis.forward as forward
+    from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, prepare
+    from app.analysis.events import detect_events
+
+    sig = signals_for("drag", (("coulomb_nm", 3.0), ("viscous_nms", 0.005)), 5, 60.0)
+    events, _, _ = prepare(sig, detect_events(sig, DIAGNOSIS_EVENTS))
+    assert len(forward.clusters(events)) > 2
+    monkeypatch.setattr(forward, "SIM_THREADS", 1)
+    serial = forward.simulate_events(events, paper(), 0.97)
+    monkeypatch.setattr(forward, "SIM_THREADS", 3)
+    threaded = forward.simulate_events(events, paper(), 0.97)
+    assert len(serial) == len(threaded) == len(events)
+    for a, b in zip(serial, threaded, strict=True):
+        np.testing.assert_array_equal(a.t, b.t)
+        np.testing.assert_array_equal(a.speed, b.speed)
