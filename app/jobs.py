@@ -43,6 +43,10 @@ from multiprocessing.process import BaseProcess
 from app.errors import AppError
 from app.storage.base import Store
 from app.storage.records import JobRecord, JobStatus
+from app.storage.url import open_store
+from app.tempfiles import temp_dir_of
+from app.worker import die_with_parent
+from sim import SimError
 
 log = logging.getLogger("lashscope.jobs")
 #: kind -> lane; one module each in app.jobkinds, with run(store, job)
@@ -239,10 +243,6 @@ class JobRunner:
 
 def worker_main(url: str, job_id: str, parent: int | None = None) -> None:
     """Entry point of a worker process: run one job against the store at ``url``; dies with ``parent``."""
-    from app.storage.url import open_store
-    from app.tempfiles import temp_dir_of
-    from app.worker import die_with_parent
-
     if parent is not None:
         die_with_parent(parent)
         with contextlib.suppress(OSError):
@@ -257,8 +257,6 @@ def worker_main(url: str, job_id: str, parent: int | None = None) -> None:
 
 def execute(store: Store, job: JobRecord) -> None:
     """Run a started job and record its outcome (done, or failed with a typed reason)."""
-    from sim import SimError
-
     try:
         run = import_module(f"app.jobkinds.{job.kind}").run  # KINDS only: checked before a worker starts
         run(store, job)

@@ -56,7 +56,7 @@ def opened(source: LogSource) -> Iterator[str | os.PathLike[str] | BinaryIO]:
         return
     assert isinstance(source, str)
     try:
-        import fsspec
+        import fsspec  # lazy: optional extra, only for URLs
     except ImportError as exc:
         raise InputError(f"{source}: reading logs from URLs needs fsspec (pip install 'lashscope[fleet]')") from exc
     try:

@@ -11,8 +11,8 @@
       align      common time base; torque-to-speed offset = lag of measured behind simulated speed
       metrics    ripple metrics of measured and (offset-corrected) simulated speed, differences
 
-Progress goes to ``progress(stage, fraction)`` with ``fraction`` in 0..1 over the whole run;
-nothing here prints. Results are plain dataclasses; :func:`app.pipeline_results.result_payload`
+Progress goes to ``progress(fraction, stage)`` (:class:`app.progress.Progress`), ``fraction`` in 0..1 over
+the whole run; nothing here prints. Results are plain dataclasses; :func:`app.pipeline_results.result_payload`
 turns them into JSON + arrays for storage.
 """
 
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -33,29 +32,42 @@ from app.analysis.compare import EventComparison, SpeedError, compare_event, spe
 from app.analysis.diagnosis.uncertainty import rigid_inertia
 from app.analysis.drivability import DrivabilityParams
 from app.analysis.events import SPEED, TORQUE, Event, EventParams, find_events
-from app.analysis.feel import FeelComparison, event_feel
+from app.analysis.feel import FeelComparison, event_feel, run_feel
 from app.analysis.lash import LashParams
 from app.analysis.logchecks import CheckParams, Finding, Limits, check_log
 from app.analysis.metrics import MetricParams, ripple_metrics
 from app.analysis.sampling import sample_period
 from app.analysis.series import FloatArray, finite_signal
 from app.analysis.slip import Drive, log_ratio_scale
+from app.analysis.tolerance import EventWindow, check_request, tolerance_doc
 from app.analysis.tracking import TrackingParams, Verdict, event_verdict, log_verdict
-from app.errors import InputError, InsufficientDataError, MissingSignalError
-from app.log_source import LogSource
+from app.errors import (
+    InputError,
+    InsufficientDataError,
+    LogFormatError,
+    MissingSignalError,
+    SignalMapError,
+    WorkLimitError,
+)
+from app.ingest.database import load_database
+from app.ingest.dbc_cache import cached_database
+from app.ingest.pipeline_signals import load_signals
+from app.ingest.readers import open_log
+from app.ingest.readreport import read_summary
+from app.ingest.signalmap import load_signal_map
+from app.log_source import LogSource, opened
+from app.progress import Progress, no_progress, within
 from app.signals import Signal, SignalSet
-from sim import SimError, SimResult, Vehicle, simulate
+from app.vehicle_check import steps_per_second, trial_vehicle
+from sim import SimError, SimResult, Vehicle, WhatIf, load_vehicle, simulate
+from sim.layout import shaft_gap
 from sim.metrics import unloaded_time
+from sim.model import build_chain
+from sim.paper import run_case, sensitivities, sensitivity_unit
 
-ProgressFn = Callable[[str, float], None]
 REQUIRED = (TORQUE, SPEED)
-RPM_PER_RAD_S = 30.0 / np.pi
 MAX_OPTION_S = 10.0  # a duration option beyond this is a mistake: windows and arrays are sized by it
 RATE_SUFFIXES = ("_nm_s", "_rpm_s")  # fields ending in _s that are rates (min_rate_nm_s), not durations
-
-
-def _no_progress(stage: str, fraction: float) -> None:
-    return None
 
 
 @dataclass(frozen=True)
@@ -165,7 +177,7 @@ class AnalysisResult:
 
 
 def decode_log(log: LogSource, database: Path, signal_map: Path,
-               progress: ProgressFn = _no_progress) -> tuple[SignalSet, dict[str, Any]]:
+               progress: Progress = no_progress) -> tuple[SignalSet, dict[str, Any]]:
     """Read and decode a log into canonical signals; returns the signals and an ingest summary.
 
     ``log`` is a path, a binary file object, or an fsspec URL (:mod:`app.log_source`). The DBC is
@@ -174,17 +186,10 @@ def decode_log(log: LogSource, database: Path, signal_map: Path,
     reading lost (:func:`app.ingest.readreport.read_summary`: damaged, truncated, frames and seconds lost,
     a one-sentence ``note``).
     """
-    from app.ingest.dbc_cache import cached_database
-    from app.ingest.pipeline_signals import load_signals
-    from app.ingest.readers import open_log
-    from app.ingest.readreport import read_summary
-    from app.ingest.signalmap import load_signal_map
-    from app.log_source import opened
-
     loaded = cached_database(database)
     smap = load_signal_map(signal_map)
     with opened(log) as src, open_log(src) as reader:
-        signals, report = load_signals(reader, loaded, smap, progress=lambda f: progress("decode", f),
+        signals, report = load_signals(reader, loaded, smap, progress=within(progress, 0.0, 1.0, "decode"),
                                        require=REQUIRED)
         meta, read_report = reader.meta, reader.report
     ingest = {
@@ -199,8 +204,6 @@ def decode_log(log: LogSource, database: Path, signal_map: Path,
 
 def _plain(obj: Any) -> Any:
     """A report object as JSON-friendly data (dataclass, mapping or its public attributes)."""
-    from dataclasses import is_dataclass
-
     if is_dataclass(obj) and not isinstance(obj, type):
         return asdict(obj)
     if isinstance(obj, dict):
@@ -214,15 +217,11 @@ def check_vehicle_files(driveline: Path, database: Path, signal_map: Path) -> di
     The driveline must also pass a cheap simulation trial (:func:`app.vehicle_check.trial_vehicle`).
     Raises ParameterError (driveline), DatabaseError, SignalMapError; returns a summary.
     """
-    from app.vehicle_check import trial_vehicle
-    from sim import load_vehicle
-
     vehicle = load_vehicle(driveline)
     steps = trial_vehicle(vehicle, driveline.name)
     loaded, routes = signal_routes(database, signal_map)
     missing = [c for c in REQUIRED if c not in routes]
     if missing:
-        from app.errors import SignalMapError
         raise SignalMapError(f"signal map {signal_map.name} does not map {missing}, which every analysis needs")
     return {"vehicle": vehicle.name, "description": vehicle.description, "ratio": vehicle.ratio,
             "stages": [f"{s.name} ({s.kind})" for s in vehicle.chain], "housing": vehicle.housing.enabled,
@@ -232,9 +231,6 @@ def check_vehicle_files(driveline: Path, database: Path, signal_map: Path) -> di
 
 def signal_routes(database: Path, signal_map: Path) -> tuple[Any, dict[str, tuple[str, str]]]:
     """The loaded database and, per canonical channel, the (message, signal) the map reads it from."""
-    from app.ingest.database import load_database
-    from app.ingest.signalmap import load_signal_map
-
     loaded = load_database(database)
     smap = load_signal_map(signal_map)
     routes = smap.routes(loaded.db)
@@ -257,9 +253,6 @@ def free_rotor_inertia(vehicle: Vehicle) -> float:
     ratio to the rotor. With the reducer gaps open as well only the rotor moves freely; the
     gap-open estimate fits a rescaling of this inertia (``MetricParams.lash.inertia_range``).
     """
-    from sim.layout import shaft_gap
-    from sim.model import build_chain
-
     chain = build_chain(vehicle)
     last = int(chain.ca[chain.gap_coupling[shaft_gap(vehicle)]])
     return float(sum(chain.inertia[b] * chain.speed_ratio[b] ** 2 for b in range(last + 1)))
@@ -291,7 +284,7 @@ def _pooled_lag(pairs: list[tuple[FloatArray, FloatArray]], dt: float, max_lag_s
 
 
 def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptions | None = None,
-                    progress: ProgressFn = _no_progress, start: float = 0.0) -> AnalysisResult:
+                    progress: Progress = no_progress, start: float = 0.0) -> AnalysisResult:
     """Events, simulation, alignment and metrics for decoded signals (see the module docstring)."""
     opts = options or AnalysisOptions()
     if opts.metrics.free_rotor_inertia_kgm2 is None:
@@ -299,8 +292,10 @@ def analyze_signals(signals: SignalSet, vehicle: Vehicle, options: AnalysisOptio
     clock = time.perf_counter()
     timings: dict[str, float] = {}
 
+    part = within(progress, start, 1.0 - start)
+
     def stage(name: str, frac: float) -> None:
-        progress(name, start + (1.0 - start) * frac)
+        part(frac, name)
 
     for name in REQUIRED:
         if name not in signals:
@@ -448,31 +443,26 @@ def _event_feel(accel: AccelSource, res: SimResult, lag: float, ev: Event, signa
 
 
 def run_analysis(log_path: LogSource, vehicle: VehicleInputs, options: AnalysisOptions | None = None,
-                 progress: ProgressFn = _no_progress) -> AnalysisResult:
+                 progress: Progress = no_progress) -> AnalysisResult:
     """Decode ``log_path`` (a path, file object or URL) with the vehicle's DBC and signal map, then
-    :func:`analyze_signals`; then the event-store hook (:func:`app.fleet.hook.after_analysis`)."""
+    :func:`analyze_signals`. No side effects: the caller stores the result and runs the event-store hook
+    (:func:`app.fleet.hook.after_analysis`), as the ``analysis`` job kind and ``lashscope analyze`` do."""
     clock = time.perf_counter()
     signals, ingest = decode_log(log_path, vehicle.database, vehicle.signal_map,
-                                 lambda s, f: progress(s, 0.4 * f))
+                                 within(progress, 0.0, 0.4))
     decode_s = time.perf_counter() - clock
     result = analyze_signals(signals, vehicle.vehicle, options, progress, start=0.4)
     result = replace(result, ingest=ingest, timings_s={"decode": decode_s, **result.timings_s})
-    from app.fleet.hook import after_analysis
-
-    after_analysis(log_path, vehicle, result)
     return result
 
 
-def inspect_log(path: Path, progress: ProgressFn = _no_progress, cpu_s: float | None = None) -> dict[str, Any]:
+def inspect_log(path: Path, progress: Progress = no_progress, cpu_s: float | None = None) -> dict[str, Any]:
     """Read a whole log once (salvaging) to count frames and collect what was damaged.
 
     Raises the reader's typed errors (UnsupportedFormatError, LogFormatError) when nothing
     usable is there, and :class:`~app.errors.WorkLimitError` (``validation_limit``) once reading
     has taken more than ``cpu_s`` seconds of this thread's CPU (checked after each chunk).
     """
-    from app.errors import WorkLimitError
-    from app.ingest.readers import open_log
-
     frames = 0
     t_first: int | None = None
     t_last = 0
@@ -489,7 +479,6 @@ def inspect_log(path: Path, progress: ProgressFn = _no_progress, cpu_s: float | 
                 t_last = max(t_last, int(chunk.t_ns.max()))
         meta, report = reader.meta, reader.report
     if frames == 0:
-        from app.errors import LogFormatError
         raise LogFormatError(f"{path.name}: no CAN frames could be read ({len(report.issues)} problems found)")
     return {
         "format": meta.format, "frames": frames,
@@ -511,9 +500,6 @@ def gap_sensitivity_work(vehicle: Vehicle) -> float:
     """What :func:`gap_sensitivity` will cost, in stage-steps, from the vehicle alone (no simulation).
 
     Raises :class:`~app.errors.WorkLimitError` past :data:`MAX_GAP_SENSITIVITY_WORK`, before any work."""
-    from app.errors import WorkLimitError
-    from app.vehicle_check import steps_per_second
-
     chain = vehicle.chain
     work = (2 + 2 * len(vehicle.gap_names)) * steps_per_second(vehicle) * len(chain)
     if work > MAX_GAP_SENSITIVITY_WORK:
@@ -523,7 +509,7 @@ def gap_sensitivity_work(vehicle: Vehicle) -> float:
     return work
 
 
-def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> dict[str, Any]:
+def gap_sensitivity(vehicle: Vehicle, progress: Progress = no_progress) -> dict[str, Any]:
     """Gap what-ifs for a vehicle under the paper's scripted tip-in (see :mod:`sim.paper`).
 
     For each of the five gaps: the speed fluctuation and impact-induced fluctuation with the
@@ -538,10 +524,6 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
     ``sensitivity_per_mm`` (None without radii) and ``sensitivity_per_rad`` per gap.
     ``sensitivity`` is the one in ``sensitivity_unit``.
     """
-    from sim import WhatIf
-    from sim.layout import shaft_gap
-    from sim.paper import run_case, sensitivities, sensitivity_unit
-
     gap_sensitivity_work(vehicle)  # past its limit: refused before any simulation
     names = vehicle.gap_names  # the classic five, or the stage chain's gaps
 
@@ -549,7 +531,7 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
                                                                               WhatIf(gap_scale={"all": 0.0}))}
     gaps: list[dict[str, Any]] = []
     for i, g in enumerate(names, start=1):
-        progress("gap_sensitivity", i / (len(names) + 1))
+        progress(i / (len(names) + 1), "gap_sensitivity")
         removed = cases[f"no_gap{i}"] = run_case(vehicle, f"no_gap{i}", WhatIf(gap_scale={g: 0.0}))
         halved = run_case(vehicle, f"half_gap{i}", WhatIf(gap_scale={g: 0.5}))
         gap = vehicle.gap(g)
@@ -577,8 +559,6 @@ def gap_sensitivity(vehicle: Vehicle, progress: ProgressFn = _no_progress) -> di
 
 def _case(c: Any) -> dict[str, float]:
     """One what-if case: the speed metrics and what the occupants feel (body acceleration criteria)."""
-    from app.analysis.feel import run_feel
-
     res = c.result
     feel = run_feel(res.t, res.vehicle_accel_ms2, res.airgap_torque_nm)
     return {"unloaded_ms": c.unloaded_ms, "fluctuation_rpm": c.fluct_rpm, "impact_rpm": c.impact_rpm,
@@ -587,15 +567,13 @@ def _case(c: Any) -> dict[str, float]:
 
 
 def tolerance_for_result(files: Any, vehicle: Vehicle, n: int, seed: int,
-                         progress: Callable[[float], None] = lambda f: None, lead_s: float = 0.05) -> dict[str, Any]:
+                         progress: Progress = no_progress, lead_s: float = 0.05) -> dict[str, Any]:
     """The tolerance band of every analysed event of a stored result (:mod:`app.analysis.tolerance`).
 
     ``files`` is a :class:`app.storage.results.ResultFiles` (or anything with ``doc`` and
     ``array``); the decoded torque and speed stored with the result drive the Monte Carlo,
     each event simulated from ``lead_s`` before its window (the analysis' offset search span).
     """
-    from app.analysis.tolerance import EventWindow, check_request, tolerance_doc
-
     check_request(n, seed)
     doc = files.doc
     sigs: dict[str, Signal] = {}

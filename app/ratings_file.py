@@ -12,8 +12,10 @@ import json
 import os
 from pathlib import Path
 
+from app import atomic
 from app.analysis.ratings import RatingModel
 from app.errors import InputError, StorageError
+from app.settings import Settings
 
 ENV = "LASHSCOPE_RATINGS"
 
@@ -34,15 +36,13 @@ def save_model(model: RatingModel, path: str | os.PathLike[str]) -> Path:
     p = Path(path)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
-        tmp = p.with_name(f".{p.name}.tmp")
-        tmp.write_text(json.dumps(model.to_dict(), indent=1) + "\n", encoding="utf-8")
-        tmp.replace(p)
+        atomic.write_text(p, json.dumps(model.to_dict(), indent=1) + "\n")
     except OSError as exc:
         raise StorageError(f"rating model {p}: cannot write ({exc.strerror or exc})") from exc
     return p
 
 
 def model_from_env() -> RatingModel | None:
-    """The model ``LASHSCOPE_RATINGS`` names, or None when it is unset."""
-    value = os.environ.get(ENV, "").strip()
+    """The model ``LASHSCOPE_RATINGS`` names (``Settings.ratings``, read now), or None when it is unset."""
+    value = Settings().ratings.strip()
     return load_model(value) if value else None

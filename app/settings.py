@@ -48,6 +48,15 @@
 ``LASHSCOPE_LIVE_CHANNELS``     live buses a client may open, ``interface:channel`` or ``interface:*`` (comma-separated;
                               default ``virtual:*,tcp_loopback:127.0.0.1:29536,socketcan:*``: of the loopback
                               hubs only the one on the default port, so a client cannot probe local ports)
+``LASHSCOPE_LIVE_INTERFACES``   python-can interfaces a live session may use (comma-separated; replaces the default set)
+``LASHSCOPE_EVENT_STORE``       Parquet event store the service's analyses also write (app.fleet.hook; ``off``: none;
+                              ``lashscope serve`` sets ``<data dir>/events`` for its workers unless it is set)
+``LASHSCOPE_RATINGS``           rating model file scoring every analysed event (app.ratings_file; default none)
+``LASHSCOPE_MF4_NATIVE``        read MF4 with the project's numpy reader where the layout allows (default true;
+                              false: always through asammdf)
+
+Values a process hands to the processes it starts (the event store, the rating model) are read when they are
+used, with a fresh ``Settings()``; the server reads the rest once (:func:`get_settings`).
 """
 
 from __future__ import annotations
@@ -133,6 +142,16 @@ class Settings(BaseSettings):
         if isinstance(v, str):
             return [o.strip() for o in v.split(",") if o.strip()]
         return v
+
+    live_interfaces: Annotated[list[str], NoDecode] = Field(default_factory=list)  # empty: the default set
+    event_store: str = ""  # a directory; "", "0", "off", "none", "false": no event store
+    ratings: str = ""  # a rating model file; "": no ratings
+    mf4_native: bool = True
+
+    @field_validator("live_interfaces", mode="before")
+    @classmethod
+    def _split_names(cls, v: object) -> object:
+        return [o.strip() for o in v.split(",") if o.strip()] if isinstance(v, str) else v
 
     @field_validator("trusted_proxies")
     @classmethod

@@ -26,9 +26,14 @@ from typing import Any
 
 import numpy as np
 
+from app.analysis.logchecks import CheckParams, sign_correlation
+from app.analysis.series import finite_signal
 from app.errors import InputError, SignalMapError
 from app.ingest.database import LoadedDatabase, load_database
+from app.ingest.pipeline_signals import load_signals
+from app.ingest.readers import open_log
 from app.ingest.signalmap import CANONICAL, REQUIRED, TIME_BASE, ChannelSpec, SignalMap, unit_factor
+from app.ingest.stats import DecodeReport, StatsAccumulator
 from app.ingest.suggest import Candidate, observed, suggest_candidates, suggest_signal_map
 from app.signals import Signal, SignalSet
 
@@ -119,9 +124,6 @@ def check_source(db: LoadedDatabase, role: str, source: str) -> ChannelSpec:
 
 def _scan(log: Path, loaded: LoadedDatabase, strict: bool) -> tuple[dict[int, float], dict[int, int], str, int, float]:
     """Observed mean periods and frame counts per frame ID, the format, frames and duration (no decoding)."""
-    from app.ingest.readers import open_log
-    from app.ingest.stats import DecodeReport, StatsAccumulator
-
     stats = StatsAccumulator(loaded.db)
     with open_log(log, strict=strict) as reader:
         for chunk in reader.chunks():
@@ -159,8 +161,6 @@ def propose(log: Path, database: Path, overrides: Mapping[str, str | None] | Non
     smap = SignalMap("proposed", channels, notes=["proposed from the log and the DBC by lashscope init"])
     evidence: dict[str, ChannelEvidence] = {}
     if channels:
-        from app.ingest.pipeline_signals import load_signals
-
         signals, _ = load_signals(log, loaded, smap, strict=strict)
         flips = _sign_choices(signals, invert or {})
         if any(flips.values()):
@@ -193,9 +193,6 @@ def _flipped(s: Signal, flip: bool) -> Signal:
 
 
 def _torque_correlation(torque: Signal, speed: Signal) -> float:
-    from app.analysis.logchecks import CheckParams, sign_correlation
-    from app.analysis.series import finite_signal
-
     if len(torque) < 2 or len(speed) < 2:
         return float("nan")
     return sign_correlation(finite_signal(torque), finite_signal(speed), CheckParams().accel_window_s)

@@ -16,6 +16,8 @@ import tomllib
 from typing import Any
 
 from sim import ParameterError, SimError, Vehicle, dump_toml, load_vehicle
+from sim.model import build_chain
+from sim.simulate import choose_step
 
 MAX_STEPS_PER_S = 1_000_000  # the paper preset needs 15 000; a 30-min log at this cost is ~2e9 steps
 TRIAL_TORQUE_NM = 400.0  # progressive springs are judged at the deflection this torque causes
@@ -80,9 +82,6 @@ def suspect_fields(vehicle: Vehicle) -> list[tuple[str, float, float]]:
 
 def steps_per_second(vehicle: Vehicle) -> float:
     """Integrator steps one simulated second of the multibody model needs at a 1 ms output grid."""
-    from sim.model import build_chain
-    from sim.simulate import choose_step
-
     _, sub = choose_step(build_chain(vehicle), 0.001, torque_max=TRIAL_TORQUE_NM)
     return 1000.0 * sub
 

@@ -7,6 +7,8 @@ outside any time limit.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import os
 import signal
 
@@ -15,11 +17,7 @@ _PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 def die_with_parent(parent: int) -> None:
     """Have the kernel SIGKILL this process when ``parent`` dies (Linux); exit now if it already has."""
-    try:
-        import ctypes
-
+    with contextlib.suppress(OSError, AttributeError):  # not Linux: callers also check os.getppid() at progress reports
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
-    except (OSError, AttributeError):  # not Linux: callers also check os.getppid() at progress reports
-        pass
     if os.getppid() != parent:  # the server died before the line above took effect
         os._exit(1)

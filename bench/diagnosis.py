@@ -41,16 +41,6 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from app.analysis.diagnosis import DiagnosisOptions, DiagnosisResult, diagnose_signals, validate_on  # noqa: E402
-from app.analysis.diagnosis.synthetic import (  # noqa: E402
-    CanSampling,
-    DriveSpec,
-    make_drive,
-    measure_frames,
-    run_truth,
-    scale_to_signal,
-    signal_ratio,
-)
-from app.analysis.diagnosis.truthlog import read_log, write_blf  # noqa: E402
 from app.ingest.database import load_database  # noqa: E402
 from app.ingest.signalmap import load_signal_map  # noqa: E402
 from app.signals import SignalSet  # noqa: E402
@@ -60,6 +50,16 @@ from bench.lengths import measure as measure_lengths  # noqa: E402
 from bench.lengths import report as report_lengths  # noqa: E402
 from sim import Vehicle, load_vehicle  # noqa: E402
 from sim.effects import EFFECTS, apply_effects  # noqa: E402
+from tests.support.synthetic import (  # noqa: E402
+    CanSampling,
+    DriveSpec,
+    make_drive,
+    measure_frames,
+    run_truth,
+    scale_to_signal,
+    signal_ratio,
+)
+from tests.support.truthlog import read_log, write_blf  # noqa: E402
 
 DBC = REPO / "dbc" / "lashscope_ev.dbc"
 CLEAR_SIGNAL_RATIO = 2.0  # truth-vs-nominal speed difference RMS over event windows, in noise sigmas

@@ -35,7 +35,6 @@ sys.path.insert(0, str(REPO))
 
 from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, validate_on  # noqa: E402
 from app.analysis.diagnosis.report import report_dict  # noqa: E402
-from app.analysis.diagnosis.truthlog import read_log  # noqa: E402
 from app.signals import SignalSet  # noqa: E402
 from bench.diagnosis_report import CONFIDENT, pct  # noqa: E402
 from bench.indep.car import vehicle_source  # noqa: E402
@@ -45,6 +44,7 @@ from bench.lengths import LENGTHS_S  # noqa: E402
 from bench.lengths import measure as measure_lengths  # noqa: E402
 from bench.lengths import report as report_lengths  # noqa: E402
 from sim import load_vehicle  # noqa: E402
+from tests.support.truthlog import read_log  # noqa: E402
 
 OUT = REPO / "bench" / "out" / "indep"
 

@@ -25,6 +25,7 @@ from typing import Any
 from sim.errors import ParameterError
 from sim.fields import ANY, INT_POS, NONNEG, POS, build, check, field_meta, flag, to_plain, validate
 from sim.fields import num as _f
+from sim.layout import legacy_stages, stage_checks, stage_layout
 from sim.optional import Drag, Effects, ProgressiveStiffness, SpeedSensor, TorqueLag, TyreSlip
 from sim.params_base import (
     DAMPING,
@@ -196,8 +197,6 @@ class Vehicle:
             if not isinstance(value, str) or len(value) > limit:
                 raise ParameterError(text, value, f"must be text of at most {limit} characters")
         if self.stages:
-            from sim.layout import stage_checks
-
             check_topology(self.stages)
             stage_checks(self)
         for path, band in self.tolerances.items():
@@ -307,14 +306,10 @@ class Vehicle:
     @functools.cached_property
     def chain(self) -> tuple[Stage, ...]:
         """The driveline as stages from rotor to wheels; the classic layout as its five stages."""
-        from sim.layout import legacy_stages
-
         return self.stages or legacy_stages(self)
 
     def as_stages(self) -> Vehicle:
         """The same driveline written as a stage chain (a classic file converted; a chain unchanged)."""
-        from sim.layout import stage_layout
-
         return self if self.stages else Vehicle.from_dict(stage_layout(self))
 
     def stage(self, name: str) -> Stage:

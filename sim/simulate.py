@@ -18,10 +18,11 @@ from sim.runner import MAX_EVENTS, raise_status, run_from_state
 from sim.seat import seat_rail_acceleration
 from sim.sensor import delay_sample_quantize
 from sim.two_inertia import pack, project, quasi_static, run_two_inertia
+from sim.units import RPM_PER_RAD_S
 from sim.whatif import WhatIf
 
 F64 = NDArray[np.float64]
-RPM = 30.0 / math.pi  # rad/s -> rpm
+RPM = RPM_PER_RAD_S  # rad/s -> rpm
 STEP_SAFETY = 0.4  # fraction of the explicit stability limit of the stiffest mode (sim.linear.step_limit)
 TWO_INERTIA_SAFETY = 0.3  # fraction of 2/|lambda|max for the paper's two-inertia model
 

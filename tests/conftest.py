@@ -1,4 +1,4 @@
-"""Shared fixtures: paths to the public sample data beside the repo (``../shared``)."""
+"""Shared fixtures: paths to the public sample data, committed copies (``tests/data``) first, then ``../shared``."""
 
 from __future__ import annotations
 
@@ -16,11 +16,28 @@ if TYPE_CHECKING:
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("LASHSCOPE_SHARED", REPO.parent / "shared")).resolve()
 DATA = SHARED / "data"
+COMMITTED = REPO / "tests" / "data"  # small copies of some of those files, same layout (tests/data/PROVENANCE.md)
+
+
+def sample_path(*parts: str) -> Path:
+    """The committed copy under ``tests/data`` when there is one, else the path under ``../shared/data``."""
+    local = COMMITTED.joinpath(*parts)
+    return local if local.exists() else DATA.joinpath(*parts)
+
+
+def sample_files(folder: str, *patterns: str) -> list[Path]:
+    """Files matching the glob ``patterns`` under ``folder`` of ``tests/data`` and ``../shared/data``, sorted by
+    their path inside the folder; a committed copy stands in for the shared file of the same path."""
+    found: dict[Path, Path] = {}
+    for root in (DATA / folder, COMMITTED / folder):  # committed last: it replaces the shared file
+        if root.is_dir():
+            found.update((p.relative_to(root), p) for pat in patterns for p in root.glob(pat) if p.is_file())
+    return [found[k] for k in sorted(found)]
 
 
 def shared_file(*parts: str) -> Path:
-    """A file under ``../shared/data``; skips the test with a reason when it is absent."""
-    path = DATA.joinpath(*parts)
+    """A file under ``tests/data`` or ``../shared/data``; skips the test with a reason when it is in neither."""
+    path = sample_path(*parts)
     if not path.exists():
         pytest.skip(f"public sample data not found: {path} (set LASHSCOPE_SHARED)")
     return path

@@ -50,7 +50,7 @@ def test_model_equal_to_truth_gives_matching_metrics_and_the_offset(paper: objec
 def test_smaller_true_halfshaft_gap_shows_as_larger_simulated_ripple(paper: object, tmp_path: Path) -> None:
     sc = Scenario(duration_s=30.0, brake_cycle=2)
     progress: list[tuple[str, float]] = []
-    res = analyze_signals(_signals(sc), paper, AnalysisOptions(), lambda s, f: progress.append((s, f)))  # type: ignore[arg-type]
+    res = analyze_signals(_signals(sc), paper, AnalysisOptions(), lambda f, s: progress.append((s, f)))
     assert any(e.exclusion and e.exclusion.startswith("braking") for e in res.events)
     diffs = [er.comparison.difference["fluctuation_rpm"] for er in res.event_results
              if er.comparison is not None and np.isfinite(er.comparison.difference["fluctuation_rpm"])]

@@ -54,6 +54,7 @@ from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
 from app.analysis.zerophase import butter_sos, zero_phase
 from app.errors import InsufficientDataError
 from app.signals import Signal, SignalSet
+from sim.units import rpm_to_rad_s
 
 ACCEL = "accel_long_ms2"
 G = 9.80665
@@ -164,7 +165,7 @@ def road_speed(signals: SignalSet, wheel_radius_m: float | None,
     t = wheels[0].t
     mean = np.mean([w.at(t) for w in wheels], axis=0)
     ok = np.isfinite(mean)
-    return Signal("road_speed_ms", t[ok], mean[ok] * math.pi / 30.0 * wheel_radius_m, "m/s"), "wheel_speed"
+    return Signal("road_speed_ms", t[ok], rpm_to_rad_s(mean[ok]) * wheel_radius_m, "m/s"), "wheel_speed"
 
 
 def _saturation(values: FloatArray, t: FloatArray) -> tuple[tuple[float, float], ...]:

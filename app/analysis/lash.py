@@ -44,9 +44,9 @@ import numpy.typing as npt
 
 from app.analysis.series import FloatArray
 from app.signals import Signal
+from sim.units import RPM_PER_RAD_S
 
 NAN = float("nan")
-RPM_PER_RAD_S = 30.0 / np.pi
 
 
 @dataclass(frozen=True)

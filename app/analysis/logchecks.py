@@ -49,6 +49,7 @@ from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
 from app.errors import ImplausibleSignalError
 from app.signals import Signal, SignalSet
 from sim import Vehicle
+from sim.units import RAD_S_PER_RPM
 
 TORQUE_SIGN_INVERTED = "torque_sign_inverted"
 IMPLAUSIBLE_SIGNAL = "implausible_signal"
@@ -56,7 +57,6 @@ WHEEL_SPEED_COMPUTED = "wheel_speed_computed"
 SPEED_RETIMED = "speed_retimed"
 TIME_BASE_UNMATCHED = "time_base_unmatched"
 TIME_BASE = "time_base"
-RAD_S_PER_RPM = np.pi / 30.0
 
 MIN_BASE_SPEED_RPM = 2500.0  # lowest corner speed of a traction motor: peak torque <= max power / this
 MAX_ROAD_SPEED_KMH = 250.0  # top road speed: the motor speed the ratio and tyre give there is its limit

@@ -42,6 +42,7 @@ import numpy as np
 
 from app.analysis.series import FloatArray, moving_mean
 from app.signals import SignalSet
+from sim.units import rad_s_to_rpm
 
 WHEEL_PREFIX = "wheel_speed_"
 VEHICLE_SPEED = "vehicle_speed_kmh"
@@ -75,7 +76,7 @@ def road_speed_at_motor(signals: SignalSet, t: FloatArray, drive: Drive) -> tupl
     if (VEHICLE_SPEED in signals and VEHICLE_SPEED not in drive.computed and len(signals[VEHICLE_SPEED])
             and drive.wheel_radius_m):
         v_ms = np.abs(signals[VEHICLE_SPEED].at(t)) / 3.6
-        refs.append(v_ms / drive.wheel_radius_m * 30.0 / np.pi * drive.ratio)
+        refs.append(rad_s_to_rpm(v_ms / drive.wheel_radius_m) * drive.ratio)
         used.append(VEHICLE_SPEED)
     if not refs:
         return np.full(t.size, np.nan), used
@@ -147,7 +148,7 @@ def spin_problem(signals: SignalSet, t0: float, t1: float, drive: Drive) -> str 
     gain = way * _window_slopes(tt, v, SLIP_AVERAGE_S)[i]  # rpm/s
     drive_tq = np.maximum(way * moving_mean(tt, tq, SLIP_AVERAGE_S)[i], 0.0)
     road = SPIN_ROAD_ACCEL_MS2 / drive.wheel_radius_m * drive.ratio if drive.wheel_radius_m else 0.0  # rad/s^2
-    allowed = (drive.spin_margin * drive_tq / drive.inertia_kgm2 + road) * 30.0 / np.pi
+    allowed = rad_s_to_rpm(drive.spin_margin * drive_tq / drive.inertia_kgm2 + road)
     k = int(np.argmax(gain - allowed))
     if gain[k] <= allowed[k]:
         return None

@@ -25,6 +25,7 @@ import numpy.typing as npt
 
 from app.analysis.drivability import drivability_criteria
 from app.errors import InputError
+from app.progress import Progress, no_progress
 from app.signals import Signal
 from sim import SimError, Vehicle
 from sim.batch import ToleranceResult, tolerance_analysis
@@ -113,20 +114,21 @@ def felt_shuffle(t: npt.NDArray[np.float64], vehicle_speed_kmh: npt.NDArray[np.f
 
 
 def tolerance_doc(vehicle: Vehicle, torque: Signal, speed: Signal, windows: Sequence[EventWindow], n: int, seed: int,
-                  progress: Callable[[float], None] = lambda f: None) -> dict[str, Any]:
-    """:func:`event_tolerance` for every window, with the sampled fields; progress 0..1 per event done."""
+                  progress: Progress = no_progress) -> dict[str, Any]:
+    """:func:`event_tolerance` for every window, with the sampled fields; progress 0..1 (stage ``tolerance``)
+    per event done, from the simulator's count of variants."""
     check_request(n, seed)
     rows: list[dict[str, Any]] = []
     fields: tuple[str, ...] = ()
     for k, win in enumerate(windows):
         def step(done: int, total: int, k: int = k) -> None:
-            progress((k + done / max(1, total)) / max(1, len(windows)))
+            progress((k + done / max(1, total)) / max(1, len(windows)), "tolerance")
 
         row, res = event_tolerance(vehicle, torque, speed, win, n, seed, progress=step)
         if res is not None:
             fields = res.fields
         rows.append(row)
-        progress((k + 1) / max(1, len(windows)))
+        progress((k + 1) / max(1, len(windows)), "tolerance")
     return {"n": n, "seed": seed, "distribution": "uniform", "percentiles": list(BAND_PERCENTILES),
             "metric": "peak-to-adjacent-valley fluctuation of the raw motor speed over the event window (rpm; not "
                       "detrended, unlike the analysis' metrics)",

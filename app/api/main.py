@@ -31,7 +31,8 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.middleware.gzip import GZipMiddleware
 
 from app import __version__
-from app.api import errors, route_errors
+from app.analysis import downsample
+from app.api import errors, numbers, route_errors
 from app.api.formats import FormatGuard
 from app.api.head import HeadAsGet
 from app.api.routes import (
@@ -91,9 +92,6 @@ async def _stop_live_sessions(app: FastAPI) -> None:
 
 def _warm_up() -> None:
     """Load the compiled series kernels before the first request (from numba's cache; compiled once)."""
-    from app.analysis import downsample
-    from app.api import numbers
-
     downsample.warm_up()
     numbers.warm_up()
 

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import typing
+from dataclasses import fields as dc_fields
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
+from app.analysis.events import Event
+from app.analysis.metrics import METRIC_NAMES, RippleMetrics
+from app.api.tables import EVENT_COLUMNS
 from app.storage.records import AnalysisRecord, JobRecord, LogRecord, VehicleRecord
 
 
@@ -161,10 +166,6 @@ def _float_field(name: str, what: str) -> Any:
 
 
 def _metric_values_model() -> type[BaseModel]:
-    from dataclasses import fields as dc_fields
-
-    from app.analysis.metrics import METRIC_NAMES, RippleMetrics
-
     names = list(METRIC_NAMES) + [f.name for f in dc_fields(RippleMetrics)
                                   if f.name not in METRIC_NAMES and f.name != "resolution"]
     defs: dict[str, Any] = {n: _float_field(n, n.replace("_", " ")) for n in names}
@@ -188,11 +189,6 @@ class FindingOut(_Open):
 
 
 def _event_model() -> type[BaseModel]:
-    import typing
-
-    from app.analysis.events import Event
-    from app.api.tables import EVENT_COLUMNS
-
     hints = typing.get_type_hints(Event)
     defs: dict[str, Any] = {}
     for name in dict.fromkeys([*EVENT_COLUMNS, *hints]):

@@ -34,6 +34,7 @@ def register(sub: Any) -> None:
 
 
 def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
+    from app.fleet.hook import after_analysis, store_dir
     from app.payload import result_payload
     from app.pipeline import AnalysisOptions, run_analysis
     from app.storage.results import json_safe
@@ -45,7 +46,12 @@ def analysis_doc(args: argparse.Namespace) -> dict[str, Any]:
         from app.ratings_file import load_model
 
         ratings = load_model(args.ratings)  # a bad model file fails before the analysis runs
-    doc, arrays = result_payload(run_analysis(args.log, inputs, opts), ratings)
+    result = run_analysis(args.log, inputs, opts)
+    doc, arrays = result_payload(result, ratings)
+    if ratings is None:
+        after_analysis(args.log, inputs, doc)
+    elif store_dir() is not None:  # the event rows carry LASHSCOPE_RATINGS's rating, not --ratings'
+        after_analysis(args.log, inputs, result_payload(result)[0])
     if getattr(args, "tolerance", 0):
         from types import SimpleNamespace
 

@@ -18,8 +18,11 @@ from pathlib import Path
 import can
 import numpy as np
 
+from app import atomic
 from app.demo.scenario import Channel, Scenario, measured_channels
 from app.errors import DatabaseError
+from app.ingest.stats import counter_modulus
+from app.pipeline import signal_routes
 from sim import load_vehicle
 
 DEMO_START_EPOCH_S = 1_718_000_000.0  # fixed absolute start so the same content gives the same file
@@ -32,8 +35,6 @@ def encode_blf(path: Path, channels: Mapping[str, Channel], routes: Mapping[str,
     Returns the number of frames written (``drops`` per message fewer than were sent). The log starts
     at ``start_epoch_s`` (s since the epoch; fixed by default so the same content gives the same file).
     """
-    from app.ingest.stats import counter_modulus
-
     db = database
     by_message: dict[str, list[str]] = {}
     for ch, (msg, _sig) in routes.items():
@@ -69,20 +70,16 @@ def encode_blf(path: Path, channels: Mapping[str, Channel], routes: Mapping[str,
             frames.append((float(t[k]), int(msg.frame_id), bool(msg.is_extended_frame), bytes(data)))
     frames.sort(key=lambda f: (f[0], f[1]))
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    with can.BLFWriter(str(tmp)) as writer:
+    with atomic.atomic_path(path) as tmp, can.BLFWriter(str(tmp)) as writer:
         for ts, arb, ext, data in frames:
             writer.on_message_received(can.Message(timestamp=start_epoch_s + ts, arbitration_id=arb,
                                                    is_extended_id=ext, data=data, channel=0))
-    tmp.replace(path)
     return len(frames)
 
 
 def build_demo_log(path: Path, dbc: Path, signal_map: Path, scenario: Scenario | None = None,
                    start_epoch_s: float = DEMO_START_EPOCH_S) -> int:
     """Simulate the scripted drive (paper preset truth) and write it to ``path``; returns the frame count."""
-    from app.pipeline import signal_routes
-
     loaded, routes = signal_routes(dbc, signal_map)
     channels = measured_channels(load_vehicle("paper"), scenario)
     return encode_blf(path, channels, routes, loaded.db, drops=(scenario or Scenario()).dropped_frames,

@@ -4,20 +4,20 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from app.storage.results import ResultFiles
-
-if TYPE_CHECKING:
-    from matplotlib.figure import Figure
 
 
 def overlay_png(files: ResultFiles, path: Path, max_events: int = 12, title: str = "") -> Path:
     """One panel per analysed event (up to ``max_events``): speed vs time from the torque crossing."""
-    import matplotlib.pyplot as plt
-
     fig = overlay_figure(files, max_events, title)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -27,11 +27,6 @@ def overlay_png(files: ResultFiles, path: Path, max_events: int = 12, title: str
 
 def overlay_figure(files: ResultFiles, max_events: int = 12, title: str = "") -> Figure:
     """The figure of :func:`overlay_png` (Agg backend); the caller closes it."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     doc: dict[str, Any] = files.doc
     metrics = {m["event_index"]: m for m in doc["metrics"]}
     events = [e for e in doc["events"] if e["has_series"] and e["index"] in metrics][:max_events]

@@ -28,8 +28,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TextIO
 
+from app import atomic
 from app.errors import AppError, InputError
-from app.fleet.work import BatchSpec, analyse_log
+from app.fleet.rows import event_rows
+from app.fleet.store import compact, write_rows
+from app.fleet.work import BatchSpec, analyse_log, warm_kernels
 from app.log_source import content_hash, is_url, source_name
 
 RECORD_FORMAT = 1
@@ -80,9 +83,7 @@ def expand_sources(patterns: Sequence[str]) -> list[str]:
 
 def _write_json(path: Path, doc: dict[str, Any]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(doc, indent=1, allow_nan=False), encoding="utf-8")
-    tmp.replace(path)
+    atomic.write_text(path, json.dumps(doc, indent=1, allow_nan=False))
 
 
 def record_path(out: Path, key: str) -> Path:
@@ -114,9 +115,6 @@ class _Pending:
 def _store(out: Path, job: _Pending, result: dict[str, Any], cfg: BatchConfig,
            partitions: set[Path]) -> dict[str, Any]:
     """Write one task's rows and then its record (the record marks the log done)."""
-    from app.fleet.rows import event_rows
-    from app.fleet.store import write_rows
-
     record: dict[str, Any] = {
         "format": RECORD_FORMAT, "log": job.source, "log_name": source_name(job.source), "log_hash": job.key,
         "vehicle": job.vehicle, "driveline": cfg.spec.inputs.vehicle.name, "status": result["status"],
@@ -217,8 +215,6 @@ def run_batch(sources: Sequence[str], cfg: BatchConfig, stream: TextIO | None = 
     elif todo:
         _on_cluster(todo, cfg, done, summary, client)
     if summary.partitions:
-        from app.fleet.store import compact
-
         clock_c = time.perf_counter()
         compact(summary.partitions)  # one file per partition: queries pay per file
         summary.timings_s["compact"] = time.perf_counter() - clock_c
@@ -228,8 +224,7 @@ def run_batch(sources: Sequence[str], cfg: BatchConfig, stream: TextIO | None = 
 
 def _on_cluster(todo: list[_Pending], cfg: BatchConfig, done: Callable[[dict[str, Any]], None],
                 summary: BatchSummary, client: Any = None) -> None:
-    from app.fleet.cluster import dask_client
-    from app.fleet.work import warm_kernels
+    from app.fleet.cluster import dask_client  # lazy: Dask (an optional extra) only on a cluster
 
     if client is not None:
         _run_on(client, todo, cfg, done, summary, time.perf_counter())
@@ -243,9 +238,9 @@ def _on_cluster(todo: list[_Pending], cfg: BatchConfig, done: Callable[[dict[str
 
 def _run_on(client: Any, todo: list[_Pending], cfg: BatchConfig, done: Callable[[dict[str, Any]], None],
             summary: BatchSummary, clock: float) -> None:
-    from distributed import as_completed
+    from distributed import as_completed  # lazy: Dask (an optional extra) only on a cluster
 
-    from app.fleet.plugin import WarmWorker
+    from app.fleet.plugin import WarmWorker  # lazy: imports distributed
 
     timings = summary.timings_s
     client.register_plugin(WarmWorker())  # every worker imports and loads the kernels once (a no-op when warm)

@@ -58,7 +58,7 @@ class ClusterStartError(AppError, RuntimeError):
 
 def _distributed() -> Any:
     try:
-        import distributed
+        import distributed  # lazy: Dask is an optional extra
     except ImportError as exc:
         raise InputError("the batch needs Dask: pip install 'lashscope[fleet]' (or run in-process with "
                          "--workers 0)") from exc
@@ -70,7 +70,7 @@ def local_cluster(workers: int) -> Any:
     distributed = _distributed()
     if workers < 1:
         raise InputError(f"--workers {workers}: a local cluster needs at least 1 worker (0 runs in-process)")
-    import dask
+    import dask  # lazy: Dask is an optional extra
 
     try:
         with dask.config.set(QUIET_WORKERS):  # the nannies hand this configuration to their workers

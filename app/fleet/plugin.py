@@ -14,12 +14,12 @@ from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from app.fleet.work import warm_worker
+
 
 class WarmWorker(WorkerPlugin):
     name = "lashscope-warm"
 
     def setup(self, worker: Any) -> None:
-        from app.fleet.work import warm_worker
-
         if getattr(worker, "lashscope_warm_s", None) is None:  # registered again by a later batch: warm already
             worker.lashscope_warm_s = warm_worker()  # seconds, for the curious (client.run can read it)

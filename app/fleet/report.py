@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from app.fleet.store import read_events, weekly_median
+from sim.units import rpm_to_rad_s
 
 QUANTITIES = {  # report key -> (unit, what)
     "gap_open_time_ms": ("ms", "median measured gap-open time"),
@@ -61,7 +62,7 @@ def median_interval(values: np.ndarray, level: float, rng: np.random.Generator,
 def _lash_deg(part: Any) -> np.ndarray:
     gap_s = part["measured_gap_open_time_s"].to_numpy(dtype=float)
     rise = part["measured_rise_height_rpm"].to_numpy(dtype=float)
-    return np.asarray(np.degrees(0.5 * rise * np.pi / 30.0 * gap_s), dtype=float)
+    return np.asarray(np.degrees(rpm_to_rad_s(0.5 * rise) * gap_s), dtype=float)
 
 
 def _per_log(part: Any, level: float, rng: np.random.Generator) -> list[dict[str, Any]]:
@@ -151,10 +152,10 @@ def point_colour(vehicle: dict[str, Any], quantity: str) -> str:
 
 def report_png(report: dict[str, Any], path: Path) -> Path:
     """Two panels: total lash per vehicle with intervals and the fleet band; weekly median ripple over time."""
-    import matplotlib
+    import matplotlib  # lazy: matplotlib only for the PNG; the server imports this module for the report's numbers
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # after choosing the Agg backend
 
     vehicles = report["vehicles"]
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7.5))

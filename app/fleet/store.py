@@ -39,7 +39,8 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
-from app.errors import StorageError
+from app import atomic
+from app.errors import NotFoundError, StorageError
 from app.fleet.rows import FLOAT_COLUMNS, STRING_COLUMNS
 
 PARTITIONS = pa.schema([("vehicle", pa.string()), ("month", pa.string())])
@@ -62,9 +63,8 @@ def partition_dir(root: Path, vehicle: str, date: str) -> Path:
 
 
 def _replace(table: pa.Table, final: Path) -> None:
-    tmp = final.parent / f".{final.name}.{uuid.uuid4().hex}.tmp"
-    pq.write_table(table, tmp)
-    tmp.replace(final)
+    with atomic.atomic_path(final) as tmp:
+        pq.write_table(table, tmp)
 
 
 def _drop_logs(folder: Path, logs: set[tuple[str, str]]) -> None:
@@ -136,8 +136,6 @@ def dataset(root: str | os.PathLike[str]) -> ds.Dataset:
     """The event store as a pyarrow dataset (partition columns ``vehicle`` and ``month`` included)."""
     base = Path(root)
     if not base.is_dir():
-        from app.errors import NotFoundError
-
         raise NotFoundError(f"no event store at {base} (run `lashscope batch ... --out DIR` first)")
     return ds.dataset(base, format="parquet", schema=pa.unify_schemas([SCHEMA, PARTITIONS]),
                       partitioning=ds.partitioning(PARTITIONS, flavor="hive"))
@@ -159,7 +157,7 @@ def weekly_ripple(root: str | os.PathLike[str], metric: str = "measured_fluctuat
 
 def weekly_median(frame: Any, metric: str = "measured_fluctuation_rpm") -> Any:
     """:func:`weekly_ripple` of rows already read (a DataFrame with vehicle, time and ``metric``)."""
-    import pandas as pd
+    import pandas as pd  # lazy: pandas (a second of start-up) only for this summary
 
     frame = frame[frame["time"].notna() & frame[metric].notna()]
     if frame.empty:

@@ -6,9 +6,8 @@ picklable dict -- never raises for a problem with the log: a typed error becomes
 error code crosses the process boundary as data. The caller (:mod:`app.fleet.batch`) writes the
 results; the task touches no output, so a task re-run after a worker died is harmless.
 
-The pipeline is called as :func:`app.pipeline.decode_log` + :func:`app.pipeline.analyze_signals`
-(not ``run_analysis``): the batch writes its own event rows, and the service's event-store hook
-must not write them a second time.
+The pipeline is called as :func:`app.pipeline.decode_log` + :func:`app.pipeline.analyze_signals`; the
+batch writes its own event rows (the service's event-store hook runs only where the service calls it).
 """
 
 from __future__ import annotations
@@ -42,6 +41,7 @@ def _failure(exc: BaseException, name: str) -> dict[str, Any]:
 
 
 def _diagnosis(signals: Any, spec: BatchSpec) -> dict[str, Any]:
+    # lazy: the diagnosis library only for batches that diagnose
     from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals
 
     model = spec.options.get("model", "multibody")
@@ -56,11 +56,13 @@ def analyse_log(source: LogSource, spec: BatchSpec) -> dict[str, Any]:
     ``doc`` holds the parts of the analysis document the event rows and the per-log record need
     (events, metrics, summary, tracking, ingest, notes), JSON-safe.
     """
+    # lazy: a Dask worker imports this module to unpickle a task; warm_worker loads these, timed (bench/batch.py)
     from sim import SimError
 
     clock, cpu = time.perf_counter(), time.thread_time()
     name = source_name(source)
     try:
+        # lazy, as above
         from app.payload import result_payload
         from app.pipeline import AnalysisOptions, analyze_signals, decode_log
         from app.storage.results import json_safe
@@ -92,9 +94,10 @@ def warm_kernels() -> float:
     one loads the cache in ~1.5 s. Called before the workers start, so parallel workers load a
     ready cache instead of each compiling the same kernels at once.
     """
+    # lazy: the kernels' module, loaded outside warm_kernels' clock
     import numpy as np
 
-    from sim import load_vehicle, simulate
+    from sim import load_vehicle, simulate  # lazy, as numpy above
 
     clock = time.perf_counter()
     vehicle = load_vehicle("paper")
@@ -108,6 +111,7 @@ def warm_kernels() -> float:
 def warm_worker() -> float:
     """Import what an analysis imports and load the kernels (:func:`warm_kernels`); seconds taken."""
     clock = time.perf_counter()
+    # lazy on purpose: these imports are what warm_worker warms and times
     import app.ingest.pipeline_signals
     import app.ingest.readers
     import app.payload

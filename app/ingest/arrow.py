@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import pyarrow as pa
 
 _TYPES = {np.dtype(np.float64): "float64", np.dtype(np.float32): "float32", np.dtype(np.int64): "int64",
           np.dtype(np.int32): "int32", np.dtype(np.int16): "int16", np.dtype(np.int8): "int8",
@@ -21,8 +22,6 @@ _TYPES = {np.dtype(np.float64): "float64", np.dtype(np.float32): "float32", np.d
 
 def numeric(values: npt.NDArray[Any]) -> Any:
     """A numeric Arrow array over ``values`` (1-D; native byte order; copied only if not contiguous)."""
-    import pyarrow as pa
-
     arr = np.ascontiguousarray(values)
     if arr.dtype == np.bool_:
         return pa.Array.from_buffers(pa.bool_(), arr.size, [None, pa.py_buffer(np.packbits(arr, bitorder="little"))])
@@ -36,8 +35,6 @@ def numeric(values: npt.NDArray[Any]) -> Any:
 
 def strings(values: Sequence[str]) -> Any:
     """An Arrow string array of ``values``."""
-    import pyarrow as pa
-
     encoded = [v.encode() for v in values]
     offsets = np.zeros(len(encoded) + 1, np.int32)
     offsets[1:] = np.cumsum([len(e) for e in encoded], dtype=np.int64)
@@ -47,14 +44,10 @@ def strings(values: Sequence[str]) -> Any:
 
 def categories(index: npt.NDArray[np.int32], labels: Sequence[str]) -> Any:
     """A dictionary (categorical) Arrow array: ``labels[index[i]]`` for every row."""
-    import pyarrow as pa
-
     return pa.DictionaryArray.from_arrays(numeric(index.astype(np.int32)), strings(labels))
 
 
 def table(columns: Mapping[str, Any]) -> Any:
     """An Arrow table from numpy columns (converted with :func:`numeric`) or ready Arrow arrays."""
-    import pyarrow as pa
-
     arrays = [numeric(c) if isinstance(c, np.ndarray) else c for c in columns.values()]
     return pa.Table.from_arrays(arrays, names=list(columns))

@@ -9,9 +9,8 @@ the log's other traffic.
 
 from __future__ import annotations
 
-import inspect
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import BinaryIO
 
 import numpy as np
@@ -24,10 +23,10 @@ from app.ingest.frames import FrameChunk
 from app.ingest.readers import LogReader, open_log
 from app.ingest.signalmap import ResolvedChannel, SignalMap
 from app.ingest.stats import DecodeReport, StatsAccumulator
+from app.progress import Progress, no_progress
 from app.signals.sampling import Spacing, spacing
 from app.signals.signal import Interp, Signal, SignalSet
 
-Progress = Callable[[float, str], None]
 ChannelSamples = tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]
 
 
@@ -57,21 +56,6 @@ def map_decoded(decoded: Mapping[str, DecodedMessage], resolved: Mapping[str, Re
     return out
 
 
-def _caller(progress: Callable[..., None] | None) -> Progress:
-    """``progress(fraction, message)``; a callable taking one argument gets the fraction only."""
-    if progress is None:
-        return lambda fraction, message: None
-    try:
-        params = inspect.signature(progress).parameters.values()
-        two = any(p.kind is p.VAR_POSITIONAL for p in params) or sum(
-            p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in params) >= 2
-    except (TypeError, ValueError):
-        two = True
-    if two:
-        return progress
-    return lambda fraction, message: progress(fraction)
-
-
 def _fraction(reader: LogReader) -> float | None:
     """Share of the log read so far, from the reader's public position and size."""
     size, pos = reader.size, reader.position()
@@ -85,7 +69,7 @@ def load_signals(
     db: LoadedDatabase,
     smap: SignalMap,
     *,
-    progress: Callable[..., None] | None = None,
+    progress: Progress = no_progress,
     require: Sequence[str] = (),
     strict: bool = False,
     na_to_nan: bool = True,
@@ -103,8 +87,8 @@ def load_signals(
     smap
         The vehicle's signal map (validated against ``db`` first).
     progress
-        Called as ``progress(fraction, message)`` after each chunk (fraction of the file read,
-        0..1); a one-argument callable gets the fraction only.
+        :class:`app.progress.Progress`, called as ``progress(fraction, message)`` after each chunk
+        (fraction of the file read, 0..1; the message counts the frames read).
     require
         Canonical channels that must come out with samples, e.g. :data:`app.ingest.signalmap.REQUIRED`.
     strict
@@ -123,7 +107,6 @@ def load_signals(
     MissingSignalError
         A channel in ``require`` is not mapped or no frame carried it.
     """
-    report_progress = _caller(progress)
     resolved = smap.resolve(db.db)
     decoder = VectorDecoder(db.db, na_to_nan=na_to_nan, na_labels=na_labels,
                             messages={r.message.name for r in resolved.values()})
@@ -140,7 +123,7 @@ def load_signals(
             for channel, samples in map_decoded(decoded, resolved).items():
                 parts[channel].append(samples)
             frac = _fraction(reader)
-            report_progress(frac if frac is not None else 0.0, f"{stats.frames} frames read")
+            progress(frac if frac is not None else 0.0, f"{stats.frames} frames read")
         report = DecodeReport(source=str(getattr(reader, "name", "")), format=reader.meta.format,
                               database=db.name, database_repairs=list(db.repairs),
                               database_notes=list(db.notes))
@@ -164,7 +147,7 @@ def load_signals(
             same = spacing(t_s)
             spaced.append((t_s, same))
         report.sampling[channel] = same
-    report_progress(1.0, f"{report.frames_read} frames read, {len(signals)} channels")
+    progress(1.0, f"{report.frames_read} frames read, {len(signals)} channels")
     missing = {c: ("not in the signal map" if c not in resolved else
                    f"no frames of {resolved[c].message.name}" + (f" on bus {resolved[c].spec.bus}"
                                                                   if resolved[c].spec.bus is not None else ""))

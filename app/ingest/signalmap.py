@@ -42,6 +42,7 @@ from cantools.database.can import Signal as CanSignal
 
 from app.errors import SignalMapError
 from app.signals.signal import Interp
+from sim.units import RPM_PER_RAD_S
 
 #: Canonical channels: name -> (canonical unit, interpolation, required by the analyses).
 CANONICAL: dict[str, tuple[str, Interp, bool]] = {
@@ -61,13 +62,12 @@ CANONICAL: dict[str, tuple[str, Interp, bool]] = {
 TIME_BASE = "time_base"
 REQUIRED: tuple[str, ...] = tuple(k for k, (_, _, req) in CANONICAL.items() if req)
 
-_RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 G_N = 9.80665  # standard gravity, m/s^2 per g
 #: canonical unit -> {accepted spelling (normalised) -> factor to the canonical unit}
 UNIT_FACTORS: dict[str, dict[str, float]] = {
     "rpm": {"rpm": 1.0, "1/min": 1.0, "u/min": 1.0, "rev/min": 1.0, "r/min": 1.0, "min-1": 1.0, "min^-1": 1.0,
-            "rad/s": _RPM_PER_RAD_S, "rads/s": _RPM_PER_RAD_S,
-            "rad/sec": _RPM_PER_RAD_S, "rps": 60.0, "rev/s": 60.0, "deg/s": 1.0 / 6.0, "krpm": 1000.0},
+            "rad/s": RPM_PER_RAD_S, "rads/s": RPM_PER_RAD_S,
+            "rad/sec": RPM_PER_RAD_S, "rps": 60.0, "rev/s": 60.0, "deg/s": 1.0 / 6.0, "krpm": 1000.0},
     "Nm": {"nm": 1.0, "n.m": 1.0, "n*m": 1.0, "n-m": 1.0, "n·m": 1.0, "newtonmeter": 1.0, "knm": 1000.0, "dnm": 0.1},
     "km/h": {"km/h": 1.0, "kph": 1.0, "kmh": 1.0, "kmph": 1.0, "m/s": 3.6, "mph": 1.609344},
     "%": {"%": 1.0, "pct": 1.0, "percent": 1.0},

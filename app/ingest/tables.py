@@ -20,7 +20,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+
 from app.errors import StorageError
+from app.ingest import arrow
 from app.ingest.decode import DecodedMessage
 
 FORMATS = ("parquet", "csv")
@@ -101,10 +105,6 @@ class MessageTables:
         return sorted(self.paths)
 
     def _write(self, name: str, buf: _Buffer) -> None:
-        import pyarrow.csv as pacsv
-        import pyarrow.parquet as pq
-
-        from app.ingest import arrow
 
         dm = DecodedMessage.concat(buf.parts)
         cols: dict[str, Any] = {"t_s": dm.t_ns / 1e9, "bus": dm.channel}

@@ -9,18 +9,18 @@ the worker (``app.jobkinds.<kind>``). A new kind is a module here plus its lane 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
+from app.progress import Progress
 from app.storage.base import Store
 
 PROGRESS_EVERY_S = 0.25
 
 
-def progress_reporter(store: Store, job_id: str, scale: float = 0.98) -> Callable[[str, float], None]:
-    """``progress(stage, fraction)`` writing to the job row at most every 0.25 s (and at each new stage)."""
+def progress_reporter(store: Store, job_id: str, scale: float = 0.98) -> Progress:
+    """A :class:`~app.progress.Progress` writing to the job row at most every 0.25 s (and at each new stage)."""
     last_time, last_stage = [0.0], [""]
 
-    def progress(stage: str, fraction: float) -> None:
+    def progress(fraction: float, stage: str, /) -> None:
         now = time.monotonic()
         if stage != last_stage[0] or now - last_time[0] >= PROGRESS_EVERY_S:
             last_time[0], last_stage[0] = now, stage

@@ -16,8 +16,14 @@ from pathlib import Path
 from typing import Any
 
 from app.errors import InputError
+from app.fleet.batch import BatchConfig, run_batch
+from app.fleet.work import BatchSpec
+from app.jobkinds import progress_reporter
+from app.jobkinds.diagnosis import write_json
+from app.pipeline import AnalysisOptions, VehicleInputs
 from app.storage.base import Store
 from app.storage.records import JobRecord
+from sim import load_vehicle
 
 REQUEST, SUMMARY = "request.json", "summary.json"
 
@@ -39,13 +45,6 @@ def records(out: Path) -> dict[str, dict[str, Any]]:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.fleet.batch import BatchConfig, run_batch
-    from app.fleet.work import BatchSpec
-    from app.jobkinds import progress_reporter
-    from app.jobkinds.diagnosis import write_json
-    from app.pipeline import AnalysisOptions, VehicleInputs
-    from sim import load_vehicle
-
     d = directory(store, job.subject)
     try:
         req = json.loads((d / REQUEST).read_text(encoding="utf-8"))
@@ -58,11 +57,11 @@ def run(store: Store, job: JobRecord) -> None:
     cfg = BatchConfig(out=d / "out", spec=spec, vehicle_id=req["vehicle_id"], workers=0)
     progress = progress_reporter(store, job.id)
     done = [len(records(cfg.out))]  # logs finished by an earlier, cut-off attempt are skipped
-    progress("analysing", done[0] / len(logs))
+    progress(done[0] / len(logs), "analysing")
 
     def on_record(record: dict[str, Any]) -> None:
         done[0] += 1
-        progress("analysing", min(done[0], len(logs)) / len(logs))
+        progress(min(done[0], len(logs)) / len(logs), "analysing")
 
     summary = run_batch([str(rec.path) for rec in logs], cfg, stream=None, on_record=on_record)
     store.update_job(job.id, 0.99, "saving")

@@ -16,10 +16,14 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from app import atomic
 from app.errors import AnalysisError, InputError
 from app.jobkinds import progress_reporter
+from app.pipeline import decode_log
+from app.progress import within
 from app.storage.base import Store
 from app.storage.records import JobRecord
+from sim import load_vehicle
 
 SEP = "--dg"  # <analysis id><SEP><hex>: a diagnosis id names its analysis
 STATUS, VALIDATION, REPORT = "status.json", "validation.json", "report.json"
@@ -43,10 +47,8 @@ def write_json(path: Path, doc: dict[str, Any]) -> None:
 
 
 def write_text(path: Path, text: str) -> None:
-    """Write ``text`` to a temporary sibling and rename it into place."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    """Write ``text`` to a temporary sibling and rename it into place (:func:`app.atomic.write_text`)."""
+    atomic.write_text(path, text)
 
 
 def read_json(path: Path) -> dict[str, Any] | None:
@@ -67,7 +69,7 @@ def update(path: Path, **kw: Any) -> dict[str, Any]:
 
 def options(opts: dict[str, Any], model: str) -> Any:
     """The stored options as :class:`app.analysis.diagnosis.DiagnosisOptions` (typed error if unreadable)."""
-    from app.analysis.diagnosis import DiagnosisOptions
+    from app.analysis.diagnosis import DiagnosisOptions  # lazy: the server imports this module for file names
 
     try:
         return DiagnosisOptions(candidates=tuple(opts["candidates"]), seed=int(opts["seed"]), model=model)
@@ -78,9 +80,6 @@ def options(opts: dict[str, Any], model: str) -> Any:
 def decode(store: Store, log_id: str, vehicle_name: str, version: int) -> tuple[Any, Any, dict[str, Any]]:
     """A stored log's signals decoded with a stored vehicle's DBC and map, that vehicle's driveline, and what
     reading the log lost (``app.ingest.readreport``)."""
-    from app.pipeline import decode_log
-    from sim import load_vehicle
-
     logrec = store.get_log(log_id)
     veh = store.get_vehicle(vehicle_name, version)
     signals, ingest = decode_log(logrec.path, veh.database_path, veh.signal_map_path)
@@ -115,8 +114,8 @@ def base_ratios(report: dict[str, Any]) -> dict[str, float]:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.analysis.diagnosis import diagnose_checked, report_dict
-    from app.diagnosis_plots import chart_data, event_overlay_png, residual_chart_png
+    from app.analysis.diagnosis import diagnose_checked, report_dict  # lazy: in the worker only
+    from app.diagnosis_plots import chart_data, event_overlay_png, residual_chart_png  # lazy: matplotlib
 
     analysis_id, _, diagnosis_id = job.subject.split("/")
     d = store.analysis_dir(analysis_id) / "diagnoses" / diagnosis_id
@@ -125,11 +124,11 @@ def run(store: Store, job: JobRecord) -> None:
         raise InputError(f"diagnosis {diagnosis_id} has no {STATUS}", code="diagnosis_not_found")
     opts = options(st["options"], st["options"]["model"])
     progress = progress_reporter(store, job.id)
-    progress("decoding", 0.0)
+    progress(0.0, "decoding")
     rec = store.get_analysis(analysis_id)
     signals, vehicle, read = decode(store, rec.log_id, st["vehicle"]["name"], st["vehicle"]["version"])
     result, checked = diagnose_checked(signals, vehicle, opts,
-                                       lambda fraction, message: progress(message, 0.95 * fraction))
+                                       within(progress, 0.0, 0.95))
     doc = report_dict(result, findings=checked.findings)
     doc["read"] = read  # a damaged or truncated log, stated with the answer
     store.update_job(job.id, 0.97, "saving")

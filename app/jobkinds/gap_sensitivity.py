@@ -11,9 +11,13 @@ import json
 from pathlib import Path
 from typing import Any
 
+from app import atomic
 from app.jobkinds import progress_reporter
+from app.pipeline import gap_sensitivity
 from app.storage.base import Store
 from app.storage.records import JobRecord
+from app.storage.results import json_safe
+from sim import load_vehicle
 
 
 def subject(name: str, version: int) -> str:
@@ -25,18 +29,11 @@ def cache_path(driveline_path: Path) -> Path:
 
 
 def write_cached(driveline_path: Path, doc: dict[str, Any]) -> None:
-    out = cache_path(driveline_path)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc), encoding="utf-8")
-    tmp.replace(out)
+    atomic.write_text(cache_path(driveline_path), json.dumps(doc))
 
 
 def compute(store: Store, name: str, version: int | None, progress: Any = None) -> dict[str, Any]:
     """The document of a vehicle version, computed (and kept beside it)."""
-    from app.pipeline import gap_sensitivity
-    from app.storage.results import json_safe
-    from sim import load_vehicle
-
     rec = store.get_vehicle(name, version)
     vehicle = load_vehicle(rec.driveline_path)
     doc: dict[str, Any] = dict(json_safe(gap_sensitivity(vehicle, progress) if progress else gap_sensitivity(vehicle)))

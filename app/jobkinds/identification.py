@@ -14,8 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from app.errors import InputError
+from app.jobkinds import progress_reporter
+from app.jobkinds.diagnosis import write_json, write_text
 from app.storage.base import Store
 from app.storage.records import JobRecord
+from sim import load_vehicle
 
 REQUEST, RESULT, IDENTIFIED = "request.json", "result.json", "identified.toml"
 
@@ -34,10 +37,7 @@ def request(store: Store, identification_id: str) -> dict[str, Any]:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.identify.logs import IdentifyOptions, identify_logs
-    from app.jobkinds import progress_reporter
-    from app.jobkinds.diagnosis import write_json, write_text
-    from sim import load_vehicle
+    from app.identify.logs import IdentifyOptions, identify_logs  # lazy: the fit library loads in the worker only
 
     d = directory(store, job.subject)
     req = request(store, job.subject)
@@ -50,7 +50,7 @@ def run(store: Store, job: JobRecord) -> None:
     options = IdentifyOptions(dbc=veh.database_path, signal_map=veh.signal_map_path, seed=int(req["seed"]),
                               params=tuple(req["params"]))
     result = identify_logs(logs, load_vehicle(veh.driveline_path), options, withheld,
-                           lambda fraction, message: progress(message, fraction))
+                           progress)
     store.update_job(job.id, 0.99, "saving")
     val = result.validation
     for item in [*result.logs, *val.get("before", []), *val.get("after", [])]:

@@ -9,9 +9,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from app import atomic
 from app.jobkinds import progress_reporter
+from app.pipeline import tolerance_for_result
 from app.storage.base import Store
 from app.storage.records import JobRecord
+from app.storage.results import ResultFiles, json_safe
+from sim import load_vehicle
 
 
 def subject(analysis_id: str, n: int, seed: int) -> str:
@@ -24,19 +28,12 @@ def result_path(result_dir: Path, n: int, seed: int) -> Path:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.pipeline import tolerance_for_result
-    from app.storage.results import ResultFiles, json_safe
-    from sim import load_vehicle
-
     analysis_id, n_part, seed_part = job.subject.split("/")
     n, seed = int(n_part.removeprefix("n=")), int(seed_part.removeprefix("seed="))
     rec = store.get_analysis(analysis_id)
     veh = store.get_vehicle(rec.vehicle_name, rec.vehicle_version)
     progress = progress_reporter(store, job.id)
     doc = tolerance_for_result(ResultFiles(rec.result_dir), load_vehicle(veh.driveline_path), n, seed,
-                               lambda f: progress("tolerance", f))
+                               progress)
     doc.update(analysis_id=analysis_id, vehicle=rec.vehicle_name, vehicle_version=rec.vehicle_version)
-    out = result_path(rec.result_dir, n, seed)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(json_safe(doc)), encoding="utf-8")
-    tmp.replace(out)
+    atomic.write_text(result_path(rec.result_dir, n, seed), json.dumps(json_safe(doc)))

@@ -9,6 +9,7 @@ done (one atomic rewrite), so a re-run after a crash leaves one answer.
 from __future__ import annotations
 
 from app.errors import InputError
+from app.jobkinds import progress_reporter
 from app.jobkinds.diagnosis import (
     REPORT,
     STATUS,
@@ -30,8 +31,7 @@ def subject(analysis_id: str, diagnosis_id: str) -> str:
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.analysis.diagnosis import validate_effects
-    from app.jobkinds import progress_reporter
+    from app.analysis.diagnosis import validate_effects  # lazy: the diagnosis library loads in the worker only
 
     analysis_id, _, diagnosis_id, _ = job.subject.split("/")
     d = store.analysis_dir(analysis_id) / "diagnoses" / diagnosis_id
@@ -41,8 +41,8 @@ def run(store: Store, job: JobRecord) -> None:
     effects = chosen(report)
     opts = options(report["options"], report["model"])
     progress = progress_reporter(store, job.id)
-    progress("decoding", 0.0)
+    progress(0.0, "decoding")
     signals, vehicle, read = decode(store, val["log_id"], st["vehicle"]["name"], st["vehicle"]["version"])
-    result = validate_effects(effects, signals, vehicle, opts, lambda fraction, message: progress(message, fraction),
+    result = validate_effects(effects, signals, vehicle, opts, progress,
                               base_ratios=base_ratios(report))
     write_json(d / VALIDATION, {"log_id": val["log_id"], "job_id": val.get("job_id"), **result.to_dict(), "read": read})

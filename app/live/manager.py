@@ -24,7 +24,9 @@ from app.errors import ConflictError, InputError, NotFoundError
 from app.live.analyzer import LiveAnalyzer
 from app.live.bus import BusConfig, supported_interfaces
 from app.live.session import ChannelSource, LiveSession, SessionOptions
+from app.pipeline import free_rotor_inertia, inspect_log
 from app.storage.base import Store
+from sim import load_vehicle
 
 # Interfaces a REST client may open. udp_multicast sends to the network and socketcand connects
 # to any host given, so a server offers them only when its operator lists them explicitly.
@@ -150,8 +152,6 @@ class LiveManager:
     def adopt(self, path: Path | None, session_id: str, vehicle: str | None, version: int | None,
               meta: dict[str, Any] | None = None) -> Finished:
         """Add a recording to the store (and create its analysis)."""
-        from app.pipeline import inspect_log
-
         if path is None or not path.exists():
             return Finished(None, None, "nothing was recorded")
         try:
@@ -191,7 +191,4 @@ class LiveManager:
 def _metric_params(driveline_path: Path) -> MetricParams:
     """The offline analysis' metric thresholds plus the vehicle's free-rotor inertia, so live
     events get the same gap-open estimate as the stored analysis of the recording."""
-    from app.pipeline import free_rotor_inertia
-    from sim import load_vehicle
-
     return MetricParams(free_rotor_inertia_kgm2=free_rotor_inertia(load_vehicle(driveline_path)))

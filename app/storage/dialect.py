@@ -82,7 +82,7 @@ def database_errors() -> tuple[type[Exception], ...]:
     """The exceptions a backend's driver raises when the database itself fails (for ``/health``)."""
     errors: list[type[Exception]] = [sqlite3.Error]
     try:
-        import psycopg
+        import psycopg  # lazy: optional extra
     except ImportError:
         pass
     else:

@@ -104,7 +104,7 @@ class PostgresStore(SQLStore):
 
     def __init__(self, conninfo: str, root: Path, connect_timeout_s: float = 10.0) -> None:
         try:
-            import psycopg
+            import psycopg  # lazy: optional extra
         except ImportError as exc:
             raise InputError("a postgresql:// store needs the psycopg driver: pip install 'lashscope[postgres]'",
                              code="unsupported_store") from exc

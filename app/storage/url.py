@@ -17,6 +17,7 @@ from pathlib import Path
 from urllib.parse import parse_qs, unquote, urlsplit
 
 from app.errors import InputError
+from app.storage.postgres import PostgresStore, redact, split_url
 from app.storage.sqlite import SQLiteStore
 from app.storage.sqlstore import SQLStore
 
@@ -46,8 +47,6 @@ def open_store(url: str | Path, files: Path | None = None) -> SQLStore:
 
 
 def _postgres(text: str, files: Path | None) -> SQLStore:
-    from app.storage.postgres import PostgresStore, redact, split_url
-
     conninfo, named = split_url(text)
     parts = urlsplit(conninfo)
     if not parts.path.strip("/"):

@@ -45,10 +45,11 @@ def test_nominal_ripple_mid_band_and_large_ripple_at_the_top() -> None:
 def test_doc_is_deterministic_and_reports_progress() -> None:
     vehicle = load_vehicle("paper")
     torque, speed = Signal("motor_torque_nm", T, TORQUE, "N m"), _nominal_speed()
-    seen: list[float] = []
-    a = tolerance_doc(vehicle, torque, speed, [WIN], n=20, seed=3, progress=seen.append)
+    reports: list[tuple[float, str]] = []
+    a = tolerance_doc(vehicle, torque, speed, [WIN], n=20, seed=3, progress=lambda f, s: reports.append((f, s)))
+    seen, stages = [f for f, _ in reports], {s for _, s in reports}
     b = tolerance_doc(vehicle, torque, speed, [WIN], n=20, seed=3)
-    assert a == b and seen and seen[-1] == 1.0
+    assert a == b and seen and seen[-1] == 1.0 and stages == {"tolerance"}
     assert "gaps.halfshaft" in a["sampled_fields"] and "halfshaft.stiffness" in a["sampled_fields"]
     c = tolerance_doc(vehicle, torque, speed, [WIN], n=20, seed=4)
     assert c["events"][0]["band_rpm"] != a["events"][0]["band_rpm"]

@@ -163,7 +163,7 @@ def test_drag_mount_and_backlash_knobs():
 
 
 def test_short_drive_reads_back_through_lashscope_ingest(tmp_path):
-    from app.analysis.diagnosis.truthlog import read_log
+    from tests.support.truthlog import read_log
 
     d = make_drive(CAR, BAND_A, np.random.default_rng(11), 10.0)
     o = simulate(CAR, d.t, d.torque, d.speed0_kmh)

@@ -8,10 +8,10 @@ from functools import cache
 import numpy as np
 import pytest
 
-from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 from app.signals import SignalSet
 from sim import Vehicle, load_vehicle
 from sim.effects import apply_effects
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 
 SHORT = DriveSpec(duration_s=30.0)
 

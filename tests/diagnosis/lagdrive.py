@@ -11,13 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
-from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure_frames, run_truth
-from app.analysis.diagnosis.truthlog import write_blf
 from app.ingest.database import load_database
 from app.ingest.signalmap import load_signal_map
 from sim.effects import apply_effects
 from tests.conftest import REPO
 from tests.diagnosis.conftest import paper
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure_frames, run_truth
+from tests.support.truthlog import write_blf
 
 CANDIDATES = ["torque_lag", "speed_sensor", "drag"]
 

@@ -110,8 +110,8 @@ def test_split_seed_changes_the_split_not_the_answer(signals_for: Signals) -> No
 def test_input_lag_and_output_filter_are_ambiguous_when_no_gap_separates_them() -> None:
     """Without lash there is no gap phase: an input lag and an output filter are the same operator on
     a linear driveline, so both reach the noise floor and the decision names the pair."""
-    from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
     from sim.effects import apply_effects
+    from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 
     no_lash = paper().with_changes({f"gaps.{g}": 0.0 for g in ("spline", "mesh1", "mesh2", "differential",
                                                                 "halfshaft")})

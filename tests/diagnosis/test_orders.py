@@ -14,8 +14,8 @@ from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_di
 from app.analysis.diagnosis.decide import Decision, remainder_field, with_tones
 from app.analysis.diagnosis.noise import estimate_noise_floor
 from app.analysis.diagnosis.orders import OrderTone, find_order_tones
-from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 from tests.diagnosis.conftest import paper
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 
 
 def _channel(seed: int, amp: float, order: int, sigma: float = 0.6) -> tuple[np.ndarray, np.ndarray]:

@@ -12,10 +12,10 @@ from app.analysis.diagnosis.calibrate import Bounds, fit
 from app.analysis.diagnosis.partners import screen_partners
 from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, prepare
 from app.analysis.diagnosis.split import make_split
-from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 from app.analysis.events import detect_events
 from sim.effects import apply_effects, get_effect
 from tests.diagnosis.conftest import paper
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 
 TRUTH = {"backlash": {"reducer_scale": 1.8, "halfshaft_scale": 1.0}, "drag": {"coulomb_nm": 4.0, "viscous_nms": 0.01}}
 

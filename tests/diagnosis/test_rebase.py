@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from app.analysis.diagnosis import DiagnosisOptions, augmented_vehicle, diagnose_signals, report_dict
-from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 from app.diagnosis_plots import chart_data
 from app.identify import physical, with_base
 from app.signals import SignalSet
 from sim.effects import apply_effects
 from tests.diagnosis.conftest import paper
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 
 
 def _drive(base: dict[str, float], effects: dict[str, dict[str, float]], seed: int) -> SignalSet:
@@ -71,9 +71,9 @@ def test_an_effect_on_a_car_whose_data_sheet_is_off_is_still_named() -> None:
 def test_backlash_is_left_out_when_the_lash_traverse_falls_between_samples() -> None:
     """The chain-drive car logged at 20 Hz crosses its lash between two samples: where the lash sits cannot be
     told, so backlash is not a candidate (said why); at 100 Hz it is."""
-    from app.analysis.diagnosis.synthetic import CanSampling
     from sim import load_vehicle
     from tests.identify.drives import drive_signals
+    from tests.support.synthetic import CanSampling
 
     why = {}
     for period in (0.05, 0.01):

@@ -15,9 +15,9 @@ import pytest
 from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals, report_dict
 from app.analysis.diagnosis.forward import DiagEvent, Nuisance, simulate_events
 from app.analysis.diagnosis.noise import white_noise_sigma
-from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 from app.analysis.diagnosis.uncertainty import torque_noise_variance
 from tests.diagnosis.conftest import paper
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 
 
 def _torque(t: np.ndarray) -> np.ndarray:

@@ -7,14 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.analysis.diagnosis.synthetic import CanSampling, DriveSpec, make_drive, measure_frames, run_truth
-from app.analysis.diagnosis.truthlog import read_log, write_blf
 from app.errors import InputError
 from app.ingest.database import load_database
 from app.ingest.pipeline_signals import load_signals
 from app.ingest.signalmap import load_signal_map
 from tests.conftest import REPO
 from tests.diagnosis.conftest import paper
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure_frames, run_truth
+from tests.support.truthlog import read_log, write_blf
 
 DBC = REPO / "dbc" / "lashscope_ev.dbc"
 

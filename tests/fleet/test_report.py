@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -110,8 +111,9 @@ def test_logs_that_do_not_track_are_left_out_of_the_figures_and_counted(store: P
 
 def test_hook_writes_service_rows_only_when_enabled(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                     fleet_logs: dict[str, Path]) -> None:
-    from app.fleet.hook import ENV
+    from app.fleet.hook import ENV, after_analysis
     from app.log_source import content_hash
+    from app.payload import result_payload
     from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
     from sim import load_vehicle
     from tests.fleet.conftest import DBC, MAP
@@ -119,10 +121,14 @@ def test_hook_writes_service_rows_only_when_enabled(tmp_path: Path, monkeypatch:
     inputs = VehicleInputs(load_vehicle("paper"), DBC, MAP)
     opts = AnalysisOptions(whole_log=False)
     monkeypatch.delenv(ENV, raising=False)
-    run_analysis(fleet_logs["log2"], inputs, opts)
+    result = run_analysis(fleet_logs["log2"], inputs, opts)
+    doc, _ = result_payload(result)
+    after_analysis(fleet_logs["log2"], inputs, doc)
     assert not (tmp_path / "events").exists()
     monkeypatch.setenv(ENV, str(tmp_path / "events"))
-    result = run_analysis(fleet_logs["log2"], inputs, opts)
+    assert run_analysis(fleet_logs["log2"], inputs, opts).events == result.events
+    assert not (tmp_path / "events").exists()  # the analysis itself has no side effects; its caller runs the hook
+    after_analysis(fleet_logs["log2"], inputs, doc)
     frame = read_events(tmp_path / "events")
     assert len(frame) == len(result.events) and set(frame["source"]) == {"service"}
     assert set(frame["log_hash"]) == {content_hash(fleet_logs["log2"])} and set(frame["vehicle"]) == {"paper"}
@@ -130,8 +136,11 @@ def test_hook_writes_service_rows_only_when_enabled(tmp_path: Path, monkeypatch:
                 if er.comparison is not None}
     got = dict(zip(frame["event_index"], frame["measured_fluctuation_rpm"], strict=True))
     assert measured and all(got[i] == pytest.approx(v) for i, v in measured.items())
-    monkeypatch.setenv(ENV, str(fleet_logs["log2"]))  # a file, not a folder: logged, the analysis still succeeds
-    assert run_analysis(fleet_logs["log2"], inputs, opts).events == result.events
+    monkeypatch.setenv(ENV, str(tmp_path / "stored"))  # the hash an upload stored is used as given, not recomputed
+    after_analysis(fleet_logs["log2"], inputs, doc, log_hash="ab" * 32)
+    assert set(read_events(tmp_path / "stored")["log_hash"]) == {"ab" * 32}
+    monkeypatch.setenv(ENV, str(fleet_logs["log2"]))  # a file, not a folder: logged, the caller goes on
+    after_analysis(fleet_logs["log2"], inputs, doc)
 
 
 def test_a_vehicle_is_red_on_a_panel_only_outside_that_panels_band(store: Path) -> None:
@@ -156,13 +165,30 @@ def test_a_vehicle_is_red_on_a_panel_only_outside_that_panels_band(store: Path) 
 
 def test_service_rows_carry_the_registered_vehicle_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                         fleet_logs: dict[str, Path]) -> None:
-    from app.fleet.hook import ENV
+    from app.fleet.hook import ENV, after_analysis
+    from app.payload import result_payload
     from app.pipeline import AnalysisOptions, VehicleInputs, run_analysis
     from sim import load_vehicle
     from tests.fleet.conftest import DBC, MAP
 
     monkeypatch.setenv(ENV, str(tmp_path / "events"))
-    run_analysis(fleet_logs["log2"], VehicleInputs(load_vehicle("paper"), DBC, MAP, "my-car"),
-                 AnalysisOptions(whole_log=False))
+    inputs = VehicleInputs(load_vehicle("paper"), DBC, MAP, "my-car")
+    after_analysis(fleet_logs["log2"], inputs,
+                   result_payload(run_analysis(fleet_logs["log2"], inputs, AnalysisOptions(whole_log=False)))[0])
     frame = read_events(tmp_path / "events")
     assert set(frame["vehicle"]) == {"my-car"} and set(frame["driveline"]) == {"paper"}
+
+
+def test_cli_analyze_writes_service_rows_when_a_store_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                fleet_logs: dict[str, Path]) -> None:
+    from app.cli import main
+    from app.fleet.hook import ENV
+    from app.log_source import content_hash
+
+    monkeypatch.setenv(ENV, str(tmp_path / "events"))
+    assert main(["analyze", str(fleet_logs["log2"]), "--vehicle", "paper", "--no-whole-log",
+                 "--out", str(tmp_path / "a.json")]) == 0
+    doc = json.loads((tmp_path / "a.json").read_text())
+    frame = read_events(tmp_path / "events")
+    assert len(frame) == len(doc["events"]) > 0 and set(frame["source"]) == {"service"}
+    assert set(frame["log_hash"]) == {content_hash(fleet_logs["log2"])}

@@ -16,7 +16,14 @@ import numpy as np
 from app.analysis.diagnosis.forward import DiagEvent
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, prepare
-from app.analysis.diagnosis.synthetic import (
+from app.analysis.events import detect_events
+from app.identify.base import with_base
+from app.ingest.database import load_database
+from app.ingest.signalmap import load_signal_map
+from app.signals import SignalSet
+from sim import Vehicle, load_vehicle
+from tests.conftest import REPO
+from tests.support.synthetic import (
     CanSampling,
     DriveSpec,
     make_drive,
@@ -25,14 +32,7 @@ from app.analysis.diagnosis.synthetic import (
     run_truth,
     to_signals,
 )
-from app.analysis.diagnosis.truthlog import write_blf
-from app.analysis.events import detect_events
-from app.identify.base import with_base
-from app.ingest.database import load_database
-from app.ingest.signalmap import load_signal_map
-from app.signals import SignalSet
-from sim import Vehicle, load_vehicle
-from tests.conftest import REPO
+from tests.support.truthlog import write_blf
 
 OFF = {"stiffness": 0.75, "damping": 1.8, "mass": 1.15, "lash": 1.25}  # a data sheet off in every base parameter
 

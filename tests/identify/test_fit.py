@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.analysis.diagnosis.synthetic import CanSampling
 from app.errors import InsufficientDataError, NotIdentifiableError
 from app.identify import FitOptions, identify_events, physical, with_base
 from app.identify.base import effective_stiffness, first_mode, lash_mrad
 from app.signals import Signal, SignalSet
 from sim import load_vehicle
 from tests.identify.drives import OFF, drive_signals, prepared
+from tests.support.synthetic import CanSampling
 
 
 @pytest.fixture(scope="module")

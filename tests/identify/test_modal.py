@@ -21,7 +21,6 @@ from hypothesis import strategies as st
 from scipy import signal
 
 from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
-from app.analysis.diagnosis.truthlog import read_log
 from app.analysis.events import detect_events
 from app.errors import InputError, InsufficientDataError
 from app.identify.modal import (
@@ -41,6 +40,7 @@ from bench.indep.drive import BAND_A, make_drive
 from bench.indep.dynamics import N_STATE, _rhs, initial_state, pack, simulate
 from bench.indep.record import DBC, MAP, write_drive
 from tests.conftest import shared_file
+from tests.support.truthlog import read_log
 
 RPM = 30.0 / np.pi
 J_MOTOR = 0.12  # kg m^2: rotor and reducer at the motor

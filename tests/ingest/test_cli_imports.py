@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from tests.conftest import DATA, REPO
+from tests.conftest import REPO, sample_files
 
 HEAVY = ("cantools", "can", "pyarrow", "scipy", "asammdf", "pandas", "fastapi", "numba", "numpy")
 
@@ -52,8 +52,8 @@ def test_top_level_help_imports_no_heavy_library_nor_the_simulator() -> None:
 
 def test_reading_asc_and_mf4_loads_neither_numba_nor_asammdf() -> None:
     """The ASC scanner is numpy only and the MF4 reader reads CANedge files itself."""
-    mf4 = sorted((DATA / "css-electronics-mf4").rglob("*.MF4")) if DATA.is_dir() else []
-    asc = [p for p in sorted(DATA.rglob("*.asc")) if p.stat().st_size > 8192][:1] if DATA.is_dir() else []
+    mf4 = sample_files("css-electronics-mf4", "**/*.MF4")
+    asc = [p for p in sample_files("", "**/*.asc") if p.stat().st_size > 8192][:1]
     if not (mf4 and asc):
         pytest.skip("shared data not found (set LASHSCOPE_SHARED)")
     code = (

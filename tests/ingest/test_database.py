@@ -10,10 +10,10 @@ import pytest
 
 from app.errors import DatabaseError
 from app.ingest.database import load_database
-from tests.conftest import DATA, shared_file
+from tests.conftest import sample_files, shared_file
 
-TESTFILES = DATA / "cantools-testfiles"
-ALL_TESTFILES = sorted(TESTFILES.glob("*/*")) if TESTFILES.is_dir() else []
+TESTFILES = "cantools-testfiles"  # tests/data holds two of them, ../shared/data all
+ALL_TESTFILES = sample_files(TESTFILES, "*/*")
 
 
 def _cantools_loads(path: Path) -> bool:

@@ -92,7 +92,7 @@ def test_one_argument_progress_and_open_reader(tmp_path: Path, ref) -> None:  # 
     write_reference_blf(log, seconds=0.5)
     fractions: list[float] = []
     with open_log(log) as reader:
-        signals, _ = load_signals(reader, *ref, progress=fractions.append)
+        signals, _ = load_signals(reader, *ref, progress=lambda f, _frames: fractions.append(f))
     assert fractions[-1] == 1.0 and len(signals["pedal_pct"]) == 50
 
 

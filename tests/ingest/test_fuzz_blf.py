@@ -204,20 +204,34 @@ def test_wrong_suffix_is_read_by_content(tmp_path: Path) -> None:
     assert out.chunk is not None and len(out.chunk) == N_FRAMES
 
 
+def _mutated(base: bytes, rng: np.random.Generator) -> tuple[bytes, int]:
+    """``base`` with 1..11 random bytes past the file header changed, and the first changed position."""
+    data = bytearray(base)
+    positions = rng.integers(144, len(data), int(rng.integers(1, 12)))
+    for pos in positions:
+        data[int(pos)] = int(rng.integers(0, 256))
+    return bytes(data), int(positions.min())
+
+
 @pytest.mark.parametrize("seed", range(40))
 def test_mutations(seed: int) -> None:
+    """Bytes changed past the header: always a salvage (never a refusal), every frame of the containers before
+    the first changed byte kept as it was, frames counted in the report, and lost frames reported as damage."""
     rng = np.random.default_rng(seed)
-    data = bytearray(BASE)
-    for pos in rng.integers(144, len(data), int(rng.integers(1, 12))):
-        data[int(pos)] = int(rng.integers(0, 256))
-    uncompressed = bytearray(blf_file(base_objects(), compress=False, container_bytes=5000))
-    for pos in rng.integers(144, len(uncompressed), int(rng.integers(1, 12))):
-        uncompressed[int(pos)] = int(rng.integers(0, 256))
-    for blob in (bytes(data), bytes(uncompressed)):
+    compressed = _mutated(BASE, rng)
+    uncompressed = blf_file(base_objects(), compress=False, container_bytes=5000)
+    mutated_plain = _mutated(uncompressed, rng)
+    for original, (blob, first) in ((BASE, compressed), (uncompressed, mutated_plain)):
         out = run_bounded(blob)
-        if out.chunk is not None:
-            assert len(out.chunk) <= N_FRAMES + 12
-            assert out.report is not None and out.report.frames == len(out.chunk)
+        assert out.chunk is not None and out.report is not None, out.error
+        assert len(out.chunk) <= N_FRAMES + 12 and out.report.frames == len(out.chunk)
+        before = [o for o in container_offsets(original) if o <= first][1:]  # starts of the containers after one
+        if before:  # the containers before the damaged one, read from the undamaged file
+            intact = run_bounded(original[:before[-1]]).chunk
+            assert intact is not None and len(out.chunk) >= len(intact) > 0
+            assert is_prefix(out.chunk.select(np.arange(len(out.chunk)) < len(intact)), intact)
+        if len(out.chunk) < N_FRAMES:
+            assert [i for i in out.report.issues if i.kind != "time_backwards"], "lost frames must be reported"
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])

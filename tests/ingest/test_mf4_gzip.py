@@ -18,9 +18,9 @@ from app.ingest.frames import FrameChunk
 from app.ingest.readers import _source as source_module
 from app.ingest.readers import open_log
 from app.tempfiles import owner_tag
-from tests.conftest import DATA, REPO
+from tests.conftest import REPO, sample_files
 
-MF4 = sorted((DATA / "css-electronics-mf4").rglob("*.MF4")) if DATA.is_dir() else []
+MF4 = sample_files("css-electronics-mf4", "**/*.MF4")
 
 
 @pytest.fixture

@@ -1,7 +1,7 @@
 """The numpy MF4 reader against asammdf, on the shared CANedge files and asammdf's own layouts, and damaged files.
 
 Every case compares whole frame columns with the reader run through asammdf
-(``mf4.NATIVE = False``): the unfinalised, unsorted CANedge originals (VLSD payloads) and
+(``LASHSCOPE_MF4_NATIVE=false``): the unfinalised, unsorted CANedge originals (VLSD payloads) and
 asammdf's re-saves of them (sorted; plain, deflate and transposed deflate data blocks; a DL
 list when concatenated). Damaged copies must give a typed error or keep exactly the intact
 frames before the damage, with the loss reported.
@@ -9,6 +9,7 @@ frames before the damage, with the loss reported.
 
 from __future__ import annotations
 
+import os
 import re
 import warnings
 from pathlib import Path
@@ -18,25 +19,27 @@ import pytest
 
 from app.errors import LogFormatError, TruncatedLogError
 from app.ingest.frames import FrameChunk, IngestReport
-from app.ingest.readers import mf4 as mf4_module
 from app.ingest.readers import open_log
 from app.ingest.readers.mf4_blocks import MdfFile
-from tests.conftest import DATA
+from tests.conftest import sample_files, shared_file
 
-MF4 = sorted((DATA / "css-electronics-mf4").rglob("*.MF4")) if DATA.is_dir() else []
+MF4 = sample_files("css-electronics-mf4", "**/*.MF4")
 pytestmark = pytest.mark.skipif(not MF4, reason="CANedge MF4 files not found (set LASHSCOPE_SHARED)")
 COLUMNS = ("t_ns", "channel", "arb_id", "flags", "dlc", "data")
 
 
 def read(path: Path, *, native: bool = True, strict: bool = False) -> tuple[FrameChunk, IngestReport, object]:
-    old = mf4_module.NATIVE
-    mf4_module.NATIVE = native
+    old = os.environ.get("LASHSCOPE_MF4_NATIVE")
+    os.environ["LASHSCOPE_MF4_NATIVE"] = str(native).lower()
     try:
         with open_log(path, strict=strict, chunk_frames=500) as log:
             chunk = FrameChunk.concat(list(log.chunks()))
             return chunk, log.report, log.meta
     finally:
-        mf4_module.NATIVE = old
+        if old is None:
+            del os.environ["LASHSCOPE_MF4_NATIVE"]
+        else:
+            os.environ["LASHSCOPE_MF4_NATIVE"] = old
 
 
 def assert_same(a: FrameChunk, b: FrameChunk) -> None:
@@ -119,7 +122,10 @@ def test_truncated_canedge_file_keeps_every_whole_record(tmp_path: Path) -> None
 
 
 def _damaged_deflate(tmp_path: Path, garbage_tail: bool) -> tuple[Path, FrameChunk]:
-    f = resaved(MF4[1], tmp_path / "z.mf4", 1)
+    # the 215 kB CANedge file (only under ../shared/data): where its stream is damaged is tuned to its data
+    src = shared_file("css-electronics-mf4", "examples", "data-processing", "LOG", "2F6913DB", "00000004",
+                      "00000001.MF4")
+    f = resaved(src, tmp_path / "z.mf4", 1)
     data = bytearray(f.read_bytes())
     dz = _blocks(bytes(data), b"DZ")[0]
     zlen = int.from_bytes(data[dz + 24 + 16:dz + 24 + 24], "little")

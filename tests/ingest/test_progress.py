@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from app.ingest.readers import LogReader, open_log
-from tests.conftest import shared_file
+from tests.conftest import sample_files
 
 
 def candump(n: int) -> bytes:
@@ -64,7 +64,7 @@ def test_pipe_has_no_size() -> None:
 
 
 def test_mf4_position_from_records() -> None:
-    path = next(iter(sorted(shared_file("css-electronics-mf4").rglob("*.MF4"))), None)
+    path = next(iter(sample_files("css-electronics-mf4", "**/*.MF4")), None)
     if path is None:
         pytest.skip("no MF4 file in the shared data")
     with open_log(path, chunk_frames=2000) as reader:
@@ -88,7 +88,7 @@ def test_load_signals_progress_uses_the_public_position(tmp_path: Path) -> None:
                              for i in range(100_000)))  # ~4 MB
     fractions: list[float] = []
     signals, _ = load_signals(log, LoadedDatabase(db, log, "dbc"), smap,
-                              progress=fractions.append, chunk_frames=4096)
+                              progress=lambda f, _frames: fractions.append(f), chunk_frames=4096)
     assert len(signals["motor_speed_rpm"]) == 100_000
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
     assert len({f for f in fractions if 0.0 < f < 1.0}) >= 2  # progress moves while reading, not only at the end

@@ -17,7 +17,7 @@ from app.errors import LogFormatError
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers import blf as blf_module
 from app.ingest.readers import open_log
-from tests.conftest import DATA
+from tests.conftest import sample_files, sample_path
 
 START = (2024, 3, 2, 5, 14, 30, 15, 250)  # SYSTEMTIME: 2024-03-05 14:30:15.250 (a Tuesday)
 
@@ -147,12 +147,12 @@ def _fd_mix() -> bytes:
     return blf_file(objs, container_bytes=333)
 
 
-PYCAN_BLF = sorted((DATA / "python-can-testdata" / "test" / "data").glob("*.blf")) if DATA.is_dir() else []
+PYCAN_BLF = sample_files("python-can-testdata/test/data", "*.blf")
 
 
 @pytest.mark.parametrize("name", ["mix", *[p.name for p in PYCAN_BLF]])
 def test_vectorised_path_equals_compiled_walk(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    data = _fd_mix() if name == "mix" else (DATA / "python-can-testdata" / "test" / "data" / name).read_bytes()
+    data = _fd_mix() if name == "mix" else sample_path("python-can-testdata", "test", "data", name).read_bytes()
     fast, fast_log = read(data)
     monkeypatch.setattr(blf_module, "decode_run", lambda buf, start: None)  # force the object-by-object walk
     slow, slow_log = read(data)

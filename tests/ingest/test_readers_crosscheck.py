@@ -17,17 +17,11 @@ import pytest
 
 from app.ingest.frames import FrameChunk, FrameFlag, LogMeta
 from app.ingest.readers import open_log
-from tests.conftest import DATA
+from tests.conftest import sample_files, sample_path
 
-PYCAN = DATA / "python-can-testdata" / "test" / "data"
-MF4_DIR = DATA / "css-electronics-mf4"
-
-
-def _files(folder: Path, patterns: tuple[str, ...]) -> list[Path]:
-    return sorted(p for pat in patterns for p in folder.rglob(pat)) if folder.is_dir() else []
-
-
-CROSS_FILES = _files(PYCAN, ("*.asc", "*.asc.gz", "*.blf", "*.trc")) + _files(MF4_DIR, ("*.MF4",))
+PYCAN = sample_path("python-can-testdata", "test", "data")  # all of python-can's vectors are committed
+CROSS_FILES = (sample_files("python-can-testdata/test/data", "**/*.asc", "**/*.asc.gz", "**/*.blf", "**/*.trc")
+               + sample_files("css-electronics-mf4", "**/*.MF4"))
 
 
 def python_can_frames(path: Path) -> tuple[list[can.Message], float]:

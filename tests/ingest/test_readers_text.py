@@ -12,7 +12,7 @@ from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers import LogReader, open_log
 from app.ingest.readers import asc as asc_module
 from app.ingest.readers.asc import parse_asc_date
-from tests.conftest import DATA
+from tests.conftest import sample_files
 
 
 def read_text(text: str, **kw: object) -> tuple[FrameChunk, LogReader]:
@@ -132,7 +132,7 @@ def test_gvret_header_with_dir_column_and_epoch_clock() -> None:
     assert bytes(chunk.data[0, :2]) == b"\xaa\xbb"
 
 
-ASC_FILES = [p for p in sorted(DATA.rglob("*.asc")) if p.stat().st_size < 400_000] if DATA.is_dir() else []
+ASC_FILES = [p for p in sample_files("", "**/*.asc") if p.stat().st_size < 400_000]
 
 
 @pytest.mark.parametrize("path", ASC_FILES, ids=lambda p: p.name[:40])

@@ -14,6 +14,7 @@ from fastapi import APIRouter, Query
 from app.api.deps import StoreDep
 from app.api.schemas import ERRORS, EffectOut, FieldChange, VehicleCompareOut
 from app.errors import InputError
+from sim.effects import EFFECTS
 
 router = APIRouter(responses=ERRORS)
 
@@ -21,8 +22,6 @@ router = APIRouter(responses=ERRORS)
 @router.get("/effects", response_model=list[EffectOut], tags=["diagnoses"],
             summary="Candidate effects a diagnosis can fit (ids for the 'candidates' option)")
 def list_effects() -> list[EffectOut]:
-    from sim.effects import EFFECTS
-
     return [EffectOut(id=e.id, title=e.title, model=e.model, params=[p.name for p in e.params])
             for e in EFFECTS.values()]
 

@@ -32,6 +32,7 @@ from app.api.deps import RunnerDep, SettingsDep, StoreDep
 from app.api.routes.analyses import room_for_a_job
 from app.api.schemas import ERRORS, AppliedOut, DiagnosisChartsOut, DiagnosisOut
 from app.errors import ConflictError, NotFoundError
+from app.identify.base import with_base
 from app.jobkinds import validation
 from app.jobkinds.diagnosis import (
     CHARTS,
@@ -48,9 +49,12 @@ from app.jobkinds.diagnosis import (
     update,
     write_json,
 )
+from app.pipeline import check_vehicle_files
 from app.storage.base import Store
 from app.storage.records import JobStatus
 from app.storage.sqlstore import check_vehicle_name
+from sim import dump_toml, load_vehicle
+from sim.effects import EFFECTS, apply_effects
 
 
 class DiagnosisCreate(BaseModel):
@@ -119,8 +123,7 @@ def _read(store: Store, d: Path) -> dict[str, Any]:
              summary="Start a diagnosis of an analysis' sim-to-real gap (runs in the background)")
 def create_diagnosis(analysis_id: str, body: DiagnosisCreate, store: StoreDep, runner: RunnerDep,
                      settings: SettingsDep) -> dict[str, Any]:
-    from app.analysis.diagnosis import DiagnosisOptions
-    from sim.effects import EFFECTS
+    from app.analysis.diagnosis import DiagnosisOptions  # lazy: the diagnosis library loads on first use
 
     rec = store.get_analysis(analysis_id)
     options = DiagnosisOptions(candidates=tuple(body.candidates) if body.candidates else tuple(EFFECTS),
@@ -188,11 +191,6 @@ def _done_report(store: Store, d: Path, diagnosis_id: str) -> dict[str, Any]:
 @router.post("/diagnoses/{diagnosis_id}/apply", status_code=status.HTTP_201_CREATED, response_model=AppliedOut,
              summary="Apply the diagnosed effect: store a new vehicle version (the augmented model)")
 def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict[str, Any]:
-    from app.identify.base import with_base
-    from app.pipeline import check_vehicle_files
-    from sim import dump_toml, load_vehicle
-    from sim.effects import apply_effects
-
     if body.name is not None:
         check_vehicle_name(body.name)  # before anything is read or written: the name never reaches a path
     d = _dir(store, diagnosis_id)

@@ -13,6 +13,10 @@ from fastapi import APIRouter, Query
 
 from app.api.deps import SettingsDep, StoreDep
 from app.api.schemas import ERRORS, FleetOut
+from app.errors import NotFoundError
+from app.fleet.hook import store_dir
+from app.fleet.report import fleet_report
+from app.storage.results import json_safe
 
 router = APIRouter(tags=["fleet"], responses=ERRORS)
 
@@ -23,11 +27,6 @@ def fleet(settings: SettingsDep, store: StoreDep, band_k: Annotated[float, Query
           include_poor_tracking: bool = False) -> dict[str, Any]:
     """Each vehicle's ``per_log`` point names its stored log (``log_id``, null when the log came from a
     batch and is not stored here) and the analyses of that log (newest first), to link to them."""
-    from app.errors import NotFoundError
-    from app.fleet.hook import store_dir
-    from app.fleet.report import fleet_report
-    from app.storage.results import json_safe
-
     root = store_dir() or settings.data_dir / "events"
     try:
         report = fleet_report(root, k=band_k, include_poor=include_poor_tracking)

@@ -36,6 +36,7 @@ from app.errors import ConflictError, InputError, NotFoundError
 from app.identify import BASE_NAMES
 from app.jobkinds.diagnosis import read_json, write_json
 from app.jobkinds.identification import IDENTIFIED, REQUEST, RESULT, directory
+from app.pipeline import check_vehicle_files
 from app.storage.base import Store
 from app.storage.records import JobRecord, JobStatus
 
@@ -118,8 +119,6 @@ def identified_vehicle(identification_id: str, store: StoreDep) -> Response:
 @router.post("/{identification_id}/apply", status_code=status.HTTP_201_CREATED, response_model=AppliedOut,
              summary="Store the identified vehicle as a new version of the vehicle")
 def apply_identification(identification_id: str, store: StoreDep) -> dict[str, Any]:
-    from app.pipeline import check_vehicle_files
-
     req, _ = _done(store, identification_id)
     d = directory(store, identification_id)
     veh = store.get_vehicle(req["vehicle"], req["vehicle_version"])

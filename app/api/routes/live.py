@@ -20,7 +20,6 @@ and option values that look like file paths are refused the same way.
 from __future__ import annotations
 
 import asyncio
-import os
 import threading
 from collections.abc import AsyncIterator
 from typing import Annotated, Any
@@ -66,10 +65,8 @@ class LiveStopped(BaseModel):
     note: str | None = None
 
 
-def _allowed() -> frozenset[str] | None:
-    raw = os.environ.get("LASHSCOPE_LIVE_INTERFACES", "")
-    names = frozenset(n.strip() for n in raw.split(",") if n.strip())
-    return names or None
+def _allowed(settings: Settings) -> frozenset[str] | None:
+    return frozenset(settings.live_interfaces) or None
 
 
 def get_manager(request: Request, settings: SettingsDep) -> LiveManager:
@@ -80,7 +77,7 @@ def get_manager(request: Request, settings: SettingsDep) -> LiveManager:
             runner = getattr(request.app.state, "runner", None)
             manager = LiveManager(request.app.state.store, settings.data_dir / "live", source_for,
                                   submit=runner.submit if runner is not None else None,
-                                  allowed_interfaces=_allowed())
+                                  allowed_interfaces=_allowed(settings))
             manager.recover()
             request.app.state.live = manager
     return manager

@@ -15,6 +15,7 @@ from app.api.schemas import ERRORS, LogOut
 from app.api.timezones import TZ_DOC, time_zone, zoned_start
 from app.api.upload import UploadedFile, receive_upload, user_file_names
 from app.errors import FormatFileError, InputError
+from app.ingest.readers.described import MAX_DESCRIPTION_BYTES, parse_layout
 from app.log_formats import LOG_FORMATS, formats_sentence, sidecar_of
 from app.pipeline import inspect_log
 
@@ -110,8 +111,6 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
 def _format_file(parts: list[UploadedFile]) -> str | None:
     """The text of an uploaded format description, validated (FormatFileError names the field); the parts
     are removed."""
-    from app.ingest.readers.described import MAX_DESCRIPTION_BYTES, parse_layout
-
     try:
         if not parts:
             return None

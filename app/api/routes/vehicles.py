@@ -22,12 +22,14 @@ from app.api.schemas import (
 )
 from app.api.upload import check_toml, receive_upload, user_file_names
 from app.errors import AppError, InputError, NotFoundError, UploadTooLargeError
+from app.ingest.signalmap import CANONICAL
 from app.jobkinds import gap_sensitivity as gap_job
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity_work
+from app.signal_proposal import parse_overrides, propose
 from app.storage.records import JobRecord, JobStatus
 from app.storage.results import json_safe
 from app.storage.sqlstore import check_vehicle_name
-from sim import load_vehicle, preset_names
+from sim import dump_toml, load_vehicle, preset_names
 
 router = APIRouter(prefix="/vehicles", tags=["vehicles"], responses=ERRORS)
 # bytes each file may have (checked before it is read): a driveline of 24 stages or a signal map is a few kB;
@@ -104,8 +106,6 @@ async def create_vehicle(request: Request, response: Response, store: StoreDep, 
 
 
 def _preset_toml(name: str) -> str:
-    from sim import dump_toml
-
     return dump_toml(load_vehicle(name))
 
 
@@ -239,9 +239,6 @@ async def propose_signal_map(request: Request, store: StoreDep, settings: Settin
     factor, rate (Hz), decoded range in the canonical unit, correlation and sign check, and the other candidates;
     ``signal_map_toml`` is the map to register (``POST /vehicles``, field ``signal_map``) as is or edited.
     ``missing`` lists the channels every analysis needs that no signal was found for. Nothing is stored."""
-    from app.ingest.signalmap import CANONICAL
-    from app.signal_proposal import parse_overrides, propose
-
     up = await receive_upload(request, store.temp_path, MAX_FILE_BYTES["dbc"], 0, urlencoded_form=True,
                               idle_s=settings.upload_idle_s, max_files=1)
     files = {f.field_name: f.path for f in up.files}

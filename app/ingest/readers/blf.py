@@ -59,7 +59,7 @@ DATA_LOST = {125: "DATA_LOST_BEGIN", 126: "DATA_LOST_END"}
 
 def _walk_objects() -> Any:
     """The compiled fallback walker, imported on first need (numba has a fixed start-up cost)."""
-    from app.ingest.readers.blf_kernel import walk_objects
+    from app.ingest.readers.blf_kernel import walk_objects  # lazy: numba start-up
 
     return walk_objects
 

@@ -42,13 +42,13 @@ from app.ingest.readers import mf4_native as native
 from app.ingest.readers._base import BaseReader
 from app.ingest.readers._source import StreamDamage, inflate_cap, too_large
 from app.ingest.readers.mf4_blocks import Damaged, MdfFile, Unsupported
+from app.settings import Settings
 from app.tempfiles import owner_tag
 
 EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFlag.FD, FrameFlag.ERROR,
                                                     FrameFlag.REMOTE, FrameFlag.BRS, FrameFlag.ESI, FrameFlag.TX))
 GROUP_KINDS = ("CAN_DataFrame", "CAN_RemoteFrame", "CAN_ErrorFrame")
 _BLOCK = 1 << 20
-NATIVE = True  # read with mf4_native where the layout allows; False: always through asammdf
 
 
 def _field(samples: Any, name: str, n: int, default: int = 0) -> npt.NDArray[np.int64]:
@@ -114,14 +114,14 @@ class MF4Reader(BaseReader):
             source = self._spool = self._inflate(*inflate_cap(self._stream.size))
         try:
             try:
-                if NATIVE:
+                if Settings().mf4_native:  # LASHSCOPE_MF4_NATIVE=false: always through asammdf
                     self._load_native(source)
                     return
             except Unsupported as why:
                 self._native = None
                 self.problem("mf4_fallback", f"read through asammdf: {why}")
             try:
-                import asammdf
+                import asammdf  # lazy: the fallback for other MF4 layouts
             except ImportError as exc:
                 raise LogFormatError(f"{self.name}: this MF4 layout needs the asammdf package") from exc
             self._load(asammdf, source)

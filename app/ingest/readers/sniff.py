@@ -13,8 +13,10 @@ import zlib
 from pathlib import PurePath
 
 from app.errors import LogFormatError, UnsupportedFormatError
-from app.ingest.readers import analyser_tsv, serial_dump
+from app.ingest.readers.analyser_tsv import HEADER as ANALYSER_HEADER
+from app.ingest.readers.analyser_tsv import ROW as ANALYSER_ROW
 from app.ingest.readers.described import TextLayout, user_layouts
+from app.ingest.readers.serial_dump import LINE_SHAPE as SERIAL_LINE
 from app.ingest.readers.tcu import LINE_SHAPE as TCU_LINE
 from app.log_formats import FORMAT_NAMES, LOG_FORMATS, supported_list
 
@@ -42,8 +44,8 @@ _LINE_RULES: dict[str, tuple[re.Pattern[str], ...]] = {
                    re.I),
     ),
     "tcu": (re.compile(TCU_LINE),),
-    "analyser_tsv": (analyser_tsv.HEADER, re.compile(analyser_tsv.ROW, re.I)),
-    "serial_dump": (re.compile(serial_dump.LINE_SHAPE),),
+    "analyser_tsv": (ANALYSER_HEADER, re.compile(ANALYSER_ROW, re.I)),
+    "serial_dump": (re.compile(SERIAL_LINE),),
 }
 
 

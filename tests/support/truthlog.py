@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 
-from app.analysis.diagnosis.synthetic import Frames
 from app.errors import InputError
 from app.ingest.database import LoadedDatabase, load_database
 from app.ingest.pipeline_signals import load_signals
@@ -29,6 +28,7 @@ from app.ingest.readers import open_log
 from app.ingest.signalmap import SignalMap, load_signal_map
 from app.ingest.stats import counter_modulus
 from app.signals import SignalSet
+from tests.support.synthetic import Frames
 
 CHANNELS = ("motor_torque_nm", "motor_speed_rpm")
 
