@@ -131,3 +131,20 @@ def test_an_effect_the_identified_base_cannot_stand_in_for_is_named_despite_a_tr
     assert trade and all(abs(t["correlation"]) >= 0.9 and t["effect_param"].startswith("tyre_slip.") for t in trade)
     assert d.details["preferred_to_base"]["probability"] >= 0.9
     assert "held-out events prefer tyre_slip to the identified base alone" in d.reason
+
+
+def test_an_effect_is_not_attributed_when_the_vehicle_cannot_be_identified_first() -> None:
+    """3 calibration events: the diagnosis can still fit the candidates, but not identify the vehicle before them,
+    so a torque lag that would explain the gap is reported as what it would attribute, not attributed; with one
+    calibration event more the vehicle is identified first and the lag is named."""
+    from tests.diagnosis.conftest import drive_signals
+    opts = DiagnosisOptions(candidates=("torque_lag", "drag"), seed=1, max_pairs=0)
+    few = diagnose_signals(drive_signals("torque_lag", (("tau_s", 0.02), ("delay_s", 0.0)), 31, 22.0), paper(), opts)
+    assert len(few.split.calibration) == 3
+    d = few.decision
+    assert d.status == "insufficient_data" and d.top == ()
+    assert d.details["would_attribute"] == ["torque_lag"] and d.details["identify_first"] is True
+    assert "could not be identified first" in d.reason and "needs at least 4" in d.reason
+    more = diagnose_signals(drive_signals("torque_lag", (("tau_s", 0.02), ("delay_s", 0.0)), 31, 26.0), paper(), opts)
+    assert len(more.split.calibration) == 4 and more.identification is not None
+    assert more.decision.status == "explained" and more.decision.top == ("torque_lag",)

@@ -381,6 +381,7 @@ def _diagnose(
     nominal = vehicle
     ident, ident_score, rebased, ident_note, file_eval = None, None, None, "", None
     bound_stop: Decision | None = None  # "identify the vehicle first", unless an effect brings the base inside
+    too_few = ""  # why the vehicle could not be identified for want of events
     refit_with: Identification | None = None  # base parameters the best effects are refitted with
     joint_ident: dict[str, Identification] = {}  # candidate -> the base parameters identified jointly with it
     say(step[0] / n_steps, "identifying the vehicle's base parameters on calibration events")
@@ -389,6 +390,7 @@ def _diagnose(
                                 baseline=base_fit)
     except (InsufficientDataError, NotIdentifiableError) as exc:
         ident_note = f"not identified: {exc}"
+        too_few = str(exc) if isinstance(exc, InsufficientDataError) else ""
     if ident is not None:
         fit_order.append(f"identification ({', '.join(ident.ratios) or 'nothing fitted'}): "
                          f"{[e.index for e in cal]}")
@@ -508,6 +510,13 @@ def _diagnose(
                                                    held=refit_with)
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
+    if too_few and decision.status in ("explained", "partial", "ambiguous"):
+        # the vehicle could not be identified first: what the effect explains may be the data sheet's error (a
+        # speed-sensor filter on its bound standing in for a damping twice the file's), so nothing is attributed
+        decision = Decision("insufficient_data", gap_ratio=decision.gap_ratio, best=decision.best, reason=(
+            f"{' + '.join(decision.top)} would explain part of the gap, but the vehicle could not be identified "
+            f"first ({too_few}): an unmodelled effect cannot be told from a data sheet that is off on so few events"),
+            details={"would_attribute": list(decision.top), "identify_first": True})
     if bound_stop is not None:
         top = "+".join(decision.top)
         jointly = joint_ident.get(top)
