@@ -20,15 +20,19 @@ import math
 import multiprocessing
 import os
 import resource
+import threading
 import time
 from pathlib import Path
 from typing import Any
 
-from app.errors import AppError, WorkLimitError
+from app.errors import AppError, QueueFullError, WorkLimitError
 
 _SPAWN = multiprocessing.get_context("spawn")
 START_CPU_S = 3.0  # what the child spends importing before the work (about 1 s on one core), on top of cpu_s
 START_WALL_S = 30.0  # the same in wall time on a loaded machine
+MAX_CHILDREN = 2  # at once per server: each may hold its memory limit
+WAIT_S = 10.0  # a request waits this long for a free slot, then 429
+_slots = threading.BoundedSemaphore(MAX_CHILDREN)
 
 
 def _child(conn: Any, target: str, args: tuple[Any, ...], kwargs: dict[str, Any], root: str, parent: int,
@@ -78,12 +82,23 @@ def run_bounded(target: str, *args: Any, root: Path, what: str, setting: str, cp
     ``root``: the data directory (the child's temporary files go to its ``tmp/``); ``what`` names the work in
     messages and ``setting`` the setting of ``cpu_s``.
     Blocks the calling thread (call it from a worker thread of the server). Past the CPU time, the memory or
-    the wall time (``4 x cpu_s`` plus start-up) raises :class:`WorkLimitError` with ``code``."""
+    the wall time (``4 x cpu_s`` plus start-up) raises :class:`WorkLimitError` with ``code``; while
+    :data:`MAX_CHILDREN` run, a call waits up to :data:`WAIT_S`, then :class:`QueueFullError` (429 ``busy``)."""
+    if not _slots.acquire(timeout=WAIT_S):
+        raise QueueFullError(f"{what}: {MAX_CHILDREN} such requests are running; try again shortly", code="busy")
+    try:
+        return _run(target, args, kwargs or {}, root, what, setting, cpu_s, memory_mb, code)
+    finally:
+        _slots.release()
+
+
+def _run(target: str, args: tuple[Any, ...], kwargs: dict[str, Any], root: Path, what: str, setting: str,
+         cpu_s: float, memory_mb: int, code: str) -> Any:
     from app.tempfiles import TMP, sweep
 
     recv, send = _SPAWN.Pipe(duplex=False)
     proc = _SPAWN.Process(target=_child, daemon=True, name=f"lashscope-bounded-{target.rsplit(':', 1)[-1]}",
-                          args=(send, target, args, kwargs or {}, str(root), os.getpid(), cpu_s, memory_mb))
+                          args=(send, target, args, kwargs, str(root), os.getpid(), cpu_s, memory_mb))
     proc.start()
     send.close()
     wall_s = 4 * cpu_s + START_WALL_S

@@ -21,6 +21,7 @@ from app.api.schemas import (
     VehicleOut,
 )
 from app.api.upload import check_toml, receive_upload, user_file_names
+from app.bounded import run_bounded
 from app.errors import AppError, InputError, NotFoundError, UploadTooLargeError
 from app.jobkinds import gap_sensitivity as gap_job
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity_work
@@ -240,7 +241,7 @@ async def propose_signal_map(request: Request, store: StoreDep, settings: Settin
     ``signal_map_toml`` is the map to register (``POST /vehicles``, field ``signal_map``) as is or edited.
     ``missing`` lists the channels every analysis needs that no signal was found for. Nothing is stored."""
     from app.ingest.signalmap import CANONICAL
-    from app.signal_proposal import parse_overrides, propose
+    from app.signal_proposal import parse_overrides
 
     up = await receive_upload(request, store.temp_path, MAX_FILE_BYTES["dbc"], 0, urlencoded_form=True,
                               idle_s=settings.upload_idle_s, max_files=1)
@@ -273,8 +274,11 @@ async def propose_signal_map(request: Request, store: StoreDep, settings: Settin
         dbc = files.get("dbc") or settings.dbc_dir / "lashscope_ev.dbc"
         names.setdefault(dbc, f"default {dbc.name}")
         names[log.path] = log.filename
-        with user_file_names(names):
-            proposal = await run_in_threadpool(propose, log.path, dbc, overrides, invert=fixed)
+        with user_file_names(names):  # reads a stored log of any size twice: in a child process, within limits
+            proposal = await run_in_threadpool(
+                run_bounded, "app.signal_proposal:propose", log.path, dbc, overrides, root=store.root,
+                what=f"proposing a signal map for {log.filename}", setting="3 x LASHSCOPE_VALIDATE_CPU_S",
+                cpu_s=3 * settings.validate_cpu_s, memory_mb=settings.bounded_memory_mb, kwargs={"invert": fixed})
     finally:
         for p in files.values():
             p.unlink(missing_ok=True)
