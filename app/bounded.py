@@ -6,7 +6,8 @@ hours, holding the interpreter lock, so no other request would be answered), or 
 proposed from a stored log of any size. :func:`run_bounded` runs such a function in a spawned
 child (no fork of the threaded server): the kernel stops it after ``cpu_s`` seconds of CPU
 (``RLIMIT_CPU``), its address space is capped at ``memory_mb`` (``RLIMIT_AS``: a ``MemoryError``
-inside), a wall-time deadline kills it if it stalls, and it dies with the server. The server's
+inside), a wall-time deadline kills it if it stalls, and it dies with the server. The CPU time counts
+from when the child has imported what it runs (about 1 s). The server's
 thread only waits on a pipe. Past a limit the caller gets a typed
 :class:`~app.errors.WorkLimitError` naming it; the child's own typed errors come back as they were
 raised; temporary files the child left (killed mid-inflation) are swept.
@@ -20,6 +21,7 @@ import math
 import multiprocessing
 import os
 import resource
+import signal
 import threading
 import time
 from pathlib import Path
@@ -28,11 +30,18 @@ from typing import Any
 from app.errors import AppError, QueueFullError, WorkLimitError
 
 _SPAWN = multiprocessing.get_context("spawn")
-START_CPU_S = 3.0  # what the child spends importing before the work (about 1 s on one core), on top of cpu_s
 START_WALL_S = 30.0  # the same in wall time on a loaded machine
 MAX_CHILDREN = 2  # at once per server: each may hold its memory limit
 WAIT_S = 10.0  # a request waits this long for a free slot, then 429
 _slots = threading.BoundedSemaphore(MAX_CHILDREN)
+
+
+class _CpuLimit(BaseException):  # not an Exception: no handler in the work may swallow it
+    """Raised in the child by its CPU timer."""
+
+
+def _out_of_cpu(signum: int, frame: Any) -> None:
+    raise _CpuLimit
 
 
 def _child(conn: Any, target: str, args: tuple[Any, ...], kwargs: dict[str, Any], root: str, parent: int,
@@ -42,15 +51,24 @@ def _child(conn: Any, target: str, args: tuple[Any, ...], kwargs: dict[str, Any]
     from app.worker import die_with_parent
 
     die_with_parent(parent)
-    cpu = math.ceil(cpu_s + START_CPU_S)
-    resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 1))  # SIGXCPU at the soft limit, SIGKILL at the hard
     limit = memory_mb * 2**20
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     try:
         module, _, name = target.partition(":")
         fn = getattr(importlib.import_module(module), name)
+        # cpu_s for the work itself, after the imports: a timer of the process' CPU time whose signal the regex
+        # engine (and any Python code) notices within microseconds, and the kernel's limit a second later for
+        # compiled code that never looks
+        used = sum(resource.getrusage(resource.RUSAGE_SELF)[:2])
+        cpu = math.ceil(used + cpu_s) + 1
+        resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 1))  # SIGXCPU at the soft limit, SIGKILL at the hard
+        signal.signal(signal.SIGPROF, _out_of_cpu)
+        signal.setitimer(signal.ITIMER_PROF, cpu_s)
         with temp_dir_of(Path(root)):
             out: tuple[Any, ...] = ("ok", fn(*args, **kwargs))
+        signal.setitimer(signal.ITIMER_PROF, 0)
+    except _CpuLimit:
+        out = ("cpu",)
     except AppError as exc:
         out = ("app_error", type(exc).__module__, type(exc).__qualname__, exc.detail, exc.code, exc.status)
     except MemoryError:
@@ -118,9 +136,9 @@ def _run(target: str, args: tuple[Any, ...], kwargs: dict[str, Any], root: Path,
         proc.join()
         with contextlib.suppress(OSError):
             sweep(Path(root) / TMP, math.inf)  # what the child left if it was killed (it is gone now)
-    if out is None:
-        why = (f"more than {cpu_s:g} s of CPU ({setting})" if proc.exitcode in (-24, -9) or time.monotonic() < deadline
-               else f"more than {wall_s:g} s")
+    if out is None or out[0] == "cpu":
+        why = (f"more than {wall_s:g} s" if out is None and time.monotonic() >= deadline
+               else f"more than {cpu_s:g} s of CPU ({setting})")
         raise WorkLimitError(f"{what} took {why} and was stopped", code=code)
     if out[0] == "ok":
         return out[1]

@@ -277,8 +277,8 @@ async def propose_signal_map(request: Request, store: StoreDep, settings: Settin
         with user_file_names(names):  # reads a stored log of any size twice: in a child process, within limits
             proposal = await run_in_threadpool(
                 run_bounded, "app.signal_proposal:propose", log.path, dbc, overrides, root=store.root,
-                what=f"proposing a signal map for {log.filename}", setting="3 x LASHSCOPE_VALIDATE_CPU_S",
-                cpu_s=3 * settings.validate_cpu_s, memory_mb=settings.bounded_memory_mb, kwargs={"invert": fixed})
+                what=f"proposing a signal map for {log.filename}", setting="LASHSCOPE_VALIDATE_CPU_S",
+                cpu_s=settings.validate_cpu_s, memory_mb=settings.bounded_memory_mb, kwargs={"invert": fixed})
     finally:
         for p in files.values():
             p.unlink(missing_ok=True)
