@@ -156,7 +156,8 @@ def every_method(srv: Server, c: httpx.Client, key: str) -> int:
             for path in round_paths:
                 for method in METHODS:
                     _send(c, statuses, method, path, headers)
-            time.sleep(2.5)  # the wrong keys' bucket refills before the next round
+            if headers is wrong:
+                time.sleep(2.5)  # the wrong keys' bucket refills before the next round
     return sum(v for k, v in statuses.items() if k >= 500 or k == 0)
 
 

@@ -236,7 +236,7 @@ def poll_job(c: httpx.Client, path: str, timeout: float = 600.0) -> str:
                     return f"{job['status']} {(job.get('error') or {}).get('code', '')}".strip()
             else:
                 return answer(r)
-        time.sleep(1.0)
+        time.sleep(0.25)
     return "still running"
 
 
@@ -277,9 +277,11 @@ def route_attacks(url: str) -> list[tuple[str, Callable[[httpx.Client], str]]]:
     ]
 
 
-def attacks(url: str) -> list[tuple[str, Callable[[httpx.Client], str]]]:
-    bombs = {fmt: gzip_bomb(fmt, BOMB_BYTES * (2 if fmt == "candump" else 1)) for fmt in ("candump", "asc", "trc",
-                                                                                         "mf4")}
+def attacks(url: str, short: bool = False) -> list[tuple[str, Callable[[httpx.Client], str]]]:
+    """The attacks (``short``: the bombs a quarter the size, those of :data:`SLOW` not built)."""
+    size = BOMB_BYTES // (4 if short else 1)
+    bombs = {fmt: gzip_bomb(fmt, size * (2 if fmt == "candump" else 1))
+             for fmt in (("candump", "mf4") if short else ("candump", "asc", "trc", "mf4"))}
     plain_text = b"(1609459200.000000) can0 123#0011223344556677\n" * 330_000  # 15 MB candump, uncompressed
     listing: list[tuple[str, Callable[[httpx.Client], str]]] = [
         ("vehicle name '../../x' (path)", lambda c: post_vehicle(c, "../../x")),
@@ -303,8 +305,9 @@ def attacks(url: str) -> list[tuple[str, Callable[[httpx.Client], str]]]:
     for fmt, bomb in bombs.items():
         listing.append((f"gzip bomb {fmt}, {len(bomb) / 2**20:.1f} MiB gzipped",
                         partial(upload, name=f"drive.{fmt}.gz", body=bomb)))
-    blf = blf_bomb(3_000_000)
-    listing.append((f"BLF of zlib containers, {len(blf) / 2**20:.1f} MiB (144 MB of frames)",
+    frames = 1_000_000 if short else 3_000_000
+    blf = blf_bomb(frames)
+    listing.append((f"BLF of zlib containers, {len(blf) / 2**20:.1f} MiB ({frames * 48 / 1e6:.0f} MB of frames)",
                     partial(upload, name="drive.blf", body=blf)))
     listing.append(("3 mf4 gzip bombs at once", lambda c: concurrent_bombs(url, bombs["mf4"], 3)))
     return listing + format_attacks() + route_attacks(url)
@@ -368,8 +371,14 @@ def kill_mid_bounded(srv: Server) -> str:
             f"{len(list((srv.data_dir / 'tmp').iterdir()))} after the restart")
 
 
-def run(srv: Server, kill: bool = True, only: str = "") -> list[str]:
-    """Every work attack against ``srv`` (``only``: those whose name contains it), one printed line each; with
+# left out of the short form (``short=True``): seconds of CPU each, and each limit has its test in tests/api
+SLOW = ("DBC, 400 overlapping", "DBC, 1000 overlapping", "candump, 15 MB", "format: backtracking regex, 2000 lines",
+        "proposal: DBC, 400 overlapping", "3 mf4 gzip bombs")
+
+
+def run(srv: Server, kill: bool = True, only: str = "", short: bool = False) -> list[str]:
+    """Every work attack against ``srv`` (``only``: those whose name contains it; ``short``: without
+    :data:`SLOW`), one printed line each; with
     ``kill``, last, the server is killed mid-upload and while a child process reads a log, and started again each
     time (on another port: ``srv.url`` changes)."""
     assert srv.proc is not None
@@ -377,8 +386,8 @@ def run(srv: Server, kill: bool = True, only: str = "") -> list[str]:
              "/health max ms (failed)"]
     before = outside_files(srv.proc.pid)
     with httpx.Client(base_url=srv.url, timeout=600.0) as c:
-        for name, attack in attacks(srv.url):
-            if only not in name:
+        for name, attack in attacks(srv.url, short):
+            if only not in name or (short and name.startswith(SLOW)):
                 continue
             with watched(srv) as w:
                 got = attack(c)
@@ -393,6 +402,44 @@ def run(srv: Server, kill: bool = True, only: str = "") -> list[str]:
     return lines
 
 
+def worst(lines: list[str]) -> dict[str, float]:
+    """The worst figure of each column over the attack rows :func:`run` printed (and the kill -9 rows' temp files
+    after the restart and children alive after the kill)."""
+    out = {"answers >= 500": 0.0, "server CPU s": 0.0, "child CPU s": 0.0, "peak RSS MiB": 0.0, "tmp files": 0.0,
+           "outside files": 0.0, "/health max ms": 0.0, "/health failed": 0.0, "temp files after restart": 0.0,
+           "children alive after kill": 0.0}
+    for line in lines[1:]:
+        cells = [c.strip() for c in line.split("|")]
+        if len(cells) == 9:
+            out["answers >= 500"] += sum(a.strip()[:1] in "50" for a in cells[1].replace(";", ",").split(","))
+            for key, cell in zip(("server CPU s", "child CPU s", "peak RSS MiB"), cells[2:5], strict=True):
+                if key != "child CPU s" or "(job)" not in cells[0]:  # a job has its own limits
+                    out[key] = max(out[key], float(cell))
+            out["tmp files"] = max(out["tmp files"], float(cells[6]))
+            named = cells[1].split("files named after the paths: ")[1:]  # written where a path in the input said
+            out["outside files"] = max(out["outside files"], float(cells[7]), *(float(n) for n in named))
+            ms, failed = cells[8].rstrip(")").split(" (")
+            out["/health max ms"] = max(out["/health max ms"], float(ms))
+            out["/health failed"] += float(failed)
+        elif "after the restart" in line:
+            after = line.rsplit(", ", 1)[1].split()[0]
+            out["temp files after restart"] = max(out["temp files after restart"], float(after))
+            if "alive after the kill" in line:
+                alive = line.split("alive after the kill ")[1].split(";")[0]
+                out["children alive after kill"] = max(out["children alive after kill"], float(alive))
+    return out
+
+
+def met(figures: dict[str, float]) -> bool:
+    """Issue 27's targets on the work attacks: RSS < 1 GiB, /health within 1 s and never failed, 0 temp files left
+    (after kill -9 and a restart too), 0 files outside the data directory, <= 10 s of CPU per request in the server
+    and in a child process, no answer >= 500."""
+    return (figures["peak RSS MiB"] < 1024 and figures["/health max ms"] <= 1000 and not figures["/health failed"]
+            and not figures["tmp files"] and not figures["temp files after restart"] and not figures["outside files"]
+            and figures["server CPU s"] <= 10 and figures["child CPU s"] <= 10 and not figures["answers >= 500"]
+            and not figures["children alive after kill"])
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--only", default="", help="only the attacks whose name contains this")
@@ -400,11 +447,15 @@ def main() -> int:
     work = Path(tempfile.mkdtemp(prefix="lashscope-attacks-"))
     srv = Server(work / "data", max_upload_mb=16.0).start()
     try:
-        for line in run(srv, only=args.only):
+        lines = run(srv, only=args.only)
+        for line in lines:
             print(line, flush=True)
+        figures = worst(lines)
+        print("worst: " + ", ".join(f"{k} {v:g}" for k, v in figures.items()))
+        print(f"work targets: {'all met' if met(figures) else 'NOT MET'}")
     finally:
         srv.stop()
-    return 0
+    return 0 if met(figures) else 1
 
 
 if __name__ == "__main__":
