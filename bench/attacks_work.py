@@ -1,12 +1,16 @@
 """Work attacks: small requests that ask the server for a lot of work or a lot of disk.
 
 Each attack runs against a real ``lashscope serve`` while a thread polls ``/health`` and samples the
-server's memory; per attack it prints the answer (status and code), the server's CPU seconds, its
+server's memory; per attack it prints the answer (status and code), the server's CPU seconds, the CPU
+seconds of the child processes it waited for meanwhile (reads within limits, job workers), its
 peak RSS, its open file handles, the temporary files left in ``<data>/tmp``, the files the server
-wrote outside the data directory (in the system temp folder) and the slowest ``/health``.
+wrote outside the data directory (in the system temp folder) and the slowest ``/health``; then the
+worst of each column and whether the targets were met.
 
-Run alone: ``.venv/bin/python bench/attacks_work.py`` (about a minute; the attacks' bytes come from
-``tests/api/attacks.py``); ``bench/fuzz_api.py`` runs them too, after its fuzzed requests.
+Run alone: ``.venv/bin/python bench/attacks_work.py [--only NAME]`` (a few minutes; the attacks'
+bytes come from ``tests/api/attacks.py``), ending with kill -9 of the server mid-upload and while a
+child process reads a log, each followed by a restart; ``bench/fuzz_api.py`` runs the same attacks
+after its fuzzed requests, without the kills.
 
 Targets (issue 27): server RSS under 1 GiB and ``/health`` within 1 s through every attack; 0 files
 written outside the data directory; 0 temporary files left after any attack or kill -9 plus restart;

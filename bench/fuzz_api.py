@@ -1,20 +1,27 @@
 """Abuse benchmark: >= 10 000 fuzzed requests, stalled uploads and reads under a running job,
-against a real ``lashscope serve`` on a loopback port; first the connection-level attacks of
-``bench/attacks_conn.py`` on a server of their own (``--conn-only``: only those; ``--no-conn``: without).
+against a real ``lashscope serve`` on a loopback port; first the key and method attacks of
+``bench/attacks_keys.py`` and the connection-level attacks of ``bench/attacks_conn.py``, each on a
+server of its own (``--keys-only``, ``--conn-only``: only those; ``--no-conn``: without).
 
-Run: ``.venv/bin/python bench/fuzz_api.py [--n 10000] [--seed 0]`` (several minutes on 2 cores).
+Run: ``.venv/bin/python bench/fuzz_api.py [--n 10000] [--seed 0]`` (several minutes on 2 cores);
+``--short``: every part at a small scale, the slowest work attacks left out (CI runs it in
+``tests/api/test_attacks.py``, about two minutes).
 
 The work attacks of ``bench/attacks_work.py`` (compression bombs of each format, pathological
-DBCs and drivelines, repeated fields) run after the fuzzed requests; kill -9 mid-upload only when
-it runs alone.
+DBCs, drivelines and format descriptions, the signal-map proposal, gap sensitivity and
+identification jobs with absurd input, repeated fields) run after the fuzzed requests, with the
+CPU of the server's child processes; kill -9 mid-upload and mid-read only when that module runs
+alone (``.venv/bin/python bench/attacks_work.py``).
 
-Targets (issue 12): 0 responses 500 in >= 10 000 fuzzed requests (multipart, driveline TOML,
-JSON bodies, query parameters; ``tests/api/fuzzing.py``, replayable by seed); 0 files left in
-``tmp/`` and 0 server handles open on them after the abuse; read p95 <= 150 ms with 30 clients
-while a job runs (next to the same reads with no job: the ratio is the job's cost to readers).
-First, on a server of its own, the key and method attacks of ``bench/attacks_keys.py`` (every
-method on every route, wrong-key floods, a revoked last key), each with the server's peak RSS,
-open handles, temp files and CPU seconds (``--keys-only``: those alone).
+Targets (issues 12 and 27): 0 responses >= 500 in >= 10 000 fuzzed requests (multipart, driveline
+TOML, format descriptions, JSON bodies, query parameters, the newer routes; ``tests/api/fuzzing.py``,
+replayable by seed); 0 files left in ``tmp/`` and 0 server handles open on them after the abuse;
+server RSS under 1 GiB and ``/health`` within 1 s through every attack, 0 files written outside the
+data directory, <= 10 s of CPU per request (server or child) or a job with its limits; the
+legitimate load (30 clients reading while a diagnosis runs, default limits) p95 <= 150 ms with 0
+errors; read p95 <= 150 ms with 30 clients while a tolerance job runs (next to the same reads with
+no job: the ratio is the job's cost to readers). Each part prints the server's peak RSS, open
+handles, temp files and CPU seconds; the last line says whether every target was met (exit 1 if not).
 """
 
 from __future__ import annotations
