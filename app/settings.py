@@ -135,6 +135,8 @@ class Settings(BaseSettings):
     trusted_proxies: Annotated[list[str], NoDecode] = Field(default_factory=list)
     live_channels: Annotated[list[str], NoDecode] = Field(
         default_factory=lambda: ["virtual:*", f"tcp_loopback:127.0.0.1:{DEFAULT_HUB_PORT}", "socketcan:*"])
+    # address space of the process that reads an upload with a client's format description, or proposes a signal map
+    bounded_memory_mb: int = Field(default=1536, ge=512)
 
     @field_validator("cors_origins", "allowed_hosts", "live_channels", "trusted_proxies", mode="before")
     @classmethod

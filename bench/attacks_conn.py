@@ -17,7 +17,8 @@ attack got, responses >= 500 and the slowest ``/health``:
 Last, the legitimate load at the default limits: 30 clients on keep-alive connections reading
 aligned-speed windows while a diagnosis runs (p95 and errors). Linux routes all of 127.0.0.0/8
 to loopback, so the attackers are other addresses than the monitor and the readers (127.0.0.1).
-``--conn-scale`` shrinks the counts (CI runs 0.05 in ``tests/api/test_attacks.py``).
+``--conn-scale`` shrinks the counts (the short form, ``bench/fuzz_api.py --short`` in
+``tests/api/test_attacks.py``, runs 0.05, with half the body deadline).
 
 Targets: RSS < 1 GiB and every ``/health`` within 1 s through every attack; 0 files left in
 ``tmp/``; 0 responses >= 500; the legitimate load p95 <= 150 ms with 0 errors.
@@ -311,8 +312,8 @@ def legit_load(srv: Server, c: httpx.Client, analysis_id: str, clients: int, per
 def run(args: argparse.Namespace, work: Path, log: Path, clients: int = 30, per_client: int = 20) -> bool:
     """Every attack above on a fresh server, then the legitimate load; whether every target held."""
     scale = args.conn_scale
-    srv = Server(work / "conn-data", max_upload_mb=16.0,
-                 extra_args=("--body-timeout", str(BODY_TIMEOUT_S))).start()
+    body_s = BODY_TIMEOUT_S if scale >= 0.5 else BODY_TIMEOUT_S / 2  # the short form: the trickle ends sooner
+    srv = Server(work / "conn-data", max_upload_mb=16.0, extra_args=("--body-timeout", str(body_s))).start()
     ok = True
     try:
         with httpx.Client(base_url=srv.url, timeout=120.0) as c:
@@ -320,15 +321,15 @@ def run(args: argparse.Namespace, work: Path, log: Path, clients: int = 30, per_
             log_id = upload(c, log).json()["id"]
             analysis_id = c.post("/analyses", json={"log_id": log_id, "vehicle": "ev"}).json()["id"]
             assert wait_for(c, analysis_id, timeout=300.0)["status"] == "done"
-            print(f"connection attacks (scale {scale:g}; default limits, body deadline {BODY_TIMEOUT_S:g} s; "
+            print(f"connection attacks (scale {scale:g}; default limits, body deadline {body_s:g} s; "
                   f"load average {os.getloadavg()[0]:.1f}):", flush=True)
             seconds = max(3.0, 15 * scale)
             ok &= attack(srv, "headers", lambda: header_flood(srv, 4, 1000, seconds))
             ok &= attack(srv, "slowloris", lambda: slowloris(srv, max(250, round(5000 * scale)),
                                                              max(2, round(50 * scale)), seconds))
-            ok &= attack(srv, "trickle", lambda: trickle(srv, max(10, round(200 * scale)), 3 * BODY_TIMEOUT_S))
+            ok &= attack(srv, "trickle", lambda: trickle(srv, max(10, round(200 * scale)), 3 * body_s))
             ok &= attack(srv, "forged forwarded", lambda: forged(srv, max(200, round(4000 * scale))))
-            time.sleep(10.0)  # the rate buckets of 127.0.0.1 are untouched, but the server settles
+            time.sleep(max(2.0, 10.0 * scale))  # the rate buckets of 127.0.0.1 are untouched, but the server settles
             ok &= legit_load(srv, c, analysis_id, clients, per_client)
     finally:
         srv.stop()

@@ -4,8 +4,9 @@ Run: ``.venv/bin/python bench/attacks_keys.py [--flood 6000] [--huge 300]``.
 
 A fresh server on a loopback port with one admin key, then one attack after another:
 
-- **every method**: GET, HEAD, POST, PUT, PATCH, DELETE and OPTIONS on every route of the OpenAPI
-  document, with the key, without one and with a wrong one (no answer may be 5xx);
+- **every method**: GET, HEAD, POST, PUT, PATCH, DELETE and OPTIONS on every route the app declares
+  (walked from its routers: the OpenAPI document's and the dashboard's, docs' and static files'), with
+  the key, without one and with a wrong one, then with ids of 303 characters (no answer may be 5xx);
 - **wrong-key flood**: distinct wrong keys from one address as fast as one client sends them
   (they must be 401 and then 429, while another address with the right key is still served);
 - **huge-token flood**: wrong keys of 1 MiB each (the server must keep none of them);
@@ -29,6 +30,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import httpx
 
@@ -108,15 +110,36 @@ def _send(c: httpx.Client, statuses: Counter[int], method: str, path: str, heade
         statuses[0] += 1  # no answer: counted as a failure
 
 
-def _paths(c: httpx.Client, auth: dict[str, str]) -> list[str]:
-    """Every route of the OpenAPI document with its path parameters filled in with ids that do not exist."""
-    doc = c.get("/openapi.json", headers=auth).json()
+def app_routes() -> list[str]:
+    """Every path template the app declares, walked from its routers (the OpenAPI document leaves out the
+    dashboard, the docs and the document itself)."""
+    from app.api.main import create_app
+    from app.settings import Settings
+
+    def walk(routes: list[Any], prefix: str = "") -> Iterator[str]:
+        for r in routes:
+            ctx = getattr(r, "include_context", None)
+            if ctx is not None:
+                yield from walk(ctx.included_router.routes, prefix + ctx.prefix)
+            elif getattr(r, "path", None) is not None:
+                yield prefix + r.path
+
+    app = create_app(Settings(data_dir=Path(tempfile.mkdtemp(prefix="lashscope-routes-")) / "data"))
+    return sorted(set(walk(app.routes)))
+
+
+def _paths(c: httpx.Client, auth: dict[str, str], fill: str = "x0") -> list[str]:
+    """Every route of the app with its path parameters filled in with ``fill`` (ids that do not exist); fails if
+    the OpenAPI document has a route the walk did not find."""
+    templates = app_routes()
+    documented = set(c.get("/openapi.json", headers=auth).json()["paths"])
+    assert documented <= set(templates), sorted(documented - set(templates))
     out = []
-    for template in doc["paths"]:
+    for template in templates:
         path = template
         while "{" in path:
             a, b = path.index("{"), path.index("}")
-            path = path[:a] + "x0" + path[b + 1:]
+            path = path[:a] + fill + path[b + 1:]
         out.append(path)
     return out
 
@@ -126,12 +149,15 @@ def every_method(srv: Server, c: httpx.Client, key: str) -> int:
     admin = {"Authorization": f"Bearer {key}"}
     wrong = {"Authorization": f"Bearer lsk_{'0' * 12}_{secrets.token_urlsafe(32)}"}
     paths = _paths(c, admin)
-    with measured(srv, f"every method ({len(METHODS)} methods x {len(paths)} routes x 3 keys)") as statuses:
-        for headers in (admin, {}, wrong):
-            for path in paths:
+    long_ids = _paths(c, admin, "id_" + "a" * 300)  # longer than a file name
+    with measured(srv, f"every method ({len(METHODS)} methods x {len(paths)} routes x 3 keys, then ids of 303 "
+                       "characters with the key)") as statuses:
+        for headers, round_paths in ((admin, paths), ({}, paths), (wrong, paths), (admin, long_ids)):
+            for path in round_paths:
                 for method in METHODS:
                     _send(c, statuses, method, path, headers)
-            time.sleep(2.5)  # the wrong keys' bucket refills before the next round
+            if headers is wrong:
+                time.sleep(2.5)  # the wrong keys' bucket refills before the next round
     return sum(v for k, v in statuses.items() if k >= 500 or k == 0)
 
 

@@ -59,6 +59,12 @@ def _placeholders(sql: str) -> str:
     return sql.replace("%", "%%").replace("?", "%s")
 
 
+def _text(value: Any) -> Any:
+    """PostgreSQL text cannot hold NUL (SQLite can): a client's id or name with one is looked up as U+FFFD, which
+    no stored id has, so it is not found rather than a driver error; a message written with one keeps U+FFFD."""
+    return value.replace("\x00", "\ufffd") if isinstance(value, str) and "\x00" in value else value
+
+
 class PgConnection:
     """A psycopg connection that takes the store's SQL (``?`` placeholders) and yields :class:`PgRow` rows."""
 
@@ -68,7 +74,7 @@ class PgConnection:
     def execute(self, sql: str, parameters: Sequence[Any] = (), /) -> Any:
         if not parameters:
             return self.raw.execute(sql)
-        return self.raw.execute(_placeholders(sql), tuple(parameters))
+        return self.raw.execute(_placeholders(sql), tuple(_text(p) for p in parameters))
 
     @property
     def usable(self) -> bool:

@@ -71,3 +71,18 @@ def many_stage_driveline(stages: int, stiffness: float = 2.5e4) -> bytes:
               "lash_rad = {{nominal = 0.01, min = 0.005, max = 0.015}}\n\n")
     extra = "".join(spline.format(i=i, k=stiffness) for i in range(stages - 4))
     return (head + extra + first + rest).encode()
+
+
+# a format description whose time group backtracks exponentially on a line of digits without the ``x`` after them
+BACKTRACKING_REGEX = r"^(?P<time>(\d+)+)x;(?P<id>[0-9A-F]+);(?P<data>[0-9A-F]*)$"
+
+
+def described_format(regex: str = BACKTRACKING_REGEX, **extra: str) -> bytes:
+    """A format description (``format_file`` of ``POST /logs``) with ``regex`` and ``extra`` TOML lines."""
+    lines = [f"regex = '{regex}'", *(f"{k} = {v}" for k, v in extra.items())]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def backtracking_log(lines: int = 5, digits: int = 40) -> bytes:
+    """A text log whose lines make :data:`BACKTRACKING_REGEX` try about 2**``digits`` ways each, gzipped."""
+    return gzip.compress(b"t;id;data\n" + (b"1" * digits + b"\n") * lines)

@@ -120,13 +120,81 @@ def _json_body(rng: random.Random, log_id: str) -> bytes:
     return json.dumps(body).encode()
 
 
+FORMAT_KEYS = ["name", "regex", "separator", "columns", "data_to_end", "time_unit", "time_encoding", "id_encoding",
+               "data_encoding", "skip_lines", "comment", "extended", "extended_values", "tx_values", "channel_base",
+               "x"]
+FRAME_REGEX = r"^(?P<time>[0-9.]+);(?P<id>[0-9A-F]+);(?P<data>[0-9A-F ]*)$"
+REGEXES = [FRAME_REGEX, "(", "^(?P<time>.*)$", "(?P<time>)(?P<id>)(?P<data>)", "[" * 300, "(?P<time>\\d+)" * 3,
+           "(?P<x>a)", "\\", "(?P<time>a{1,65535}){1,65535}", "(?P<id>.)(?P<time>.)(?P<data>.)(?P=id)", "\x00"]
+
+
+def _description(rng: random.Random) -> bytes:
+    """A format description of a text log (``format_file`` of ``POST /logs``): one in twenty as documented, the
+    rest with hostile values, unknown keys, broken TOML or binary bytes (none whose regex backtracks: that is
+    ``tests/api/attacks.py``'s)."""
+    kind = rng.randrange(20)
+    if kind == 0:
+        return f"regex = '{FRAME_REGEX}'\nskip_lines = 1\n".encode()
+    if kind == 1:
+        return _bytes(rng, rng.randrange(1, 2048))
+    if kind == 2:
+        return b"name = " + b"[" * rng.choice([100, 5000, 40_000])
+    columns = "separator = ';'\ncolumns = {time = 0, id = 1, data = 2}"
+    lines = [rng.choice([f"regex = '{rng.choice(REGEXES)}'", columns])]
+    for key in rng.sample(FORMAT_KEYS, rng.randrange(0, 6)):
+        value = rng.choice([*TOML_VALUES, '"whitespace"', '"\\t"', '";;"', '"ms"', '"hex"', '"field"', "{time = 999}",
+                            '["x", 1]', '"../../etc/passwd"', "{" + ", ".join(f"c{i} = {i}" for i in range(300)) + "}"])
+        lines.append(f"{key} = {value}")
+    return "\n".join(lines).encode("utf-8", "surrogatepass")
+
+
+def _text_log(rng: random.Random) -> bytes:
+    rows = [f"{i / 100:.3f};{rng.choice(['123', '7FF', '1FFFFFFF', 'x', ''])};{rng.choice(['00 11', '', 'zz'])}"
+            for i in range(rng.randrange(0, 50))]
+    return ("t;id;data\n" + "\n".join(rows)).encode() + (_bytes(rng, 64) if rng.random() < 0.2 else b"")
+
+
+def _override_lines(rng: random.Random) -> str:
+    roles = ["motor_speed_rpm", "motor_torque_nm", "brake_pressed", "x", ""]
+    return "\n".join(rng.choice([f"{rng.choice(roles)}=MCU_Speed.MotorSpeed", f"{rng.choice(roles)}=-",
+                                  f"invert {rng.choice(roles)}", f"keep {rng.choice(roles)}", "=", "a" * 500,
+                                  f"{rng.choice(roles)}={rng.choice(NASTY)}"]) for _ in range(rng.randrange(0, 6)))
+
+
+def _small_dbc(rng: random.Random) -> bytes:
+    lines = ["VERSION \"\"", "", "BU_: ECU", f"BO_ {rng.choice(['291', '-1', '99999999999', 'x'])} M: "
+             f"{rng.choice(['8', '64', '0', '-3'])} ECU"]
+    lines += [f" SG_ S{i} : {rng.randrange(-8, 70)}|{rng.randrange(-1, 70)}@{rng.choice('01x')}{rng.choice('+-')} "
+              f"({rng.choice(NASTY[:8])},0) [0|1] \"\" ECU" for i in range(rng.randrange(0, 5))]
+    return "\n".join(lines).encode()
+
+
+def _id_json(rng: random.Random, log_id: str) -> bytes:
+    """An identification request that never queues one (an unknown log, a repeated one or a bad field, at least)."""
+    if rng.random() < 0.2:
+        return _json_body(rng, log_id)
+    unknown = f"log_{rng.randrange(16**16):016x}"
+    body: dict[str, Any] = {
+        "log_ids": rng.choice([[log_id, unknown], [unknown], [log_id, log_id], [], [log_id] * 60, "x", [5]]),
+        "vehicle": rng.choice(["ev", "nope", "", None, "../x"]),
+        "validate_log_ids": rng.choice([[], [log_id], [unknown] * 11, None]),
+        "params": rng.choice([["stiffness"], ["x"], [], ["lash", "lash"], None]),
+        "seed": rng.choice([0, -1, 2**40, "x", 1.5]), "vehicle_version": rng.choice([None, 0, 1, 10**30, "x"])}
+    for key in rng.sample(list(body), rng.randrange(0, 3)):
+        del body[key]
+    return json.dumps(body).encode()
+
+
 def requests(seed: int, n: int, preset_toml: str, analysis_id: str = "an_0000000000000000",
              log_id: str = "log_0000000000000000") -> list[FuzzRequest]:
     """``n`` requests drawn with ``seed`` (``analysis_id``/``log_id``: existing ones reach deeper code)."""
     rng = random.Random(seed)
     out: list[FuzzRequest] = []
     for _ in range(n):
-        kind = rng.randrange(6)
+        kind = rng.randrange(10)
+        if kind >= 6:
+            out.append(_newer_route(rng, kind, log_id))
+            continue
         if kind == 0:  # log uploads
             files = [("file", _name(rng), _bytes(rng, rng.choice([0, 10, 5000, 70_000])))]
             if rng.random() < 0.2:
@@ -165,3 +233,34 @@ def requests(seed: int, n: int, preset_toml: str, analysis_id: str = "an_0000000
             ])
             out.append(FuzzRequest("GET", path, _query(rng, names)))
     return out
+
+
+def _newer_route(rng: random.Random, kind: int, log_id: str) -> FuzzRequest:
+    """Format descriptions with a log, the signal-map proposal, the gap sensitivity and identifications."""
+    if kind == 6:
+        parts: list[tuple[str, str | None, bytes]] = [("file", _name(rng), _text_log(rng)),
+                                                      ("format_file", _name(rng), _description(rng))]
+        if rng.random() < 0.1:
+            parts.append(("format_file", "again.toml", _description(rng)))
+        body, ctype = _multipart(rng, parts)
+        return FuzzRequest("POST", "/logs", {}, {"content-type": ctype}, body)
+    if kind == 7:  # a stored log one in twenty-five times: the rest are refused before a proposal starts
+        form: list[tuple[str, str | None, bytes]] = [
+            ("log_id", None, (log_id if rng.random() < 0.04 else rng.choice(["log_nope", "", "../x", "a" * 300,
+                                                                              "x\x00"])).encode())]
+        if rng.random() < 0.6:
+            form.append(("map", None, _override_lines(rng).encode()))
+        if rng.random() < 0.5:
+            form.append((rng.choice(["dbc", "dbc", "file"]), _name(rng), rng.choice([_small_dbc(rng),
+                                                                                      _bytes(rng, 300)])))
+        body, ctype = _multipart(rng, form)
+        return FuzzRequest("POST", "/vehicles/signal-map-proposal", {}, {"content-type": ctype}, body)
+    if kind == 8:
+        name = rng.choice(["ev", "nope", "..", "a" * 300, "EV"])
+        method, tail = rng.choice([("GET", ""), ("POST", ""), ("GET", "/status"), ("DELETE", ""), ("PUT", "")])
+        return FuzzRequest(method, f"/vehicles/{name}/gap-sensitivity{tail}", _query(rng, ["version", "compute"]))
+    if rng.random() < 0.5:
+        return FuzzRequest("POST", "/identifications", {}, {"content-type": "application/json"}, _id_json(rng, log_id))
+    ident = rng.choice(["id_0123456789abcdef", "id_" + "a" * 300, "id_..", "x", "id_%2e%2e", "ba_1"])
+    method, tail = rng.choice([("GET", ""), ("DELETE", ""), ("GET", "/vehicle"), ("POST", "/apply"), ("PATCH", "")])
+    return FuzzRequest(method, f"/identifications/{ident}{tail}")

@@ -1,11 +1,12 @@
 """Connection-level limits on real sockets against the real server (``app/api/connections.py``):
-request heads, head and body deadlines, connections per client and in total, forwarded addresses."""
+request heads, head and body deadlines, keep-alive, connections per client and in total, forwarded addresses."""
 
 from __future__ import annotations
 
 import json
 import logging
 import resource
+import socket
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -92,6 +93,32 @@ def test_heads_and_bodies_have_deadlines(tmp_path: Path) -> None:
         assert list((data / "tmp").iterdir()) == []
         r = httpx.post(f"{srv.url}/analyses", json={"log_id": "nope", "vehicle": "ev"})
         assert r.status_code == 404  # a body that arrives in time reaches the route
+
+
+def _one_reply(s: socket.socket) -> bytes:
+    """One whole answer on a kept-alive connection (head, then ``Content-Length`` bytes)."""
+    data = b""
+    while b"\r\n\r\n" not in data:
+        chunk = s.recv(65536)
+        assert chunk, data
+        data += chunk
+    head, _, body = data.partition(b"\r\n\r\n")
+    length = int(next(line.split(b":", 1)[1] for line in head.split(b"\r\n")
+                      if line.lower().startswith(b"content-length")))
+    while len(body) < length:
+        body += s.recv(65536)
+    return head + b"\r\n\r\n" + body
+
+
+def test_an_idle_kept_alive_connection_is_closed_after_the_keep_alive_time(tmp_path: Path) -> None:
+    with serving(tmp_path / "data", keep_alive_s=1) as srv, connect(srv.port) as s:
+        keep = b"GET /health HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"
+        s.sendall(keep)
+        assert status_of(_one_reply(s)) == 200
+        s.sendall(keep)  # the same connection serves the next request
+        assert status_of(_one_reply(s)) == 200
+        s.settimeout(4.0)  # idle: closed by the server after 1 s (uvicorn's own default would keep it 5 s)
+        assert s.recv(65536) == b""
 
 
 @pytest.fixture

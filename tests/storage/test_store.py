@@ -204,3 +204,16 @@ def test_a_clean_stop_resumes_the_job_at_once_without_counting_an_attempt(store:
         assert store.start_job(job.id, "server-b", lease_s=600.0).attempts == 1
         store.release_lease(job.id, "server-b")
     assert store.get_job(job.id).status is JobStatus.RUNNING
+
+
+def test_ids_and_messages_with_a_nul_byte(store: SQLStore) -> None:
+    """A client's id with a NUL is not found on either backend (PostgreSQL text cannot hold one: no driver error
+    may reach the client as a 500), and a job's error message with one is kept."""
+    for lookup in (store.get_log, store.get_analysis, store.get_vehicle):
+        with pytest.raises(NotFoundError):
+            lookup("x\x00y")
+    assert store.find_job("identification", "id_\x00") is None
+    job = store.create_job("analysis", "an_nul")
+    store.fail_job(job.id, "log_format", "line 3: 'a\x00b' is not a frame")
+    detail = store.get_job(job.id).error_detail
+    assert detail in ("line 3: 'a\x00b' is not a frame", "line 3: 'a\ufffdb' is not a frame")

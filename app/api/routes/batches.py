@@ -35,7 +35,8 @@ router = APIRouter(prefix="/batches", tags=["batches"], responses=ERRORS)
 
 
 def _load(store: Store, batch_id: str) -> tuple[dict[str, Any], JobRecord]:
-    req = read_json(directory(store, batch_id) / REQUEST) if batch_id.startswith("ba_") else None
+    ok = batch_id.startswith("ba_") and batch_id[3:].isalnum() and len(batch_id) <= 64  # a folder name: no path
+    req = read_json(directory(store, batch_id) / REQUEST) if ok else None
     job = store.find_job("batch", batch_id) if req is not None else None
     if req is None or job is None:
         raise NotFoundError(f"batch {batch_id!r} not found", code="batch_not_found")

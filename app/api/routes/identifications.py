@@ -45,7 +45,8 @@ PREFIX = "id_"
 
 
 def _load(store: Store, identification_id: str) -> tuple[dict[str, Any], JobRecord]:
-    ok = identification_id.startswith(PREFIX) and identification_id[len(PREFIX):].isalnum()
+    ok = (identification_id.startswith(PREFIX) and identification_id[len(PREFIX):].isalnum()
+          and len(identification_id) <= 64)  # a folder name: longer ones are not ours (and past NAME_MAX)
     req = read_json(directory(store, identification_id) / REQUEST) if ok else None
     job = store.find_job("identification", identification_id) if req is not None else None
     if req is None or job is None:

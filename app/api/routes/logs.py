@@ -14,6 +14,7 @@ from app.api.routes.analyses import deleted
 from app.api.schemas import ERRORS, LogOut
 from app.api.timezones import TZ_DOC, time_zone, zoned_start
 from app.api.upload import UploadedFile, receive_upload, user_file_names
+from app.bounded import run_bounded
 from app.errors import FormatFileError, InputError
 from app.ingest.readers.described import MAX_DESCRIPTION_BYTES, parse_layout
 from app.log_formats import LOG_FORMATS, formats_sentence, sidecar_of
@@ -90,7 +91,14 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
         if layout_text is not None:
             side.write_text(layout_text, encoding="utf-8")  # read by open_log beside the log
         with user_file_names({f.path: f.filename}):
-            info = await run_in_threadpool(inspect_log, f.path, cpu_s=settings.validate_cpu_s)
+            if layout_text is None:
+                info = await run_in_threadpool(inspect_log, f.path, cpu_s=settings.validate_cpu_s)
+            else:  # the client's regular expression may backtrack for hours on one line: read in a child process
+                info = await run_in_threadpool(
+                    run_bounded, "app.pipeline:inspect_log", f.path, root=store.root, what=f"reading {f.filename}",
+                    setting="LASHSCOPE_VALIDATE_CPU_S", cpu_s=settings.validate_cpu_s,
+                    memory_mb=settings.bounded_memory_mb, code="validation_limit",
+                    kwargs={"cpu_s": settings.validate_cpu_s})
     except BaseException:
         f.path.unlink(missing_ok=True)
         side.unlink(missing_ok=True)

@@ -21,11 +21,12 @@ from app.api.schemas import (
     VehicleOut,
 )
 from app.api.upload import check_toml, receive_upload, user_file_names
+from app.bounded import run_bounded
 from app.errors import AppError, InputError, NotFoundError, UploadTooLargeError
 from app.ingest.signalmap import CANONICAL
 from app.jobkinds import gap_sensitivity as gap_job
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity_work
-from app.signal_proposal import parse_overrides, propose
+from app.signal_proposal import parse_overrides
 from app.storage.records import JobRecord, JobStatus
 from app.storage.results import json_safe
 from app.storage.sqlstore import check_vehicle_name
@@ -270,8 +271,11 @@ async def propose_signal_map(request: Request, store: StoreDep, settings: Settin
         dbc = files.get("dbc") or settings.dbc_dir / "lashscope_ev.dbc"
         names.setdefault(dbc, f"default {dbc.name}")
         names[log.path] = log.filename
-        with user_file_names(names):
-            proposal = await run_in_threadpool(propose, log.path, dbc, overrides, invert=fixed)
+        with user_file_names(names):  # reads a stored log of any size twice: in a child process, within limits
+            proposal = await run_in_threadpool(
+                run_bounded, "app.signal_proposal:propose", log.path, dbc, overrides, root=store.root,
+                what=f"proposing a signal map for {log.filename}", setting="LASHSCOPE_VALIDATE_CPU_S",
+                cpu_s=settings.validate_cpu_s, memory_mb=settings.bounded_memory_mb, kwargs={"invert": fixed})
     finally:
         for p in files.values():
             p.unlink(missing_ok=True)

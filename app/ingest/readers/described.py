@@ -217,6 +217,8 @@ def parse_layout(text: str, source: str = "format description") -> TextLayout:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise FormatFileError(f"{source}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise FormatFileError(f"{source}: not valid TOML: tables or arrays nested too deeply") from None
     unknown = sorted(set(data) - _KEYS)
     if unknown:
         raise _fail(source, unknown[0], f"unknown field; the fields are {', '.join(sorted(_KEYS))}")
