@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from sim.errors import ParameterError
 from sim.params_base import RATIO
+from sim.stagekinds import SHAFTS
 from sim.stages import Stage, stage_dict
 
 if TYPE_CHECKING:
@@ -37,15 +38,19 @@ def legacy_stages(v: Vehicle) -> tuple[Stage, ...]:
     """The classic layout as stages: spline, mesh1, mesh2 (gear pairs), differential, halfshaft."""
     red, hs, g, ps = v.reducer, v.halfshaft, v.gaps, v.effects.progressive_stiffness
     assert red is not None and hs is not None and g is not None
-    return (
+    return (  # body and coupling names as the classic model always gave them (stored results keep them)
         Stage(kind="spline", name="spline", stiffness=red.spline_stiffness, damping=red.spline_damping,
-              inertia=red.input_shaft_inertia, lash_rad=g.spline, cubic_stiffness=ps.spline),
+              inertia=red.input_shaft_inertia, lash_rad=g.spline, cubic_stiffness=ps.spline,
+              body_name="input_shaft"),
         Stage(kind="gear", name="mesh1", ratio=red.ratio1, stiffness=red.mesh1_stiffness, damping=red.mesh1_damping,
-              inertia=red.intermediate_inertia, lash_rad=g.mesh1, cubic_stiffness=ps.mesh1),
+              inertia=red.intermediate_inertia, lash_rad=g.mesh1, cubic_stiffness=ps.mesh1,
+              body_name="intermediate", coupling_name="gear1"),
         Stage(kind="gear", name="mesh2", ratio=red.ratio2, stiffness=red.mesh2_stiffness, damping=red.mesh2_damping,
-              inertia=red.differential_inertia, lash_rad=g.mesh2, cubic_stiffness=ps.mesh2),
+              inertia=red.differential_inertia, lash_rad=g.mesh2, cubic_stiffness=ps.mesh2,
+              body_name="differential", coupling_name="gear2"),
         Stage(kind="differential", name="differential", stiffness=red.diff_stiffness, damping=red.diff_damping,
-              inertia=red.side_gears_inertia, lash_rad=g.differential, cubic_stiffness=ps.differential),
+              inertia=red.side_gears_inertia, lash_rad=g.differential, cubic_stiffness=ps.differential,
+              body_name="side_gears", coupling_name="diff"),
         Stage(kind="halfshaft", name="halfshaft", stiffness=hs.stiffness, damping=hs.damping, inertia=hs.inertia,
               segments=hs.segments, count=hs.count, lash_rad=g.halfshaft, cubic_stiffness=ps.halfshaft),
     )
@@ -73,7 +78,7 @@ def shaft_gap(v: Vehicle) -> str:
     """The gap sensitivities are normalised to and the free rotor side ends at: the (left) half-shaft
     gap, or the last gap of a chain without half-shafts."""
     for s in v.chain:
-        if s.kind == "halfshaft":
+        if s.spec.role == SHAFTS:
             return s.name
     return v.gap_names[-1]
 
