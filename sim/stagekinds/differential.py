@@ -40,7 +40,8 @@ class Differential(StageKind):
         if data.get("type") == "solid":
             extra = next((k for k in _GEAR_FIELDS if k in data), None)
             if extra is not None:
-                raise ParameterError(f"{label}{extra}", data[extra], "a solid axle has no differential gears; remove it")
+                raise ParameterError(f"{label}{extra}", data[extra],
+                                     "a solid axle has no differential gears; remove it")
 
     def written_fields(self, s: Stage) -> tuple[str, ...]:
         fields = super().written_fields(s)
