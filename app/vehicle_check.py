@@ -35,11 +35,6 @@ def _flat(doc: dict[str, Any], prefix: str = "") -> dict[str, float]:
     return out
 
 
-# a stage is compared with the paper's stage of the same kind (a chain or planetary with its gear pair)
-_PAPER_KIND = {"spline": "spline", "gear": "mesh2", "chain": "mesh2", "planetary": "mesh2",
-               "differential": "differential", "halfshaft": "halfshaft"}
-
-
 def _flat_vehicle(vehicle: Vehicle, stage_key: Any = None) -> dict[str, float]:
     """Numeric fields of ``vehicle`` by dotted path; ``[[stage]]`` fields as ``stage.<name>.<field>``
     (``stage_key(stage) -> name`` renames the stage, to look up its counterpart)."""
@@ -60,7 +55,8 @@ def suspect_fields(vehicle: Vehicle) -> list[tuple[str, float, float]]:
     ref = _flat_vehicle(paper)
     if vehicle.stages:
         ref.update(_flat_vehicle(paper.as_stages()))
-        by_kind = {s.name: _PAPER_KIND[s.kind] for s in vehicle.stages}
+        # each stage against the paper's stage of the same kind (its kind's reference_stage)
+        by_kind = {s.name: s.spec.reference_stage for s in vehicle.stages}
         paper_stages = _flat_vehicle(paper.as_stages())
         for key in list(mine):
             parts = key.split(".")

@@ -2,53 +2,77 @@
 
 A classic vehicle file (``[reducer]``, ``[halfshaft]``, ``[gaps.*]``: two external gear pairs, an
 open differential, ``count`` equal half-shafts) is simulated through the same stage builder as a
-``[[stage]]`` file; :func:`legacy_stages` gives its stages (named after its gaps, so gap names,
-what-ifs and effects stay as they were). :func:`stage_layout` writes any classic vehicle as an
+``[[stage]]`` file; :data:`CLASSIC_STAGES` is the one translation (each stage's kind, name and the
+classic fields that hold its values), from which :func:`legacy_stages` builds its stages (named
+after its gaps, so gap names, what-ifs and effects stay as they were) and :data:`FIELD_MAP` maps
+the classic dotted fields. :func:`stage_layout` writes any classic vehicle as an
 equivalent stage file (the housing stated explicitly, cubic stiffnesses moved onto the stages,
 tolerance paths renamed).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sim.errors import ParameterError
 from sim.params_base import RATIO
+from sim.stagekinds import SHAFTS
 from sim.stages import Stage, stage_dict
 
 if TYPE_CHECKING:
     from sim.params import Vehicle
 
 CLASSIC_GAPS = ("spline", "mesh1", "mesh2", "differential", "halfshaft")
-# classic dotted fields -> the stage field that holds the same value
-FIELD_MAP = {
-    "reducer.input_shaft_inertia": "stage.spline.inertia", "reducer.spline_stiffness": "stage.spline.stiffness",
-    "reducer.spline_damping": "stage.spline.damping", "reducer.intermediate_inertia": "stage.mesh1.inertia",
-    "reducer.mesh1_stiffness": "stage.mesh1.stiffness", "reducer.mesh1_damping": "stage.mesh1.damping",
-    "reducer.differential_inertia": "stage.mesh2.inertia", "reducer.mesh2_stiffness": "stage.mesh2.stiffness",
-    "reducer.mesh2_damping": "stage.mesh2.damping", "reducer.side_gears_inertia": "stage.differential.inertia",
-    "reducer.diff_stiffness": "stage.differential.stiffness", "reducer.diff_damping": "stage.differential.damping",
-    "halfshaft.stiffness": "stage.halfshaft.stiffness", "halfshaft.damping": "stage.halfshaft.damping",
-    "halfshaft.inertia": "stage.halfshaft.inertia",
-}
+
+
+@dataclass(frozen=True)
+class ClassicStage:
+    """One stage of the classic layout: where its values sit in the classic file, and its model names."""
+
+    kind: str
+    name: str  # also the name of its gap (``[gaps.<name>]``) and of its cubic term in ``progressive_stiffness``
+    fields: Mapping[str, str]  # stage field -> classic dotted field
+    ratio: str = ""  # the Reducer property giving the stage ratio (gear pairs)
+    body_name: str = ""  # body and coupling names the classic model always gave (stored results keep them)
+    coupling_name: str = ""
+
+
+# the one translation of the classic layout: its five stages in chain order
+CLASSIC_STAGES = (
+    ClassicStage("spline", "spline", {"inertia": "reducer.input_shaft_inertia",
+                                      "stiffness": "reducer.spline_stiffness", "damping": "reducer.spline_damping"},
+                 body_name="input_shaft"),
+    ClassicStage("gear", "mesh1", {"inertia": "reducer.intermediate_inertia", "stiffness": "reducer.mesh1_stiffness",
+                                   "damping": "reducer.mesh1_damping"},
+                 ratio="ratio1", body_name="intermediate", coupling_name="gear1"),
+    ClassicStage("gear", "mesh2", {"inertia": "reducer.differential_inertia", "stiffness": "reducer.mesh2_stiffness",
+                                   "damping": "reducer.mesh2_damping"},
+                 ratio="ratio2", body_name="differential", coupling_name="gear2"),
+    ClassicStage("differential", "differential", {"inertia": "reducer.side_gears_inertia",
+                                                  "stiffness": "reducer.diff_stiffness",
+                                                  "damping": "reducer.diff_damping"},
+                 body_name="side_gears", coupling_name="diff"),
+    ClassicStage("halfshaft", "halfshaft", {"stiffness": "halfshaft.stiffness", "damping": "halfshaft.damping",
+                                            "inertia": "halfshaft.inertia", "segments": "halfshaft.segments",
+                                            "count": "halfshaft.count"}),
+)
+# classic dotted fields -> the stage field that holds the same value (the numeric, banded ones)
+FIELD_MAP = {classic: f"stage.{c.name}.{key}" for c in CLASSIC_STAGES for key, classic in c.fields.items()
+             if key in ("inertia", "stiffness", "damping")}
 
 
 def legacy_stages(v: Vehicle) -> tuple[Stage, ...]:
     """The classic layout as stages: spline, mesh1, mesh2 (gear pairs), differential, halfshaft."""
-    red, hs, g, ps = v.reducer, v.halfshaft, v.gaps, v.effects.progressive_stiffness
-    assert red is not None and hs is not None and g is not None
-    return (
-        Stage(kind="spline", name="spline", stiffness=red.spline_stiffness, damping=red.spline_damping,
-              inertia=red.input_shaft_inertia, lash_rad=g.spline, cubic_stiffness=ps.spline),
-        Stage(kind="gear", name="mesh1", ratio=red.ratio1, stiffness=red.mesh1_stiffness, damping=red.mesh1_damping,
-              inertia=red.intermediate_inertia, lash_rad=g.mesh1, cubic_stiffness=ps.mesh1),
-        Stage(kind="gear", name="mesh2", ratio=red.ratio2, stiffness=red.mesh2_stiffness, damping=red.mesh2_damping,
-              inertia=red.differential_inertia, lash_rad=g.mesh2, cubic_stiffness=ps.mesh2),
-        Stage(kind="differential", name="differential", stiffness=red.diff_stiffness, damping=red.diff_damping,
-              inertia=red.side_gears_inertia, lash_rad=g.differential, cubic_stiffness=ps.differential),
-        Stage(kind="halfshaft", name="halfshaft", stiffness=hs.stiffness, damping=hs.damping, inertia=hs.inertia,
-              segments=hs.segments, count=hs.count, lash_rad=g.halfshaft, cubic_stiffness=ps.halfshaft),
-    )
+    red, g, ps = v.reducer, v.gaps, v.effects.progressive_stiffness
+    assert red is not None and g is not None
+    return tuple(
+        Stage(kind=c.kind, name=c.name, lash_rad=getattr(g, c.name), cubic_stiffness=getattr(ps, c.name),
+              body_name=c.body_name, coupling_name=c.coupling_name,
+              **({"ratio": getattr(red, c.ratio)} if c.ratio else {}),
+              **{key: v.get(path) for key, path in c.fields.items()})
+        for c in CLASSIC_STAGES)
 
 
 def stage_layout(v: Vehicle) -> dict[str, Any]:
@@ -73,7 +97,7 @@ def shaft_gap(v: Vehicle) -> str:
     """The gap sensitivities are normalised to and the free rotor side ends at: the (left) half-shaft
     gap, or the last gap of a chain without half-shafts."""
     for s in v.chain:
-        if s.kind == "halfshaft":
+        if s.spec.role == SHAFTS:
             return s.name
     return v.gap_names[-1]
 

@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.params import Vehicle
+from sim.stagekinds.base import ChainBuilder, Wiring
 
 F64 = NDArray[np.float64]
 GRAVITY = 9.81
@@ -107,111 +108,32 @@ class ChainModel:
         return np.asarray(np.where(two, 0.5 * (b + theta[np.maximum(self.cb2, 0)]), b), dtype=np.float64)
 
 
-# classic-layout body and coupling names, kept so stored results and reports do not change
-_LEGACY_BODY = {"spline": "input_shaft", "mesh1": "intermediate", "mesh2": "differential", "differential": "side_gears"}
-_LEGACY_COUPLING = {"mesh1": "gear1", "mesh2": "gear2", "differential": "diff"}
-Row = tuple[str, int, int, int, float, float, float, float, float, float, float]  # see _Builder.couple
-
-
-class _Builder:
-    """Bodies and coupling rows appended in chain order."""
-
-    def __init__(self) -> None:
-        self.names: list[str] = []
-        self.inertia: list[float] = []
-        self.rows: list[Row] = []
-        self.gaps: dict[str, int] = {}
-
-    def body(self, name: str, inertia: float) -> int:
-        self.names.append(name)
-        self.inertia.append(inertia)
-        return len(self.names) - 1
-
-    def couple(self, name: str, a: int, b: int, r: float, e: float, k: float, c: float, half: float,
-               report: float, k3: float, b2: int = -1, gap: str = "") -> None:
-        """Coupling a -> b (and b2) with values in a's angle; ``gap`` names the lash it carries."""
-        if gap:
-            self.gaps[gap] = len(self.rows)
-        self.rows.append((name, a, b, b2, r, e, k, c, half, report, k3))
-
-    def shaft(self, name: str, a: int, wheel_name: str, wheel_j: float, n: int, k: float, c: float, j: float,
-              lash: float, k3: float, seg: int, gap: str) -> int:
-        """``seg`` equal pieces from body ``a`` to a new wheel body; ``n`` equal shafts lumped in parallel."""
-        j_seg = n * j / seg
-        self.inertia[a] += 0.5 * j_seg
-        nodes = [a, *(self.body(f"{name}_node{i}", j_seg)
-                      for i in range(1, seg))]
-        w = self.body(wheel_name, wheel_j + 0.5 * j_seg)
-        nodes.append(w)
-        for i in range(seg):  # seg pieces in series each deflect x/seg: k -> k seg, k3 -> k3 seg^3
-            self.couple(name if seg == 1 else f"{name}{i + 1}", nodes[i], nodes[i + 1], 1.0, 0.0, n * k * seg,
-                        n * c * seg, lash / 2 if i == 0 else 0.0, 1.0 / n, n * k3 * seg**3, gap=gap if i == 0 else "")
-        return w
-
-
 def build_chain(v: Vehicle) -> ChainModel:
     """Bodies and couplings of the multibody model for ``v`` (see the module docstring).
 
     Works on :attr:`Vehicle.chain`, so a classic file and its stage equivalent give the same
-    arrays. Each stage's values are converted from their stated shaft to the input shaft
-    (``a``): stiffness and damping / f^2, cubic stiffness / f^4, lash * f, with f the stage
-    ratio when they are stated on the output shaft.
+    arrays. Each stage's kind appends its body and coupling (:meth:`sim.stagekinds.StageKind.wire`,
+    values converted from their stated shaft to the input shaft); the wheel end, the vehicle
+    body, the housing and its mount are added around them here.
     """
     stages = v.chain
-    legacy = not v.stages
-    hs = stages[-1] if stages[-1].kind == "halfshaft" else None
-    n = v.driven_wheels
-    split = hs is not None and hs.right is not None
     tyre = v.effects.tyre_slip
-    vehicle_j = v.body.mass * v.wheel.radius**2
-    bld = _Builder()
-    cur = bld.body("rotor", v.motor.rotor_inertia)
-    sense = 1.0  # true turning sense of the current body
-    diff = None
+    n = v.driven_wheels
+    bld = ChainBuilder()
+    w = Wiring(bld=bld, cur=bld.body("rotor", v.motor.rotor_inertia), driven_wheels=n,
+               wheel_inertia=v.wheel.inertia, own=n * v.wheel.inertia,
+               vehicle_inertia=0.0 if tyre.enabled else v.body.mass * v.wheel.radius**2,
+               split=stages[-1].right is not None)
     for s in stages:
-        if s.kind == "halfshaft":
-            break
-        if not s.has_coupling:  # solid axle: the shafts start at the ring gear's body
-            bld.inertia[cur] += s.inertia
-            continue
-        if s.kind == "differential" and split:
-            diff = s  # 3-body coupling, built with the shafts
-            continue
-        f, r = s.to_input, s.ratio
-        e = sense * (1.0 + r) if s.kind == "gear" else (sense * (1.0 - r) if s.kind in ("planetary", "chain") else 0.0)
-        nxt = bld.body(_LEGACY_BODY.get(s.name, s.name) if legacy else s.name, s.inertia)
-        bld.couple(_LEGACY_COUPLING.get(s.name, s.name) if legacy else s.name, cur, nxt, r, e, s.stiffness / f**2,
-                   s.damping / f**2, s.lash_rad.nominal * f / 2, r, s.cubic_stiffness / f**4, gap=s.name)
-        if s.kind == "gear":
-            sense = -sense
-        cur = nxt
-    wheel, wheel2, own = cur, -1, n * v.wheel.inertia
-    if hs is not None and diff is not None and hs.right is not None:
-        left = bld.body(f"{diff.name}_left", 0.5 * diff.inertia)
-        wheel_j = v.wheel.inertia + (0.0 if tyre.enabled else 0.5 * vehicle_j)
-        first = len(bld.rows)
-        wheel = bld.shaft(hs.name, left, "wheel_left", wheel_j, 1, hs.stiffness, hs.damping, hs.inertia,
-                          hs.lash_rad.nominal, hs.cubic_stiffness, hs.segments, hs.name)
-        rs = hs.right
-        right = bld.body(f"{diff.name}_right", 0.5 * diff.inertia)
-        wheel2 = bld.shaft(f"{hs.name}_right", right, "wheel_right", wheel_j, 1, rs.stiffness, rs.damping, rs.inertia,
-                           rs.lash_rad.nominal, rs.cubic_stiffness, hs.segments, f"{hs.name}_right")
-        bld.gaps = {g: (j + 1 if j >= first else j) for g, j in bld.gaps.items()}
-        bld.gaps[diff.name] = first
-        bld.rows.insert(first, (diff.name, cur, left, right, 1.0, 0.0, diff.stiffness, diff.damping,
-                                diff.lash_rad.nominal / 2, 1.0, diff.cubic_stiffness))
-        own = v.wheel.inertia
-    elif hs is not None:
-        wheel_j = own + (0.0 if tyre.enabled else vehicle_j)  # I_W = I_w + M R^2 / 2 per wheel
-        wheel = bld.shaft(hs.name, cur, "wheels", wheel_j, n, hs.stiffness, hs.damping, hs.inertia,
-                          hs.lash_rad.nominal, hs.cubic_stiffness, hs.segments, hs.name)
-    else:  # the last stage drives the wheels directly
-        bld.names[cur] = "wheels"
-        bld.inertia[cur] += own + (0.0 if tyre.enabled else vehicle_j)
-    return _finish(v, bld, wheel, wheel2, own / v.wheel.inertia, sense)
+        s.spec.wire(w, s, s.body_name or s.name, s.coupling_name or s.name)
+    if w.wheel < 0:  # the last stage drives the wheels directly
+        bld.names[w.cur] = "wheels"
+        bld.inertia[w.cur] += w.own + w.vehicle_inertia
+        w.wheel = w.cur
+    return _finish(v, bld, w.wheel, w.wheel2, w.own / v.wheel.inertia, w.sense)
 
 
-def _finish(v: Vehicle, bld: _Builder, wheel: int, wheel2: int, per_body: float, sense: float = 1.0) -> ChainModel:
+def _finish(v: Vehicle, bld: ChainBuilder, wheel: int, wheel2: int, per_body: float, sense: float = 1.0) -> ChainModel:
     """Vehicle body, housing and mount, ratios and road data around the built chain."""
     tyre = v.effects.tyre_slip
     vehicle = bld.body("vehicle", v.body.mass * v.wheel.radius**2) if tyre.enabled else -1

@@ -349,7 +349,8 @@ class Vehicle:
 
     @property
     def driven_wheels(self) -> int:
-        return self.chain[-1].count if self.chain[-1].kind == "halfshaft" else 1
+        last = self.chain[-1]
+        return last.spec.driven_wheels(last)
 
     @property
     def ratio(self) -> float:

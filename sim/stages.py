@@ -12,15 +12,12 @@ to a new body after it (its *output*) and carries
     of the output body in its own angle (gear stage: driven gear, its shaft and the next
     pinion; differential: both side gears; half-shaft: one shaft, distributed).
 
-Kinds (:data:`KINDS`): ``spline`` (alias ``coupling``), ``gear`` (external pair: reverses the
-rotation, its mesh reacts on the housing with ``1 + r``), ``planetary`` (sun in, carrier out,
-ring in the housing: no reversal, reaction ``1 - r``), ``chain`` (alias ``belt``: no reversal,
-sprockets in the housing, slack as lash, reaction ``1 - r``), ``differential`` (``type = "open"``
-or ``"solid"`` for a solid axle), ``halfshaft`` (``count`` 1 or 2; a ``[stage.right]`` table gives
-the right shaft its own stiffness, damping, inertia and lash: unequal shafts, which need an
-open differential). The file may also put the rotor and the wheels in the chain as its first
-(``kind = "rotor"``, the ``[motor]`` fields) and last (``kind = "wheel"``, the ``[wheel]`` fields)
-entries. Validation names the stage by index and name: ``stage 2 'chain': lash_rad``.
+Kinds are the registry :mod:`sim.stagekinds` (one module per kind: its fields, checks, kernel
+wiring and docs line); this module reads and checks the tables and the chain's order by their
+kind's role (drive stages, then at most one differential, then at most one half-shaft stage).
+The file may also put the rotor and the wheels in the chain as its first (``kind = "rotor"``,
+the ``[motor]`` fields) and last (``kind = "wheel"``, the ``[wheel]`` fields) entries.
+Validation names the stage by index and name: ``stage 2 'chain': lash_rad``.
 """
 
 from __future__ import annotations
@@ -34,13 +31,11 @@ from sim.errors import ParameterError
 from sim.fields import INT_POS, NONNEG, POS, check
 from sim.fields import num as _f
 from sim.optional import CUBIC_STIFFNESS as CUBIC
-from sim.params_base import DAMPING, INERTIA, LASH_RAD, SEGMENTS, STIFFNESS, TEETH, Gap, gap_from_mm
+from sim.params_base import DAMPING, INERTIA, LASH_RAD, SEGMENTS, STIFFNESS, Gap, gap_from_mm
+from sim.stagekinds import DIFFERENTIAL, DRIVE, SHAFTS, StageKind, kind_names, kind_of
+from sim.stagekinds.base import STAGE_RATIO
 
-KINDS = ("spline", "gear", "planetary", "chain", "differential", "halfshaft")
-ALIASES = {"coupling": "spline", "belt": "chain"}
-DRIVE_KINDS = ("spline", "gear", "planetary", "chain")  # before the differential
 MAX_STAGES = 24  # decided before any stage is parsed: what one check, analysis or what-if may cost
-STAGE_RATIO = (0.1, 30.0)  # one stage's speed ratio input / output
 END_TABLES = {"rotor": "motor", "wheel": "wheel"}  # end entries of the chain -> their own tables
 RESERVED = frozenset({"rotor", "wheel", "wheels", "housing", "vehicle", "mount", "tyre"})  # the model's own bodies
 
@@ -73,11 +68,19 @@ class Stage:
     segments: int = _f("-", INT_POS, 1, SEGMENTS)  # half-shaft only
     count: int = _f("-", INT_POS, 1, (1, 2))  # half-shaft only
     right: Shaft | None = None  # half-shaft only: the right shaft when unequal
+    # names of its body and coupling in the model's arrays when not the stage's own (the classic layout's)
+    body_name: str = dataclasses.field(default="", compare=False, repr=False)
+    coupling_name: str = dataclasses.field(default="", compare=False, repr=False)
+
+    @property
+    def spec(self) -> StageKind:
+        """The stage's kind from the registry (:mod:`sim.stagekinds`)."""
+        return kind_of(self.kind)
 
     @property
     def has_coupling(self) -> bool:
         """False for a solid axle: the shafts start at the ring gear's body."""
-        return not (self.kind == "differential" and self.type == "solid")
+        return self.spec.has_coupling(self)
 
     @property
     def to_input(self) -> float:
@@ -85,22 +88,9 @@ class Stage:
         return self.ratio if self.referred_to == "output" else 1.0
 
     def gap_names(self) -> tuple[str, ...]:
-        if not self.has_coupling:
+        if not self.spec.has_gap(self):
             return ()
         return (self.name, f"{self.name}_right") if self.right is not None else (self.name,)
-
-
-# fields each kind takes: (required, optional)
-_COMMON = ("kind", "name")
-_DRIVE = (("stiffness", "damping", "inertia"), ("ratio", "teeth", "lash_rad", "cubic_stiffness", "referred_to"))
-FIELDS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "spline": (("stiffness", "damping", "inertia"), ("lash_rad", "cubic_stiffness")),
-    "gear": _DRIVE,
-    "planetary": _DRIVE,
-    "chain": _DRIVE,
-    "differential": (("inertia",), ("type", "stiffness", "damping", "lash_rad", "cubic_stiffness")),
-    "halfshaft": (("stiffness", "damping"), ("inertia", "lash_rad", "segments", "count", "cubic_stiffness", "right")),
-}
 
 
 def _label(i: int, name: str) -> str:
@@ -157,33 +147,21 @@ def parse_stage(i: int, raw: Any) -> Stage:
     if name in RESERVED or name.endswith(("_right", "_left")):
         raise ParameterError(f"{label}name", name, f"reserved for the model's own bodies ({sorted(RESERVED)}, "
                              "*_left, *_right)")
-    kind = raw.get("kind")
-    if kind is None:
-        raise ParameterError(f"{label}kind", None, f"required field missing; one of {list(KINDS)}")
-    kind = ALIASES.get(kind, kind)
-    if kind not in FIELDS:
-        raise ParameterError(f"{label}kind", raw.get("kind"), f"unknown stage kind; known: {list(KINDS)} "
-                             f"(aliases {sorted(ALIASES)}; 'rotor' and 'wheel' only as first and last entry)")
-    required, optional = FIELDS[kind]
-    allowed = set(_COMMON) | set(required) | set(optional)
+    if raw.get("kind") is None:
+        raise ParameterError(f"{label}kind", None, f"required field missing; one of {kind_names()}")
+    spec = kind_of(raw["kind"], f"{label}kind")
+    kind = spec.name
+    allowed = set(spec.fields())
     for key in raw:
         if key not in allowed:
             raise ParameterError(f"{label}{key}", raw[key], f"not a field of a {kind} stage; known: {sorted(allowed)}")
     data = {k: v for k, v in raw.items() if k not in ("kind", "name", "teeth", "right")}
-    if kind == "differential" and data.get("type", "open") == "open":
-        required = (*required, "stiffness", "damping")
-    for key in required:
+    for key in (*spec.required, *spec.extra_required(raw)):
         if key not in raw:
             raise ParameterError(f"{label}{key}", None, f"required field missing for a {kind} stage")
-    if kind in ("gear", "planetary", "chain"):
-        data["ratio"] = _ratio(raw, kind, label)
-    for key, allowed_values in (("referred_to", ("output", "input")), ("type", ("open", "solid"))):
-        if key in data and data[key] not in allowed_values:
-            raise ParameterError(f"{label}{key}", data[key], f"must be one of {list(allowed_values)}")
-    if data.get("type") == "solid":
-        for key in ("stiffness", "damping", "lash_rad", "cubic_stiffness"):
-            if key in data:
-                raise ParameterError(f"{label}{key}", data[key], "a solid axle has no differential gears; remove it")
+    spec.prepare(raw, data, label)
+    if "referred_to" in data and data["referred_to"] not in ("output", "input"):
+        raise ParameterError(f"{label}referred_to", data["referred_to"], f"must be one of {['output', 'input']}")
     kw = _build_fields(Stage, data, label)
     if "right" in raw:
         kw["right"] = _shaft(raw["right"], f"{label}right.")
@@ -203,27 +181,6 @@ def _shaft(raw: Any, prefix: str) -> Shaft:
         if key not in raw:
             raise ParameterError(f"{prefix}{key}", None, "required field missing")
     return Shaft(**_build_fields(Shaft, raw, prefix))
-
-
-def _ratio(raw: Mapping[str, Any], kind: str, label: str) -> float:
-    """A stage's speed ratio from ``ratio`` or ``teeth`` (gear/chain ``[drive, driven]``; planetary ``[sun, ring]``)."""
-    if ("ratio" in raw) == ("teeth" in raw):
-        raise ParameterError(f"{label}ratio", raw.get("ratio"), "give exactly one of ratio or teeth")
-    if "ratio" in raw:
-        value = raw["ratio"]
-        check(f"{label}ratio", value, POS, STAGE_RATIO)
-        ratio = float(value)
-    else:
-        teeth = raw["teeth"]
-        if not isinstance(teeth, list | tuple) or len(teeth) != 2:
-            raise ParameterError(f"{label}teeth", teeth, "must be [drive, driven] (planetary: [sun, ring])")
-        check(f"{label}teeth", tuple(teeth), INT_POS, TEETH)
-        ratio = 1.0 + teeth[1] / teeth[0] if kind == "planetary" else teeth[1] / teeth[0]
-        check(f"{label}teeth", ratio, POS, STAGE_RATIO, "(speed ratio)")
-    if kind == "planetary" and ratio <= 1.0:
-        raise ParameterError(f"{label}ratio", ratio,
-                             "a planetary stage (sun in, carrier out, ring fixed) has ratio > 1")
-    return ratio
 
 
 def parse_chain(raw: Any, first: int = 0) -> tuple[Stage, ...]:
@@ -248,22 +205,27 @@ def parse_chain(raw: Any, first: int = 0) -> tuple[Stage, ...]:
 
 
 def check_topology(stages: tuple[Stage, ...], first: int = 0) -> None:
-    """Rotor, drive stages, at most one differential, at most one half-shaft stage, in that order."""
+    """Rotor, drive stages, at most one differential, at most one half-shaft stage, in that order.
+
+    Each stage's place follows from its kind's role (:data:`sim.stagekinds.DRIVE`, ``DIFFERENTIAL``,
+    ``SHAFTS``)."""
     diff = -1
     for i, s in enumerate(stages):
         label = _label(i + first, s.name)
-        if s.kind in DRIVE_KINDS and (diff >= 0 or any(p.kind == "halfshaft" for p in stages[:i])):
-            where = stages[diff] if diff >= 0 else next(p for p in stages[:i] if p.kind == "halfshaft")
+        role = s.spec.role
+        shafts_before = [p for p in stages[:i] if p.spec.role == SHAFTS]
+        if role == DRIVE and (diff >= 0 or shafts_before):
+            where = stages[diff] if diff >= 0 else shafts_before[0]
             raise ParameterError(f"{label}kind", s.kind, f"a {s.kind} stage cannot follow the {where.kind} "
                                  f"'{where.name}': drive stages come before the differential and half-shafts")
-        if s.kind == "differential":
+        if role == DIFFERENTIAL:
             if diff >= 0:
                 raise ParameterError(f"{label}kind", s.kind, f"second differential; stage {diff + first} "
                                      f"'{stages[diff].name}' is one already")
-            if any(p.kind == "halfshaft" for p in stages[:i]):
+            if shafts_before:
                 raise ParameterError(f"{label}kind", s.kind, "the differential must come before the half-shafts")
             diff = i
-        if s.kind == "halfshaft" and i != len(stages) - 1:
+        if role == SHAFTS and i != len(stages) - 1:
             raise ParameterError(f"{label}kind", s.kind, "the half-shafts must be the last stage before the wheels")
         if s.right is not None and (diff < 0 or stages[diff].type != "open"):
             raise ParameterError(f"{label}right", "unequal shafts", "two unequal half-shafts need an open "
@@ -309,13 +271,8 @@ def split_ends(data: Mapping[str, Any]) -> tuple[dict[str, Any], int]:
 
 def stage_dict(s: Stage) -> dict[str, Any]:
     """The stage as a plain table that :func:`parse_stage` reads back (defaults of its kind left out)."""
-    required, optional = FIELDS[s.kind]
     out: dict[str, Any] = {"kind": s.kind, "name": s.name}
-    for key in (*required, *optional):
-        if key in ("teeth", "right") or not hasattr(s, key):
-            continue
-        if s.kind == "differential" and s.type == "solid" and key not in ("inertia", "type"):
-            continue
+    for key in s.spec.written_fields(s):
         value = getattr(s, key)
         out[key] = dataclasses.asdict(value) if isinstance(value, Gap) else value
     if s.right is not None:

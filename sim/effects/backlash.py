@@ -15,13 +15,14 @@ from __future__ import annotations
 from typing import Any
 
 from sim.effects.base import Effect, ParamSpec, Values
+from sim.stagekinds import SHAFTS
 
 REDUCER_GAPS = ("spline", "mesh1", "mesh2", "differential")  # the classic layout's reducer group
 
 
 def gap_groups(vehicle: Any) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """(reducer group, half-shaft group) of gap names on ``vehicle``'s chain, in chain order."""
-    shafts = tuple(g for s in vehicle.chain if s.kind == "halfshaft" for g in s.gap_names())
+    shafts = tuple(g for s in vehicle.chain if s.spec.role == SHAFTS for g in s.gap_names())
     return tuple(g for g in vehicle.gap_names if g not in shafts), shafts
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 from typing import Any
 
 from sim.effects.base import Effect, ParamSpec, Values
+from sim.stagekinds import SHAFTS
 
 HALFSHAFT_REF_RAD = 0.1
 MOUNT_REF_RAD = 0.02
@@ -32,7 +33,7 @@ def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
                 / HALFSHAFT_REF_RAD**2, **mount}
     out: dict[str, Any] = mount if vehicle.housing.enabled else {}
     for s in vehicle.stages:  # a stage chain: the cubic term of each half-shaft (both when unequal)
-        if s.kind == "halfshaft":
+        if s.spec.role == SHAFTS:
             out[f"stage.{s.name}.cubic_stiffness"] = v["halfshaft_rel"] * s.stiffness / HALFSHAFT_REF_RAD**2
             if s.right is not None:
                 out[f"stage.{s.name}.right.cubic_stiffness"] = (v["halfshaft_rel"] * s.right.stiffness
