@@ -18,9 +18,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 
-def temp_sibling(path: Path) -> Path:
-    """A new, unique hidden name beside ``path``."""
-    return path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+def temp_sibling(path: Path, suffix: str = "") -> Path:
+    """A new, unique hidden name beside ``path`` (ending in ``suffix`` after ``.tmp``, for a writer that
+    chooses the format by the name's ending)."""
+    return path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp{suffix}")
 
 
 def _fsync(path: Path) -> None:
@@ -32,14 +33,14 @@ def _fsync(path: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path]:
     """Yield a temporary path beside ``path`` to write; on a clean exit it is synced and renamed to ``path``.
 
     A writer that takes a file name (a BLF or Parquet writer) writes the yielded path. On an exception the
     temporary file is removed and the exception propagates; ``path`` keeps what it had.
     """
     target = Path(path)
-    tmp = temp_sibling(target)
+    tmp = temp_sibling(target, suffix)
     try:
         yield tmp
         _fsync(tmp)

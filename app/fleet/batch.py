@@ -98,6 +98,18 @@ def read_record(out: Path, key: str) -> dict[str, Any] | None:
     return doc
 
 
+def read_records(out: Path) -> dict[str, dict[str, Any]]:
+    """Every per-log record of the batch output ``out`` written so far, by the log's key (content hash)."""
+    found: dict[str, dict[str, Any]] = {}
+    for path in sorted((out / "logs").glob("*.json")):
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):  # removed meanwhile, or not ours
+            continue
+        found[path.stem] = doc
+    return found
+
+
 def _vehicle_of(source: str, cfg: BatchConfig) -> str:
     if not cfg.vehicle_id_from_dir:
         return cfg.vehicle_id

@@ -1,45 +1,36 @@
 """Job kind ``identification``: :func:`app.identify.logs.identify_logs` over stored logs of one vehicle.
 
-Subject: the identification id (``id_<hex>``). Its folder (:func:`directory`, under the store's
-``jobs/``) holds ``request.json`` (the log ids, the withheld logs, the vehicle and its version, the
-base parameters to fit) and, once done, ``result.json`` (the documented result of
-:meth:`~app.identify.logs.IdentifyResult.to_dict`) and ``identified.toml`` (the identified vehicle
-with its ``[provenance]``), which ``POST /identifications/{id}/apply`` stores as a new version.
+Subject: the identification id (``id_<hex>``), which names an ``identification`` artefact of the store
+(:mod:`app.storage.artifacts`): its ``request`` (the log ids, the withheld logs, the vehicle and its
+version, the base parameters to fit) and, once done, its ``result`` (the documented result of
+:meth:`~app.identify.logs.IdentifyResult.to_dict`) and ``vehicle`` file (the identified vehicle with its
+``[provenance]``), which ``POST /identifications/{id}/apply`` stores as a new version.
 """
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Any
 
 from app.errors import InputError
+from app.identify.logs import IdentifyOptions, identify_logs
 from app.jobkinds import progress_reporter
-from app.jobkinds.diagnosis import write_json, write_text
 from app.storage.base import Store
 from app.storage.records import JobRecord
 from sim import load_vehicle
 
-REQUEST, RESULT, IDENTIFIED = "request.json", "result.json", "identified.toml"
-
-
-def directory(store: Store, identification_id: str) -> Path:
-    return store.job_dir(identification_id)
+KIND = "identification"
 
 
 def request(store: Store, identification_id: str) -> dict[str, Any]:
-    try:
-        doc: dict[str, Any] = json.loads((directory(store, identification_id) / REQUEST).read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
+    doc = store.artifacts.get(KIND, identification_id, "request")
+    if doc is None:
         raise InputError(f"identification {identification_id} has no readable request",
-                         code="identification_not_found") from exc
+                         code="identification_not_found")
     return doc
 
 
 def run(store: Store, job: JobRecord) -> None:
-    from app.identify.logs import IdentifyOptions, identify_logs  # lazy: the fit library loads in the worker only
-
-    d = directory(store, job.subject)
     req = request(store, job.subject)
     veh = store.get_vehicle(req["vehicle"], req["vehicle_version"])
     records = {log_id: store.get_log(log_id) for log_id in [*req["log_ids"], *req["validate_log_ids"]]}
@@ -56,5 +47,5 @@ def run(store: Store, job: JobRecord) -> None:
     for item in [*result.logs, *val.get("before", []), *val.get("after", [])]:
         key = "name" if "name" in item else "log"  # logs by their upload name: the stored file's stays inside
         item[key] = names.get(item[key], item[key])
-    write_text(d / IDENTIFIED, result.vehicle_toml(req["name"]))
-    write_json(d / RESULT, json.loads(json.dumps(result.to_dict(), allow_nan=False)))
+    store.artifacts.put_text(KIND, job.subject, "vehicle", result.vehicle_toml(req["name"]))
+    store.artifacts.put(KIND, job.subject, "result", json.loads(json.dumps(result.to_dict(), allow_nan=False)))

@@ -1,30 +1,18 @@
 """Job kind ``tolerance``: the Monte Carlo ripple band of a finished analysis over the vehicle's tolerances.
 
-Subject: ``<analysis id>/n=<n>/seed=<seed>`` (:func:`subject`); the band is written beside the
-analysis' results (:func:`result_path`), atomically, so it is computed once per ``(n, seed)``.
+Subject: ``<analysis id>/n=<n>/seed=<seed>`` (:func:`app.jobkinds.tolerance_subject`), which is also the id
+of the ``tolerance`` artefact (its ``band``) the worker stores, atomically, beside the analysis' results,
+so it is computed once per ``(n, seed)``.
 """
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
-from app import atomic
 from app.jobkinds import progress_reporter
 from app.pipeline import tolerance_for_result
 from app.storage.base import Store
 from app.storage.records import JobRecord
 from app.storage.results import ResultFiles, json_safe
 from sim import load_vehicle
-
-
-def subject(analysis_id: str, n: int, seed: int) -> str:
-    """The job subject (and result file stem) of a tolerance band: ``<analysis>/n=<n>/seed=<seed>``."""
-    return f"{analysis_id}/n={n}/seed={seed}"
-
-
-def result_path(result_dir: Path, n: int, seed: int) -> Path:
-    return result_dir / f"tolerance_n{n}_seed{seed}.json"
 
 
 def run(store: Store, job: JobRecord) -> None:
@@ -36,4 +24,4 @@ def run(store: Store, job: JobRecord) -> None:
     doc = tolerance_for_result(ResultFiles(rec.result_dir), load_vehicle(veh.driveline_path), n, seed,
                                progress)
     doc.update(analysis_id=analysis_id, vehicle=rec.vehicle_name, vehicle_version=rec.vehicle_version)
-    atomic.write_text(result_path(rec.result_dir, n, seed), json.dumps(json_safe(doc)))
+    store.artifacts.put("tolerance", job.subject, "band", json_safe(doc))

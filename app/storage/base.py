@@ -1,7 +1,8 @@
 """The store interface the API, the CLI and the job runner talk to.
 
 An implementation keeps logs (de-duplicated by content hash), versioned vehicles,
-analyses and their jobs, and result files, and survives restarts. The embedded default
+analyses and their jobs, result files and the jobs' artefacts (:mod:`app.storage.artifacts`),
+and survives restarts. The embedded default
 is :class:`app.storage.sqlite.SQLiteStore` (SQLite in WAL mode plus files); several processes,
 on several machines, share :class:`app.storage.postgres.PostgresStore` (PostgreSQL plus files).
 Both are :class:`app.storage.sqlstore.SQLStore`, opened from a URL by :func:`app.storage.url.open_store`.
@@ -12,12 +13,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Protocol
 
+from app.storage.artifacts import Artifacts
 from app.storage.keys import ApiKey
 from app.storage.records import AnalysisRecord, JobRecord, LogRecord, VehicleRecord
 
 
 class Store(Protocol):
     root: Path
+    artifacts: Artifacts  # job artefacts (diagnoses, validations, tolerance bands, batches, identifications)
 
     @property
     def url(self) -> str: ...
@@ -26,7 +29,6 @@ class Store(Protocol):
     def temp_path(self, suffix: str = "") -> Path: ...
     def clean_temp(self, older_than_s: float = 0.0) -> int: ...
     def analysis_dir(self, analysis_id: str) -> Path: ...
-    def job_dir(self, job_id: str) -> Path: ...
 
     # logs
     def add_log(self, temp: Path, *, sha256: str, filename: str, fmt: str, frames: int, duration_s: float,

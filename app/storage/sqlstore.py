@@ -8,7 +8,9 @@ Layout of the files directory (``root``)::
     <root>/logs/<sha256><.ext>.format.toml  the format description uploaded with a text log (if any)
     <root>/vehicles/<name>/v<N>/      driveline.toml, database<.ext>, signals.map.toml
     <root>/analyses/<id>/             results written by the pipeline (atomic rename on completion)
-    <root>/jobs/<id>/                 results of other jobs (gap sensitivity)
+    <root>/jobs/<id>/                 batches and identifications
+    (the jobs' artefacts -- diagnoses, tolerance bands, batches, identifications, gap sensitivities --
+    are read and written through ``store.artifacts``, :mod:`app.storage.artifacts`, which owns their layout)
 
 Rows (logs, vehicles, analyses, jobs, API keys) live in the database; a subclass provides the
 connections (one per thread) and the :class:`~app.storage.dialect.Dialect`. The queries are
@@ -33,6 +35,7 @@ from typing import Any
 
 from app.errors import ConflictError, InputError, NotFoundError, StorageError
 from app.log_formats import sidecar_of
+from app.storage.artifacts import Artifacts
 from app.storage.dialect import Connection, Dialect
 from app.storage.jobtable import JobTable, now
 from app.storage.keys import KeyTable
@@ -76,6 +79,7 @@ class SQLStore(JobTable, KeyTable):
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise StorageError(f"cannot create the data directory {self.root.name!r}: {exc.strerror}") from exc
+        self.artifacts = Artifacts(self.root)
         self._local = threading.local()
         self._all: list[Any] = []  # every thread's connection, closed by close()
         self._lock = threading.Lock()
@@ -138,9 +142,6 @@ class SQLStore(JobTable, KeyTable):
 
     def analysis_dir(self, analysis_id: str) -> Path:
         return self.root / "analyses" / analysis_id
-
-    def job_dir(self, job_id: str) -> Path:
-        return self.root / "jobs" / job_id
 
     # -- logs --------------------------------------------------------------------------
     def _log(self, row: Any) -> LogRecord:

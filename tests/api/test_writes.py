@@ -8,13 +8,12 @@ exercised on its own.
 
 from __future__ import annotations
 
-import json
 import tempfile
 from pathlib import Path
 
 import pytest
 
-from app.jobkinds.diagnosis import REPORT, SEP, STATUS, directory, write_json
+from app.jobkinds import DIAGNOSIS_SEP
 from tests.api.inprocess import TestClient, in_process
 from tests.conftest import REPO
 
@@ -36,15 +35,13 @@ def finished_diagnosis(client: TestClient) -> str:
     rec, _ = store.add_log(log, sha256="0" * 64, filename="x.log", fmt="candump", frames=1, duration_s=0.0,
                            start_time=None, issues=[], meta={})
     analysis = store.create_analysis(rec.id, store.get_vehicle("ev"), {})
-    diagnosis_id = f"{analysis.id}{SEP}0001"
+    diagnosis_id = f"{analysis.id}{DIAGNOSIS_SEP}0001"
     job = store.create_job("diagnosis", f"{analysis.id}/diagnoses/{diagnosis_id}")
     store.start_job(job.id)
     store.finish_job(job.id)
-    d = directory(store, diagnosis_id)
-    d.mkdir(parents=True)
-    write_json(d / STATUS, {"id": diagnosis_id, "analysis_id": analysis.id, "job_id": job.id,
-                            "vehicle": {"name": "ev", "version": 1}})
-    write_json(d / REPORT, REPORT_DOC)
+    status = {"id": diagnosis_id, "analysis_id": analysis.id, "job_id": job.id, "vehicle": {"name": "ev", "version": 1}}
+    store.artifacts.put("diagnosis", diagnosis_id, "status", status)
+    store.artifacts.put("diagnosis", diagnosis_id, "report", REPORT_DOC)
     return diagnosis_id
 
 
@@ -75,9 +72,10 @@ def test_apply_stores_the_augmented_vehicle_and_keeps_no_copy(tmp_path: Path) ->
         assert r.json()["vehicle"] == "ev-lag" and r.json()["effects"]["torque_lag"]["tau_s"] == 0.012
         toml = client.get("/vehicles/ev-lag/versions/1/driveline").text
         assert "tau_s = 0.012" in toml
-        d = directory(client.app.state.store, did)  # type: ignore[attr-defined]
-        assert sorted(p.name for p in d.iterdir()) == [REPORT, STATUS]
-        assert json.loads((d / STATUS).read_text())["applied"]["vehicle"] == "ev-lag"
+        store = client.app.state.store  # type: ignore[attr-defined]
+        assert [p for p in ("status", "report", "charts", "validation", "plot_events", "plot_residual")
+                if store.artifacts.has("diagnosis", did, p)] == ["status", "report"]  # nothing else was written
+        assert store.artifacts.get("diagnosis", did, "status")["applied"]["vehicle"] == "ev-lag"
         assert leftovers(data) == []
 
 

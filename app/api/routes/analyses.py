@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
@@ -25,8 +24,7 @@ from app.api.schemas import (
 )
 from app.api.tables import events_csv, metrics_csv
 from app.errors import AppError, ConflictError, NotFoundError, QueueFullError
-from app.jobkinds.tolerance import result_path as tolerance_path
-from app.jobkinds.tolerance import subject as tolerance_subject
+from app.jobkinds import tolerance_subject
 from app.jobs import JobRunner
 from app.pipeline import AnalysisOptions
 from app.storage.base import Store
@@ -158,10 +156,10 @@ def get_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, n: TolN 
     Reading never starts work: 200 with the band once computed, 202 with the job's progress while
     it runs, 404 ``tolerance_not_started`` before ``POST`` started it, or the job's error.
     """
-    rec, _ = finished(store, cache, analysis_id)
-    out = tolerance_path(rec.result_dir, n, seed)
-    if out.exists():
-        return JSONResponse(json.loads(out.read_text(encoding="utf-8")))
+    finished(store, cache, analysis_id)
+    band = store.artifacts.get("tolerance", tolerance_subject(analysis_id, n, seed), "band")
+    if band is not None:
+        return JSONResponse(band)
     job = store.find_job("tolerance", tolerance_subject(analysis_id, n, seed))
     if job is None or job.status is JobStatus.DONE:  # never started, or its result was removed
         raise NotFoundError(f"no tolerance band n={n} seed={seed} for {analysis_id}; start it with POST "
@@ -177,11 +175,11 @@ def start_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, runner
                     n: TolN = 200, seed: TolSeed = 0) -> Response:
     """Starts the job unless the band exists (200 with it) or its job is queued or running (202 with that
     job); a failed job is started again. Poll ``GET`` with the same ``n`` and ``seed``."""
-    rec, _ = finished(store, cache, analysis_id)
-    out = tolerance_path(rec.result_dir, n, seed)
-    if out.exists():
-        return JSONResponse(json.loads(out.read_text(encoding="utf-8")))
+    finished(store, cache, analysis_id)
     subject = tolerance_subject(analysis_id, n, seed)
+    band = store.artifacts.get("tolerance", subject, "band")
+    if band is not None:
+        return JSONResponse(band)
     job = store.find_job("tolerance", subject)
     if job is None or job.status in (JobStatus.FAILED, JobStatus.DONE):
         room_for_a_job(store, settings.max_queued_jobs)
@@ -194,8 +192,8 @@ def start_tolerance(analysis_id: str, store: StoreDep, cache: ResultsDep, runner
             summary="Whether the tolerance band is computed, computing (with progress) or not started")
 def tolerance_status(analysis_id: str, store: StoreDep, cache: ResultsDep, n: TolN = 200,
                      seed: TolSeed = 0) -> JobStateOut:
-    rec, _ = finished(store, cache, analysis_id)
-    if tolerance_path(rec.result_dir, n, seed).exists():
+    finished(store, cache, analysis_id)
+    if store.artifacts.has("tolerance", tolerance_subject(analysis_id, n, seed), "band"):
         return JobStateOut(status="done", progress=1.0)
     return job_state(store.find_job("tolerance", tolerance_subject(analysis_id, n, seed)))
 

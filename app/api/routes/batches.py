@@ -15,7 +15,6 @@ by id and file name only; the store's internal paths never leave the server.
 from __future__ import annotations
 
 import json
-import shutil
 import uuid
 from typing import Any
 
@@ -25,18 +24,18 @@ from app.api.deps import RunnerDep, SettingsDep, StoreDep
 from app.api.routes.analyses import room_for_a_job
 from app.api.schemas import ERRORS, BatchCreate, BatchLogsOut, BatchOut, JobOut
 from app.errors import InputError, NotFoundError
-from app.jobkinds.batch import REQUEST, SUMMARY, directory, records
-from app.jobkinds.diagnosis import read_json, write_json
+from app.fleet.batch import read_records
 from app.pipeline import AnalysisOptions
 from app.storage.base import Store
 from app.storage.records import JobRecord, JobStatus
 
 router = APIRouter(prefix="/batches", tags=["batches"], responses=ERRORS)
+KIND = "batch"  # the artefact kind (app.storage.artifacts)
 
 
 def _load(store: Store, batch_id: str) -> tuple[dict[str, Any], JobRecord]:
-    ok = batch_id.startswith("ba_") and batch_id[3:].isalnum() and len(batch_id) <= 64  # a folder name: no path
-    req = read_json(directory(store, batch_id) / REQUEST) if ok else None
+    ok = batch_id.startswith("ba_") and batch_id[3:].isalnum() and len(batch_id) <= 64  # longer ones are not ours
+    req = store.artifacts.get(KIND, batch_id, "request") if ok else None
     job = store.find_job("batch", batch_id) if req is not None else None
     if req is None or job is None:
         raise NotFoundError(f"batch {batch_id!r} not found", code="batch_not_found")
@@ -44,7 +43,7 @@ def _load(store: Store, batch_id: str) -> tuple[dict[str, Any], JobRecord]:
 
 
 def _rows(store: Store, batch_id: str, req: dict[str, Any]) -> list[dict[str, Any]]:
-    found = records(directory(store, batch_id) / "out")
+    found = read_records(store.artifacts.workdir(KIND, batch_id))
     rows = []
     by_name = {str(r.get("log_name")): r for r in found.values()}  # a log that could not be read at all
     for log_id, filename, sha, stored in zip(req["log_ids"], req["filenames"], req["hashes"], req["stored"],
@@ -65,7 +64,7 @@ def _out(store: Store, batch_id: str, req: dict[str, Any], job: JobRecord) -> Ba
     counts = {"ok": 0, "failed": 0, "pending": 0}
     for row in _rows(store, batch_id, req):
         counts[row["status"] if row["status"] in counts else "failed"] += 1
-    summary = read_json(directory(store, batch_id) / SUMMARY) if job.status is JobStatus.DONE else None
+    summary = store.artifacts.get(KIND, batch_id, "summary") if job.status is JobStatus.DONE else None
     base = f"/batches/{batch_id}"
     return BatchOut(id=batch_id, status=job.status.value, progress=job.progress, stage=job.stage, job=JobOut.of(job),
                     vehicle=req["vehicle"], vehicle_version=req["vehicle_version"], vehicle_id=req["vehicle_id"],
@@ -83,13 +82,11 @@ def create_batch(body: BatchCreate, store: StoreDep, runner: RunnerDep, settings
     vehicle = store.get_vehicle(body.vehicle, body.vehicle_version)
     room_for_a_job(store, settings.max_queued_jobs)
     batch_id = f"ba_{uuid.uuid4().hex[:16]}"
-    d = directory(store, batch_id)
-    d.mkdir(parents=True, exist_ok=True)
     req = {"log_ids": body.log_ids, "filenames": [rec.filename for rec in logs], "hashes": [rec.sha256 for rec in logs],
            "stored": [rec.path.name for rec in logs],
            "vehicle": vehicle.name, "vehicle_version": vehicle.version, "vehicle_id": body.vehicle_id or vehicle.name,
            "options": options.to_dict(), "diagnose": body.diagnose}
-    write_json(d / REQUEST, req)
+    store.artifacts.put(KIND, batch_id, "request", req)
     job = store.create_job("batch", batch_id)
     runner.submit(job.id)
     return _out(store, batch_id, req, job)
@@ -114,5 +111,5 @@ def delete_batch(batch_id: str, store: StoreDep, runner: RunnerDep) -> Response:
     _, job = _load(store, batch_id)
     if job.status in (JobStatus.QUEUED, JobStatus.RUNNING):
         runner.cancel(job.id, f"cancelled: batch {batch_id} was deleted")
-    shutil.rmtree(directory(store, batch_id), ignore_errors=True)
+    store.artifacts.delete(KIND, batch_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -14,14 +14,13 @@ Diagnoses and validations are jobs of the one job runner (:mod:`app.jobs`; kinds
 worker process under a lease, killed after ``LASHSCOPE_DIAGNOSIS_TIMEOUT_S`` (the diagnosis then
 fails with code ``timeout``), resumed once after a crash and never run twice at once, and
 cancelled with its analysis. Status, progress, attempts and errors come from the job row; the
-files under the analysis' directory (``diagnoses/<id>/status.json``, ``report.json``,
-``validation.json``, PNGs) hold what was asked and what came out.
+diagnosis artefact of the store (``store.artifacts``, :mod:`app.storage.artifacts`: its status,
+report, charts, validation and PNG plots) holds what was asked and what came out.
 """
 
 from __future__ import annotations
 
 import secrets
-from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, status
@@ -31,24 +30,10 @@ from pydantic import BaseModel, Field
 from app.api.deps import RunnerDep, SettingsDep, StoreDep
 from app.api.routes.analyses import room_for_a_job
 from app.api.schemas import ERRORS, AppliedOut, DiagnosisChartsOut, DiagnosisOut
+from app.diagnosis_decision import base_ratios, chosen
 from app.errors import ConflictError, NotFoundError
 from app.identify.base import with_base
-from app.jobkinds import validation
-from app.jobkinds.diagnosis import (
-    CHARTS,
-    PLOTS,
-    REPORT,
-    SEP,
-    STATUS,
-    VALIDATION,
-    base_ratios,
-    chosen,
-    directory,
-    read_json,
-    subject,
-    update,
-    write_json,
-)
+from app.jobkinds import DIAGNOSIS_SEP, diagnosis_subject, validation_subject
 from app.pipeline import check_vehicle_files
 from app.storage.base import Store
 from app.storage.records import JobStatus
@@ -73,15 +58,14 @@ class ValidateBody(BaseModel):
 
 router = APIRouter(tags=["diagnoses"], responses=ERRORS)
 ACTIVE = (JobStatus.QUEUED, JobStatus.RUNNING)
+KIND = "diagnosis"  # the artefact kind (app.storage.artifacts)
+PLOTS = {"events": "plot_events", "residual": "plot_residual"}  # plot name -> the artefact's file part
 
 
-def _dir(store: Store, diagnosis_id: str) -> Path:
-    if SEP not in diagnosis_id or "/" in diagnosis_id:
+def _known(store: Store, diagnosis_id: str) -> str:
+    if not store.artifacts.has(KIND, diagnosis_id, "status"):  # also every id that cannot name one
         raise NotFoundError(f"diagnosis {diagnosis_id!r} not found", code="diagnosis_not_found")
-    d = directory(store, diagnosis_id)
-    if not (d / STATUS).is_file():
-        raise NotFoundError(f"diagnosis {diagnosis_id!r} not found", code="diagnosis_not_found")
-    return d
+    return diagnosis_id
 
 
 def _job_state(store: Store, doc: dict[str, Any]) -> dict[str, Any]:
@@ -107,15 +91,16 @@ def _job_state(store: Store, doc: dict[str, Any]) -> dict[str, Any]:
     return doc
 
 
-def _read(store: Store, d: Path) -> dict[str, Any]:
-    doc = _job_state(store, read_json(d / STATUS) or {})
-    report = read_json(d / REPORT)
+def _read(store: Store, diagnosis_id: str) -> dict[str, Any]:
+    art = store.artifacts
+    doc = _job_state(store, art.get(KIND, diagnosis_id, "status") or {})
+    report = art.get(KIND, diagnosis_id, "report")
     if report is not None and doc.get("status") == "done":
         doc["report"] = report
-    val = read_json(d / VALIDATION)
+    val = art.get(KIND, diagnosis_id, "validation")
     if val is not None:
         doc["validation"] = _job_state(store, val)
-    doc["plots"] = [k for k, f in PLOTS.items() if (d / f).is_file()]
+    doc["plots"] = [k for k, part in PLOTS.items() if art.has(KIND, diagnosis_id, part)]
     return doc
 
 
@@ -129,32 +114,30 @@ def create_diagnosis(analysis_id: str, body: DiagnosisCreate, store: StoreDep, r
     options = DiagnosisOptions(candidates=tuple(body.candidates) if body.candidates else tuple(EFFECTS),
                                seed=body.seed, model=body.model)  # 400 on unknown candidates or model
     room_for_a_job(store, settings.max_queued_jobs)
-    diagnosis_id = f"{analysis_id}{SEP}{secrets.token_hex(4)}"
-    d = directory(store, diagnosis_id)
-    d.mkdir(parents=True, exist_ok=True)
-    job = store.create_job("diagnosis", subject(analysis_id, diagnosis_id))
-    write_json(d / STATUS, {
+    diagnosis_id = f"{analysis_id}{DIAGNOSIS_SEP}{secrets.token_hex(4)}"
+    job = store.create_job("diagnosis", diagnosis_subject(analysis_id, diagnosis_id))
+    store.artifacts.put(KIND, diagnosis_id, "status", {
         "id": diagnosis_id, "analysis_id": analysis_id, "job_id": job.id,
         "options": {"candidates": list(options.candidates), "seed": options.seed, "model": options.model},
         "vehicle": {"name": rec.vehicle_name, "version": rec.vehicle_version}})
     runner.submit(job.id)
-    return _read(store, d)
+    return _read(store, diagnosis_id)
 
 
 @router.get("/diagnoses/{diagnosis_id}", response_model=DiagnosisOut,
             summary="Status, progress and (when done) the diagnosis report")
 def get_diagnosis(diagnosis_id: str, store: StoreDep) -> dict[str, Any]:
-    return _read(store, _dir(store, diagnosis_id))
+    return _read(store, _known(store, diagnosis_id))
 
 
 @router.get("/diagnoses/{diagnosis_id}/plots/{name}", summary="Per-event overlay or residual chart (PNG)",
             response_class=FileResponse)
 def get_plot(diagnosis_id: str, name: str, store: StoreDep) -> FileResponse:
-    d = _dir(store, diagnosis_id)
+    _known(store, diagnosis_id)
     if name not in PLOTS:
         raise NotFoundError(f"plot {name!r}: use one of {sorted(PLOTS)}", code="plot_not_found")
-    path = d / PLOTS[name]
-    if not path.is_file():
+    path = store.artifacts.file(KIND, diagnosis_id, PLOTS[name])
+    if path is None:
         raise ConflictError(f"diagnosis {diagnosis_id} has no {name} plot yet", code="diagnosis_not_ready")
     return FileResponse(path, media_type="image/png")
 
@@ -163,11 +146,11 @@ def get_plot(diagnosis_id: str, name: str, store: StoreDep) -> FileResponse:
             summary="The numbers behind the diagnosis plots: held-out residual by event, phase and band before "
                     "and after the chosen fit; measured, baseline and fitted speed of held-out events")
 def get_charts(diagnosis_id: str, store: StoreDep) -> dict[str, Any]:
-    d = _dir(store, diagnosis_id)
-    doc = read_json(d / CHARTS)
+    _known(store, diagnosis_id)
+    doc = store.artifacts.get(KIND, diagnosis_id, "charts")
     if doc is not None:
         return doc
-    state = _read(store, d)
+    state = _read(store, diagnosis_id)
     if state.get("status") != "done":
         raise ConflictError(f"diagnosis {diagnosis_id} is {state.get('status')}: no charts yet",
                             code="diagnosis_not_ready")
@@ -180,8 +163,8 @@ def get_charts(diagnosis_id: str, store: StoreDep) -> dict[str, Any]:
                         "(its PNG plots are at /plots/events and /plots/residual)", code="charts_not_found")
 
 
-def _done_report(store: Store, d: Path, diagnosis_id: str) -> dict[str, Any]:
-    doc = _read(store, d)
+def _done_report(store: Store, diagnosis_id: str) -> dict[str, Any]:
+    doc = _read(store, diagnosis_id)
     if doc.get("status") != "done" or "report" not in doc:
         raise ConflictError(f"diagnosis {diagnosis_id} is {doc.get('status')}", code="diagnosis_not_ready")
     report: dict[str, Any] = doc["report"]
@@ -193,9 +176,8 @@ def _done_report(store: Store, d: Path, diagnosis_id: str) -> dict[str, Any]:
 def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict[str, Any]:
     if body.name is not None:
         check_vehicle_name(body.name)  # before anything is read or written: the name never reaches a path
-    d = _dir(store, diagnosis_id)
-    report = _done_report(store, d, diagnosis_id)
-    st = read_json(d / STATUS) or {}
+    report = _done_report(store, _known(store, diagnosis_id))
+    st = store.artifacts.get(KIND, diagnosis_id, "status") or {}
     veh = store.get_vehicle(st["vehicle"]["name"], st["vehicle"]["version"])
     effects = chosen(report)
     augmented = apply_effects(with_base(load_vehicle(veh.driveline_path), base_ratios(report)), effects)
@@ -209,7 +191,8 @@ def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict
                                          signal_map=veh.signal_map_path, summary=summary)
     finally:
         path.unlink(missing_ok=True)
-    update(d / STATUS, applied={"vehicle": rec.name, "version": rec.version, "effects": effects})
+    store.artifacts.update(KIND, diagnosis_id, "status",
+                           applied={"vehicle": rec.name, "version": rec.version, "effects": effects})
     return {"vehicle": rec.name, "version": rec.version, "created": created, "effects": effects,
             "from": f"{veh.name}@{veh.version}"}
 
@@ -218,16 +201,15 @@ def apply_diagnosis(diagnosis_id: str, body: ApplyBody, store: StoreDep) -> dict
              summary="Validate the diagnosed effect on another log (runs in the background)")
 def validate_diagnosis(diagnosis_id: str, body: ValidateBody, store: StoreDep, runner: RunnerDep,
                        settings: SettingsDep) -> dict[str, Any]:
-    d = _dir(store, diagnosis_id)
-    chosen(_done_report(store, d, diagnosis_id))  # 409 / 422 now rather than in the background
+    chosen(_done_report(store, _known(store, diagnosis_id)))  # 409 / 422 now rather than in the background
     store.get_log(body.log_id)  # 404 now rather than in the background
-    earlier = read_json(d / VALIDATION)
+    earlier = store.artifacts.get(KIND, diagnosis_id, "validation")
     if earlier and earlier.get("job_id") and store.get_job(earlier["job_id"]).status in ACTIVE:
         raise ConflictError(f"diagnosis {diagnosis_id} is being validated already (job {earlier['job_id']})",
                             code="validation_busy")
     room_for_a_job(store, settings.max_queued_jobs)
-    analysis_id = diagnosis_id.rsplit(SEP, 1)[0]
-    job = store.create_job("validation", validation.subject(analysis_id, diagnosis_id))
-    write_json(d / VALIDATION, {"log_id": body.log_id, "job_id": job.id})
+    analysis_id = diagnosis_id.rsplit(DIAGNOSIS_SEP, 1)[0]
+    job = store.create_job("validation", validation_subject(analysis_id, diagnosis_id))
+    store.artifacts.put(KIND, diagnosis_id, "validation", {"log_id": body.log_id, "job_id": job.id})
     runner.submit(job.id)
-    return _read(store, d)
+    return _read(store, diagnosis_id)

@@ -16,7 +16,6 @@ leave the server.
 
 from __future__ import annotations
 
-import shutil
 import uuid
 from typing import Any
 
@@ -34,20 +33,19 @@ from app.api.schemas import (
 )
 from app.errors import ConflictError, InputError, NotFoundError
 from app.identify import BASE_NAMES
-from app.jobkinds.diagnosis import read_json, write_json
-from app.jobkinds.identification import IDENTIFIED, REQUEST, RESULT, directory
 from app.pipeline import check_vehicle_files
 from app.storage.base import Store
 from app.storage.records import JobRecord, JobStatus
 
 router = APIRouter(prefix="/identifications", tags=["identifications"], responses=ERRORS)
 PREFIX = "id_"
+KIND = "identification"  # the artefact kind (app.storage.artifacts)
 
 
 def _load(store: Store, identification_id: str) -> tuple[dict[str, Any], JobRecord]:
     ok = (identification_id.startswith(PREFIX) and identification_id[len(PREFIX):].isalnum()
-          and len(identification_id) <= 64)  # a folder name: longer ones are not ours (and past NAME_MAX)
-    req = read_json(directory(store, identification_id) / REQUEST) if ok else None
+          and len(identification_id) <= 64)  # longer ones are not ours (and past NAME_MAX)
+    req = store.artifacts.get(KIND, identification_id, "request") if ok else None
     job = store.find_job("identification", identification_id) if req is not None else None
     if req is None or job is None:
         raise NotFoundError(f"identification {identification_id!r} not found", code="identification_not_found")
@@ -55,7 +53,7 @@ def _load(store: Store, identification_id: str) -> tuple[dict[str, Any], JobReco
 
 
 def _out(store: Store, identification_id: str, req: dict[str, Any], job: JobRecord) -> IdentificationOut:
-    result = read_json(directory(store, identification_id) / RESULT) if job.status is JobStatus.DONE else None
+    result = store.artifacts.get(KIND, identification_id, "result") if job.status is JobStatus.DONE else None
     base = f"/identifications/{identification_id}"
     links = {"self": base}
     if result is not None:
@@ -83,12 +81,10 @@ def create_identification(body: IdentificationCreate, store: StoreDep, runner: R
     vehicle = store.get_vehicle(body.vehicle, body.vehicle_version)
     room_for_a_job(store, settings.max_queued_jobs)
     identification_id = f"{PREFIX}{uuid.uuid4().hex[:16]}"
-    d = directory(store, identification_id)
-    d.mkdir(parents=True, exist_ok=True)
     req = {"log_ids": body.log_ids, "validate_log_ids": body.validate_log_ids, "vehicle": vehicle.name,
            "vehicle_version": vehicle.version, "params": list(body.params or BASE_NAMES), "seed": body.seed,
            "name": vehicle.name}
-    write_json(d / REQUEST, req)
+    store.artifacts.put(KIND, identification_id, "request", req)
     job = store.create_job("identification", identification_id)
     runner.submit(job.id)
     return _out(store, identification_id, req, job)
@@ -103,7 +99,7 @@ def get_identification(identification_id: str, store: StoreDep) -> Identificatio
 
 def _done(store: Store, identification_id: str) -> tuple[dict[str, Any], JobRecord]:
     req, job = _load(store, identification_id)
-    if job.status is not JobStatus.DONE or not (directory(store, identification_id) / IDENTIFIED).is_file():
+    if job.status is not JobStatus.DONE or store.artifacts.file(KIND, identification_id, "vehicle") is None:
         raise ConflictError(f"identification {identification_id} is {job.status.value}",
                             code="identification_not_ready")
     return req, job
@@ -113,7 +109,10 @@ def _done(store: Store, identification_id: str) -> tuple[dict[str, Any], JobReco
             response_class=Response, responses={200: {"content": {"application/toml": {}}}})
 def identified_vehicle(identification_id: str, store: StoreDep) -> Response:
     _done(store, identification_id)
-    text = (directory(store, identification_id) / IDENTIFIED).read_text(encoding="utf-8")
+    path = store.artifacts.file(KIND, identification_id, "vehicle")
+    if path is None:  # removed since _done looked
+        raise NotFoundError(f"identification {identification_id!r} not found", code="identification_not_found")
+    text = path.read_text(encoding="utf-8")
     return Response(text, media_type="application/toml")
 
 
@@ -121,15 +120,18 @@ def identified_vehicle(identification_id: str, store: StoreDep) -> Response:
              summary="Store the identified vehicle as a new version of the vehicle")
 def apply_identification(identification_id: str, store: StoreDep) -> dict[str, Any]:
     req, _ = _done(store, identification_id)
-    d = directory(store, identification_id)
+    identified = store.artifacts.file(KIND, identification_id, "vehicle")
+    if identified is None:  # removed since _done looked
+        raise NotFoundError(f"identification {identification_id!r} not found", code="identification_not_found")
     veh = store.get_vehicle(req["vehicle"], req["vehicle_version"])
-    summary = check_vehicle_files(d / IDENTIFIED, veh.database_path, veh.signal_map_path)
-    result = read_json(d / RESULT) or {}
+    summary = check_vehicle_files(identified, veh.database_path, veh.signal_map_path)
+    result = store.artifacts.get(KIND, identification_id, "result") or {}
     summary["identification"] = {"id": identification_id, "from": f"{veh.name}@{veh.version}",
                                  "named": result.get("named", [])}
-    rec, created = store.add_vehicle(veh.name, driveline=d / IDENTIFIED, database=veh.database_path,
+    rec, created = store.add_vehicle(veh.name, driveline=identified, database=veh.database_path,
                                      signal_map=veh.signal_map_path, summary=summary)
-    write_json(d / REQUEST, {**req, "applied": {"vehicle": rec.name, "version": rec.version}})
+    store.artifacts.put(KIND, identification_id, "request",
+                        {**req, "applied": {"vehicle": rec.name, "version": rec.version}})
     return {"vehicle": rec.name, "version": rec.version, "created": created, "effects": {},
             "from": f"{veh.name}@{veh.version}"}
 
@@ -140,5 +142,5 @@ def delete_identification(identification_id: str, store: StoreDep, runner: Runne
     _, job = _load(store, identification_id)
     if job.status in (JobStatus.QUEUED, JobStatus.RUNNING):
         runner.cancel(job.id, f"cancelled: identification {identification_id} was deleted")
-    shutil.rmtree(directory(store, identification_id), ignore_errors=True)
+    store.artifacts.delete(KIND, identification_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Request, Response, status
@@ -25,8 +23,10 @@ from app.bounded import run_bounded
 from app.errors import AppError, InputError, NotFoundError, UploadTooLargeError
 from app.ingest.signalmap import CANONICAL
 from app.jobkinds import gap_sensitivity as gap_job
+from app.jobkinds import gap_sensitivity_subject
 from app.pipeline import GAP_SENSITIVITY_FORMAT, check_vehicle_files, gap_sensitivity_work
 from app.signal_proposal import parse_overrides
+from app.storage.base import Store
 from app.storage.records import JobRecord, JobStatus
 from app.storage.results import json_safe
 from app.storage.sqlstore import check_vehicle_name
@@ -155,10 +155,10 @@ async def vehicle_gap_sensitivity(name: str, store: StoreDep,
     (the paper's definition; the vehicle gives every gap's contact radius) or ``rad`` of gap
     angle; ``sensitivity_per_mm`` (null without radii) and ``sensitivity_per_rad`` are both given."""
     rec = store.get_vehicle(name, version)
-    doc = _cached(rec.driveline_path)
+    doc = _cached(store, rec.name, rec.version)
     if doc is not None:
         return doc
-    job = store.find_job("gap_sensitivity", gap_job.subject(rec.name, rec.version))
+    job = store.find_job("gap_sensitivity", gap_sensitivity_subject(rec.name, rec.version))
     if job is not None and job.status in (JobStatus.QUEUED, JobStatus.RUNNING):
         return _job_answer(rec.name, rec.version, job)
     if not compute and job is not None and job.status is JobStatus.FAILED:
@@ -176,11 +176,11 @@ async def vehicle_gap_sensitivity(name: str, store: StoreDep,
 def start_gap_sensitivity(name: str, store: StoreDep, runner: RunnerDep, settings: SettingsDep,
                           version: Annotated[int | None, Query(ge=1)] = None) -> Any:
     rec = store.get_vehicle(name, version)
-    doc = _cached(rec.driveline_path)
+    doc = _cached(store, rec.name, rec.version)
     if doc is not None:
         return JSONResponse(doc)
     gap_sensitivity_work(load_vehicle(rec.driveline_path))  # past the limit: refused now, not in the background
-    subject = gap_job.subject(rec.name, rec.version)
+    subject = gap_sensitivity_subject(rec.name, rec.version)
     job = store.find_job("gap_sensitivity", subject)
     if job is None or job.status in (JobStatus.FAILED, JobStatus.DONE):
         room_for_a_job(store, settings.max_queued_jobs)
@@ -194,17 +194,15 @@ def start_gap_sensitivity(name: str, store: StoreDep, runner: RunnerDep, setting
 def gap_sensitivity_status(name: str, store: StoreDep,
                            version: Annotated[int | None, Query(ge=1)] = None) -> JobStateOut:
     rec = store.get_vehicle(name, version)
-    if _cached(rec.driveline_path) is not None:
+    if _cached(store, rec.name, rec.version) is not None:
         return JobStateOut(status="done", progress=1.0)
-    return job_state(store.find_job("gap_sensitivity", gap_job.subject(rec.name, rec.version)))
+    return job_state(store.find_job("gap_sensitivity", gap_sensitivity_subject(rec.name, rec.version)))
 
 
-def _cached(driveline_path: Path) -> dict[str, Any] | None:
-    cached = gap_job.cache_path(driveline_path)
-    if cached.exists():
-        doc: dict[str, Any] = json.loads(cached.read_text(encoding="utf-8"))
-        if doc.get("format") == GAP_SENSITIVITY_FORMAT:  # older documents did not state the unit
-            return doc
+def _cached(store: Store, name: str, version: int) -> dict[str, Any] | None:
+    doc = store.artifacts.get("gap_sensitivity", gap_sensitivity_subject(name, version), "doc")
+    if doc is not None and doc.get("format") == GAP_SENSITIVITY_FORMAT:  # older documents did not state the unit
+        return doc
     return None
 
 
