@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -14,15 +13,7 @@ from app.analysis.diagnosis.split import make_split, restricted, spread_order, s
 from app.errors import InputError
 from app.signals import SignalSet
 from tests.diagnosis.conftest import paper
-
-
-@dataclass(frozen=True)
-class Ev:
-    index: int
-    kind: str
-    t_event: float
-    speed_rpm: float
-    torque_step_nm: float
+from tests.diagnosis.test_split import Ev
 
 
 def _events(n_in: int, n_out: int) -> list[Ev]:
