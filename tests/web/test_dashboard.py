@@ -56,7 +56,7 @@ def analysis_id(browser: Any, server: Server, demo_log: Path) -> str:
         pg.set_input_files("#upload-file", str(demo_log))
         pg.fill("#upload-tz", "Europe/Berlin")  # the demo BLF records a local clock without a zone
         pg.click("#upload-button")
-        pg.wait_for_function("document.querySelector('#upload-status').textContent.includes('stored as')")
+        pg.wait_for_function("document.querySelector('#upload-status')?.textContent.includes('stored as')")
         # the bar ends full, with the bytes sent
         assert pg.get_attribute("#upload-status .progress", "aria-valuenow") == "100"
         assert f"{demo_log.name}: " in (pg.text_content("#upload-status .progress") or "")
@@ -297,7 +297,7 @@ def test_vehicles_page_registers_from_uploaded_files_and_a_proposed_map(page: An
     head, _, rest = text.partition("[channels.vehicle_speed_kmh]")
     page.fill("#vehicle-map", head + rest.partition("\n\n")[2])
     page.click("#vehicle-register")
-    page.wait_for_function("document.querySelector('#vehicle-msg').textContent.includes('stored from-log v1')")
+    page.wait_for_function("document.querySelector('#vehicle-msg')?.textContent.includes('stored from-log v1')")
     summary = api(server, "/vehicles/from-log")["summary"]
     assert "vehicle_speed_kmh" not in summary["channels"] and "brake_pressed" not in summary["channels"]
     assert summary["channels"]["motor_speed_rpm"] == "MCU_Speed.MotorSpeed"
@@ -431,7 +431,7 @@ def test_two_cursors_read_every_series_and_the_delta(page: Any, server: Server, 
     page.keyboard.down("Shift")
     page.mouse.click(box["x"] + 0.6 * box["width"], y)
     page.keyboard.up("Shift")
-    page.wait_for_function("document.querySelector('#cursor-readout').dataset.b")
+    page.wait_for_function("document.querySelector('#cursor-readout')?.dataset.b")
     a = float(page.get_attribute("#cursor-readout", "data-a") or "nan")
     b = float(page.get_attribute("#cursor-readout", "data-b") or "nan")
     tl = page.query_selector("#timeline")
@@ -454,7 +454,7 @@ def test_two_cursors_read_every_series_and_the_delta(page: Any, server: Server, 
 def test_overlays_follow_the_zoom_on_time_from_the_crossing(page: Any, server: Server, analysis_id: str) -> None:
     open_analysis(page, server, analysis_id)
     events = api(server, f"/analyses/{analysis_id}/events")["events"]
-    page.wait_for_function("document.querySelector('#overlays').dataset.ready == '1'")
+    page.wait_for_function("document.querySelector('#overlays')?.dataset.ready == '1'")
     # the panels' time axis is time from the torque zero crossing
     spans = page.evaluate("[...document.querySelectorAll('#overlays .panel .chart')].map(c => [c.chart.scales.x.min, "
                           "c.chart.scales.x.max])")
@@ -466,8 +466,8 @@ def test_overlays_follow_the_zoom_on_time_from_the_crossing(page: Any, server: S
         xs = sorted((b["x"], b["x"] + b["w"]) for b in boxes if b["row"] == row)
         assert all(x1 <= x0b for (_, x1), (x0b, _) in itertools.pairwise(xs))
     _drag(page, "#timeline .u-over", 0.30, 0.55)
-    page.wait_for_function("document.querySelector('#overlays').dataset.focus && "
-                           "document.querySelector('#overlays').dataset.ready == '1'")
+    page.wait_for_function("document.querySelector('#overlays')?.dataset.focus && "
+                           "document.querySelector('#overlays')?.dataset.ready == '1'")
     t0, t1 = (float(x) for x in (page.get_attribute("#overlays", "data-focus") or "").split(","))
     inside = [e["index"] for e in events if e["has_series"] and t0 <= e["t_cross_s"] <= t1]
     shown = [int(p.get_attribute("data-event")) for p in page.query_selector_all("#overlays .panel")]

@@ -47,7 +47,7 @@ def test_analysis_view_states_the_truncation(page: Any, server: Server, cut_log:
 
 def test_upload_card_lists_the_formats_of_the_registry(page: Any, server: Server) -> None:
     page.goto(f"{server.url}/#/logs")
-    page.wait_for_function("document.querySelector('#log-formats').textContent.includes('gzip accepted')")
+    page.wait_for_function("document.querySelector('#log-formats')?.textContent.includes('gzip accepted')")
     text = page.text_content("#log-formats") or ""
     for f in LOG_FORMATS:
         assert f.label in text
