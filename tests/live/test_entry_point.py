@@ -55,10 +55,19 @@ def test_can_bus_by_interface_name(hub: LoopbackHub) -> None:
         can.Bus(interface="tcp_loopback", channel="192.0.2.1:29536")  # never leaves loopback
 
 
+def _ctrl_c_as_in_a_shell() -> None:
+    """In the child before exec: Ctrl-C delivered and handled by default, as a shell starts a program. An ignored
+    or blocked SIGINT survives exec, and the whole suite's process can carry one from code it ran earlier (the
+    logger then never sees its Ctrl-C); a user's shell does not."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def test_python_can_logger_process_records_our_hub(hub: LoopbackHub, tmp_path: Path) -> None:
     out = tmp_path / "logged.asc"
     logger = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "tcp_loopback", "-c", hub.channel,
-                               "-f", str(out)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               "-f", str(out)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              preexec_fn=_ctrl_c_as_in_a_shell)
     try:
         assert _wait(lambda: hub.clients == 1 or logger.poll() is not None), "can.logger did not connect"
         assert logger.poll() is None, logger.communicate()[1]
