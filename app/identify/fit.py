@@ -36,7 +36,7 @@ from app.analysis.diagnosis.calibrate import GAIN_BOUNDS, Bounds, FitResult, fit
 from app.analysis.diagnosis.forward import DiagEvent, Nuisance, prediction, simulate_events, vehicle_with
 from app.analysis.diagnosis.localise import MIN_TRAVERSE_SAMPLES, phase_times
 from app.analysis.diagnosis.noise import NoiseFloor
-from app.analysis.diagnosis.split import Split, stratified_order
+from app.analysis.diagnosis.split import Split, stage_sizes, stratified_order
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.errors import InsufficientDataError, NotIdentifiableError
 from app.identify.base import (
@@ -615,12 +615,7 @@ def identify_staged(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     Up to about 64 events (a 60 s drive) it is one stage of all of them, as :func:`identify_events`."""
     say = progress or (lambda f, m: None)
     order = stratified_order(events)
-    sizes: list[int] = []
-    n = first
-    while n < 0.75 * len(order):
-        sizes.append(n)
-        n *= 2
-    sizes.append(len(order))
+    sizes = stage_sizes(len(order), first)
     if len(sizes) == 1:
         return identify_events(events, noise, vehicle, options, progress)
     clock = time.process_time()

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals
-from app.analysis.diagnosis.select import stage_sizes
-from app.analysis.diagnosis.split import make_split, restricted, spread_order, stratified_order
+from app.analysis.diagnosis.split import make_split, restricted, spread_order, stage_sizes, stratified_order
 from app.errors import InputError
 from app.signals import SignalSet
 from tests.diagnosis.conftest import paper

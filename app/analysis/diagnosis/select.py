@@ -71,7 +71,7 @@ from app.analysis.diagnosis.rebase import (
     with_base,
 )
 from app.analysis.diagnosis.score import EventScore, Interval
-from app.analysis.diagnosis.split import Split, make_split, restricted, stratified_order
+from app.analysis.diagnosis.split import STAGE_EVENTS, Split, make_split, restricted, stage_sizes, stratified_order
 from app.analysis.diagnosis.structure import remainder
 from app.analysis.diagnosis.uncertainty import with_input_uncertainty
 from app.errors import InputError, InsufficientDataError, NotIdentifiableError
@@ -84,8 +84,6 @@ from sim.effects import EFFECTS, get_effect
 FloatArray = npt.NDArray[np.float64]
 Progress = Callable[[float, str], None]
 PAIR_PASSES_PER_PARAM = 10  # a pair's refinement starts near its solution (the single fit + the screen's step)
-STAGE_EVENTS = 24  # events per side in the sequential design's first stage (the calibration side of a 60 s drive)
-STAGE_COVER = 0.75  # a stage that would take this share of a side or more takes all of it
 BASE_SHARE_APART = 0.5  # an effect trading off with the base is told apart only if the identified base alone explains
 # less than this share of the held-out gap (its interval's upper end): where the file's error explains most of the
 # gap, an effect with a stiffness of its own fits the base's model form (a mount on a 1 kHz drive whose data sheet
@@ -212,17 +210,6 @@ def _refit_first(vehicle: Vehicle, cal: Sequence[DiagEvent], split: Split, first
     again = fit(vehicle, cal, split, (get_effect(first),), bounds=bounds, model=opts.model, start=start,
                 screen=False, seed=opts.seed)
     return again if again.chi2 < single.chi2 else None
-
-
-def stage_sizes(n_side: int, first: int = STAGE_EVENTS) -> list[int]:
-    """Events per side of each stage of the sequential design for a side of ``n_side`` events: ``first``, twice
-    that, ... (24, 48, 96, ...) while a stage takes under :data:`STAGE_COVER` of the side, then all of it."""
-    out: list[int] = []
-    n = first
-    while n < STAGE_COVER * n_side:
-        out.append(n)
-        n *= 2
-    return [*out, n_side]
 
 
 def with_eta(say: Progress, t0: float) -> Progress:

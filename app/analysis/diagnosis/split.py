@@ -199,3 +199,18 @@ def restricted(split: Split, events: Sequence[SplitEvent]) -> Split:
     ho = tuple(i for i in split.heldout if i in keep)
     strata = {k: sum(1 for e in events if e.kind == k) for k in sorted({e.kind for e in events})}
     return Split(split.seed, cal, ho, _digest(split.seed, events, cal, ho), strata)
+
+
+STAGE_EVENTS = 24  # events per side in the sequential design's first stage (the calibration side of a 60 s drive)
+STAGE_COVER = 0.75  # a stage that would take this share of a side or more takes all of it
+
+
+def stage_sizes(n_side: int, first: int = STAGE_EVENTS) -> list[int]:
+    """Events per side of each stage of the sequential design for a side of ``n_side`` events: ``first``, twice
+    that, ... (24, 48, 96, ...) while a stage takes under :data:`STAGE_COVER` of the side, then all of it."""
+    out: list[int] = []
+    n = first
+    while n < STAGE_COVER * n_side:
+        out.append(n)
+        n *= 2
+    return [*out, n_side]
