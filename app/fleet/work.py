@@ -8,6 +8,9 @@ results; the task touches no output, so a task re-run after a worker died is har
 
 The pipeline is called as :func:`app.pipeline.decode_log` + :func:`app.pipeline.analyze_signals`; the
 batch writes its own event rows (the service's event-store hook runs only where the service calls it).
+
+A Dask worker imports this module to unpickle the worker plugin (:mod:`app.fleet.plugin`) or its first
+task, so everything an analysis imports is loaded then, once per worker, before any task is timed.
 """
 
 from __future__ import annotations
@@ -16,8 +19,14 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from app.errors import AppError
 from app.log_source import LogSource, source_name
+from app.payload import result_payload
+from app.pipeline import AnalysisOptions, analyze_signals, decode_log
+from app.storage.results import json_safe
+from sim import SimError, load_vehicle, simulate
 
 
 @dataclass(frozen=True)
@@ -56,17 +65,9 @@ def analyse_log(source: LogSource, spec: BatchSpec) -> dict[str, Any]:
     ``doc`` holds the parts of the analysis document the event rows and the per-log record need
     (events, metrics, summary, tracking, ingest, notes), JSON-safe.
     """
-    # lazy: a Dask worker imports this module to unpickle a task; warm_worker loads these, timed (bench/batch.py)
-    from sim import SimError
-
     clock, cpu = time.perf_counter(), time.thread_time()
     name = source_name(source)
     try:
-        # lazy, as above
-        from app.payload import result_payload
-        from app.pipeline import AnalysisOptions, analyze_signals, decode_log
-        from app.storage.results import json_safe
-
         signals, ingest = decode_log(source, spec.inputs.database, spec.inputs.signal_map)
         result = analyze_signals(signals, spec.inputs.vehicle, AnalysisOptions.from_dict(spec.options))
         full, _ = result_payload(result)
@@ -94,11 +95,6 @@ def warm_kernels() -> float:
     one loads the cache in ~1.5 s. Called before the workers start, so parallel workers load a
     ready cache instead of each compiling the same kernels at once.
     """
-    # lazy: the kernels' module, loaded outside warm_kernels' clock
-    import numpy as np
-
-    from sim import load_vehicle, simulate  # lazy, as numpy above
-
     clock = time.perf_counter()
     vehicle = load_vehicle("paper")
     t = np.arange(0.0, 0.2, 0.001)
@@ -109,13 +105,6 @@ def warm_kernels() -> float:
 
 
 def warm_worker() -> float:
-    """Import what an analysis imports and load the kernels (:func:`warm_kernels`); seconds taken."""
-    clock = time.perf_counter()
-    # lazy on purpose: these imports are what warm_worker warms and times
-    import app.ingest.pipeline_signals
-    import app.ingest.readers
-    import app.payload
-    import app.pipeline  # noqa: F401
-
-    warm_kernels()
-    return time.perf_counter() - clock
+    """Load the kernels (:func:`warm_kernels`) in a worker; seconds taken. What an analysis imports was loaded
+    with this module (see the module docstring)."""
+    return warm_kernels()
