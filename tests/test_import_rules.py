@@ -180,7 +180,7 @@ def test_analysis_imports_only_what_it_may(path: Path) -> None:
     assert not bad, f"{path.relative_to(REPO)} imports {bad}; app.analysis may import only {ANALYSIS_MAY_IMPORT}"
 
 
-MAX_IN_FUNCTION_IMPORTS = 17  # outside app/cli (which registers every command on each run, so imports late); each one left gives its reason on its line
+MAX_IN_FUNCTION_IMPORTS = 17  # outside app/cli (which registers every command on each run, so imports late)
 
 
 def _in_function_imports() -> list[tuple[Path, int]]:
