@@ -40,7 +40,6 @@ from app.ingest.readers._text import (
 
 EXT, FD, TX = int(FrameFlag.EXTENDED), int(FrameFlag.FD), int(FrameFlag.TX)
 
-LINE_SHAPE = r"^\(\d+(\.\d+)?\)\s+[RT]X\d+\s+[0-9A-Fa-f]{1,8}\s+\[\d+\]"  # for the format sniffer
 _LINE = re.compile(r"^\(([^)]*)\)\s+([RT])X(\d+)\s+(\S+)\s+\[(\d+)\]\s*(.*)$", re.I)
 _HEX_ID = re.compile(r"^[0-9A-Fa-f]{1,8}$")
 _PUTTY = re.compile(r"PuTTY log (\d{4})\.(\d\d)\.(\d\d) (\d\d:\d\d:\d\d)")

@@ -2,7 +2,8 @@
 
 Binary formats have magic bytes (BLF ``LOGG``, MDF ``MDF     `` / ``UnFinMF ``). Text formats
 are scored by how many of the first lines have that format's unmistakable shape; a gzip
-head is inflated first. CANedge's compressed/encrypted MF4 containers (``Generic File``)
+head is inflated first. Both come from the format table, :data:`app.log_formats.LOG_FORMATS`.
+CANedge's compressed/encrypted MF4 containers (``Generic File``)
 are recognised only to refuse them with a clear message.
 """
 
@@ -13,40 +14,15 @@ import zlib
 from pathlib import PurePath
 
 from app.errors import LogFormatError, UnsupportedFormatError
-from app.ingest.readers.analyser_tsv import HEADER as ANALYSER_HEADER
-from app.ingest.readers.analyser_tsv import ROW as ANALYSER_ROW
 from app.ingest.readers.described import TextLayout, user_layouts
-from app.ingest.readers.serial_dump import LINE_SHAPE as SERIAL_LINE
-from app.ingest.readers.tcu import LINE_SHAPE as TCU_LINE
 from app.log_formats import FORMAT_NAMES, LOG_FORMATS, supported_list
 
 FORMATS = FORMAT_NAMES
 
 SUFFIXES = {suffix: f.name for f in LOG_FORMATS for suffix in f.suffixes}
-
+_MAGIC = tuple((magic, f.name) for f in LOG_FORMATS for magic in f.magic)
 _LINE_RULES: dict[str, tuple[re.Pattern[str], ...]] = {
-    "asc": (
-        re.compile(r"^\s*date\s+\S+", re.I),
-        re.compile(r"^\s*base\s+(hex|dec)\b", re.I),
-        re.compile(r"^\s*(no\s+)?internal\s+events\s+logged", re.I),
-        re.compile(r"^\s*begin\s+triggerblock", re.I),
-        re.compile(r"^\s*\d+\.\d+\s+(\d+\s+\w+x?\s+(Rx|Tx)\b|\d+\s+ErrorFrame|CANFD\s+\d+)", re.I),
-    ),
-    "candump": (re.compile(r"^\s*\(\d+(\.\d+)?\)\s+\S+\s+[0-9A-Fa-f]{3,8}#"),),
-    "trc": (
-        re.compile(r"^;\$(FILEVERSION|STARTTIME|COLUMNS)="),
-        re.compile(r"^\s*\d+\)\s+\d+(\.\d+)?\s+"),
-        re.compile(r"^\s*\d+\s+\d+\.\d+\s+(DT|FD|FB|FE|BI|RR|ST|ER|EC|EV)\s"),
-    ),
-    "gvret_csv": (
-        re.compile(r"^\s*Time Stamp,ID,Extended,(Dir,)?Bus,LEN", re.I),
-        re.compile(r"^\d+(\.\d+)?,(0x)?[0-9A-Fa-f]{1,8},(true|false),((Rx|Tx),)?\d+,\d+(,[0-9A-Fa-f]{1,2})*,?\s*$",
-                   re.I),
-    ),
-    "tcu": (re.compile(TCU_LINE),),
-    "analyser_tsv": (ANALYSER_HEADER, re.compile(ANALYSER_ROW, re.I)),
-    "serial_dump": (re.compile(SERIAL_LINE),),
-}
+    f.name: tuple(re.compile(p) for p in f.lines) for f in LOG_FORMATS if f.lines}
 
 
 def _inflate_head(head: bytes) -> bytes:
@@ -145,10 +121,9 @@ def sniff_format(head: bytes, name: str | None = None) -> str:
         if not inner:
             raise LogFormatError(f"{name + ': ' if name else ''}empty log (gzip member decompresses to nothing)")
         return sniff_format(inner, name[:-3] if name and name.lower().endswith(".gz") else name)
-    if head[:4] == b"LOGG":
-        return "blf"
-    if head[:8] in (b"MDF     ", b"UnFinMF "):
-        return "mf4"
+    for magic, fmt in _MAGIC:
+        if head.startswith(magic):
+            return fmt
     if head[:12] == b"Generic File":
         raise unsupported(name, "this is a CANedge compressed or encrypted MF4 container (MFC/MFE), which needs "
                           "the vendor's decompression/decryption first")

@@ -22,7 +22,6 @@ from app.ingest.frames import FrameFlag
 from app.ingest.readers._text import BadLine, LineFrame, LineFrameReader, first_stamp, printable
 
 EXT = int(FrameFlag.EXTENDED)
-LINE_SHAPE = r"^[0-9A-Fa-f]{8}x[0-9A-Fa-f]{8}(?:[0-9A-Fa-f]{2}){0,8}\s*$"  # for the format sniffer
 _LINE = re.compile(r"^([0-9A-Fa-f]{1,12})x([0-9A-Fa-f]{8})([0-9A-Fa-f]*)$")
 
 Frame = tuple[int, int, int, bytes]  # device t_ns, arb_id, flags, payload
