@@ -100,20 +100,30 @@ def judge(ident: Identification, score: CandidateScore, n_heldout: Any, draws: A
 
 
 def joint_with_base(nominal: Vehicle, ident: Identification, events: Sequence[DiagEvent], split: Split, cid: str,
-                    single: FitResult, bounds: Bounds, model: str) -> FitResult | None:
+                    single: FitResult | None, bounds: Bounds, model: str,
+                    from_file: tuple[FitResult, Sequence[dict[str, float]]] | None = None) -> FitResult | None:
     """Effect ``cid`` and the identified base parameters fitted together on the file's vehicle, from their values.
 
     The total lash is left out next to ``backlash`` (both set the gaps). None when no base parameter is left.
+    ``from_file``: the file's baseline fit and start values of the effect on the file's vehicle (its linearised
+    screen there); the fit then also starts from the file's base values with the effect at each of them, and
+    refines from whichever start point fits the calibration events best.
     """
     names = [k for k in ident.ratios if not (k == "lash" and cid == "backlash")]
-    if not names or cid not in single.values:
+    if not names or ((single is None or cid not in single.values) and not (from_file and from_file[1])):
         return None
     effects = (*(BASE_EFFECTS[k] for k in names), get_effect(cid))
-    values = {BASE_EFFECTS[k].id: dict(ident.fit.values[BASE_EFFECTS[k].id]) for k in names}
-    values[cid] = dict(single.values[cid])
-    start = FitResult((), single.nuisance, values, 0.0, 0, 0)
-    return fit(nominal, events, split, effects, bounds=bounds, model=model, start=start, screen=False,
-               passes_per_param=JOINT_PASSES_PER_PARAM)
+    starts: list[FitResult] = []
+    if single is not None and cid in single.values:
+        values = {BASE_EFFECTS[k].id: dict(ident.fit.values[BASE_EFFECTS[k].id]) for k in names}
+        values[cid] = dict(single.values[cid])
+        starts.append(FitResult((), single.nuisance, values, 0.0, 0, 0))
+    if from_file is not None:
+        file_fit, effect_starts = from_file
+        at_file = {BASE_EFFECTS[k].id: BASE_EFFECTS[k].off_values() for k in names}
+        starts.extend(FitResult((), file_fit.nuisance, {**at_file, cid: dict(st)}, 0.0, 0, 0) for st in effect_starts)
+    return fit(nominal, events, split, effects, bounds=bounds, model=model, start=starts[0], screen=False,
+               alternatives=starts[1:], passes_per_param=JOINT_PASSES_PER_PARAM)
 
 
 def nuisance_only(ident: Identification) -> FitResult:
