@@ -56,9 +56,10 @@ def test_can_bus_by_interface_name(hub: LoopbackHub) -> None:
 
 
 def _ctrl_c_as_in_a_shell() -> None:
-    """In the child before exec: Ctrl-C delivered and handled by default, as a shell starts a program. An ignored
-    or blocked SIGINT survives exec, and the whole suite's process can carry one from code it ran earlier (the
-    logger then never sees its Ctrl-C); a user's shell does not."""
+    """In the child before exec: Ctrl-C delivered and handled by default, as an interactive shell starts a program.
+    An ignored SIGINT survives exec, and the suite's own process can start with one: a non-interactive shell starts
+    a background job with SIGINT and SIGQUIT ignored (``SigIgn: 0000000000000006`` in its /proc status), and a
+    runner that starts the tests so passes that on (the logger then never sees its Ctrl-C)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
