@@ -133,6 +133,21 @@ def test_an_effect_the_identified_base_cannot_stand_in_for_is_named_despite_a_tr
     assert "held-out events prefer tyre_slip to the identified base alone" in d.reason
 
 
+def test_a_data_sheet_error_says_which_effects_would_change_the_log_alike() -> None:
+    """A mount 0.76x as stiff as the file's on a right data sheet reads as a 0.95x shaft stiffness (a soft mount
+    lowers the shuffle mode like a soft shaft): the answer stays base_parameters, and it names the mount as what
+    would explain the log to first order if the data sheet is known to be right; a torque lag, which changes the
+    log otherwise, is not named."""
+    res = diagnose_signals(_drive({}, {"housing_mount": {"stiffness_log2": -0.4, "damping_log2": 0.0}}, 81),
+                           paper(), DiagnosisOptions(seed=0, candidates=("housing_mount", "torque_lag", "drag")))
+    d = res.decision
+    assert d.status == "base_parameters" and d.top == (), d.reason
+    alike = {m["effect"]: m["linear_share"] for m in d.details["mimicked_by"]}
+    assert set(alike) == {"housing_mount"} and 0.5 <= alike["housing_mount"] <= 1.0
+    assert "housing_mount would remove" in d.reason and "rule that out before correcting it" in d.reason
+    assert report_dict(res)["decision"]["mimicked_by"] == d.details["mimicked_by"]
+
+
 def test_an_effect_the_identification_takes_in_part_is_named_on_a_correct_data_sheet() -> None:
     """A shaft that hardens under load, on a car whose data sheet is right: the identification reads it as a stiffer
     shaft (1.7x) that explains only part of the held-out gap. The candidates' screen on the file's vehicle puts the

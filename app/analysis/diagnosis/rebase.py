@@ -25,6 +25,7 @@ from typing import Any
 from app.analysis.diagnosis.calibrate import Bounds, FitResult, fit
 from app.analysis.diagnosis.decide import CandidateScore, Decision, DecisionRules, gap_ratio, has_gap
 from app.analysis.diagnosis.forward import DiagEvent
+from app.analysis.diagnosis.partners import PartnerScreen
 from app.analysis.diagnosis.split import Split
 from app.identify.base import BASE_EFFECTS, BASE_NAMES
 from app.identify.fit import Identification
@@ -97,6 +98,27 @@ def judge(ident: Identification, score: CandidateScore, n_heldout: Any, draws: A
                       False, reason)
     return Rebase(None, True, f"identification: {sentence(ident)}; the candidates are fitted on the identified "
                               f"vehicle (held-out residual {left.value:.2f}x the noise floor left)")
+
+
+MIMIC_SHARE = 0.5  # an effect that removes this share of the file's calibration residual above the noise, to first
+# order, is named as one the data sheet's error could be mistaken for
+
+
+def mimicked_by(decision: Decision, screen: Sequence[PartnerScreen], baseline: FitResult) -> Decision:
+    """``decision`` (``base_parameters``: the file's error explains the gap) with the candidate effects that would
+    change the log alike on a right data sheet, to first order (``screen``: their linearised gains on the file's
+    vehicle against its ``baseline``): a soft mount lowers the shuffle mode like a soft shaft. Nothing is
+    attributed; the report says what to rule out before correcting the file (``details.mimicked_by``)."""
+    excess = max(baseline.chi2 - baseline.n, 1.0)
+    alike = [(s.id, min(s.gain / excess, 1.0)) for s in screen if s.gain >= MIMIC_SHARE * excess]
+    if not alike:
+        return decision
+    names = ", ".join(f"{cid} would remove {100 * share:.0f} %" for cid, share in alike)
+    reason = (f"{decision.reason}. On a right data sheet an unmodelled effect would change the log alike, to first "
+              f"order: {names} of the file's residual above the noise floor. Where the data sheet is known to be "
+              "right, rule that out before correcting it")
+    return replace(decision, reason=reason, details={
+        **decision.details, "mimicked_by": [{"effect": cid, "linear_share": round(share, 4)} for cid, share in alike]})
 
 
 def joint_with_base(nominal: Vehicle, ident: Identification, events: Sequence[DiagEvent], split: Split, cid: str,

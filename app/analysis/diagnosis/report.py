@@ -37,7 +37,10 @@ Top-level keys (all numbers SI unless the key names a unit; intervals are
                                           (the vehicle file's base parameters that the log says are off:
                                           ratio to the file's value with its 90 % interval; with
                                           ``base_parameters`` alone, or before an effect named on top),
-                       "identify_first": bool (base_parameters: a parameter rests on its prior bound)}
+                       "identify_first": bool (base_parameters: a parameter rests on its prior bound),
+                       "mimicked_by": [{"effect", "linear_share"}] (base_parameters that explain the gap: the
+                                          effects that would change the log alike on a right data sheet, to
+                                          first order, with the share of the file's residual they remove)}
                       "explained_share" is the share of the residual *above the noise floor* removed,
                       "heldout_shrink" the relative drop of the residual energy; the reason quotes
                       both under these names (explained share, held-out shrink).

@@ -65,6 +65,7 @@ from app.analysis.diagnosis.rebase import (
     base_trade,
     joint_with_base,
     judge,
+    mimicked_by,
     not_separable,
     nuisance_only,
     told_apart,
@@ -402,7 +403,12 @@ def _diagnose(
             fit_order.append("identification: a base parameter on its prior bound; candidates fitted on the file's "
                              "vehicle, an effect named only with every base parameter inside its prior")
         elif outcome.stop is not None:
-            decision = with_tones(outcome.stop, noise.tones)
+            # the file's error explains the gap; which effects would change the log alike on a right data sheet
+            say(step[0] / n_steps, "screening the candidates on the file's vehicle")
+            screen = screen_partners(vehicle, cal, base_fit, candidates, opts.model)
+            fit_order.append(f"candidates on the file's vehicle (linearised gain): "
+                             f"{', '.join(s.describe() for s in screen)}")
+            decision = with_tones(mimicked_by(outcome.stop, screen, base_fit), noise.tones)
             say(1.0, f"decision: {decision.status}")
             return result(decision, baseline=base_eval, candidates={BASE_ID: id_eval}, phases=phases, draws=draws,
                           fit_order=fit_order, not_applicable=not_applicable, identification=ident,
