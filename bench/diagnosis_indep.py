@@ -60,6 +60,7 @@ class Result:
     n_events: int
     error: str = ""
     base_named: tuple[str, ...] = ()  # base parameters the report says the data sheet has wrong
+    mimicked: tuple[str, ...] = ()  # base_parameters: effects that would change the log alike (mimicked_by)
 
 
 def generate(which: str, quick: bool, jobs: int = 1, names: list[str] | None = None) -> tuple[Path, list[Case]]:
@@ -99,14 +100,17 @@ def diagnose(case: Case, folder: Path) -> Result:
     # top-level ``base_parameters`` list
     items = (rep.get("decision") or {}).get("base_parameters") or ()
     base_named = tuple(str(b["name"]) for b in items if isinstance(b, dict))
+    mimicked = tuple(str(m["effect"]) for m in (rep.get("decision") or {}).get("mimicked_by") or ()
+                     if isinstance(m, dict))
     shrink_b = float("nan")
     if d.top and d.status in (*CONFIDENT, "ambiguous"):
         try:
             shrink_b = validate_on(res, read_log(folder / case.drive_b, DBC, MAP), vehicle).shrink.value
         except Exception as exc:
             return Result(case, d.status, tuple(d.top), remainder, shrink_b, cpu, len(res.events),
-                          f"validation: {type(exc).__name__}: {exc}", base_named)
-    return Result(case, d.status, tuple(d.top), remainder, shrink_b, cpu, len(res.events), base_named=base_named)
+                          f"validation: {type(exc).__name__}: {exc}", base_named, mimicked)
+    return Result(case, d.status, tuple(d.top), remainder, shrink_b, cpu, len(res.events), base_named=base_named,
+                  mimicked=mimicked)
 
 
 def _structured(r: Result) -> bool:
@@ -171,6 +175,10 @@ def targets(results: list[Result]) -> None:
     sheet = [r for r in clear if r.status == "base_parameters" and r not in correct]
     print(f"  [info] single effects answered \"the data sheet is off\" (base_parameters, not wrong): "
           f"{pct(len(sheet), len(clear))}" + (f" -- {', '.join(r.case.name for r in sheet)}" if sheet else ""))
+    if sheet:
+        told = [r for r in sheet if set(r.case.expected) <= set(r.mimicked)]
+        print(f"  [info] ... of which the report names the drive's effect as one that would change the log alike "
+              f"on a right data sheet (mimicked_by): {len(told)} of {len(sheet)}")
     faint_ok = [r for r in faint if r in correct]
     faint_quiet = [r for r in faint if r.status == "no_significant_gap"]
     print(f"  [info] faint in-library effects (2-10 noise sigma): correct-confident {pct(len(faint_ok), len(faint))}, "
