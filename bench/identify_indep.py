@@ -255,6 +255,10 @@ def diagnosis_targets(out: list[Outcome], apart: dict[str, float] | None = None)
                 or (o.diag.status not in CONFIDENT and o not in wrong)]
         print(f"  [info] effects a data sheet mimics (< {SEPARABLE_SIGMA:.0f} sigma): named or answered "
               f"\"data sheet off\" or abstained {pct(len(fine), len(mimic))}")
+        told = [o for o in mixed if o.diag.status == "base_parameters" and set(o.case.expected) <= set(o.diag.mimicked)]
+        print(f"  [info] effect drives answered base_parameters whose report names the drive's effect as one that "
+              f"would change the log alike on a right data sheet (mimicked_by): {len(told)} of "
+              f"{sum(o.diag.status == 'base_parameters' for o in mixed)}")
     none = [o for o in out if o.case.kind == "none"]
     quiet = [o for o in none if o.diag.status not in (*CONFIDENT, "ambiguous", "base_parameters")
              and not o.diag.base_named and not (o.ident and o.ident.named)]
