@@ -185,5 +185,16 @@ def test_diagnosis_shows_the_vehicle_file_off(page: Any, server: Server, drives:
     assert page.get_attribute("#identify-first a", "href") == "#/identify"
     assert "Identify the vehicle first" in (page.text_content("#identify-first") or "")
     assert not page.query_selector("#apply")
+
+    # effects that would change the log alike on a right data sheet (decision.mimicked_by) are named with their share
+    assert not page.query_selector("#mimicked-by")
+    alike = {**doc, "report": {**doc["report"], "decision": {
+        **decision, "mimicked_by": [{"effect": "housing_mount", "linear_share": 0.7592}]}}}
+    page.unroute(f"**/diagnoses/{did}")
+    page.route(f"**/diagnoses/{did}", lambda route: route.fulfill(json=alike))
+    page.reload()
+    page.wait_for_selector("#mimicked-by")
+    note = page.text_content("#mimicked-by") or ""
+    assert "housing mount (76 %)" in note and "rule that out before correcting the file" in note
     assert not errors, errors
     assert hosts == {"127.0.0.1"}, hosts

@@ -69,7 +69,7 @@ export async function render(main, id) {
         h("dt", {}, "held-out shrink"), h("dd", {}, interval(d.heldout_shrink)),
         h("dt", {}, "split"), h("dd", {}, `${r.split.calibration.length} calibration, ${r.split.heldout.length} held-out events (seed ${r.split.seed})`),
         h("dt", {}, "noise floor"), h("dd", {}, `${fmt(r.noise_floor.sigma_rpm, 2)} rpm`))),
-    baseParameters(d), chartsCard, candidates(r), identifiability(r), identification(r.identification, d.reason),
+    baseParameters(d, titles), chartsCard, candidates(r), identifiability(r), identification(r.identification, d.reason),
     remainder(d), actions(id, d, doc, ctrl, r), where(r)].filter(Boolean));
   await charts(chartsCard, id, r, ctrl.signal);
   // the first frame with the decision and the charts: ms since navigation start (bench/dashboard.py)
@@ -79,8 +79,9 @@ export async function render(main, id) {
   return () => ctrl.abort();
 }
 
-// The vehicle file's base parameters the log says are off (ratios to the file's values, 90 % intervals).
-function baseParameters(d) {
+// The vehicle file's base parameters the log says are off (ratios to the file's values, 90 % intervals), and the
+// effects that would change the log alike on a right data sheet, to first order (mimicked_by).
+function baseParameters(d, titles) {
   const items = d.base_parameters || [];
   if (!items.length && !d.identify_first) return null;
   const unit = (x, u) => `${+x.toPrecision(4)}${u && u !== "-" ? ` ${u}` : ""}`;
@@ -90,6 +91,10 @@ function baseParameters(d) {
       h("a", { href: "#/identify" }, "Identify it from its logs"), ".") : null,
     h("ul", {}, items.map((p) => h("li", { dataset: { param: p.name } }, ratioWords(p.label, p.ratio, p.lo, p.hi),
       h("span", { class: "muted" }, ` (${unit(p.value, p.unit)}; file ${unit(p.nominal, p.unit)})`)))),
+    (d.mimicked_by || []).length ? h("p", { class: "note", id: "mimicked-by" }, "On a right data sheet ",
+      d.mimicked_by.map((m) => `${titles[m.effect] || m.effect.replaceAll("_", " ")} `
+        + `(${Math.round(100 * m.linear_share)} %)`).join(", "), " would change the log alike: the share of the file's residual above the noise it would remove, ",
+      "to first order. Where the data sheet is known to be right, rule that out before correcting the file.") : null,
     items.length && !d.identify_first ? h("p", { class: "muted" }, "Applying this diagnosis stores these values as a ",
       "new vehicle version; the Identify page fits them on several logs, with a withheld drive.") : null);
 }
