@@ -7,13 +7,17 @@
     baseline fit (nuisance only)            calibration events
     no significant gap: stop                held-out events
     identification of the base parameters   calibration events (app.identify)
-    held-out test of the identified base    held-out events: no gap left -> ``base_parameters``;
+    held-out test of the identified base    held-out events: no gap left -> ``base_parameters`` (with
+                                            the effects a linearised screen on the file's vehicle says
+                                            would change the log alike, ``mimicked_by``);
                                             a base parameter at its prior bound -> ``base_parameters``
                                             ("identify the vehicle first"); otherwise the identified
                                             vehicle is the base every candidate is fitted on
     each candidate: joint fit               calibration events
     scores, localisation                    held-out events (fitted values frozen)
     greedy pairs: best single + partners    fit on calibration, scored on held-out
+    the best two, and the best by a screen  calibration events (each effect refitted with the base
+    on the file's vehicle: joint refits     parameters, from the identified and the file's values)
     decision                                held-out scores only
 """
 
@@ -554,9 +558,9 @@ def _diagnose(
         # a trade-off inside the joint fit says the file's error *could* take part of the effect; it cannot stand in
         # for it when the identified base alone leaves much of the held-out gap unexplained (BASE_SHARE_APART), or
         # needed a prior bound to explain what it does, and held-out events prefer the effect to it (rule 4's
-        # test). Where the base
-        # explains most of the gap, an effect is not told apart from it, even one that removes most of what the
-        # base leaves: a mount did that with a 1 kHz drive's model form, after a base that explained 84 % of the gap
+        # test). Where the base explains most of the gap, an effect is not told apart from it, even one that
+        # removes most of what the base leaves: a mount did that with a 1 kHz drive's model form, after a base that
+        # explained 84 % of the gap
         apart = None
         if mixed and ident_score is not None and decision.best is not None \
                 and (bound_stop is not None or ident_score.explained.value < BASE_SHARE_APART):
