@@ -122,7 +122,7 @@ def mimicked_by(decision: Decision, screen: Sequence[PartnerScreen], baseline: F
 
 
 def joint_with_base(nominal: Vehicle, ident: Identification, events: Sequence[DiagEvent], split: Split, cid: str,
-                    single: FitResult | None, bounds: Bounds, model: str,
+                    single: FitResult, bounds: Bounds, model: str,
                     from_file: tuple[FitResult, Sequence[dict[str, float]]] | None = None) -> FitResult | None:
     """Effect ``cid`` and the identified base parameters fitted together on the file's vehicle, from their values.
 
@@ -132,14 +132,12 @@ def joint_with_base(nominal: Vehicle, ident: Identification, events: Sequence[Di
     refines from whichever start point fits the calibration events best.
     """
     names = [k for k in ident.ratios if not (k == "lash" and cid == "backlash")]
-    if not names or ((single is None or cid not in single.values) and not (from_file and from_file[1])):
+    if not names or cid not in single.values:
         return None
     effects = (*(BASE_EFFECTS[k] for k in names), get_effect(cid))
-    starts: list[FitResult] = []
-    if single is not None and cid in single.values:
-        values = {BASE_EFFECTS[k].id: dict(ident.fit.values[BASE_EFFECTS[k].id]) for k in names}
-        values[cid] = dict(single.values[cid])
-        starts.append(FitResult((), single.nuisance, values, 0.0, 0, 0))
+    values = {BASE_EFFECTS[k].id: dict(ident.fit.values[BASE_EFFECTS[k].id]) for k in names}
+    values[cid] = dict(single.values[cid])
+    starts = [FitResult((), single.nuisance, values, 0.0, 0, 0)]
     if from_file is not None:
         file_fit, effect_starts = from_file
         at_file = {BASE_EFFECTS[k].id: BASE_EFFECTS[k].off_values() for k in names}
