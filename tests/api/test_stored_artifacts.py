@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from app.storage.results import write_result
-from tests.api.inprocess import TestClient, in_process
+from tests.api.inprocess import TestClient, in_process, stored_analysis
 
 REPORT = {"schema": "lashscope.diagnosis/1", "vehicle": "ev", "model": "multibody",
           "split": {"seed": 0, "calibration": [0, 2], "heldout": [1, 3]}, "noise_floor": {"sigma_rpm": 0.4},
@@ -32,17 +32,11 @@ def _done_job(store: Any, kind: str, subject: str) -> str:
 
 
 def _setup(client: TestClient) -> tuple[Any, str, str]:
-    store = client.app.state.store  # type: ignore[attr-defined]
-    assert client.post("/vehicles", data={"name": "ev", "preset": "paper"}).status_code == 201
-    log = store.temp_path(".log")
-    log.write_bytes(b"(0.000000) can0 123#00\n")
-    rec, _ = store.add_log(log, sha256="1" * 64, filename="drive.log", fmt="candump", frames=1, duration_s=0.0,
-                           start_time=None, issues=[], meta={})
-    analysis = store.create_analysis(rec.id, store.get_vehicle("ev"), {})
+    store, analysis = stored_analysis(client, "1" * 64, "drive.log")
     store.start_job(analysis.job.id)
     store.finish_job(analysis.job.id)
     write_result(analysis.result_dir, {"summary": {}, "events": []}, {})
-    return store, analysis.id, rec.id
+    return store, analysis.id, analysis.log_id
 
 
 def test_a_diagnosis_and_tolerance_band_stored_as_plain_files_answer_as_before(tmp_path: Path) -> None:

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from app.jobkinds import DIAGNOSIS_SEP
-from tests.api.inprocess import TestClient, in_process
+from tests.api.inprocess import TestClient, in_process, stored_analysis
 from tests.conftest import REPO
 
 REPORT_DOC = {"decision": {"status": "explained", "top": ["torque_lag"]},
@@ -28,13 +28,7 @@ def leftovers(data: Path) -> list[str]:
 
 def finished_diagnosis(client: TestClient) -> str:
     """A diagnosis of an analysis of vehicle ``ev`` whose job is done and whose report chose torque_lag."""
-    store = client.app.state.store  # type: ignore[attr-defined]
-    assert client.post("/vehicles", data={"name": "ev", "preset": "paper"}).status_code == 201
-    log = store.temp_path(".log")
-    log.write_bytes(b"(0.000000) can0 123#00\n")
-    rec, _ = store.add_log(log, sha256="0" * 64, filename="x.log", fmt="candump", frames=1, duration_s=0.0,
-                           start_time=None, issues=[], meta={})
-    analysis = store.create_analysis(rec.id, store.get_vehicle("ev"), {})
+    store, analysis = stored_analysis(client, "0" * 64, "x.log")
     diagnosis_id = f"{analysis.id}{DIAGNOSIS_SEP}0001"
     job = store.create_job("diagnosis", f"{analysis.id}/diagnoses/{diagnosis_id}")
     store.start_job(job.id)
