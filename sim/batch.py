@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -53,8 +53,8 @@ def simulate_batch(
     derivative of).
 
     Variants may change any numeric field but not the topology (half-shaft segments, housing
-    on/off). Each variant gets its own stable step. Effects other than rotor drag and torque
-    lag are not applied (the batch returns resolver speed only).
+    on/off). Each variant gets its own stable step. The vehicle's torque gain applies to all. Effects
+    other than rotor drag and torque lag are not applied (the batch returns resolver speed only).
 
     Raises
     ------
@@ -64,6 +64,11 @@ def simulate_batch(
     inp = prepare_input(t_s, torque_nm, interp)
     if not variants:
         raise ParameterError("variants", list(variants), "need at least one variant")
+    if any("motor.torque_gain" in v for v in variants):
+        raise ParameterError("variants", [dict(v) for v in variants], "the torque gain is the vehicle's, one for all "
+                             "variants: scale the torque instead")
+    if vehicle.motor.torque_gain != 1.0:  # the logged torque as the air-gap torque (as sim.simulate)
+        inp = replace(inp, torque=inp.torque * vehicle.motor.torque_gain)
     chains = []
     for k, change in enumerate(variants):
         try:

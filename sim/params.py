@@ -51,6 +51,9 @@ class Motor:
     viscous_damping: float = _f("N m s/rad", NONNEG, 0.0, DAMPING)
     max_power_kw: float = _f("kW", POS, 160.0, (0.1, 5000.0))
     coulomb_drag: float = _f("N m", NONNEG, 0.0, (0.0, 1e4))  # bearing/seal friction, tanh-smoothed at 1 rad/s
+    # air-gap torque per N m of the logged torque: an inverter's torque estimate is often off by tens of percent;
+    # the simulator multiplies the logged torque by it (an identified vehicle carries the fitted value)
+    torque_gain: float = _f("-", POS, 1.0, (0.05, 20.0))
 
 
 @dataclass(frozen=True, kw_only=True)

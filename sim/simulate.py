@@ -167,6 +167,8 @@ def simulate(
     if what_if is not None:
         t_new, q_new, resampled = what_if.apply_torque(inp.t, inp.torque)
         inp = TorqueInput(t_new, q_new, inp.linear or resampled, inp.gaps)
+    if vehicle.motor.torque_gain != 1.0:  # the logged torque as the air-gap torque
+        inp = replace(inp, torque=inp.torque * vehicle.motor.torque_gain)
     w0 = initial_speed(vehicle, speed0_rpm)
     if chain is None:
         return _simulate_two_inertia(vehicle, inp, w0, dt, output_dt)

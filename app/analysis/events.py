@@ -68,7 +68,7 @@ class EventParams:
     min_pedal_step_pct: float = 2.0
     min_vehicle_speed_kmh: float = 3.0
     min_motor_speed_rpm: float = 100.0  # used when the log has no vehicle speed
-    brake_threshold: float = 0.5  # any brake_* channel above this inside the window = braking
+    brake_threshold: float = 0.5  # a brake* channel this far above its resting level inside the window = braking
     max_sample_gap_s: float = 0.1  # larger gaps in torque/speed inside a window = missing data
 
     def __post_init__(self) -> None:
@@ -144,15 +144,38 @@ def _gap_problem(sig: Signal, t0: float, t1: float, max_gap: float) -> str | Non
     return None
 
 
+BRAKE_REST_PERCENTILE = 5.0  # a brake pressure's or travel's resting level: this percentile over the log
+BRAKE_RANGE_SHARE = 0.05  # ... and it counts as applied this share of its range (99th percentile) above it
+
+
+def brake_levels(signal: Signal, threshold: float) -> tuple[float, float]:
+    """A brake channel's resting level and the value above which it says the brakes act.
+
+    A switch (``brake_pressed``, 0/1) is applied above ``threshold``. A pressure or pedal travel (``brake``, in
+    the DBC's unit) rests where the sensor's offset puts it -- 10 psi on a formula-student car's line pressure,
+    not 0 -- so it is applied when it stands more than ``threshold``, or :data:`BRAKE_RANGE_SHARE` of the
+    channel's range over the log, above its resting level (:data:`BRAKE_REST_PERCENTILE`). A foot resting on the
+    pedal at a few percent of the braking pressure does not count; a log braked throughout has its resting level
+    at the pressure of a stop and still counts each firm application.
+    """
+    v = signal.values[np.isfinite(signal.values)]
+    if signal.name != "brake" or v.size == 0:
+        return 0.0, threshold
+    rest, top = (float(x) for x in np.percentile(v, [BRAKE_REST_PERCENTILE, 99.0]))
+    return rest, rest + max(threshold, BRAKE_RANGE_SHARE * (top - rest))
+
+
 def _brake_problem(signals: SignalSet, t0: float, t1: float, threshold: float) -> str | None:
     for name in sorted(signals):
         if not name.startswith("brake"):
             continue
+        rest, level = brake_levels(signals[name], threshold)
         w = signals[name].window(t0, t1)
         vals = np.concatenate([w.values, signals[name].at([t0])])
         vals = vals[np.isfinite(vals)]
-        if vals.size and float(vals.max()) > threshold:
-            return f"braking: {name} = {float(vals.max()):g} > {threshold:g} inside the window"
+        if vals.size and float(vals.max()) > level:
+            return (f"braking: {name} = {float(vals.max()):.4g} > {level:.3g} inside the window"
+                    + (f" (resting level {rest:.3g})" if rest else ""))
     return None
 
 

@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from app.analysis.events import SPEED, TORQUE, EventParams
+from app.analysis.events import SPEED, TORQUE, EventParams, brake_levels
 from app.analysis.sampling import timer_times
 from app.analysis.series import FloatArray, finite_signal, moving_mean, quantisation_step
 from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
@@ -136,8 +136,8 @@ def _rank(x: FloatArray) -> FloatArray:
 def sign_correlation(torque: Signal, speed: Signal, window_s: float, brakes: Sequence[Signal] = (),
                      brake_threshold: float = EventParams.brake_threshold) -> float:
     """Rank correlation of the torque with the motor acceleration, both averaged over ``window_s``, without
-    the samples whose window sees one of ``brakes`` above ``brake_threshold`` (NaN when fewer than 20
-    samples are left or either is constant)."""
+    the samples whose window sees one of ``brakes`` applied (:func:`~app.analysis.events.brake_levels`); NaN
+    when fewer than 20 samples are left or either is constant."""
     t = speed.t[(speed.t >= torque.t[0]) & (speed.t <= torque.t[-1])] if len(torque) else speed.t[:0]
     if t.size < 20:
         return float("nan")
@@ -146,7 +146,7 @@ def sign_correlation(torque: Signal, speed: Signal, window_s: float, brakes: Seq
     tq = moving_mean(t, torque.at(t), window_s)
     ok = np.isfinite(accel) & np.isfinite(tq)
     for brake in brakes:
-        pressed = np.nan_to_num(brake.at(t), nan=0.0) > brake_threshold
+        pressed = np.nan_to_num(brake.at(t), nan=0.0) > brake_levels(brake, brake_threshold)[1]
         ok &= moving_mean(t, pressed.astype(np.float64), window_s) == 0.0
     if ok.sum() < 20 or np.ptp(accel[ok]) == 0 or np.ptp(tq[ok]) == 0:
         return float("nan")

@@ -69,6 +69,10 @@ def summary(doc: dict[str, Any], out: Path | None) -> str:
     named = doc["named"]
     lines.append("off the file: " + (", ".join(named) if named else "nothing (every interval holds the file's value "
                                      "or the change is too small to matter)"))
+    gain = doc["params"].get("torque_gain") or {}
+    if doc.get("torque_gain_written") is not None:
+        lines.append(f"the logged torque reads {1.0 / gain['ratio']:.3g}x the air-gap torque: the new version carries "
+                     f"torque_gain = {gain['value']:.4g} (file {gain['nominal']:.4g})")
     if out is not None:
         lines.append(f"identified vehicle written to {out}")
     lines.append(f"{doc['elapsed_s']:.1f} s CPU")

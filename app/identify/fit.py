@@ -163,10 +163,23 @@ class Identification:
     def named(self) -> list[str]:
         return [k for k, p in self.params.items() if p.named]
 
+    @property
+    def written_vehicle(self) -> Vehicle:
+        """The identified vehicle as its new version carries it: :attr:`vehicle`, with the fitted torque gain as the
+        motor's ``torque_gain`` where it is identified off the file's (its interval excludes the file's gain by
+        more than :data:`GAIN_PRACTICAL`). The diagnosis keeps the gain as its nuisance instead, so it fits on
+        :attr:`vehicle`."""
+        g = self.params.get("torque_gain")
+        if g is None or not gain_moved(g):
+            return self.vehicle
+        return self.vehicle.with_changes({"motor.torque_gain": float(g.value)})
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "params": {k: p.to_dict() for k, p in self.params.items()},
             "named": self.named,
+            "torque_gain_written": self.written_vehicle.motor.torque_gain if self.written_vehicle is not self.vehicle
+            else None,
             "not_identified": self.not_identified,
             "nuisance": {k: round(v, 6) for k, v in self.nuisance.items()},
             "ratios": {k: round(v, 6) for k, v in self.ratios.items()},
@@ -519,15 +532,30 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
                               float("nan"), float("nan"), False, False, False, why)
     nui = joint.nuisance
     gain_sd = float(np.sqrt(max(cov[0, 0], 0.0))) * (GAIN_BOUNDS[1] - GAIN_BOUNDS[0]) if names else 0.0
-    params["torque_gain"] = Param("torque_gain", "torque gain (CAN torque to air-gap torque)", "-", nui.gain,
-                                  nui.gain - t * gain_sd, nui.gain + t * gain_sd, 1.0, nui.gain,
-                                  nui.gain - t * gain_sd, nui.gain + t * gain_sd, True,
-                                  "nuisance.gain" in joint.at_bound, False, "a nuisance parameter, fitted always")
+    g0 = vehicle.motor.torque_gain  # the fit's gain is relative to the file's
+    g_lo, g_hi = nui.gain - t * gain_sd, nui.gain + t * gain_sd
+    gain = Param("torque_gain", "torque gain (CAN torque to air-gap torque)", "-", g0 * nui.gain, g0 * g_lo,
+                 g0 * g_hi, g0, nui.gain, g_lo, g_hi, True, "nuisance.gain" in joint.at_bound, False,
+                 "a nuisance parameter, fitted always")
+    if gain_moved(gain):
+        gain = replace(gain, note="a nuisance parameter, fitted always; off the file's, so the new vehicle version "
+                       "carries it")
+    params["torque_gain"] = gain
     return Identification(
         vehicle=identified, params=params, nuisance=_nuisance_dict(nui), ratios=ratios, chi2_before=chi2_before,
         chi2_after=joint.chi2, n_samples=joint.n, n_events=n_events, fit=_with_pins(joint, pins),
         nominal_physical=ph_nom,
         physical=ph, not_identified=list(dropped))
+
+
+GAIN_PRACTICAL = 0.02  # a fitted torque gain this far (relative) from the file's, beyond its interval, is written
+
+
+def gain_moved(gain: Param) -> bool:
+    """Whether the fitted torque gain is off the file's: its interval excludes the file's value, it moved by more
+    than :data:`GAIN_PRACTICAL`, and it is not at its bound (a gain at its bound is not trusted)."""
+    return bool(not gain.at_bound and not (gain.ratio_lo <= 1.0 <= gain.ratio_hi)
+                and abs(gain.ratio - 1.0) > GAIN_PRACTICAL)
 
 
 def _with_pins(joint: FitResult, pins: Mapping[str, tuple[float, float]]) -> FitResult:

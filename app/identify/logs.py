@@ -95,7 +95,8 @@ class IdentifyResult:
 
     @property
     def vehicle(self) -> Vehicle:
-        return self.identification.vehicle
+        """The new vehicle version: the identified base parameters, and the torque gain where it moved."""
+        return self.identification.written_vehicle
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -221,7 +222,7 @@ def identify_logs(logs: Sequence[Path], vehicle: Vehicle, options: IdentifyOptio
         for path in validate:
             signals, _ = decode_log(path, dbc, smap)
             before.append({"log": Path(path).name, **tracking(signals, vehicle)})
-            after.append({"log": Path(path).name, **tracking(signals, ident.vehicle)})
+            after.append({"log": Path(path).name, **tracking(signals, ident.written_vehicle)})
         validation = {"before": before, "after": after,
                       "nrmse_before": _median([v["nrmse"] for v in before]),
                       "nrmse_after": _median([v["nrmse"] for v in after]),

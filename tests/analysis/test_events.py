@@ -53,6 +53,22 @@ def test_exclusions_say_why(kwargs: dict[str, object], index: int, reason: str) 
     assert events[index].to_dict()["included"] is False
 
 
+def test_a_brake_pressure_counts_from_its_resting_level() -> None:
+    """A line-pressure sensor reads 10 psi with the foot off (its offset) and 12 psi with the foot resting on the
+    pedal: neither is braking. A firm application (300 psi) inside the third event's window is. Measured from 0,
+    every event would read as braked."""
+    ss = drive()
+    t = ss["motor_torque_nm"].t
+    rng = np.random.default_rng(3)
+    psi = 10.0 + rng.normal(0.0, 0.3, t.size) + np.where((t > 3.0) & (t < 4.0), 2.0, 0.0)
+    psi = np.where(np.abs(t - 8.3) < 0.2, 300.0, psi)
+    ss.add(Signal.from_samples("brake", t, psi, "psi"))
+    events = detect_events(ss)
+    assert [e.included for e in events] == [True, True, False, True]
+    why = str(events[2].exclusion)
+    assert why.startswith("braking: brake = 300 > 2") and "(resting level 9.5" in why
+
+
 def test_next_reversal_too_close_cuts_the_window_and_excludes() -> None:
     events = detect_events(drive(duration=14.5), EventParams(post_s=2.9, min_post_s=2.8))
     assert all(not e.included and "window cut short" in str(e.exclusion) for e in events[:-1])

@@ -79,18 +79,22 @@ def test_an_inverted_torque_is_named_and_analysed_with_the_sign_corrected(channe
 
 
 def test_the_sign_is_not_judged_while_the_friction_brakes_act(channels: dict[str, Channel]) -> None:
-    """Braking decelerates the car whatever the torque: samples near a brake channel above the threshold do not
-    count. The inverted drive braked after 10 s reads its sign from the first 10 s; braked throughout, the sign
-    is not judged (no finding) rather than judged from the brakes."""
+    """Braking decelerates the car whatever the torque: samples near an applied brake do not count. The inverted
+    drive braked after 10 s (a line pressure resting at its 10 psi offset, then 200 psi) reads its sign from the
+    first 10 s; with the brake switch on throughout, the sign is not judged (no finding) rather than judged from
+    the brakes."""
     from app.analysis.logchecks import sign_correlation
 
     inverted = _signals(channels, {"motor_torque_nm": lambda t, v: -v})
     tq, sp = inverted["motor_torque_nm"], inverted["motor_speed_rpm"]
     first = sign_correlation(tq.window(0.0, 10.0), sp.window(0.0, 10.0), 0.2)
-    late = _signals(channels, {"motor_torque_nm": lambda t, v: -v, "brake": lambda t, v: np.where(t > 10.0, 20.0, 0.0)})
+    late = _signals(channels, {"motor_torque_nm": lambda t, v: -v,
+                               "brake": lambda t, v: np.where(t > 10.0, 200.0, 10.0)})
     checks = check_log(late, Limits.for_vehicle(PAPER))
     assert checks.sign_correlation == pytest.approx(first, abs=0.03) and first < -0.5
-    always = _signals(channels, {"motor_torque_nm": lambda t, v: -v, "brake": lambda t, v: np.full(t.size, 20.0)})
+    always = _signals(channels, {"motor_torque_nm": lambda t, v: -v})
+    t = always["motor_speed_rpm"].t
+    always.add(Signal.from_samples("brake_pressed", t, np.ones(t.size), interp=Interp.PREVIOUS))
     checks = check_log(always, Limits.for_vehicle(PAPER))
     assert np.isnan(checks.sign_correlation) and checks.findings == []
 
