@@ -17,7 +17,8 @@ passes zero next to the band exit (linear interpolation)::
 
 A candidate becomes an event when the torque step (median before vs after) is at least
 ``min_step_nm`` and the torque rate at the crossing is at least ``min_rate_nm_s``.
-Events are then *excluded* (kept in the list with a reason) for missing data, braking,
+Events are then *excluded* (kept in the list with a reason) for missing data, braking (a window
+whose brakes act only ``min_post_s`` or more after the reversal ends where they start instead),
 low speed, wheel slip, a pedal that does not corroborate the reversal, or a window cut
 short by the next reversal.
 """
@@ -165,18 +166,22 @@ def brake_levels(signal: Signal, threshold: float) -> tuple[float, float]:
     return rest, rest + max(threshold, BRAKE_RANGE_SHARE * (top - rest))
 
 
-def _brake_problem(signals: SignalSet, t0: float, t1: float, threshold: float) -> str | None:
+def _brake_onset(signals: SignalSet, t0: float, t1: float, threshold: float) -> tuple[float, str] | None:
+    """The first time in ``[t0, t1]`` a brake is applied (:func:`brake_levels`) and what says so (None: never)."""
+    first: tuple[float, str] | None = None
     for name in sorted(signals):
         if not name.startswith("brake"):
             continue
         rest, level = brake_levels(signals[name], threshold)
         w = signals[name].window(t0, t1)
-        vals = np.concatenate([w.values, signals[name].at([t0])])
-        vals = vals[np.isfinite(vals)]
-        if vals.size and float(vals.max()) > level:
-            return (f"braking: {name} = {float(vals.max()):.4g} > {level:.3g} inside the window"
-                    + (f" (resting level {rest:.3g})" if rest else ""))
-    return None
+        t = np.concatenate([[t0], w.t])
+        vals = np.concatenate([signals[name].at([t0]), w.values])
+        on = np.flatnonzero(np.isfinite(vals) & (vals > level))
+        if on.size and (first is None or t[on[0]] < first[0]):
+            peak = float(np.nanmax(vals))
+            first = (float(t[on[0]]), f"{name} = {peak:.4g} > {level:.3g}" + (f" (resting level {rest:.3g})"
+                                                                              if rest else ""))
+    return first
 
 
 @dataclass(frozen=True)
@@ -260,7 +265,12 @@ def find_events(signals: SignalSet, params: EventParams | None = None, drive: Dr
                 exclusion = exclusion or (
                     f"pedal does not corroborate the {kind.value}: {pb:.1f} % -> {pa:.1f} % "
                     f"(need a {p.min_pedal_step_pct:g} % step)")
-        exclusion = exclusion or _brake_problem(signals, t_start, t_end, p.brake_threshold)
+        onset = _brake_onset(signals, t_start, t_end, p.brake_threshold)
+        if onset is not None and onset[0] - c.t_cross >= p.min_post_s:
+            t_end = onset[0]  # braked after the reversal's response: the window ends where the brakes act
+        elif onset is not None:
+            exclusion = exclusion or (f"braking: {onset[1]} {onset[0] - c.t_cross:+.3f} s from the reversal, "
+                                      f"under min_post_s {p.min_post_s} s after it")
         ms = float(speed.at([c.t_cross])[0])
         vs = float(vspeed.at([c.t_cross])[0]) if vspeed is not None and len(vspeed) else None
         if vs is not None and np.isfinite(vs):

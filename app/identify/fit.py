@@ -37,7 +37,7 @@ from app.analysis.diagnosis.forward import DiagEvent, Nuisance, prediction, simu
 from app.analysis.diagnosis.localise import MIN_TRAVERSE_SAMPLES, phase_times
 from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.split import Split, stage_sizes, stratified_order
-from app.analysis.diagnosis.uncertainty import with_input_uncertainty
+from app.analysis.diagnosis.uncertainty import rigid_inertia, with_input_uncertainty
 from app.errors import InsufficientDataError, NotIdentifiableError
 from app.identify.base import (
     BASE_EFFECTS,
@@ -52,6 +52,7 @@ from app.identify.base import (
     with_base,
 )
 from app.identify.modal import EventWindow, ModalEstimate, estimate_modes
+from app.identify.rigid import RigidBody
 from sim import Vehicle
 from sim.errors import SimError
 
@@ -158,6 +159,7 @@ class Identification:
     elapsed_s: float = 0.0
     modal: ModalEstimate | None = None
     modal_error: str = ""
+    rigid: RigidBody | None = None
 
     @property
     def named(self) -> list[str]:
@@ -191,6 +193,7 @@ class Identification:
             "fit_log": self.fit_log,
             "modal": self.modal.to_dict() if self.modal is not None else None,
             "modal_error": self.modal_error or None,
+            "rigid_body": self.rigid.to_dict() if self.rigid is not None else None,
             "elapsed_s": round(self.elapsed_s, 3),
         }
 
@@ -273,7 +276,8 @@ def model_free_mode(events: Sequence[DiagEvent], level: float = 0.9) -> tuple[Mo
 
 def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Vehicle,
                     options: FitOptions | None = None, progress: Progress | None = None,
-                    split: Split | None = None, baseline: FitResult | None = None) -> Identification:
+                    split: Split | None = None, baseline: FitResult | None = None,
+                    rigid: RigidBody | None = None) -> Identification:
     """Identify the base parameters of ``vehicle`` on prepared event windows.
 
     Parameters
@@ -286,6 +290,8 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     split : fit only the calibration side of this split (the diagnosis); None: every event.
     baseline : the file's vehicle already calibrated on these events, whose variances already carry the
         input uncertainty (the diagnosis); None: both done here.
+    rigid : the rigid-body response of the whole drives (:mod:`app.identify.rigid`); where the event windows'
+        mass and torque gain put the rigid inertia far from it, the mass is set from it (:func:`rigid_pin`).
 
     Raises
     ------
@@ -350,6 +356,21 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     say(0.15, f"joint fit of {', '.join(names) or 'the nuisance'} with the nuisance")
     joint = _joint(fitted_on, evs, split, names, bounds, opts, base, starts)
     log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
+    notes: dict[str, str] = {}
+    by_rigid = rigid_pin(fitted_on, names, joint, rigid) if rigid is not None else None
+    if by_rigid is not None:
+        ratio, half, why_pin = by_rigid
+        log.append(why_pin)
+        notes["mass"] = why_pin
+        pins = {**pins, "mass": (ratio, half)}
+        fitted_on = with_base(vehicle, {k: r for k, (r, _) in pins.items()})
+        names = [n for n in names if n != "mass"]
+        bounds = replace(bounds, gain=(1.0 - RIGID_GAIN_FREE, 1.0 + RIGID_GAIN_FREE))
+        say(0.5, f"refit of {', '.join(names) or 'the nuisance'} with the mass from the whole drives")
+        at = {BASE_EFFECTS[n].id: joint.values[BASE_EFFECTS[n].id] for n in names}
+        joint = _joint(fitted_on, evs, split, names, bounds, opts,
+                       replace(base, nuisance=replace(base.nuisance, gain=1.0)), [at, *_starts(names, fitted_on, None)])
+        log.append(f"refit {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes")
     cov, t = _cov(joint, evs, opts.level) if names else (np.zeros((0, 0)), _t(opts.level, len(evs)))
     span_u = 2.0 * t * np.sqrt(np.clip(np.diag(cov)[N_NUISANCE:N_NUISANCE + len(names)], 0.0, None))
     dropped = [n for n, s in zip(names, span_u, strict=True) if not s < IDENT_SPAN] + unresolved
@@ -373,7 +394,8 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
         names = keep
     say(0.9, "intervals")
     result = assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), t, base.chi2, len(evs),
-                      pins, why, noise.period_s)
+                      pins, why, noise.period_s, notes, gain_held=by_rigid is not None)
+    result.rigid = rigid
     result.fit_log = log
     result.modal, result.modal_error = modal, modal_error
     result.elapsed_s = time.process_time() - clock
@@ -479,7 +501,8 @@ def refined(vehicle: Vehicle, names: Sequence[str], joint: FitResult, events: Se
 def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joint: FitResult, cov: FloatArray,
              t: float, chi2_before: float, n_events: int,
              pins: Mapping[str, tuple[float, float]] | None = None,
-             unresolved: Mapping[str, str] | None = None, period_s: float = 0.0) -> Identification:
+             unresolved: Mapping[str, str] | None = None, period_s: float = 0.0,
+             notes: Mapping[str, str] | None = None, gain_held: bool = False) -> Identification:
     """Physical figures, intervals and status of the base parameters ``names`` of a fit.
 
     ``joint``'s effects start with the base effects of ``names`` (one parameter each, in that order), after the
@@ -487,6 +510,8 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
     model-free mode (name -> (ratio, 90 % half-width of its log)), on top of which ``joint`` was fitted.
     ``unresolved``: parameters the log cannot show at all (name -> why), held at the file's values. ``period_s``:
     the speed channel's sampling period (the model-form floor widens below :data:`MODE_SAMPLES` per mode period).
+    ``notes``: a parameter's note in the report (where a pin came from). ``gain_held``: the torque gain was held at
+    the file's (the mass came from the rigid-body response, with which a gain would trade).
     """
     pins = dict(pins or {})
     unresolved = dict(unresolved or {})
@@ -522,7 +547,8 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
             lo, hi = v * np.exp(-half), v * np.exp(half)  # each figure scales with its parameter (damping: nearly)
             named = bool(not at_bound and not (r_lo <= 1.0 <= r_hi) and abs(r - 1.0) > PRACTICAL[q])
             params[q] = Param(q, LABELS[q], UNITS[q], v, float(lo), float(hi), ph_nom.value(q), r, float(r_lo),
-                              float(r_hi), True, at_bound, named, "at a prior bound: not trusted" if at_bound else "")
+                              float(r_hi), True, at_bound, named,
+                              "at a prior bound: not trusted" if at_bound else (notes or {}).get(q, ""))
         else:
             why = unresolved.get(q) or ("not identifiable from these events" if q in dropped else "not fitted")
             if q not in dropped and not _fittable(vehicle, q):
@@ -537,7 +563,11 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
     gain = Param("torque_gain", "torque gain (CAN torque to air-gap torque)", "-", g0 * nui.gain, g0 * g_lo,
                  g0 * g_hi, g0, nui.gain, g_lo, g_hi, True, "nuisance.gain" in joint.at_bound, False,
                  "a nuisance parameter, fitted always")
-    if gain_moved(gain):
+    if gain_held:
+        gain = replace(gain, lo=gain.value, hi=gain.value, ratio_lo=gain.ratio, ratio_hi=gain.ratio, identified=False,
+                       note="held at the file's: the mass came from the rigid-body response, which a gain would trade "
+                       "with")
+    elif gain_moved(gain):
         gain = replace(gain, note="a nuisance parameter, fitted always; off the file's, so the new vehicle version "
                        "carries it")
     params["torque_gain"] = gain
@@ -567,6 +597,46 @@ def _with_pins(joint: FitResult, pins: Mapping[str, tuple[float, float]]) -> Fit
     values = {eff.id: dict(v) for eff, v in settings}
     return replace(joint, effects=(*(e.id for e, _ in settings), *joint.effects), values={**values, **joint.values},
                    settings=(*settings, *joint.settings))
+
+
+RIGID_APART = 0.25  # the event windows' rigid inertia this far (relative) from the whole drives' is not trusted
+MAX_RIGID_SPAN = 0.25  # ... when the whole drives' 90 % interval is this narrow (relative half-width) or narrower
+RIGID_FORM = 0.08  # model-form floor of the whole drives' figure: on the independent generator's drives it read
+# 3-17 % (median 8 %) above lashscope's rigid inertia of the same car, within 2 % on lashscope's own
+RIGID_GAIN_FREE = 1e-3  # the torque gain's freedom (relative) once the mass comes from the rigid body
+
+
+def rigid_pin(vehicle: Vehicle, names: Sequence[str], joint: FitResult, rigid: RigidBody
+              ) -> tuple[float, float, str] | None:
+    """The mass scale the whole drives' rigid-body response gives, its 90 % half-width and why, where the event
+    windows' fit went astray (None otherwise).
+
+    The rigid inertia at the motor per logged N m rests on every driving second of the logs; the event windows see
+    it only through a few seconds each, where the lash and the shuffle dominate and the anchor and road-load
+    nuisances can take up a slope. So when the windows' mass and torque gain put it more than
+    :data:`RIGID_APART` from the whole drives' figure, and outside its interval, the mass is set from that figure
+    with the torque gain held at the file's (the drives cannot tell a heavier car from a torque reading high: the
+    report says so). ``vehicle`` is the one the joint fit ran on (the mode's stiffness and damping applied)."""
+    if "mass" not in names or rigid.inertia_kgm2 is None or rigid.ci is None:
+        return None
+    j, (lo, hi) = rigid.inertia_kgm2, rigid.ci
+    span = 0.5 * float(np.log(hi / lo))
+    mass_id = BASE_EFFECTS["mass"].id
+    r_fit = ratio_of("mass", joint.values[mass_id][BASE_EFFECTS["mass"].params[0].name])
+    gain = joint.nuisance.gain * vehicle.motor.torque_gain
+    j_fit = rigid_inertia(with_base(vehicle, {"mass": r_fit})) / gain
+    if span > np.log1p(MAX_RIGID_SPAN) or lo <= j_fit <= hi or abs(np.log(j_fit / j)) <= np.log1p(RIGID_APART):
+        return None
+    j1, j2 = rigid_inertia(vehicle), rigid_inertia(with_base(vehicle, {"mass": 2.0}))
+    ratio = 1.0 + (j * vehicle.motor.torque_gain - j1) / (j2 - j1)  # the rigid inertia is linear in the mass
+    spec = BASE_EFFECTS["mass"].params[0]
+    if not spec.lo <= ratio <= spec.hi:
+        return None
+    why = (f"mass from the rigid-body response of the whole drives ({rigid.driving_s:.0f} s of driving): "
+           f"{j:.4g} kg m^2 at the motor per logged N m [{lo:.4g}, {hi:.4g}]; the event windows' mass {r_fit:.2f}x "
+           f"with torque gain {gain:.3f} put it at {j_fit:.4g}. Mass {ratio:.2f}x with the file's torque gain "
+           f"(or the file's mass with a torque reading {ratio:.2f}x high: the logs cannot tell these apart)")
+    return float(ratio), float(np.hypot(span, np.log1p(RIGID_FORM))), why
 
 
 def mode_pins(vehicle: Vehicle, names: Sequence[str], modal: ModalEstimate | None, period_s: float
@@ -633,7 +703,7 @@ def _moved(a: Identification, b: Identification) -> list[str]:
 
 def identify_staged(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Vehicle,
                     options: FitOptions | None = None, progress: Progress | None = None,
-                    first: int = IDENT_STAGE_EVENTS) -> Identification:
+                    first: int = IDENT_STAGE_EVENTS, rigid: RigidBody | None = None) -> Identification:
     """:func:`identify_events` whose cost does not grow with the drive: the sequential design of the diagnosis.
 
     The events are taken in the stratified order of :func:`app.analysis.diagnosis.split.stratified_order`; stage
@@ -645,7 +715,7 @@ def identify_staged(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     order = stratified_order(events)
     sizes = stage_sizes(len(order), first)
     if len(sizes) == 1:
-        return identify_events(events, noise, vehicle, options, progress)
+        return identify_events(events, noise, vehicle, options, progress, rigid=rigid)
     clock = time.process_time()
     done, planned = 0.0, float(sizes[0] + sizes[1])
     history: list[str] = []
@@ -658,7 +728,7 @@ def identify_staged(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
         def staged(f: float, m: str, k: int = k, n: int = n, done: float = done, planned: float = planned) -> None:
             say(min((done + f * n) / planned, 0.99), f"stage {k + 1} ({n} events): {m}")
 
-        prev, cur = cur, identify_events(sub, noise, vehicle, options, staged)
+        prev, cur = cur, identify_events(sub, noise, vehicle, options, staged, rigid=rigid)
         done += n
         moved = _moved(prev, cur) if prev is not None else list(BASE_NAMES)
         history.append(f"{n}: " + (", ".join(cur.named) or "nothing off the file")

@@ -33,6 +33,7 @@ from app.errors import InsufficientDataError
 from app.identify.base import BASE_NAMES
 from app.identify.fit import MIN_EVENTS, FitOptions, Identification, Param, identify_staged
 from app.identify.modal import ModalEstimate
+from app.identify.rigid import rigid_body
 from app.pipeline import AnalysisOptions, analyze_signals, decode_log
 from app.settings import get_settings
 from app.signals import SignalSet
@@ -214,7 +215,9 @@ def identify_logs(logs: Sequence[Path], vehicle: Vehicle, options: IdentifyOptio
         raise InsufficientDataError(
             f"identification needs at least {MIN_EVENTS} tip-in/tip-out events with usable windows; the logs give "
             + ", ".join(f"{f['name']}: {f['events']}" for f in facts))
-    ident = identify_staged(events, noise, vehicle, opts.fit_options(), lambda f, m: say(0.1 + 0.72 * f, m))
+    rigid = rigid_body([sig for _, sig in decoded], vehicle, opts.seed, opts.events.brake_threshold)
+    ident = identify_staged(events, noise, vehicle, opts.fit_options(), lambda f, m: say(0.1 + 0.72 * f, m),
+                            rigid=rigid)
     validation: dict[str, Any] = {}
     if validate:
         say(0.85, "validation on the withheld drive(s)")

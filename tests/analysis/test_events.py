@@ -69,6 +69,22 @@ def test_a_brake_pressure_counts_from_its_resting_level() -> None:
     assert why.startswith("braking: brake = 300 > 2") and "(resting level 9.5" in why
 
 
+def test_brakes_applied_late_in_the_window_end_it_there() -> None:
+    """A driver who lifts off and brakes 0.9 s later: the tip-out's response is logged before the brakes act, so
+    the window ends at the brake application instead of the event being lost. Braking 0.3 s after the reversal
+    (under ``min_post_s``) still excludes it."""
+    t = drive()["motor_torque_nm"].t
+    for lag, kept in ((0.9, True), (0.3, False)):
+        ss = drive()
+        ss.add(Signal.from_samples("brake", t, np.where((t > 5.0 + lag) & (t < 7.5), 250.0, 10.0), "psi"))
+        ev = detect_events(ss)[1]
+        assert ev.kind is EventKind.TIP_OUT and ev.included is kept, ev.exclusion
+        if kept:
+            assert ev.t_end_s == pytest.approx(5.0 + lag, abs=0.02)
+        else:
+            assert str(ev.exclusion).startswith("braking: brake = 250 >") and "+0.3" in str(ev.exclusion)
+
+
 def test_next_reversal_too_close_cuts_the_window_and_excludes() -> None:
     events = detect_events(drive(duration=14.5), EventParams(post_s=2.9, min_post_s=2.8))
     assert all(not e.included and "window cut short" in str(e.exclusion) for e in events[:-1])

@@ -1,0 +1,180 @@
+"""The rigid-body response over whole drives: the inertia at the motor per logged N m (model-free).
+
+Below its first torsional mode the driveline turns as one body, ``J dw/dt = g T - c0 - c2 w^2`` at the motor
+(``g`` the air-gap torque per logged N m, ``c0`` rolling resistance and grade, ``c2`` the aerodynamic drag).
+Both sides averaged over the same :data:`SMOOTH_S` window keep that relation, and the shuffle that rides on the
+speed averages out. A least-squares fit of the motor acceleration on the logged torque, the speed squared and a
+constant, over every driving sample of the logs -- the brakes off (:func:`app.analysis.events.brake_levels`),
+above a crawl, outliers of a spinning or locking wheel trimmed -- gives ``J / g``: kilogram metres squared at the
+rotor per logged N m. It uses thousands of samples where the event windows use a few seconds each, and no
+simulator. The vehicle file's figure is its rigid inertia (:func:`app.analysis.diagnosis.uncertainty.rigid_inertia`)
+over its torque gain.
+
+A heavier car and a torque channel that reads high change it alike, so it pins down their combination, not
+either one: the report says so. The 90 % interval comes from a moving-block bootstrap over
+:data:`BLOCK_S` blocks of the driving samples (the residuals of neighbouring samples are correlated).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from app.analysis.diagnosis.uncertainty import rigid_inertia
+from app.analysis.events import SPEED, TORQUE, EventParams, brake_levels
+from app.analysis.series import FloatArray, finite_signal, moving_mean
+from app.signals import SignalSet
+from sim import Vehicle
+
+GRID_S = 0.02  # the samples are put on this grid
+PIECE_S = 2.0  # driving stretches are cut into pieces this long; each piece is fitted from its own first sample
+MIN_PIECE_S = 1.0  # shorter pieces are left out
+MIN_SPEED_RPM = 100.0  # a crawl is left out (rolling resistance switches sign at rest)
+BRAKE_MARGIN_S = 0.4  # samples this close to an applied brake are left out
+MAX_GAP_S = 0.1  # a stretch ends at a larger hole in the speed or the torque
+TRIM_SIGMA = 4.0  # pieces whose residual is beyond this many robust sigmas (wheel spin, a locking wheel) are trimmed
+N_BOOT = 200
+MIN_DRIVING_S = 10.0  # driving time needed for an estimate
+MIN_TORQUE_SPREAD_NM = 5.0  # the torque's standard deviation over those samples, at least
+MIN_R2 = 0.5  # a fit that explains less of the speed changes is no estimate
+
+
+@dataclass(frozen=True)
+class RigidBody:
+    """Inertia at the motor per logged N m, from whole drives (None figures: no estimate, ``reason`` says why)."""
+
+    inertia_kgm2: float | None
+    ci: tuple[float, float] | None
+    file_inertia_kgm2: float
+    driving_s: float
+    r2: float | None
+    reason: str = ""
+
+    @property
+    def ratio(self) -> float | None:
+        """The measured figure over the file's: a heavier car, or a torque that reads high, both raise it."""
+        return None if self.inertia_kgm2 is None else self.inertia_kgm2 / self.file_inertia_kgm2
+
+    @property
+    def off_the_file(self) -> bool:
+        """Whether the file's figure lies outside the 90 % interval."""
+        return bool(self.ci is not None and not self.ci[0] <= self.file_inertia_kgm2 <= self.ci[1])
+
+    def describe(self) -> str:
+        if self.inertia_kgm2 is None or self.ci is None or self.ratio is None:
+            return f"rigid body (model-free): no estimate ({self.reason})"
+        line = (f"rigid body (model-free, {self.driving_s:.0f} s of driving, R^2 {self.r2:.2f}): "
+                f"{self.inertia_kgm2:.4g} kg m^2 at the motor per logged N m [{self.ci[0]:.4g}, {self.ci[1]:.4g}], "
+                f"the file's {self.file_inertia_kgm2:.4g}: {self.ratio:.2f}x")
+        if self.off_the_file:
+            line += (f" -- a car {self.ratio:.2f}x as heavy, or a torque channel reading {self.ratio:.2f}x the air-gap "
+                     "torque: the logs cannot tell these apart")
+        return line
+
+    def to_dict(self) -> dict[str, Any]:
+        def r(x: float | None) -> float | None:
+            return None if x is None else round(float(x), 6)
+        return {"inertia_kgm2": r(self.inertia_kgm2), "ci": None if self.ci is None else [r(x) for x in self.ci],
+                "file_inertia_kgm2": r(self.file_inertia_kgm2), "ratio": r(self.ratio),
+                "off_the_file": self.off_the_file, "driving_s": round(self.driving_s, 3), "r2": r(self.r2),
+                "reason": self.reason or None}
+
+
+@dataclass(frozen=True)
+class _Piece:
+    """One stretch of driving from its first sample: speed change (rad/s) and the regressors' changes."""
+
+    dw: FloatArray  # w(t) - w(t0)
+    x: FloatArray  # (n, 3): integral of the torque (N m s), elapsed time (s), integral of w^2 (rad^2/s)
+    torque: FloatArray
+
+
+def _pieces(signals: SignalSet, threshold: float) -> list[_Piece]:
+    """Driving stretches of one log -- brakes off, above a crawl, no hole in the data -- cut into pieces."""
+    speed, torque = finite_signal(signals[SPEED]), finite_signal(signals[TORQUE])
+    if len(speed) < 4 or len(torque) < 4:
+        return []
+    t0, t1 = max(speed.t[0], torque.t[0]), min(speed.t[-1], torque.t[-1])
+    if t1 - t0 < 2 * MIN_PIECE_S:
+        return []
+    t = np.arange(t0, t1, GRID_S)
+    w = speed.at(t) * (np.pi / 30.0)
+    q = torque.at(t)
+    ok = np.isfinite(w) & np.isfinite(q) & (np.abs(w) * 30.0 / np.pi > MIN_SPEED_RPM)
+    for sig in (speed, torque):
+        holes = np.flatnonzero(np.diff(sig.t) > MAX_GAP_S)
+        for k in holes:
+            ok &= ~((t > sig.t[k]) & (t < sig.t[k + 1]))
+    for name in sorted(signals):
+        if name.startswith("brake") and len(signals[name]):
+            level = brake_levels(signals[name], threshold)[1]
+            applied = (np.nan_to_num(signals[name].at(t), nan=0.0) > level).astype(np.float64)
+            ok &= moving_mean(t - BRAKE_MARGIN_S, applied, 2.0 * BRAKE_MARGIN_S) == 0.0
+    # integrals by the trapezoid rule on the grid
+    cq = np.concatenate(([0.0], np.cumsum(0.5 * (q[1:] + q[:-1]) * GRID_S)))
+    cw2 = np.concatenate(([0.0], np.cumsum(0.5 * (w[1:] ** 2 + w[:-1] ** 2) * GRID_S)))
+    out = []
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], ok.astype(np.int8), [0]))))
+    per = max(round(PIECE_S / GRID_S), 2)
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        for s in range(a, b, per):
+            e = min(s + per, b)
+            if (e - s) * GRID_S < MIN_PIECE_S:
+                continue
+            sl = slice(s + 1, e)
+            x = np.column_stack([cq[sl] - cq[s], t[sl] - t[s], cw2[sl] - cw2[s]])
+            out.append(_Piece(w[sl] - w[s], x, q[s:e]))
+    return out
+
+
+def _fit(pieces: Sequence[_Piece]) -> tuple[FloatArray, FloatArray]:
+    """Least squares of every piece's speed change on its regressors: (coefficients, per-piece RMS residual)."""
+    x = np.concatenate([p.x for p in pieces])
+    y = np.concatenate([p.dw for p in pieces])
+    coef = np.linalg.lstsq(x, y, rcond=None)[0]
+    rms = np.array([float(np.sqrt(np.mean((p.dw - p.x @ coef) ** 2))) for p in pieces])
+    return coef, rms
+
+
+def rigid_body(signal_sets: Sequence[SignalSet], vehicle: Vehicle, seed: int = 0,
+               brake_threshold: float = EventParams.brake_threshold) -> RigidBody:
+    """The rigid-body inertia at the motor per logged N m over ``signal_sets`` (one per log), with its interval.
+
+    Each piece of driving is fitted in integrated form, ``w(t) - w(t0) = (int T dt) / J - c0 (t - t0) / J -
+    c2 (int w^2 dt) / J``: the speed's own transients (the lash traverse, the twist, the shuffle) stay bounded
+    while the integrals grow, so they neither bias the slope as a lagging regressor would nor add up.
+    """
+    file_j = rigid_inertia(vehicle) / vehicle.motor.torque_gain
+    pieces = [p for s in signal_sets for p in _pieces(s, brake_threshold)]
+    driving_s = sum(p.dw.size + 1 for p in pieces) * GRID_S
+    if driving_s < MIN_DRIVING_S:
+        return RigidBody(None, None, file_j, driving_s, None,
+                         f"{driving_s:.1f} s of driving with the brakes off, under {MIN_DRIVING_S:g} s")
+    spread = float(np.std(np.concatenate([p.torque for p in pieces])))
+    if spread < MIN_TORQUE_SPREAD_NM:
+        return RigidBody(None, None, file_j, driving_s, None,
+                         f"the torque hardly varies (standard deviation {spread:.2g} N m)")
+    coef, rms = _fit(pieces)
+    med = float(np.median(rms))
+    mad = 1.4826 * float(np.median(np.abs(rms - med)))
+    pieces = [p for p, r in zip(pieces, rms, strict=True) if r <= med + TRIM_SIGMA * max(mad, 1e-12)]
+    coef, rms = _fit(pieces)
+    y = np.concatenate([p.dw for p in pieces])
+    r2 = 1.0 - float(np.sum(rms**2 * np.array([p.dw.size for p in pieces]))) / max(float(np.sum(y * y)), 1e-300)
+    if not coef[0] > 0.0 or r2 < MIN_R2:
+        return RigidBody(None, None, file_j, driving_s, r2,
+                         f"the motor speed does not follow the logged torque (R^2 {r2:.2f}, "
+                         f"slope {coef[0]:.3g} rad/s^2 per N m)")
+    rng = np.random.default_rng(seed)
+    boot = []
+    for _ in range(N_BOOT):
+        c, _ = _fit([pieces[k] for k in rng.integers(0, len(pieces), len(pieces))])
+        if c[0] > 0.0:
+            boot.append(1.0 / c[0])
+    if len(boot) < N_BOOT // 2:
+        return RigidBody(None, None, file_j, driving_s, r2, "the bootstrap resamples do not give a positive slope")
+    lo, hi = (float(x) for x in np.percentile(boot, [5.0, 95.0]))
+    return RigidBody(float(1.0 / coef[0]), (lo, hi), file_j, driving_s, r2)
