@@ -56,6 +56,8 @@ def summary(doc: dict[str, Any], out: Path | None) -> str:
                      f"[{m['zeta_ci'][0]:.3f}, {m['zeta_ci'][1]:.3f}]")
     else:
         lines.append(f"first mode (model-free): none ({doc.get('modal_error')})")
+    if doc.get("rigid_body"):
+        lines.append(doc["rigid_body"]["summary"])
     lines.append("")
     width = max(len(p["label"]) for p in doc["params"].values())
     for p in doc["params"].values():

@@ -602,7 +602,7 @@ def _with_pins(joint: FitResult, pins: Mapping[str, tuple[float, float]]) -> Fit
 RIGID_APART = 0.25  # the event windows' rigid inertia this far (relative) from the whole drives' is not trusted
 MAX_RIGID_SPAN = 0.25  # ... when the whole drives' 90 % interval is this narrow (relative half-width) or narrower
 RIGID_FORM = 0.08  # model-form floor of the whole drives' figure: on the independent generator's drives it read
-# 3-17 % (median 8 %) above lashscope's rigid inertia of the same car, within 2 % on lashscope's own
+# -5 to +12 % (median +3 %) off lashscope's rigid inertia of the same car, within 2 % on lashscope's own
 RIGID_GAIN_FREE = 1e-3  # the torque gain's freedom (relative) once the mass comes from the rigid body
 
 

@@ -2,17 +2,23 @@
 
 Below its first torsional mode the driveline turns as one body, ``J dw/dt = g T - c0 - c2 w^2`` at the motor
 (``g`` the air-gap torque per logged N m, ``c0`` rolling resistance and grade, ``c2`` the aerodynamic drag).
-Both sides averaged over the same :data:`SMOOTH_S` window keep that relation, and the shuffle that rides on the
-speed averages out. A least-squares fit of the motor acceleration on the logged torque, the speed squared and a
-constant, over every driving sample of the logs -- the brakes off (:func:`app.analysis.events.brake_levels`),
-above a crawl, outliers of a spinning or locking wheel trimmed -- gives ``J / g``: kilogram metres squared at the
-rotor per logged N m. It uses thousands of samples where the event windows use a few seconds each, and no
-simulator. The vehicle file's figure is its rigid inertia (:func:`app.analysis.diagnosis.uncertainty.rigid_inertia`)
+Over every driving second of the logs -- the brakes off (:func:`app.analysis.events.brake_levels`), above a crawl,
+no hole in the data -- the speed change from a *settled* sample (no torque reversal for :data:`SETTLE_S`, no
+torque step building a twist) is fitted in integrated form::
+
+    w(t) - w(t0) = (int T dt) / J' - c0' (t - t0) - c2' (int w^2 dt)
+
+over pieces of up to :data:`PIECE_S`. The lash traverse, the twist and the shuffle keep the motor speed within a
+bounded distance of the rigid body's while the integrals grow, so they neither bias the slope as a lagging
+regressor does (a fit of the acceleration on the torque read 20-40 % heavy on the independent generator's
+drives) nor add up; starting each piece where they have died out removes the rest. The fit gives ``J / g``:
+kilogram metres squared at the rotor per logged N m, from no simulator, over far more data than the event
+windows. The vehicle file's figure is its rigid inertia (:func:`app.analysis.diagnosis.uncertainty.rigid_inertia`)
 over its torque gain.
 
 A heavier car and a torque channel that reads high change it alike, so it pins down their combination, not
-either one: the report says so. The 90 % interval comes from a moving-block bootstrap over
-:data:`BLOCK_S` blocks of the driving samples (the residuals of neighbouring samples are correlated).
+either one: the report says so. The 90 % interval comes from a bootstrap over the pieces; pieces whose residual
+stands out (a spinning or locking wheel) are trimmed once.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from app.analysis.diagnosis.uncertainty import rigid_inertia
 from app.analysis.events import SPEED, TORQUE, EventParams, brake_levels
@@ -30,8 +37,12 @@ from app.signals import SignalSet
 from sim import Vehicle
 
 GRID_S = 0.02  # the samples are put on this grid
-PIECE_S = 2.0  # driving stretches are cut into pieces this long; each piece is fitted from its own first sample
-MIN_PIECE_S = 1.0  # shorter pieces are left out
+PIECE_S = 4.0  # driving stretches are cut into pieces up to this long, from one settled sample to another
+MIN_PIECE_S = 1.0  # ... and at least this long
+SETTLE_S = 0.6  # a settled sample: no torque reversal in this long (the lash traverse and its shuffle are over)
+REVERSAL_BAND_NM = 5.0  # ... a reversal leaves this band on the other side
+STEADY_S, STEADY_NM = 0.3, 20.0  # ... and the torque moved less than this over this long (no twist building up)
+END_S = 0.1  # a piece's end speeds are means over this long
 MIN_SPEED_RPM = 100.0  # a crawl is left out (rolling resistance switches sign at rest)
 BRAKE_MARGIN_S = 0.4  # samples this close to an applied brake are left out
 MAX_GAP_S = 0.1  # a stretch ends at a larger hole in the speed or the torque
@@ -70,8 +81,8 @@ class RigidBody:
                 f"{self.inertia_kgm2:.4g} kg m^2 at the motor per logged N m [{self.ci[0]:.4g}, {self.ci[1]:.4g}], "
                 f"the file's {self.file_inertia_kgm2:.4g}: {self.ratio:.2f}x")
         if self.off_the_file:
-            line += (f" -- a car {self.ratio:.2f}x as heavy, or a torque channel reading {self.ratio:.2f}x the air-gap "
-                     "torque: the logs cannot tell these apart")
+            line += (f" -- a heavier car (its inertia at the motor {self.ratio:.2f}x the file's), or a torque channel "
+                     f"reading {self.ratio:.2f}x the air-gap torque: the logs cannot tell these apart")
         return line
 
     def to_dict(self) -> dict[str, Any]:
@@ -80,20 +91,40 @@ class RigidBody:
         return {"inertia_kgm2": r(self.inertia_kgm2), "ci": None if self.ci is None else [r(x) for x in self.ci],
                 "file_inertia_kgm2": r(self.file_inertia_kgm2), "ratio": r(self.ratio),
                 "off_the_file": self.off_the_file, "driving_s": round(self.driving_s, 3), "r2": r(self.r2),
-                "reason": self.reason or None}
+                "reason": self.reason or None, "summary": self.describe()}
 
 
 @dataclass(frozen=True)
 class _Piece:
-    """One stretch of driving from its first sample: speed change (rad/s) and the regressors' changes."""
+    """One stretch of driving between two settled samples: its speed change (rad/s) and the regressors' changes."""
 
-    dw: FloatArray  # w(t) - w(t0)
+    dw: FloatArray  # w(t) - w(start)
     x: FloatArray  # (n, 3): integral of the torque (N m s), elapsed time (s), integral of w^2 (rad^2/s)
     torque: FloatArray
 
 
+def _settled(t: FloatArray, q: FloatArray) -> npt.NDArray[np.bool_]:
+    """Samples where the driveline turns as one body: no torque reversal in the last :data:`SETTLE_S` (the lash
+    traverse and the shuffle that follows have died out) and no step over :data:`STEADY_NM` in the last
+    :data:`STEADY_S` (no twist building up)."""
+    sign = np.where(q > REVERSAL_BAND_NM, 1, np.where(q < -REVERSAL_BAND_NM, -1, 0))
+    held = sign.copy()  # the last sign outside the band
+    for k in range(1, held.size):
+        if held[k] == 0:
+            held[k] = held[k - 1]
+    flips = np.concatenate(([False], (held[1:] != held[:-1]) & (held[:-1] != 0)))
+    last_flip = np.maximum.accumulate(np.where(flips, t, -np.inf))
+    quiet = t - last_flip >= SETTLE_S
+    n = max(round(STEADY_S / GRID_S), 1)
+    pad = np.concatenate((np.full(n, q[0]), q))
+    windows = np.lib.stride_tricks.sliding_window_view(pad, n + 1)
+    lo, hi = windows.min(axis=1), windows.max(axis=1)
+    return np.asarray(quiet & (hi - lo <= STEADY_NM), dtype=np.bool_)
+
+
 def _pieces(signals: SignalSet, threshold: float) -> list[_Piece]:
-    """Driving stretches of one log -- brakes off, above a crawl, no hole in the data -- cut into pieces."""
+    """Driving stretches of one log -- brakes off, above a crawl, no hole in the data -- cut into pieces whose ends
+    are settled samples."""
     speed, torque = finite_signal(signals[SPEED]), finite_signal(signals[TORQUE])
     if len(speed) < 4 or len(torque) < 4:
         return []
@@ -101,9 +132,9 @@ def _pieces(signals: SignalSet, threshold: float) -> list[_Piece]:
     if t1 - t0 < 2 * MIN_PIECE_S:
         return []
     t = np.arange(t0, t1, GRID_S)
-    w = speed.at(t) * (np.pi / 30.0)
+    w_raw = speed.at(t) * (np.pi / 30.0)
     q = torque.at(t)
-    ok = np.isfinite(w) & np.isfinite(q) & (np.abs(w) * 30.0 / np.pi > MIN_SPEED_RPM)
+    ok = np.isfinite(w_raw) & np.isfinite(q) & (np.abs(w_raw) * 30.0 / np.pi > MIN_SPEED_RPM)
     for sig in (speed, torque):
         holes = np.flatnonzero(np.diff(sig.t) > MAX_GAP_S)
         for k in holes:
@@ -113,43 +144,48 @@ def _pieces(signals: SignalSet, threshold: float) -> list[_Piece]:
             level = brake_levels(signals[name], threshold)[1]
             applied = (np.nan_to_num(signals[name].at(t), nan=0.0) > level).astype(np.float64)
             ok &= moving_mean(t - BRAKE_MARGIN_S, applied, 2.0 * BRAKE_MARGIN_S) == 0.0
+    w_raw = np.where(np.isfinite(w_raw), w_raw, 0.0)
+    q = np.where(np.isfinite(q), q, 0.0)
+    w = moving_mean(t - 0.5 * END_S, w_raw, END_S)  # an end's speed: the mean over END_S about it
+    ends = ok & _settled(t, q)
     # integrals by the trapezoid rule on the grid
     cq = np.concatenate(([0.0], np.cumsum(0.5 * (q[1:] + q[:-1]) * GRID_S)))
-    cw2 = np.concatenate(([0.0], np.cumsum(0.5 * (w[1:] ** 2 + w[:-1] ** 2) * GRID_S)))
+    cw2 = np.concatenate(([0.0], np.cumsum(0.5 * (w_raw[1:] ** 2 + w_raw[:-1] ** 2) * GRID_S)))
     out = []
     edges = np.flatnonzero(np.diff(np.concatenate(([0], ok.astype(np.int8), [0]))))
-    per = max(round(PIECE_S / GRID_S), 2)
+    lo_n, hi_n = round(MIN_PIECE_S / GRID_S), round(PIECE_S / GRID_S)
     for a, b in zip(edges[::2], edges[1::2], strict=True):
-        for s in range(a, b, per):
-            e = min(s + per, b)
-            if (e - s) * GRID_S < MIN_PIECE_S:
-                continue
-            sl = slice(s + 1, e)
-            x = np.column_stack([cq[sl] - cq[s], t[sl] - t[s], cw2[sl] - cw2[s]])
-            out.append(_Piece(w[sl] - w[s], x, q[s:e]))
+        cand = a + np.flatnonzero(ends[a:b])
+        k = 0
+        while k < cand.size:
+            s0 = int(cand[k])
+            e = min(s0 + hi_n, b - 1)
+            if e - s0 < lo_n:
+                break
+            sl = slice(s0 + 1, e + 1)
+            out.append(_Piece(w[sl] - w[s0], np.column_stack([cq[sl] - cq[s0], t[sl] - t[s0], cw2[sl] - cw2[s0]]),
+                              q[s0:e + 1]))
+            k = int(np.searchsorted(cand, e))
     return out
 
 
 def _fit(pieces: Sequence[_Piece]) -> tuple[FloatArray, FloatArray]:
-    """Least squares of every piece's speed change on its regressors: (coefficients, per-piece RMS residual)."""
+    """Least squares of every piece's speed changes on its regressors: (coefficients, per-piece RMS residual)."""
     x = np.concatenate([p.x for p in pieces])
     y = np.concatenate([p.dw for p in pieces])
     coef = np.linalg.lstsq(x, y, rcond=None)[0]
-    rms = np.array([float(np.sqrt(np.mean((p.dw - p.x @ coef) ** 2))) for p in pieces])
-    return coef, rms
+    return coef, np.array([float(np.sqrt(np.mean((p.dw - p.x @ coef) ** 2))) for p in pieces])
 
 
 def rigid_body(signal_sets: Sequence[SignalSet], vehicle: Vehicle, seed: int = 0,
                brake_threshold: float = EventParams.brake_threshold) -> RigidBody:
     """The rigid-body inertia at the motor per logged N m over ``signal_sets`` (one per log), with its interval.
 
-    Each piece of driving is fitted in integrated form, ``w(t) - w(t0) = (int T dt) / J - c0 (t - t0) / J -
-    c2 (int w^2 dt) / J``: the speed's own transients (the lash traverse, the twist, the shuffle) stay bounded
-    while the integrals grow, so they neither bias the slope as a lagging regressor would nor add up.
+    See the module's text for the method; figures are None with a ``reason`` when the drives do not give one.
     """
     file_j = rigid_inertia(vehicle) / vehicle.motor.torque_gain
     pieces = [p for s in signal_sets for p in _pieces(s, brake_threshold)]
-    driving_s = sum(p.dw.size + 1 for p in pieces) * GRID_S
+    driving_s = sum(float(p.x[-1, 1]) for p in pieces)
     if driving_s < MIN_DRIVING_S:
         return RigidBody(None, None, file_j, driving_s, None,
                          f"{driving_s:.1f} s of driving with the brakes off, under {MIN_DRIVING_S:g} s")
