@@ -156,16 +156,16 @@ def _pieces(signals: SignalSet, threshold: float) -> list[_Piece]:
     lo_n, hi_n = round(MIN_PIECE_S / GRID_S), round(PIECE_S / GRID_S)
     for a, b in zip(edges[::2], edges[1::2], strict=True):
         cand = a + np.flatnonzero(ends[a:b])
-        k = 0
-        while k < cand.size:
-            s0 = int(cand[k])
+        i = 0
+        while i < cand.size:
+            s0 = int(cand[i])
             e = min(s0 + hi_n, b - 1)
             if e - s0 < lo_n:
                 break
             sl = slice(s0 + 1, e + 1)
             out.append(_Piece(w[sl] - w[s0], np.column_stack([cq[sl] - cq[s0], t[sl] - t[s0], cw2[sl] - cw2[s0]]),
                               q[s0:e + 1]))
-            k = int(np.searchsorted(cand, e))
+            i = int(np.searchsorted(cand, e))
     return out
 
 
