@@ -374,10 +374,20 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     cov, t = _cov(joint, evs, opts.level) if names else (np.zeros((0, 0)), _t(opts.level, len(evs)))
     span_u = 2.0 * t * np.sqrt(np.clip(np.diag(cov)[N_NUISANCE:N_NUISANCE + len(names)], 0.0, None))
     dropped = [n for n, s in zip(names, span_u, strict=True) if not s < IDENT_SPAN] + unresolved
+    filled = rigid_fill(vehicle, rigid) if "mass" in dropped and by_rigid is None and rigid is not None else None
     if len(dropped) > len(unresolved):
         keep = [n for n in names if n not in dropped]
         log.append(f"not identified (90 % interval over {IDENT_SPAN:.0%} of the prior range): "
                    + ", ".join(f"{n} {s:.0%}" for n, s in zip(names, span_u, strict=True) if n in dropped))
+        if filled is not None:
+            by_rigid = filled
+            log.append(filled[2])
+            notes["mass"] = filled[2]
+            pins = {**pins, "mass": (filled[0], filled[1])}
+            fitted_on = with_base(vehicle, {k: r for k, (r, _) in pins.items()})
+            dropped.remove("mass")
+            bounds = replace(bounds, gain=(1.0 - RIGID_GAIN_FREE, 1.0 + RIGID_GAIN_FREE))
+            joint = replace(joint, nuisance=replace(joint.nuisance, gain=1.0))
         if keep:
             say(0.7, f"refit of {', '.join(keep)} with {', '.join(dropped)} at the file's values")
             at = {BASE_EFFECTS[n].id: joint.values[BASE_EFFECTS[n].id] for n in keep}
@@ -627,16 +637,40 @@ def rigid_pin(vehicle: Vehicle, names: Sequence[str], joint: FitResult, rigid: R
     j_fit = rigid_inertia(with_base(vehicle, {"mass": r_fit})) / gain
     if span > np.log1p(MAX_RIGID_SPAN) or lo <= j_fit <= hi or abs(np.log(j_fit / j)) <= np.log1p(RIGID_APART):
         return None
-    j1, j2 = rigid_inertia(vehicle), rigid_inertia(with_base(vehicle, {"mass": 2.0}))
-    ratio = 1.0 + (j * vehicle.motor.torque_gain - j1) / (j2 - j1)  # the rigid inertia is linear in the mass
-    spec = BASE_EFFECTS["mass"].params[0]
-    if not spec.lo <= ratio <= spec.hi:
+    ratio = _mass_for(vehicle, j)
+    if ratio is None:
         return None
     why = (f"mass from the rigid-body response of the whole drives ({rigid.driving_s:.0f} s of driving): "
            f"{j:.4g} kg m^2 at the motor per logged N m [{lo:.4g}, {hi:.4g}]; the event windows' mass {r_fit:.2f}x "
            f"with torque gain {gain:.3f} put it at {j_fit:.4g}. Mass {ratio:.2f}x with the file's torque gain "
            f"(or the file's mass with a torque reading {ratio:.2f}x high: the logs cannot tell these apart)")
     return float(ratio), float(np.hypot(span, np.log1p(RIGID_FORM))), why
+
+
+def rigid_fill(vehicle: Vehicle, rigid: RigidBody) -> tuple[float, float, str] | None:
+    """The mass scale from the whole drives' rigid body where the event windows cannot pin the mass (too few or
+    too similar events), the drives' figure is clear (its interval within :data:`MAX_RIGID_SPAN`) and off the file's;
+    None otherwise. Its 90 % half-width and why, as :func:`rigid_pin`."""
+    if rigid.inertia_kgm2 is None or rigid.ci is None or not rigid.off_the_file:
+        return None
+    j, (lo, hi) = rigid.inertia_kgm2, rigid.ci
+    span = 0.5 * float(np.log(hi / lo))
+    ratio = _mass_for(vehicle, j)
+    if span > np.log1p(MAX_RIGID_SPAN) or ratio is None:
+        return None
+    why = (f"mass from the rigid-body response of the whole drives ({rigid.driving_s:.0f} s of driving), which the "
+           f"event windows do not pin down: {j:.4g} kg m^2 at the motor per logged N m [{lo:.4g}, {hi:.4g}], the "
+           f"file's {rigid.file_inertia_kgm2:.4g}. Mass {ratio:.2f}x with the file's torque gain (or the file's mass "
+           f"with a torque reading {rigid.ratio or 1.0:.2f}x high: the logs cannot tell these apart)")
+    return ratio, float(np.hypot(span, np.log1p(RIGID_FORM))), why
+
+
+def _mass_for(vehicle: Vehicle, j: float) -> float | None:
+    """The mass scale that gives ``vehicle`` the rigid inertia ``j`` per logged N m (None: outside the prior)."""
+    j1, j2 = rigid_inertia(vehicle), rigid_inertia(with_base(vehicle, {"mass": 2.0}))
+    ratio = 1.0 + (j * vehicle.motor.torque_gain - j1) / (j2 - j1)  # the rigid inertia is linear in the mass
+    spec = BASE_EFFECTS["mass"].params[0]
+    return float(ratio) if spec.lo <= ratio <= spec.hi else None
 
 
 def mode_pins(vehicle: Vehicle, names: Sequence[str], modal: ModalEstimate | None, period_s: float

@@ -9,7 +9,7 @@ from app.analysis.diagnosis.calibrate import FitResult
 from app.analysis.diagnosis.forward import Nuisance
 from app.analysis.diagnosis.uncertainty import rigid_inertia
 from app.identify.base import BASE_EFFECTS, with_base
-from app.identify.fit import RIGID_FORM, rigid_pin
+from app.identify.fit import RIGID_FORM, rigid_fill, rigid_pin
 from app.identify.rigid import RigidBody, rigid_body
 from app.signals import Interp, Signal, SignalSet
 from sim import load_vehicle
@@ -101,3 +101,16 @@ def test_the_mass_is_set_from_the_rigid_body_only_where_the_windows_stray() -> N
     assert rigid_pin(v, ["stiffness"], _joint(1.66, 0.85), drives) is None  # the mass is not fitted
     wide = RigidBody(1.45 * j0, (1.0 * j0, 2.0 * j0), j0, 20.0, 0.6)
     assert rigid_pin(v, ["stiffness", "mass"], _joint(0.6, 1.1), wide) is None
+
+
+def test_a_mass_the_windows_cannot_pin_comes_from_a_clear_rigid_body_off_the_file() -> None:
+    """Too few events to pin the mass: a clear whole-drives figure off the file sets it; one that holds the file's
+    value, or a wide one, leaves the mass at the file's."""
+    v = load_vehicle("chain_drive")
+    j0 = rigid_inertia(v)
+    filled = rigid_fill(v, RigidBody(1.4 * j0, (1.3 * j0, 1.5 * j0), j0, 90.0, 0.9))
+    assert filled is not None and rigid_inertia(with_base(v, {"mass": filled[0]})) == pytest.approx(1.4 * j0)
+    assert "do not pin down" in filled[2]
+    assert rigid_fill(v, RigidBody(1.05 * j0, (0.95 * j0, 1.15 * j0), j0, 90.0, 0.9)) is None
+    assert rigid_fill(v, RigidBody(1.4 * j0, (0.9 * j0, 2.2 * j0), j0, 15.0, 0.6)) is None
+    assert rigid_fill(v, RigidBody(None, None, j0, 3.0, None, "too short")) is None

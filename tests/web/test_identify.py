@@ -110,6 +110,8 @@ def test_identify_page_finds_the_file_off_and_applies_it(page: Any, server: Serv
     assert page.query_selector("#identify-chart .file-line")
     # the model-free mode and the withheld drive, as the API says
     assert f"{res['modal']['freq_hz']:.2f} Hz" in (page.text_content("#identify-modal") or "")
+    rigid = page.text_content("#identify-rigid") or ""
+    assert f"{res['rigid_body']['inertia_kgm2']:.4g} kg m^2 at the motor per logged N m" in rigid
     val = res["validation"]
     text = page.text_content("#identify-validation") or ""
     assert f"{val['nrmse_before']:.3f} -> {val['nrmse_after']:.3f}" in text and val["verdict_after"] in text

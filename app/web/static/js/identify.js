@@ -221,6 +221,10 @@ function checks(r) {
     h("dd", { id: "identify-modal" }, m ? `${fmt(m.freq_hz, 2)} Hz ${ci(m.freq_ci)}, damping ratio ${fmt(m.zeta, 3)} `
       + `[${fmt(m.zeta_ci[0], 3)}, ${fmt(m.zeta_ci[1], 3)}] (${m.n_used} of ${m.n_windows} event windows)`
       : `not estimated${r.modal_error ? `: ${r.modal_error}` : ""}`),
+    h("dt", {}, "rigid body, model-free"),
+    h("dd", { id: "identify-rigid" }, r.rigid_body ? r.rigid_body.summary.replace(/^rigid body \(model-free\): /, "")
+      .replace(/^rigid body \(model-free, /, "(")
+      : "not estimated"),
     h("dt", {}, "residual / noise, fitted events"),
     h("dd", {}, `${fmt(r.residual_to_noise_before, 2)} with the file -> ${fmt(r.residual_to_noise_after, 2)} identified`),
     h("dt", {}, "withheld drive(s)"),
