@@ -359,13 +359,8 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     notes: dict[str, str] = {}
     by_rigid = rigid_pin(fitted_on, names, joint, rigid) if rigid is not None else None
     if by_rigid is not None:
-        ratio, half, why_pin = by_rigid
-        log.append(why_pin)
-        notes["mass"] = why_pin
-        pins = {**pins, "mass": (ratio, half)}
-        fitted_on = with_base(vehicle, {k: r for k, (r, _) in pins.items()})
+        pins, fitted_on, bounds = _rigid_mass(vehicle, pins, by_rigid, bounds, log, notes)
         names = [n for n in names if n != "mass"]
-        bounds = replace(bounds, gain=(1.0 - RIGID_GAIN_FREE, 1.0 + RIGID_GAIN_FREE))
         say(0.5, f"refit of {', '.join(names) or 'the nuisance'} with the mass from the whole drives")
         at = {BASE_EFFECTS[n].id: joint.values[BASE_EFFECTS[n].id] for n in names}
         joint = _joint(fitted_on, evs, split, names, bounds, opts,
@@ -381,12 +376,8 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
                    + ", ".join(f"{n} {s:.0%}" for n, s in zip(names, span_u, strict=True) if n in dropped))
         if filled is not None:
             by_rigid = filled
-            log.append(filled[2])
-            notes["mass"] = filled[2]
-            pins = {**pins, "mass": (filled[0], filled[1])}
-            fitted_on = with_base(vehicle, {k: r for k, (r, _) in pins.items()})
+            pins, fitted_on, bounds = _rigid_mass(vehicle, pins, filled, bounds, log, notes)
             dropped.remove("mass")
-            bounds = replace(bounds, gain=(1.0 - RIGID_GAIN_FREE, 1.0 + RIGID_GAIN_FREE))
             joint = replace(joint, nuisance=replace(joint.nuisance, gain=1.0))
         if keep:
             say(0.7, f"refit of {', '.join(keep)} with {', '.join(dropped)} at the file's values")
@@ -645,6 +636,18 @@ def rigid_pin(vehicle: Vehicle, names: Sequence[str], joint: FitResult, rigid: R
            f"with torque gain {gain:.3f} put it at {j_fit:.4g}. Mass {ratio:.2f}x with the file's torque gain "
            f"(or the file's mass with a torque reading {ratio:.2f}x high: the logs cannot tell these apart)")
     return float(ratio), float(np.hypot(span, np.log1p(RIGID_FORM))), why
+
+
+def _rigid_mass(vehicle: Vehicle, pins: Mapping[str, tuple[float, float]], found: tuple[float, float, str],
+                bounds: Bounds, log: list[str], notes: dict[str, str]
+                ) -> tuple[dict[str, tuple[float, float]], Vehicle, Bounds]:
+    """The mass pinned from the rigid body (``found``: scale, half-width, why): the pins, the vehicle the rest is
+    fitted on, and the bounds with the torque gain held at the file's (with which the mass would trade)."""
+    log.append(found[2])
+    notes["mass"] = found[2]
+    out = {**pins, "mass": (found[0], found[1])}
+    return (out, with_base(vehicle, {k: r for k, (r, _) in out.items()}),
+            replace(bounds, gain=(1.0 - RIGID_GAIN_FREE, 1.0 + RIGID_GAIN_FREE)))
 
 
 def rigid_fill(vehicle: Vehicle, rigid: RigidBody) -> tuple[float, float, str] | None:
