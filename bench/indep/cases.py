@@ -82,11 +82,12 @@ OUT_OF_LIBRARY: dict[str, Draw] = {
 LIBRARY = tuple(EFFECT_DRAWS)
 FAINT_SIGMA = (2.0, 10.0)
 SEED_BASE = {"dev": 10_000, "final": 50_000, "holdout": 90_000, "check": 130_000, "check2": 170_000,
-             "idev": 210_000, "ifinal": 250_000, "idev2": 290_000, "ifinal2": 330_000}
-IDENTIFY_SETS = ("idev", "ifinal", "idev2", "ifinal2")
+             "idev": 210_000, "ifinal": 250_000, "idev2": 290_000, "ifinal2": 330_000, "ifinal3": 370_000}
+IDENTIFY_SETS = ("idev", "ifinal", "idev2", "ifinal2", "ifinal3")
 # the chain car of each identification set: idev and ifinal kept the preset's ~16 Hz mode (above what a 20-33 Hz
 # logger resolves); idev2 and ifinal2 drive the low-mode car the formula-student logs show (chain_low.toml)
-CHAIN_CAR = {"idev": "chain_drive", "ifinal": "chain_drive", "idev2": "chain_low", "ifinal2": "chain_low"}
+CHAIN_CAR = {"idev": "chain_drive", "ifinal": "chain_drive", "idev2": "chain_low", "ifinal2": "chain_low",
+             "ifinal3": "chain_low"}
 
 
 def _off_by(rng: np.random.Generator, down: tuple[float, float], up: tuple[float, float]) -> float:
