@@ -1,12 +1,12 @@
 """The rigid-body response over whole drives: the inertia at the motor per logged N m (model-free).
 
-Below its first torsional mode the driveline turns as one body, ``J dw/dt = g T - c0 - c2 w^2`` at the motor
+Below its first torsional mode the driveline turns as one body, ``J dw/dt = g T - c0 - c2 w |w|`` at the motor
 (``g`` the air-gap torque per logged N m, ``c0`` rolling resistance and grade, ``c2`` the aerodynamic drag).
 Over every driving second of the logs -- the brakes off (:func:`app.analysis.events.brake_levels`), above a crawl,
 no hole in the data -- the speed change from a *settled* sample (no torque reversal for :data:`SETTLE_S`, no
 torque step building a twist) is fitted in integrated form::
 
-    w(t) - w(t0) = (int T dt) / J' - c0' (t - t0) - c2' (int w^2 dt)
+    w(t) - w(t0) = (int T dt) / J' - c0' (t - t0) - c2' (int w |w| dt)
 
 over pieces of up to :data:`PIECE_S`. The lash traverse, the twist and the shuffle keep the motor speed within a
 bounded distance of the rigid body's while the integrals grow, so they neither bias the slope as a lagging
@@ -99,7 +99,7 @@ class _Piece:
     """One stretch of driving between two settled samples: its speed change (rad/s) and the regressors' changes."""
 
     dw: FloatArray  # w(t) - w(start)
-    x: FloatArray  # (n, 3): integral of the torque (N m s), elapsed time (s), integral of w^2 (rad^2/s)
+    x: FloatArray  # (n, 3): integral of the torque (N m s), elapsed time (s), integral of w |w| (rad^2/s)
     torque: FloatArray
 
 
@@ -150,7 +150,8 @@ def _pieces(signals: SignalSet, threshold: float) -> list[_Piece]:
     ends = ok & _settled(t, q)
     # integrals by the trapezoid rule on the grid
     cq = np.concatenate(([0.0], np.cumsum(0.5 * (q[1:] + q[:-1]) * GRID_S)))
-    cw2 = np.concatenate(([0.0], np.cumsum(0.5 * (w_raw[1:] ** 2 + w_raw[:-1] ** 2) * GRID_S)))
+    drag = w_raw * np.abs(w_raw)  # air drag opposes the motion, reversing included
+    cw2 = np.concatenate(([0.0], np.cumsum(0.5 * (drag[1:] + drag[:-1]) * GRID_S)))
     out = []
     edges = np.flatnonzero(np.diff(np.concatenate(([0], ok.astype(np.int8), [0]))))
     lo_n, hi_n = round(MIN_PIECE_S / GRID_S), round(PIECE_S / GRID_S)
