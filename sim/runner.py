@@ -43,9 +43,11 @@ class RawRun:
 def run_from_state(
     chain: ChainModel, t_in: F64, q_in: F64, linear: bool, t0: float, step: float, sub: int, n_out: int,
     theta0: F64, omega0: F64, tyre0: float = 0.0, *, lag: tuple[float, float] = (0.0, 0.0),
-    sensor_tau: float = 0.0, speed_limit: float = math.inf,
+    sensor_tau: float = 0.0, speed_limit: float = math.inf, events: bool = True,
 ) -> RawRun:
     """Integrate ``chain`` from ``(theta0, omega0, tyre0)`` at ``t0`` with step ``step``, ``sub`` steps per row.
+
+    ``events=False`` leaves ``RawRun.events`` empty (the kernel still logs them; they are not converted).
 
     Raises
     ------
@@ -75,7 +77,7 @@ def run_from_state(
     return RawRun(
         resolver=out_res, sensor=out_sens, torque=out_torque, omega=out_omega, tau=out_tau[:, :nc],
         tyre=out_tau[:, nc].copy() if tyre_on else np.zeros(n_out), is_open=out_open,
-        events=[(int(ev_gap[k]), float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)],
+        events=[(int(ev_gap[k]), float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)] if events else [],
     )
 
 

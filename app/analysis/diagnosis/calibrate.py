@@ -12,6 +12,7 @@ any event that is not on its calibration side.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -45,6 +46,7 @@ OFFSET_MIN_S = 0.02  # ... or +-20 ms, whichever is wider: a logger's torque-to-
 _PENALTY = 1e3  # residual (noise units) returned for a parameter set the simulator rejects
 TRADE_OFF_CORR = 0.9  # |correlation| of two fitted effect parameters above which the data do not separate them
 PASSES_PER_PARAM = 12  # a refinement's simulator passes: this x (parameters + 1), finite-difference Jacobians included
+MEMO_POINTS = 8  # points whose residuals a fit keeps (the simulator is deterministic: same point, same residual)
 START_MARGIN = 0.005  # unit-box distance from a bound at which a refinement from a given start begins
 
 
@@ -142,6 +144,8 @@ class _Problem:
         self.last_offset = 0.0
         self.max_passes: int | None = None  # simulator passes before the refinement stops (see _Spent)
         self.best: tuple[float, FloatArray, float] | None = None  # (chi2, u, offset) of the best pass so far
+        # residual and offset of the last few points, by their bytes: a point met again is not simulated again
+        self._memo: OrderedDict[bytes, tuple[FloatArray, float]] = OrderedDict()
 
     def decode(self, u: FloatArray, offset: float = 0.0) -> tuple[Nuisance, tuple[EffectSetting, ...]]:
         x = self.lo + np.clip(u, 0.0, 1.0) * self.span
@@ -164,7 +168,12 @@ class _Problem:
     def residuals(self, u: FloatArray) -> FloatArray:
         if self.max_passes is not None and self.nfev >= self.max_passes:
             raise _Spent
-        self.nfev += 1
+        self.nfev += 1  # a repeated point counts too: the pass budget, and so the refinement, stay as they were
+        key = np.asarray(u, dtype=np.float64).tobytes()
+        hit = self._memo.get(key)
+        if hit is not None:  # the same point again (the solution after the refinement, a start screened twice)
+            self.last_offset = hit[1]
+            return self._scored(u, hit[0].copy())
         nui, settings = self.decode(u)
         try:
             veh = vehicle_with(self.base, nui, settings)
@@ -175,6 +184,12 @@ class _Problem:
         r = np.concatenate([weighted_residual(ev, prediction(ev, out, self.last_offset))
                             for ev, out in zip(self.events, outs, strict=True)])
         r = np.where(np.isfinite(r), r, _PENALTY)
+        self._memo[key] = (r.copy(), self.last_offset)
+        while len(self._memo) > MEMO_POINTS:
+            self._memo.popitem(last=False)
+        return self._scored(u, r)
+
+    def _scored(self, u: FloatArray, r: FloatArray) -> FloatArray:
         c2 = _chi2(r)
         if self.best is None or c2 < self.best[0]:
             self.best = (c2, np.array(u, dtype=np.float64), self.last_offset)
