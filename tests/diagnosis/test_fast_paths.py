@@ -62,6 +62,8 @@ def test_simulate_speed_is_simulate_s_speed_and_gaps(effects: dict[str, dict[str
     assert any(m.any() and not m.all() for m in full.gap_open.values())  # the gaps open and close in this drive
     for g, m in full.gap_open.items():
         assert np.array_equal(lean.gap_open[g], m)
+    speed_only = simulate_speed(v, t, q, speed0_rpm=1500.0, interp="linear", gaps=False)
+    assert np.array_equal(speed_only.motor_speed_rpm, full.motor_speed_rpm) and speed_only.gap_open == {}
 
 
 def test_lean_runs_give_every_event_the_same_output() -> None:
@@ -76,9 +78,11 @@ def test_lean_runs_give_every_event_the_same_output() -> None:
     finally:
         forward.LEAN_SIM = True
     assert len(lean) == len(full) == len(cal)
-    for a, b in zip(lean, full, strict=True):
+    speed_only = simulate_events(cal, veh, 1.02, settings, gaps=False)
+    for a, b, c in zip(lean, full, speed_only, strict=True):
         assert np.array_equal(a.t, b.t) and np.array_equal(a.speed, b.speed)
         assert a.gap_open is not None and b.gap_open is not None and np.array_equal(a.gap_open, b.gap_open)
+        assert np.array_equal(c.t, b.t) and np.array_equal(c.speed, b.speed) and c.gap_open is None
 
 
 def _problem(cal: list[DiagEvent], bounds: Bounds) -> _Problem:

@@ -177,7 +177,7 @@ class _Problem:
         nui, settings = self.decode(u)
         try:
             veh = vehicle_with(self.base, nui, settings)
-            outs = simulate_events(self.events, veh, nui.gain, settings, self.model)
+            outs = simulate_events(self.events, veh, nui.gain, settings, self.model, gaps=False)
         except SimError:
             return np.full(self.n_res, _PENALTY)
         self.last_offset = best_offset(self.events, outs, self.bounds.offset_s)

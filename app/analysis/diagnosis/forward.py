@@ -283,8 +283,11 @@ def clusters(events: Sequence[DiagEvent]) -> list[list[int]]:
 
 def simulate_events(events: Sequence[DiagEvent], vehicle: Vehicle, gain: float,
                     effects: Sequence[EffectSetting] = (), model: str = "multibody",
-                    interp: str = "pchip") -> list[SimOut]:
+                    interp: str = "pchip", gaps: bool = True) -> list[SimOut]:
     """Simulator output of every event, one continuous run per cluster (:func:`clusters`).
+
+    ``gaps=False``: no gap states (``SimOut.gap_open`` None), for a caller that reads the speed only (a fit's
+    residuals); the speed is the same.
 
     ``vehicle`` already carries the vehicle effects; input effects act on the run's torque and
     output effects on its speed, so their own states carry through the cluster too. Each event
@@ -298,7 +301,7 @@ def simulate_events(events: Sequence[DiagEvent], vehicle: Vehicle, gain: float,
         tq = _gained(grid, raw, gain, effects)
         if model == "multibody" and LEAN_SIM:  # the same run, without the outputs no caller here reads
             return simulate_speed(vehicle, grid, tq, speed0_rpm=events[group[0]].speed0(), interp="linear",
-                                  output_dt=FINE_DT)
+                                  output_dt=FINE_DT, gaps=gaps)
         return simulate(vehicle, grid, tq, model=model, speed0_rpm=events[group[0]].speed0(), interp="linear",
                         output_dt=FINE_DT)
 
