@@ -17,7 +17,17 @@ import pytest
 from app.analysis import blas_threads
 from app.analysis.diagnosis import calibrate, forward
 from app.analysis.diagnosis.calibrate import Bounds, _Problem, fit
-from app.analysis.diagnosis.forward import DiagEvent, Nuisance, simulate_events, vehicle_with
+from app.analysis.diagnosis.forward import (
+    DiagEvent,
+    Nuisance,
+    SimOut,
+    best_offset,
+    shifted_chi2,
+    shifted_chi2_compiled,
+    simulate_events,
+    vehicle_with,
+)
+from app.analysis.diagnosis.offset_kernel import shifted_residuals
 from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, prepare
 from app.analysis.diagnosis.split import make_split
 from app.analysis.events import detect_events
@@ -25,6 +35,7 @@ from sim import load_vehicle, simulate
 from sim.effects import apply_effects, get_effect
 from sim.simulate import simulate_speed
 from tests.diagnosis.conftest import drive_signals, paper
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 
 TRUTH = (("coulomb_nm", 4.0), ("viscous_nms", 0.01))
 
@@ -169,3 +180,58 @@ def test_blas_threads_left_alone_when_disabled() -> None:
         blas_threads.ENABLED = True
 
 
+
+
+@cache
+def _calibration_1khz() -> tuple[list[DiagEvent], Bounds]:
+    """A 1 kHz log (the offset grid of +-20 ms holds 81 offsets) of a drive with a drag."""
+    v = paper()
+    rng = np.random.default_rng(5)
+    drive = make_drive(v, rng, DriveSpec(duration_s=12.0))
+    sig = to_signals(measure(drive, run_truth(apply_effects(v, {"drag": dict(TRUTH)}), drive),
+                             CanSampling(period_s=0.001, offset_s=0.004), rng))
+    events, noise, _ = prepare(sig, detect_events(sig, DIAGNOSIS_EVENTS))
+    return events, Bounds.for_period(noise.period_s)
+
+
+@pytest.mark.parametrize("which", ["100 Hz", "1 kHz"])
+def test_the_compiled_offset_profile_is_numpy_s_bit_for_bit(which: str) -> None:
+    cal, bounds = _calibration_1khz() if which == "1 kHz" else _calibration()[:2]
+    grid = np.arange(bounds.offset_s[0], bounds.offset_s[1] + 0.00025, 0.0005)
+    assert grid.size == 81  # +-20 ms at either rate (the bound's floor)
+    drag = get_effect("drag")
+    for gain, grade, vals in ((1.0, 0.0, [0.0, 0.0]), (1.04, 0.5, [4.0, 0.01]), (0.93, -0.8, [1.0, 0.02])):
+        settings = ((drag, drag.values(vals)),)
+        outs = simulate_events(cal, vehicle_with(paper(), Nuisance(0.0, gain, grade), settings), gain, settings,
+                               gaps=False)
+        ref = shifted_chi2(cal, outs, grid)
+        assert np.array_equal(shifted_chi2_compiled(cal, outs, grid), ref)
+        assert 0 < int(np.argmin(ref)) < grid.size - 1 or which == "100 Hz"  # an inner minimum at 1 kHz
+        forward.LEAN_SIM = False
+        try:
+            off_ref = best_offset(cal, outs, bounds.offset_s)
+        finally:
+            forward.LEAN_SIM = True
+        assert best_offset(cal, outs, bounds.offset_s) == off_ref
+
+
+def test_the_offset_kernel_interpolates_as_numpy_at_the_ends_on_grid_points_and_around_nan() -> None:
+    xp = np.array([0.0, 0.001, 0.002, 0.003, 0.004, 0.005])
+    fp = np.array([1.0, 2.5, np.nan, 4.0, 4.0, -3.0])
+    t = np.array([-0.01, 0.0, 0.0005, 0.001, 0.0015, 0.0025, 0.0035, 0.0049, 0.005, 0.02])
+    meas = np.linspace(-1.0, 1.0, t.size)
+    offsets = np.array([-0.0015, -0.0005, 0.0, 0.001, 0.0031])
+    r = np.empty((offsets.size, t.size))
+    shifted_residuals(t, meas, xp, fp, offsets, r)
+    want = meas[None, :] - np.interp((t[None, :] - offsets[:, None]).ravel(), xp, fp).reshape(r.shape)
+    assert np.array_equal(r, want, equal_nan=True)
+    assert np.isnan(r).any() and np.isfinite(r).any()
+    one = np.empty((1, 3))  # a one-point grid: its value everywhere
+    shifted_residuals(np.array([-1.0, 0.0, 1.0]), np.zeros(3), np.array([0.0]), np.array([7.0]), np.zeros(1), one)
+    assert np.array_equal(one, -np.interp(np.array([[-1.0, 0.0, 1.0]]), np.array([0.0]), np.array([7.0])))
+
+
+def test_simout_time_grid_is_what_the_kernel_needs() -> None:
+    cal, _, _ = _calibration()
+    out = simulate_events(cal[:1], paper(), 1.0, gaps=False)[0]
+    assert isinstance(out, SimOut) and np.all(np.diff(out.t) > 0)  # strictly increasing: the cursor's bracket
