@@ -3,12 +3,13 @@
 Drives come from the independent generator (``bench/indep``): 60 s paper-car drives logged at 1 kHz
 with a library effect on top of a wrong data sheet (the slow case: a large sim-to-real gap makes
 every candidate fit run its whole pass budget), cached as BLF under ``bench/out/indep/cpu/``.
-Each drive is diagnosed twice in this process: the reference path (OpenBLAS left at its thread
-count, no residual memo in the fit, the full ``sim.simulate`` output per run: ``blas_threads.ENABLED``
-off, ``calibrate.MEMO_POINTS`` 0, ``forward.LEAN_SIM`` off) and the default path. Printed per drive:
-CPU seconds (``time.process_time``: every thread of the process, BLAS workers included) and wall
-seconds of each, their ratio, whether the decision is the same, and the largest relative difference
-over every fit's nuisance and effect values and chi2.
+Each drive is diagnosed twice in this process: the reference path (what a diagnosis did before:
+OpenBLAS at its own thread count, the full ``sim.simulate`` output per run, the numpy offset
+profile, no residual memo, a Jacobian's columns one after the other -- ``blas_threads.ENABLED``,
+``forward.LEAN_SIM``, ``calibrate.PARALLEL_POINTS`` off, ``calibrate.MEMO_POINTS`` 0) and the default
+path. Printed per drive: CPU seconds (``time.process_time``: every thread of the process, BLAS
+workers included) and wall seconds of each, their ratio, whether the decision is the same, and the
+largest relative difference over every fit's nuisance and effect values and chi2.
 
     .venv/bin/python bench/diagnosis_cpu.py            # the 1 kHz drives
     .venv/bin/python bench/diagnosis_cpu.py --profile  # and a cProfile of the fast path (top 20)
@@ -87,6 +88,7 @@ def run(case: Case, fast: bool, profile: bool = False) -> Run:
     blas_threads.ENABLED = fast
     calibrate.MEMO_POINTS = calibrate.MEMO_POINTS if fast else 0
     forward.LEAN_SIM = fast
+    calibrate.PARALLEL_POINTS = fast
     prof = cProfile.Profile() if profile else None
     t0, w0 = time.process_time(), time.perf_counter()
     try:
@@ -99,6 +101,7 @@ def run(case: Case, fast: bool, profile: bool = False) -> Run:
         blas_threads.ENABLED = True
         calibrate.MEMO_POINTS = memo
         forward.LEAN_SIM = True
+        calibrate.PARALLEL_POINTS = True
     cpu, wall = time.process_time() - t0, time.perf_counter() - w0
     if prof is not None:
         pstats.Stats(prof).sort_stats("tottime").print_stats(20)

@@ -49,14 +49,21 @@ def _calibration() -> tuple[list[DiagEvent], Bounds, object]:
 
 
 @pytest.fixture
-def reference_paths() -> Iterator[None]:
-    """Inside: the full SimResult per run and no residual memo (what the fit did before)."""
-    lean, memo = forward.LEAN_SIM, calibrate.MEMO_POINTS
-    forward.LEAN_SIM, calibrate.MEMO_POINTS = False, 0
+def reference_paths(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """Inside: the full SimResult per run, the numpy offset profile, no residual memo and the points one after the
+    other (what the fit did before); :func:`_fast` switches to the default paths, with two simulation threads
+    even on a one-core machine."""
+    monkeypatch.setattr(forward, "SIM_THREADS", 2)
+    lean, memo, par = forward.LEAN_SIM, calibrate.MEMO_POINTS, calibrate.PARALLEL_POINTS
+    forward.LEAN_SIM, calibrate.MEMO_POINTS, calibrate.PARALLEL_POINTS = False, 0, False
     try:
         yield
     finally:
-        forward.LEAN_SIM, calibrate.MEMO_POINTS = lean, memo
+        forward.LEAN_SIM, calibrate.MEMO_POINTS, calibrate.PARALLEL_POINTS = lean, memo, par
+
+
+def _fast() -> None:
+    forward.LEAN_SIM, calibrate.MEMO_POINTS, calibrate.PARALLEL_POINTS = True, 8, True
 
 
 @pytest.mark.parametrize("effects", [{}, {"speed_sensor": {"tau_s": 0.003, "delay_s": 0.004}},
@@ -107,16 +114,31 @@ def test_residuals_offset_and_jacobian_equal_the_reference_path(reference_paths:
     r_ref = ref.residuals(u)
     off_ref = ref.last_offset
     j_ref = ref.jacobian(u, r_ref)
-    forward.LEAN_SIM, calibrate.MEMO_POINTS = True, 8
+    _fast()
     new = _problem(cal, bounds)
     r_new = new.residuals(u)
     off_new = new.last_offset
+    ran = _count_ahead(new)
     j_new = new.jacobian(u, r_new)
+    assert ran == [u.size]  # the columns ran ahead, side by side
     assert np.array_equal(r_new, r_ref)
     assert off_new == off_ref and bounds.offset_s[0] < off_new < bounds.offset_s[1]
     assert np.array_equal(j_new, j_ref)
     assert np.all(np.abs(j_new).max(axis=0) > 0)  # every column moves the residual: a real Jacobian
     assert new.nfev == ref.nfev == u.size + 1
+
+
+def _count_ahead(prob: _Problem) -> list[int]:
+    """Records how many points each run_ahead of ``prob`` left for residuals to take."""
+    counts: list[int] = []
+    real = prob.run_ahead
+
+    def spy(points: list[np.ndarray]) -> None:
+        real(points)
+        counts.append(len(prob._ahead))
+
+    prob.run_ahead = spy  # type: ignore[method-assign]
+    return counts
 
 
 def test_a_point_met_again_returns_its_residual_and_offset_and_counts_as_a_pass() -> None:
@@ -137,8 +159,20 @@ def test_a_point_met_again_returns_its_residual_and_offset_and_counts_as_a_pass(
 def test_a_fit_with_the_memo_is_the_fit_without(reference_paths: None) -> None:
     cal, bounds, split = _calibration()
     ref = fit(paper(), cal, split, (get_effect("drag"),), bounds=bounds)
-    forward.LEAN_SIM, calibrate.MEMO_POINTS = True, 8
-    new = fit(paper(), cal, split, (get_effect("drag"),), bounds=bounds)
+    _fast()
+    seen: list[int] = []
+    real = _Problem.run_ahead
+
+    def spy(self: _Problem, points: list[np.ndarray]) -> None:
+        real(self, points)
+        seen.append(len(self._ahead))
+
+    _Problem.run_ahead = spy  # type: ignore[method-assign]
+    try:
+        new = fit(paper(), cal, split, (get_effect("drag"),), bounds=bounds)
+    finally:
+        _Problem.run_ahead = real  # type: ignore[method-assign]
+    assert len(seen) > 3 and max(seen) >= 4  # the screen's starts and the Jacobians' columns ran ahead
     assert new.values == ref.values and new.nuisance == ref.nuisance
     assert new.chi2 == ref.chi2 and new.nfev == ref.nfev
     assert new.residual is not None and ref.residual is not None and np.array_equal(new.residual, ref.residual)

@@ -12,8 +12,9 @@ any event that is not on its calibration side.
 
 from __future__ import annotations
 
+import inspect
 from collections import OrderedDict
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -21,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from app.analysis.diagnosis import forward
 from app.analysis.diagnosis.forward import (
     DiagEvent,
     EffectSetting,
@@ -46,6 +48,10 @@ OFFSET_MIN_S = 0.02  # ... or +-20 ms, whichever is wider: a logger's torque-to-
 _PENALTY = 1e3  # residual (noise units) returned for a parameter set the simulator rejects
 TRADE_OFF_CORR = 0.9  # |correlation| of two fitted effect parameters above which the data do not separate them
 PASSES_PER_PARAM = 12  # a refinement's simulator passes: this x (parameters + 1), finite-difference Jacobians included
+# a Jacobian's columns and a screen's start points simulated side by side on the simulation threads (the same
+# numbers as one after the other); False: one after the other
+PARALLEL_POINTS = True
+_LSQ_WORKERS = "workers" in inspect.signature(least_squares).parameters  # scipy >= 1.16
 MEMO_POINTS = 8  # points whose residuals a fit keeps (the simulator is deterministic: same point, same residual)
 START_MARGIN = 0.005  # unit-box distance from a bound at which a refinement from a given start begins
 
@@ -146,6 +152,7 @@ class _Problem:
         self.best: tuple[float, FloatArray, float] | None = None  # (chi2, u, offset) of the best pass so far
         # residual and offset of the last few points, by their bytes: a point met again is not simulated again
         self._memo: OrderedDict[bytes, tuple[FloatArray, float]] = OrderedDict()
+        self._ahead: dict[bytes, tuple[FloatArray, float] | None] = {}  # points run ahead (run_ahead), by their bytes
 
     def decode(self, u: FloatArray, offset: float = 0.0) -> tuple[Nuisance, tuple[EffectSetting, ...]]:
         x = self.lo + np.clip(u, 0.0, 1.0) * self.span
@@ -174,20 +181,60 @@ class _Problem:
         if hit is not None:  # the same point again (the solution after the refinement, a start screened twice)
             self.last_offset = hit[1]
             return self._scored(u, hit[0].copy())
-        nui, settings = self.decode(u)
-        try:
-            veh = vehicle_with(self.base, nui, settings)
-            outs = simulate_events(self.events, veh, nui.gain, settings, self.model, gaps=False)
-        except SimError:
+        done = self._ahead.pop(key, _NOT_RUN)
+        got = self._evaluate(u) if done is _NOT_RUN else done
+        if got is None:
             return np.full(self.n_res, _PENALTY)
-        self.last_offset = best_offset(self.events, outs, self.bounds.offset_s)
-        r = np.concatenate([weighted_residual(ev, prediction(ev, out, self.last_offset))
-                            for ev, out in zip(self.events, outs, strict=True)])
-        r = np.where(np.isfinite(r), r, _PENALTY)
+        r, self.last_offset = got
         self._memo[key] = (r.copy(), self.last_offset)
         while len(self._memo) > MEMO_POINTS:
             self._memo.popitem(last=False)
         return self._scored(u, r)
+
+    def _evaluate(self, u: FloatArray, threads: bool = True) -> tuple[FloatArray, float] | None:
+        """One simulator pass at ``u``: the weighted residual (non-finite values as the penalty) and the profiled
+        offset; None when the simulator rejects the parameters. No state of the problem changes here."""
+        nui, settings = self.decode(u)
+        try:
+            veh = vehicle_with(self.base, nui, settings)
+            outs = simulate_events(self.events, veh, nui.gain, settings, self.model, gaps=False, threads=threads)
+        except SimError:
+            return None
+        offset = best_offset(self.events, outs, self.bounds.offset_s)
+        r = np.concatenate([weighted_residual(ev, prediction(ev, out, offset))
+                            for ev, out in zip(self.events, outs, strict=True)])
+        return np.where(np.isfinite(r), r, _PENALTY), offset
+
+    def run_ahead(self, points: Sequence[FloatArray]) -> None:
+        """Simulate ``points`` side by side on the simulation threads (each point's clusters in one thread) before
+        :meth:`residuals` takes them in order: a Jacobian's columns, the start points of a screen.
+
+        Only the points the pass budget will let :meth:`residuals` reach are run; the state of the problem (pass
+        count, best point, offset, memo) changes only in :meth:`residuals`, in the caller's order, so every
+        number is the one the points evaluated one after the other give.
+        """
+        if not PARALLEL_POINTS or forward.SIM_THREADS < 2:
+            return
+        room = len(points) if self.max_passes is None else max(self.max_passes - self.nfev, 0)
+        todo: dict[bytes, FloatArray] = {}
+        for p in points[:room]:
+            key = np.asarray(p, dtype=np.float64).tobytes()
+            if key not in self._memo and key not in self._ahead:
+                todo[key] = np.array(p, dtype=np.float64)
+        if len(todo) < 2:
+            return
+        results = forward.sim_pool().map(lambda p: self._evaluate(p, threads=False), todo.values())
+        self._ahead.update(zip(todo, results, strict=True))
+
+    def ahead_map(self, fun: Callable[[FloatArray], Any], points: Iterable[FloatArray]) -> list[Any]:
+        """``map`` for the finite-difference Jacobian of ``least_squares`` (its ``workers``): the columns' points run
+        ahead side by side, then ``fun`` (scipy's wrapper of :meth:`residuals`) takes each in order."""
+        pts = list(points)
+        self.run_ahead(pts)
+        try:
+            return [fun(p) for p in pts]
+        finally:
+            self._ahead.clear()
 
     def _scored(self, u: FloatArray, r: FloatArray) -> FloatArray:
         c2 = _chi2(r)
@@ -196,14 +243,23 @@ class _Problem:
         return r
 
     def jacobian(self, u: FloatArray, r: FloatArray, step: float = 0.02) -> FloatArray:
-        """Forward-difference Jacobian at ``u`` (unit box, steps away from the nearer bound)."""
-        cols = []
+        """Forward-difference Jacobian at ``u`` (unit box, steps away from the nearer bound; the columns' points
+        simulated side by side, :meth:`run_ahead`)."""
+        steps, points = [], []
         for k in range(u.size):
             du = step if u[k] <= 0.5 else -step
             v = u.copy()
             v[k] += du
-            cols.append((self.residuals(v) - r) / du)
-        return np.column_stack(cols)
+            steps.append(du)
+            points.append(v)
+        self.run_ahead(points)
+        try:
+            return np.column_stack([(self.residuals(v) - r) / du for v, du in zip(points, steps, strict=True)])
+        finally:
+            self._ahead.clear()
+
+
+_NOT_RUN = object()
 
 
 class _Spent(Exception):
@@ -318,15 +374,21 @@ def fit(
             if k < 4:  # the fixed starts also with nominal nuisance values (a drag start on top of a road load
                 # that took the drag in the baseline counts the drag twice and loses the screen)
                 candidates.append(np.concatenate([u_nominal, eff_u]))
-    scored = [(_chi2(prob.residuals(u)), i) for i, u in enumerate(candidates)] if len(candidates) > 1 else [(0.0, 0)]
+    if len(candidates) > 1:
+        prob.run_ahead(candidates)
+        scored = [(_chi2(prob.residuals(u)), i) for i, u in enumerate(candidates)]
+        prob._ahead.clear()
+    else:
+        scored = [(0.0, 0)]
     best_u = candidates[min(scored)[1]]
     n_par = best_u.size
     budget = max_nfev if max_nfev is not None else 6 * (n_par + 1)
     prob.best = None
     prob.max_passes = prob.nfev + (max_passes if max_passes is not None else passes_per_param * (n_par + 1))
     try:
+        ahead = {"workers": prob.ahead_map} if _LSQ_WORKERS else {}  # the Jacobian's columns side by side
         sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
-                            diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6)
+                            diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6, **ahead)
         u, jac, message = np.asarray(sol.x, dtype=np.float64), sol.jac, str(sol.message)
     except _Spent:
         assert prob.best is not None

@@ -49,7 +49,7 @@ SIM_THREADS = max(1, min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_g
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
 
 
-def _sim_pool() -> ThreadPoolExecutor:
+def sim_pool() -> ThreadPoolExecutor:
     """This process's pool of simulation threads (a forked child never reuses its parent's, whose threads it
     does not have)."""
     global _POOL
@@ -285,11 +285,12 @@ def clusters(events: Sequence[DiagEvent]) -> list[list[int]]:
 
 def simulate_events(events: Sequence[DiagEvent], vehicle: Vehicle, gain: float,
                     effects: Sequence[EffectSetting] = (), model: str = "multibody",
-                    interp: str = "pchip", gaps: bool = True) -> list[SimOut]:
+                    interp: str = "pchip", gaps: bool = True, threads: bool = True) -> list[SimOut]:
     """Simulator output of every event, one continuous run per cluster (:func:`clusters`).
 
     ``gaps=False``: no gap states (``SimOut.gap_open`` None), for a caller that reads the speed only (a fit's
-    residuals); the speed is the same.
+    residuals); the speed is the same. ``threads=False``: the clusters one after the other in this thread (for a
+    caller that is itself on the simulation pool).
 
     ``vehicle`` already carries the vehicle effects; input effects act on the run's torque and
     output effects on its speed, so their own states carry through the cluster too. Each event
@@ -308,7 +309,8 @@ def simulate_events(events: Sequence[DiagEvent], vehicle: Vehicle, gain: float,
                         output_dt=FINE_DT)
 
     # the integrator releases the interpreter lock: clusters run side by side on the machine's cores
-    runs = list(_sim_pool().map(run, groups)) if SIM_THREADS > 1 and len(groups) > 1 else [run(g) for g in groups]
+    runs = (list(sim_pool().map(run, groups)) if threads and SIM_THREADS > 1 and len(groups) > 1
+            else [run(g) for g in groups])
     for group, res in zip(groups, runs, strict=True):
         t_out = np.asarray(res.t, dtype=np.float64)
         sp = np.asarray(res.motor_speed_rpm, dtype=np.float64)
