@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import ctypes
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 ENABLED = True  # False: leave the thread count alone (the benchmark's reference runs)
 _PAIRS = (  # (set, get) symbol names: numpy/scipy wheels' 64-bit-integer builds first, then plain OpenBLAS
@@ -27,13 +28,14 @@ _PAIRS = (  # (set, get) symbol names: numpy/scipy wheels' 64-bit-integer builds
     ("openblas_set_num_threads64_", "openblas_get_num_threads64_"),
     ("openblas_set_num_threads", "openblas_get_num_threads"),
 )
+_Fn = Callable[..., Any]  # a ctypes foreign function
 _LOCK = threading.Lock()
 _DEPTH = 0
-_SAVED: list[tuple[ctypes._CFuncPtr, int]] = []
-_LIBS: dict[str, tuple[ctypes._CFuncPtr, ctypes._CFuncPtr] | None] = {}
+_SAVED: list[tuple[_Fn, int]] = []
+_LIBS: dict[str, tuple[_Fn, _Fn] | None] = {}
 
 
-def _loaded_openblas() -> list[tuple[ctypes._CFuncPtr, ctypes._CFuncPtr]]:
+def _loaded_openblas() -> list[tuple[_Fn, _Fn]]:
     """(set, get) functions of every OpenBLAS mapped into this process (Linux: ``/proc/self/maps``)."""
     try:
         maps = Path("/proc/self/maps").read_text(encoding="utf-8", errors="replace")

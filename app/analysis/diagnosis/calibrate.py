@@ -181,8 +181,7 @@ class _Problem:
         if hit is not None:  # the same point again (the solution after the refinement, a start screened twice)
             self.last_offset = hit[1]
             return self._scored(u, hit[0].copy())
-        done = self._ahead.pop(key, _NOT_RUN)
-        got = self._evaluate(u) if done is _NOT_RUN else done
+        got = self._ahead.pop(key) if key in self._ahead else self._evaluate(u)
         if got is None:
             return np.full(self.n_res, _PENALTY)
         r, self.last_offset = got
@@ -257,9 +256,6 @@ class _Problem:
             return np.column_stack([(self.residuals(v) - r) / du for v, du in zip(points, steps, strict=True)])
         finally:
             self._ahead.clear()
-
-
-_NOT_RUN = object()
 
 
 class _Spent(Exception):
