@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from app.analysis.blas_threads import single_blas_thread
 from app.analysis.diagnosis import forward
 from app.analysis.diagnosis.forward import (
     DiagEvent,
@@ -304,6 +305,7 @@ def _starts(effects: Sequence[Effect], rng: np.random.Generator, n_random: int) 
     return [np.asarray(p, dtype=np.float64) for p in pts]
 
 
+@single_blas_thread()  # also for callers outside a diagnosis (identification): see app/analysis/blas_threads.py
 def fit(
     base: Vehicle,
     events: Sequence[DiagEvent],
