@@ -43,6 +43,8 @@ def _loaded_openblas() -> list[tuple[_Fn, _Fn]]:
         return []
     found = []
     for line in maps.splitlines():
+        if "openblas" not in line.lower():
+            continue
         path = line.rsplit(" ", 1)[-1]
         if "openblas" not in Path(path).name.lower() or ".so" not in path:
             continue
