@@ -81,7 +81,7 @@ class Run:
     result: DiagnosisResult
 
 
-def run(case: Case, fast: bool, profile: bool = False) -> Run:
+def run(case: Case, fast: bool, profile: bool = False, broyden: int = 0) -> Run:
     vehicle = load_vehicle(vehicle_source(case.car))
     memo = calibrate.MEMO_POINTS
     signals = read_log(OUT / case.drive_a, DBC, MAP)
@@ -89,6 +89,7 @@ def run(case: Case, fast: bool, profile: bool = False) -> Run:
     calibrate.MEMO_POINTS = calibrate.MEMO_POINTS if fast else 0
     forward.LEAN_SIM = fast
     calibrate.PARALLEL_POINTS = fast
+    calibrate.BROYDEN_EVERY = broyden if fast else 0
     prof = cProfile.Profile() if profile else None
     t0, w0 = time.process_time(), time.perf_counter()
     try:
@@ -102,6 +103,7 @@ def run(case: Case, fast: bool, profile: bool = False) -> Run:
         calibrate.MEMO_POINTS = memo
         forward.LEAN_SIM = True
         calibrate.PARALLEL_POINTS = True
+        calibrate.BROYDEN_EVERY = 0
     cpu, wall = time.process_time() - t0, time.perf_counter() - w0
     if prof is not None:
         pstats.Stats(prof).sort_stats("tottime").print_stats(20)
@@ -142,13 +144,17 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--profile", action="store_true", help="cProfile of the fast path")
     ap.add_argument("--case", action="append", default=[], help="only this case (repeatable)")
+    ap.add_argument("--broyden", type=int, default=0, metavar="N",
+                    help="fast path with calibrate.BROYDEN_EVERY = N (a finite-difference Jacobian every N "
+                         "trust-region steps, rank-one updates between; other numbers, so compare the decision)")
     args = ap.parse_args()
     todo = [c for c in cases() if not args.case or c.name in args.case]
-    print(f"diagnosis CPU, reference path vs fast path: {len(todo)} drives, 60 s at 1 kHz, paper car")
+    print(f"diagnosis CPU, reference path vs fast path: {len(todo)} drives, 60 s at 1 kHz, paper car"
+          + (f"; fast path with a finite-difference Jacobian every {args.broyden} steps" if args.broyden > 1 else ""))
     total = [0.0, 0.0]
     for c in todo:
         ref = run(c, fast=False)
-        new = run(c, fast=True, profile=args.profile)
+        new = run(c, fast=True, profile=args.profile, broyden=args.broyden)
         total[0] += ref.cpu_s
         total[1] += new.cpu_s
         dr, dn = ref.result.decision, new.result.decision

@@ -269,3 +269,26 @@ def test_simout_time_grid_is_what_the_kernel_needs() -> None:
     cal, _, _ = _calibration()
     out = simulate_events(cal[:1], paper(), 1.0, gaps=False)[0]
     assert isinstance(out, SimOut) and np.all(np.diff(out.t) > 0)  # strictly increasing: the cursor's bracket
+
+
+def test_rank_one_updates_take_fewer_passes_and_leave_a_full_jacobian_at_the_solution(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    cal, bounds, split = _calibration()
+    every = fit(paper(), cal, split, (get_effect("drag"),), bounds=bounds)
+    monkeypatch.setattr(calibrate, "BROYDEN_EVERY", 3)
+    seen: list[bool] = []
+    real = calibrate._Broyden.__call__
+
+    def spy(self: calibrate._Broyden, x: np.ndarray) -> np.ndarray:
+        jac = real(self, x)
+        seen.append(self.fresh)
+        return jac
+
+    monkeypatch.setattr(calibrate._Broyden, "__call__", spy)
+    upd = fit(paper(), cal, split, (get_effect("drag"),), bounds=bounds)
+    assert False in seen and True in seen  # updates between finite-difference Jacobians
+    assert upd.nfev < every.nfev
+    assert upd.values["drag"]["coulomb_nm"] == pytest.approx(4.0, rel=0.5)
+    prob = _problem(cal, bounds)  # the reported Jacobian is the finite-difference one at the solution
+    u = prob.encode(upd.nuisance, upd.values)
+    assert upd.jac is not None and np.array_equal(upd.jac, prob.jacobian(u, prob.residuals(u)))

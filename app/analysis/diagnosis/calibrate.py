@@ -53,6 +53,9 @@ PASSES_PER_PARAM = 12  # a refinement's simulator passes: this x (parameters + 1
 # numbers as one after the other); False: one after the other
 PARALLEL_POINTS = True
 _LSQ_WORKERS = "workers" in inspect.signature(least_squares).parameters  # scipy >= 1.16
+# > 1: the refinement's Jacobian by finite differences only every this many trust-region steps, rank-one (Broyden)
+# updates in between (fewer passes, other numbers: off until the decision benchmarks say otherwise)
+BROYDEN_EVERY = 0
 MEMO_POINTS = 8  # points whose residuals a fit keeps (the simulator is deterministic: same point, same residual)
 START_MARGIN = 0.005  # unit-box distance from a bound at which a refinement from a given start begins
 
@@ -236,6 +239,11 @@ class _Problem:
         finally:
             self._ahead.clear()
 
+    def peek(self, u: FloatArray) -> FloatArray | None:
+        """The residual of a point in the memo (a copy), without counting a pass; None when it is not there."""
+        hit = self._memo.get(np.asarray(u, dtype=np.float64).tobytes())
+        return None if hit is None else hit[0].copy()
+
     def _scored(self, u: FloatArray, r: FloatArray) -> FloatArray:
         c2 = _chi2(r)
         if self.best is None or c2 < self.best[0]:
@@ -257,6 +265,35 @@ class _Problem:
             return np.column_stack([(self.residuals(v) - r) / du for v, du in zip(points, steps, strict=True)])
         finally:
             self._ahead.clear()
+
+
+class _Broyden:
+    """Jacobian for ``least_squares``: a forward-difference one every ``every``-th call, rank-one (Broyden) updates
+    from the residual change of the step in between (no simulator pass). Off by default (:data:`BROYDEN_EVERY`)."""
+
+    def __init__(self, prob: _Problem, every: int) -> None:
+        self.prob, self.every = prob, every
+        self.calls = 0
+        self.fresh = False  # the last Jacobian returned was a finite-difference one
+        self.state: tuple[FloatArray, FloatArray, FloatArray] | None = None  # (x, f, J) of the last call
+
+    def __call__(self, x: FloatArray) -> FloatArray:
+        x = np.asarray(x, dtype=np.float64)
+        f = self.prob.peek(x)
+        if f is None:
+            f = self.prob.residuals(x)
+        if self.state is None or self.calls % self.every == 0:
+            jac = self.prob.jacobian(x, f)
+            self.fresh = True
+        else:
+            x0, f0, j0 = self.state
+            dx = x - x0
+            den = float(dx @ dx)
+            jac = j0 + np.outer((f - f0) - j0 @ dx, dx) / den if den > 0 else j0
+            self.fresh = False
+        self.calls += 1
+        self.state = (x.copy(), f.copy(), jac)
+        return jac
 
 
 class _Spent(Exception):
@@ -383,18 +420,28 @@ def fit(
     budget = max_nfev if max_nfev is not None else 6 * (n_par + 1)
     prob.best = None
     prob.max_passes = prob.nfev + (max_passes if max_passes is not None else passes_per_param * (n_par + 1))
+    broyden = _Broyden(prob, BROYDEN_EVERY) if BROYDEN_EVERY > 1 else None
+    updated = False
     try:
-        ahead = {"workers": prob.ahead_map} if _LSQ_WORKERS else {}  # the Jacobian's columns side by side
-        sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
-                            diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6, **ahead)
+        if broyden is not None:
+            sol = least_squares(prob.residuals, best_u, jac=broyden, bounds=(np.zeros(n_par), np.ones(n_par)),
+                                method="trf", x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6)
+        else:
+            ahead = {"workers": prob.ahead_map} if _LSQ_WORKERS else {}  # the Jacobian's columns side by side
+            sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
+                                diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6,
+                                **ahead)
         u, jac, message = np.asarray(sol.x, dtype=np.float64), sol.jac, str(sol.message)
+        if broyden is not None and not broyden.fresh:
+            jac = None  # a rank-one update is no Jacobian to read intervals from: a full one at the solution below
+            updated = True
     except _Spent:
         assert prob.best is not None
         u, jac, message = prob.best[1], None, f"stopped after {prob.nfev} simulator passes (the pass budget)"
     prob.max_passes = None
     r = prob.residuals(u)
     offset = prob.last_offset  # of the solution itself (a Jacobian's passes move it)
-    if jac is None and effects:
+    if jac is None and (effects or updated):
         jac = prob.jacobian(u, r)
     nui, settings = prob.decode(u, offset)
     values = {eff.id: dict(vals) for eff, vals in settings}
