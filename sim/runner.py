@@ -43,9 +43,13 @@ class RawRun:
 def run_from_state(
     chain: ChainModel, t_in: F64, q_in: F64, linear: bool, t0: float, step: float, sub: int, n_out: int,
     theta0: F64, omega0: F64, tyre0: float = 0.0, *, lag: tuple[float, float] = (0.0, 0.0),
-    sensor_tau: float = 0.0, speed_limit: float = math.inf,
+    sensor_tau: float = 0.0, speed_limit: float = math.inf, events: bool = True, states: bool = True,
 ) -> RawRun:
     """Integrate ``chain`` from ``(theta0, omega0, tyre0)`` at ``t0`` with step ``step``, ``sub`` steps per row.
+
+    ``events=False`` leaves ``RawRun.events`` empty (the kernel still logs them; they are not converted);
+    ``states=False`` leaves ``omega``, ``tau``, ``tyre`` and ``is_open`` with no rows (the kernel does not
+    write them; the resolver, sensor and torque rows are the same numbers).
 
     Raises
     ------
@@ -56,8 +60,9 @@ def run_from_state(
     nb, nc = chain.n_bodies, chain.n_couplings
     tyre_on = chain.vehicle >= 0
     out_res, out_sens, out_torque = np.zeros(n_out), np.zeros(n_out), np.zeros(n_out)
-    out_omega, out_tau = np.zeros((n_out, nb)), np.zeros((n_out, nc + int(tyre_on)))
-    out_open = np.zeros((n_out, nc), dtype=np.bool_)
+    rows = n_out if states else 0
+    out_omega, out_tau = np.zeros((rows, nb)), np.zeros((rows, nc + int(tyre_on)))
+    out_open = np.zeros((rows, nc), dtype=np.bool_)
     ev_gap = np.zeros(MAX_EVENTS, dtype=np.int64)
     ev_t = np.zeros(MAX_EVENTS)
     ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
@@ -74,8 +79,8 @@ def run_from_state(
     raise_status(status, t_fail, step)
     return RawRun(
         resolver=out_res, sensor=out_sens, torque=out_torque, omega=out_omega, tau=out_tau[:, :nc],
-        tyre=out_tau[:, nc].copy() if tyre_on else np.zeros(n_out), is_open=out_open,
-        events=[(int(ev_gap[k]), float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)],
+        tyre=out_tau[:, nc].copy() if tyre_on else np.zeros(rows), is_open=out_open,
+        events=[(int(ev_gap[k]), float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)] if events else [],
     )
 
 

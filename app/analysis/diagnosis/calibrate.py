@@ -12,7 +12,9 @@ any event that is not on its calibration side.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import inspect
+from collections import OrderedDict
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,6 +22,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from app.analysis.blas_threads import single_blas_thread
+from app.analysis.diagnosis import forward
 from app.analysis.diagnosis.forward import (
     DiagEvent,
     EffectSetting,
@@ -45,6 +49,14 @@ OFFSET_MIN_S = 0.02  # ... or +-20 ms, whichever is wider: a logger's torque-to-
 _PENALTY = 1e3  # residual (noise units) returned for a parameter set the simulator rejects
 TRADE_OFF_CORR = 0.9  # |correlation| of two fitted effect parameters above which the data do not separate them
 PASSES_PER_PARAM = 12  # a refinement's simulator passes: this x (parameters + 1), finite-difference Jacobians included
+# a Jacobian's columns and a screen's start points simulated side by side on the simulation threads (the same
+# numbers as one after the other); False: one after the other
+PARALLEL_POINTS = True
+_LSQ_WORKERS = "workers" in inspect.signature(least_squares).parameters  # scipy >= 1.16
+# > 1: the refinement's Jacobian by finite differences only every this many trust-region steps, rank-one (Broyden)
+# updates in between (fewer passes, other numbers: off until the decision benchmarks say otherwise)
+BROYDEN_EVERY = 0
+MEMO_POINTS = 8  # points whose residuals a fit keeps (the simulator is deterministic: same point, same residual)
 START_MARGIN = 0.005  # unit-box distance from a bound at which a refinement from a given start begins
 
 
@@ -142,6 +154,9 @@ class _Problem:
         self.last_offset = 0.0
         self.max_passes: int | None = None  # simulator passes before the refinement stops (see _Spent)
         self.best: tuple[float, FloatArray, float] | None = None  # (chi2, u, offset) of the best pass so far
+        # residual and offset of the last few points, by their bytes: a point met again is not simulated again
+        self._memo: OrderedDict[bytes, tuple[FloatArray, float]] = OrderedDict()
+        self._ahead: dict[bytes, tuple[FloatArray, float] | None] = {}  # points run ahead (run_ahead), by their bytes
 
     def decode(self, u: FloatArray, offset: float = 0.0) -> tuple[Nuisance, tuple[EffectSetting, ...]]:
         x = self.lo + np.clip(u, 0.0, 1.0) * self.span
@@ -164,31 +179,121 @@ class _Problem:
     def residuals(self, u: FloatArray) -> FloatArray:
         if self.max_passes is not None and self.nfev >= self.max_passes:
             raise _Spent
-        self.nfev += 1
+        self.nfev += 1  # a repeated point counts too: the pass budget, and so the refinement, stay as they were
+        key = np.asarray(u, dtype=np.float64).tobytes()
+        hit = self._memo.get(key)
+        if hit is not None:  # the same point again (the solution after the refinement, a start screened twice)
+            self.last_offset = hit[1]
+            return self._scored(u, hit[0].copy())
+        got = self._ahead.pop(key) if key in self._ahead else self._evaluate(u)
+        if got is None:
+            return np.full(self.n_res, _PENALTY)
+        r, self.last_offset = got
+        self._memo[key] = (r.copy(), self.last_offset)
+        while len(self._memo) > MEMO_POINTS:
+            self._memo.popitem(last=False)
+        return self._scored(u, r)
+
+    def _evaluate(self, u: FloatArray, threads: bool = True) -> tuple[FloatArray, float] | None:
+        """One simulator pass at ``u``: the weighted residual (non-finite values as the penalty) and the profiled
+        offset; None when the simulator rejects the parameters. No state of the problem changes here."""
         nui, settings = self.decode(u)
         try:
             veh = vehicle_with(self.base, nui, settings)
-            outs = simulate_events(self.events, veh, nui.gain, settings, self.model)
+            outs = simulate_events(self.events, veh, nui.gain, settings, self.model, gaps=False, threads=threads)
         except SimError:
-            return np.full(self.n_res, _PENALTY)
-        self.last_offset = best_offset(self.events, outs, self.bounds.offset_s)
-        r = np.concatenate([weighted_residual(ev, prediction(ev, out, self.last_offset))
+            return None
+        offset = best_offset(self.events, outs, self.bounds.offset_s)
+        r = np.concatenate([weighted_residual(ev, prediction(ev, out, offset))
                             for ev, out in zip(self.events, outs, strict=True)])
-        r = np.where(np.isfinite(r), r, _PENALTY)
+        return np.where(np.isfinite(r), r, _PENALTY), offset
+
+    def run_ahead(self, points: Sequence[FloatArray]) -> None:
+        """Simulate ``points`` side by side on the simulation threads (each point's clusters in one thread) before
+        :meth:`residuals` takes them in order: a Jacobian's columns, the start points of a screen.
+
+        Only the points the pass budget will let :meth:`residuals` reach are run; the state of the problem (pass
+        count, best point, offset, memo) changes only in :meth:`residuals`, in the caller's order, so every
+        number is the one the points evaluated one after the other give.
+        """
+        if not PARALLEL_POINTS or forward.SIM_THREADS < 2:
+            return
+        room = len(points) if self.max_passes is None else max(self.max_passes - self.nfev, 0)
+        todo: dict[bytes, FloatArray] = {}
+        for p in points[:room]:
+            key = np.asarray(p, dtype=np.float64).tobytes()
+            if key not in self._memo and key not in self._ahead:
+                todo[key] = np.array(p, dtype=np.float64)
+        if len(todo) < 2:
+            return
+        results = forward.sim_pool().map(lambda p: self._evaluate(p, threads=False), todo.values())
+        self._ahead.update(zip(todo, results, strict=True))
+
+    def ahead_map(self, fun: Callable[[FloatArray], Any], points: Iterable[FloatArray]) -> list[Any]:
+        """``map`` for the finite-difference Jacobian of ``least_squares`` (its ``workers``): the columns' points run
+        ahead side by side, then ``fun`` (scipy's wrapper of :meth:`residuals`) takes each in order."""
+        pts = list(points)
+        self.run_ahead(pts)
+        try:
+            return [fun(p) for p in pts]
+        finally:
+            self._ahead.clear()
+
+    def peek(self, u: FloatArray) -> FloatArray | None:
+        """The residual of a point in the memo (a copy), without counting a pass; None when it is not there."""
+        hit = self._memo.get(np.asarray(u, dtype=np.float64).tobytes())
+        return None if hit is None else hit[0].copy()
+
+    def _scored(self, u: FloatArray, r: FloatArray) -> FloatArray:
         c2 = _chi2(r)
         if self.best is None or c2 < self.best[0]:
             self.best = (c2, np.array(u, dtype=np.float64), self.last_offset)
         return r
 
     def jacobian(self, u: FloatArray, r: FloatArray, step: float = 0.02) -> FloatArray:
-        """Forward-difference Jacobian at ``u`` (unit box, steps away from the nearer bound)."""
-        cols = []
+        """Forward-difference Jacobian at ``u`` (unit box, steps away from the nearer bound; the columns' points
+        simulated side by side, :meth:`run_ahead`)."""
+        steps, points = [], []
         for k in range(u.size):
             du = step if u[k] <= 0.5 else -step
             v = u.copy()
             v[k] += du
-            cols.append((self.residuals(v) - r) / du)
-        return np.column_stack(cols)
+            steps.append(du)
+            points.append(v)
+        self.run_ahead(points)
+        try:
+            return np.column_stack([(self.residuals(v) - r) / du for v, du in zip(points, steps, strict=True)])
+        finally:
+            self._ahead.clear()
+
+
+class _Broyden:
+    """Jacobian for ``least_squares``: a forward-difference one every ``every``-th call, rank-one (Broyden) updates
+    from the residual change of the step in between (no simulator pass). Off by default (:data:`BROYDEN_EVERY`)."""
+
+    def __init__(self, prob: _Problem, every: int) -> None:
+        self.prob, self.every = prob, every
+        self.calls = 0
+        self.fresh = False  # the last Jacobian returned was a finite-difference one
+        self.state: tuple[FloatArray, FloatArray, FloatArray] | None = None  # (x, f, J) of the last call
+
+    def __call__(self, x: FloatArray) -> FloatArray:
+        x = np.asarray(x, dtype=np.float64)
+        f = self.prob.peek(x)
+        if f is None:
+            f = self.prob.residuals(x)
+        if self.state is None or self.calls % self.every == 0:
+            jac = self.prob.jacobian(x, f)
+            self.fresh = True
+        else:
+            x0, f0, j0 = self.state
+            dx = x - x0
+            den = float(dx @ dx)
+            jac = j0 + np.outer((f - f0) - j0 @ dx, dx) / den if den > 0 else j0
+            self.fresh = False
+        self.calls += 1
+        self.state = (x.copy(), f.copy(), jac)
+        return jac
 
 
 class _Spent(Exception):
@@ -237,6 +342,7 @@ def _starts(effects: Sequence[Effect], rng: np.random.Generator, n_random: int) 
     return [np.asarray(p, dtype=np.float64) for p in pts]
 
 
+@single_blas_thread()  # also for callers outside a diagnosis (identification): see app/analysis/blas_threads.py
 def fit(
     base: Vehicle,
     events: Sequence[DiagEvent],
@@ -303,23 +409,39 @@ def fit(
             if k < 4:  # the fixed starts also with nominal nuisance values (a drag start on top of a road load
                 # that took the drag in the baseline counts the drag twice and loses the screen)
                 candidates.append(np.concatenate([u_nominal, eff_u]))
-    scored = [(_chi2(prob.residuals(u)), i) for i, u in enumerate(candidates)] if len(candidates) > 1 else [(0.0, 0)]
+    if len(candidates) > 1:
+        prob.run_ahead(candidates)
+        scored = [(_chi2(prob.residuals(u)), i) for i, u in enumerate(candidates)]
+        prob._ahead.clear()
+    else:
+        scored = [(0.0, 0)]
     best_u = candidates[min(scored)[1]]
     n_par = best_u.size
     budget = max_nfev if max_nfev is not None else 6 * (n_par + 1)
     prob.best = None
     prob.max_passes = prob.nfev + (max_passes if max_passes is not None else passes_per_param * (n_par + 1))
+    broyden = _Broyden(prob, BROYDEN_EVERY) if BROYDEN_EVERY > 1 else None
+    updated = False
     try:
-        sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
-                            diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6)
+        if broyden is not None:
+            sol = least_squares(prob.residuals, best_u, jac=broyden, bounds=(np.zeros(n_par), np.ones(n_par)),
+                                method="trf", x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6)
+        else:
+            ahead = {"workers": prob.ahead_map} if _LSQ_WORKERS else {}  # the Jacobian's columns side by side
+            sol = least_squares(prob.residuals, best_u, bounds=(np.zeros(n_par), np.ones(n_par)), method="trf",
+                                diff_step=0.02, x_scale=1.0, max_nfev=budget, xtol=1e-3, ftol=1e-3, gtol=1e-6,
+                                **ahead)
         u, jac, message = np.asarray(sol.x, dtype=np.float64), sol.jac, str(sol.message)
+        if broyden is not None and not broyden.fresh:
+            jac = None  # a rank-one update is no Jacobian to read intervals from: a full one at the solution below
+            updated = True
     except _Spent:
         assert prob.best is not None
         u, jac, message = prob.best[1], None, f"stopped after {prob.nfev} simulator passes (the pass budget)"
     prob.max_passes = None
     r = prob.residuals(u)
     offset = prob.last_offset  # of the solution itself (a Jacobian's passes move it)
-    if jac is None and effects:
+    if jac is None and (effects or updated):
         jac = prob.jacobian(u, r)
     nui, settings = prob.decode(u, offset)
     values = {eff.id: dict(vals) for eff, vals in settings}

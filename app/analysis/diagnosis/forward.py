@@ -35,8 +35,10 @@ import numpy as np
 import numpy.typing as npt
 from scipy.interpolate import PchipInterpolator
 
+from app.analysis.diagnosis.offset_kernel import shifted_residuals
 from sim import SimResult, Vehicle, simulate
 from sim.effects.base import Effect
+from sim.simulate import SpeedRun, simulate_speed
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -47,13 +49,17 @@ SIM_THREADS = max(1, min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_g
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
 
 
-def _sim_pool() -> ThreadPoolExecutor:
+def sim_pool() -> ThreadPoolExecutor:
     """This process's pool of simulation threads (a forked child never reuses its parent's, whose threads it
     does not have)."""
     global _POOL
     if _POOL is None or _POOL[0] != os.getpid():
         _POOL = (os.getpid(), ThreadPoolExecutor(max_workers=SIM_THREADS, thread_name_prefix="lashscope-sim"))
     return _POOL[1]
+# the cheaper per-pass paths with the same numbers: multibody runs through sim.simulate.simulate_speed (resolver
+# speed and gap states only) and the offset profile's residuals compiled (shifted_chi2_compiled); False: the full
+# SimResult and the numpy profile (the benchmark's and the tests' reference)
+LEAN_SIM = True
 MARGIN_S = 0.03  # s: simulated beyond the window so the output can be shifted by the offset
 
 
@@ -279,8 +285,12 @@ def clusters(events: Sequence[DiagEvent]) -> list[list[int]]:
 
 def simulate_events(events: Sequence[DiagEvent], vehicle: Vehicle, gain: float,
                     effects: Sequence[EffectSetting] = (), model: str = "multibody",
-                    interp: str = "pchip") -> list[SimOut]:
+                    interp: str = "pchip", gaps: bool = True, threads: bool = True) -> list[SimOut]:
     """Simulator output of every event, one continuous run per cluster (:func:`clusters`).
+
+    ``gaps=False``: no gap states (``SimOut.gap_open`` None), for a caller that reads the speed only (a fit's
+    residuals); the speed is the same. ``threads=False``: the clusters one after the other in this thread (for a
+    caller that is itself on the simulation pool).
 
     ``vehicle`` already carries the vehicle effects; input effects act on the run's torque and
     output effects on its speed, so their own states carry through the cluster too. Each event
@@ -289,14 +299,18 @@ def simulate_events(events: Sequence[DiagEvent], vehicle: Vehicle, gain: float,
     outs: list[SimOut | None] = [None] * len(events)
     groups = clusters(events)
 
-    def run(group: list[int]) -> SimResult:
+    def run(group: list[int]) -> SimResult | SpeedRun:
         grid, raw = _run_torque(events, group, interp)
         tq = _gained(grid, raw, gain, effects)
+        if model == "multibody" and LEAN_SIM:  # the same run, without the outputs no caller here reads
+            return simulate_speed(vehicle, grid, tq, speed0_rpm=events[group[0]].speed0(), interp="linear",
+                                  output_dt=FINE_DT, gaps=gaps)
         return simulate(vehicle, grid, tq, model=model, speed0_rpm=events[group[0]].speed0(), interp="linear",
                         output_dt=FINE_DT)
 
     # the integrator releases the interpreter lock: clusters run side by side on the machine's cores
-    runs = list(_sim_pool().map(run, groups)) if SIM_THREADS > 1 and len(groups) > 1 else [run(g) for g in groups]
+    runs = (list(sim_pool().map(run, groups)) if threads and SIM_THREADS > 1 and len(groups) > 1
+            else [run(g) for g in groups])
     for group, res in zip(groups, runs, strict=True):
         t_out = np.asarray(res.t, dtype=np.float64)
         sp = np.asarray(res.motor_speed_rpm, dtype=np.float64)
@@ -341,11 +355,33 @@ def shifted_chi2(events: Sequence[DiagEvent], outs: Sequence[SimOut], offsets: F
     return total
 
 
+def shifted_chi2_compiled(events: Sequence[DiagEvent], outs: Sequence[SimOut], offsets: FloatArray) -> FloatArray:
+    """:func:`shifted_chi2` with each event's residuals from a compiled call (:mod:`.offset_kernel`): the same
+    residuals and the same numpy sums, so the same totals bit for bit; one buffer, reused while it is in cache,
+    instead of numpy's temporaries."""
+    if any(out.t.size == 0 for out in outs):  # numpy's own error
+        return shifted_chi2(events, outs, offsets)
+    k = offsets.size
+    grid = np.ascontiguousarray(offsets, dtype=np.float64)
+    buf = np.empty(k * max((ev.n for ev in events), default=0))
+    total = np.zeros(k)
+    for ev, out in zip(events, outs, strict=True):
+        r = buf[:k * ev.n].reshape(k, ev.n)
+        shifted_residuals(ev.speed_t, ev.speed_meas, out.t, out.speed, grid, r)
+        w = 1.0 / ev.var  # from here on shifted_chi2's own operations
+        if ev.pre.any():
+            wp = w[ev.pre]
+            r = r - (r[:, ev.pre] @ wp / wp.sum())[:, None]
+        total += (r * r) @ w
+    return total
+
+
 def best_offset(events: Sequence[DiagEvent], outs: Sequence[SimOut], bounds: tuple[float, float],
                 step: float = 0.0005) -> float:
-    """Offset (s) within ``bounds`` minimising the total weighted SSE: grid, then a parabola."""
+    """Offset (s) within ``bounds`` minimising the total weighted SSE: grid, then a parabola (the grid scored by
+    :func:`shifted_chi2_compiled`, or by the numpy :func:`shifted_chi2` when :data:`LEAN_SIM` is off)."""
     grid = np.arange(bounds[0], bounds[1] + step / 2, step)
-    chi = shifted_chi2(events, outs, grid)
+    chi = shifted_chi2_compiled(events, outs, grid) if LEAN_SIM else shifted_chi2(events, outs, grid)
     k = int(np.argmin(chi))
     if 0 < k < grid.size - 1:
         a, b, c = chi[k - 1], chi[k], chi[k + 1]

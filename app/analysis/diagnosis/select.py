@@ -30,6 +30,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import numpy.typing as npt
 
+from app.analysis.blas_threads import single_blas_thread
 from app.analysis.diagnosis.calibrate import Bounds, FitResult, fit
 from app.analysis.diagnosis.decide import (
     CandidateScore,
@@ -299,6 +300,7 @@ def run_diagnosis(
     return res
 
 
+@single_blas_thread()  # the fit's thousands of small BLAS calls would wake spinning workers (see the module)
 def _diagnose(
     events: Sequence[DiagEvent],
     noise: NoiseFloor,

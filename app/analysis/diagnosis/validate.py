@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from app.analysis.blas_threads import single_blas_thread
 from app.analysis.diagnosis.calibrate import Bounds, fit
 from app.analysis.diagnosis.decide import bootstrap_draws
 from app.analysis.diagnosis.forward import DiagEvent
@@ -137,6 +138,7 @@ def identified_ratios(result: DiagnosisResult) -> dict[str, float]:
     return dict(result.identification.ratios)
 
 
+@single_blas_thread()
 def validate_effects(effects: dict[str, dict[str, float]], signals: SignalSet, vehicle: Vehicle,
                      options: DiagnosisOptions | None = None, progress: Progress | None = None,
                      event_params: EventParams | None = None,
