@@ -167,8 +167,7 @@ def simulate(
     if what_if is not None:
         t_new, q_new, resampled = what_if.apply_torque(inp.t, inp.torque)
         inp = TorqueInput(t_new, q_new, inp.linear or resampled, inp.gaps)
-    if vehicle.motor.torque_gain != 1.0:  # the logged torque as the air-gap torque
-        inp = replace(inp, torque=inp.torque * vehicle.motor.torque_gain)
+    inp = _airgap(vehicle, inp)
     w0 = initial_speed(vehicle, speed0_rpm)
     if chain is None:
         return _simulate_two_inertia(vehicle, inp, w0, dt, output_dt)
@@ -194,6 +193,12 @@ def simulate(
         seat = seat_rail_acceleration(vehicle, chain, output_dt, res.vehicle_accel_ms2, raw.tau[:, -1])
         res = replace(res, seat_rail_accel_ms2=seat)
     return res
+
+
+def _airgap(vehicle: Vehicle, inp: TorqueInput) -> TorqueInput:
+    """The logged torque as the air-gap torque: times the motor's ``torque_gain`` (1: unchanged)."""
+    g = vehicle.motor.torque_gain
+    return inp if g == 1.0 else replace(inp, torque=inp.torque * g)
 
 
 def _run_multibody(vehicle: Vehicle, chain: ChainModel, inp: TorqueInput, t0: float, n_out: int, span: float,
@@ -244,7 +249,7 @@ def simulate_speed(
     ------
     InputSignalError, ParameterError, InstabilityError : as :func:`simulate`
     """
-    inp = prepare_input(t_s, torque_nm, interp)
+    inp = _airgap(vehicle, prepare_input(t_s, torque_nm, interp))
     t0, n_out = _grid(inp, output_dt)
     span = float(inp.t[-1]) - t0
     chain = build_chain(vehicle)

@@ -67,9 +67,14 @@ def _fast() -> None:
 
 
 @pytest.mark.parametrize("effects", [{}, {"speed_sensor": {"tau_s": 0.003, "delay_s": 0.004}},
-                                     {"tyre_slip": {"compliance_per_mn": 20.0, "relaxation_m": 0.2}}])
+                                     {"tyre_slip": {"compliance_per_mn": 20.0, "relaxation_m": 0.2}},
+                                     {"torque_gain": {}}])
 def test_simulate_speed_is_simulate_s_speed_and_gaps(effects: dict[str, dict[str, float]]) -> None:
-    v = apply_effects(load_vehicle("paper"), effects) if effects else load_vehicle("paper")
+    """... for a vehicle whose logged torque is not the air-gap torque too (an identified ``torque_gain``)."""
+    if "torque_gain" in effects:
+        v = load_vehicle("paper").with_changes({"motor.torque_gain": 0.85})
+    else:
+        v = apply_effects(load_vehicle("paper"), effects) if effects else load_vehicle("paper")
     t = np.arange(0.0, 3.0, 0.01)
     q = np.where(t < 1.0, -30.0, 90.0) + 5.0 * np.sin(7.0 * t)
     full = simulate(v, t, q, speed0_rpm=1500.0, interp="linear")
