@@ -76,9 +76,10 @@ PRACTICAL = {"stiffness": 0.04, "damping": 0.15, "mass": 0.03, "lash": 0.08}  # 
 # relative 90 % half-width of what the model form alone leaves uncertain: the simulator is not the car, and a fit
 # at a high signal-to-noise ratio is as tight as its statistics only within its own family. It grows with the
 # misfit the identified model leaves, x sqrt(residual / noise) (1 where the fit reaches the noise floor): a model
-# that cannot follow the log has biased parameters in proportion. Calibrated on the independent generator's
-# development sets (idev and idev2: 27 drives without an effect, 90 % intervals covering the truth in 100, 93, 96
-# and 90 % of them; docs/identify.md)
+# that cannot follow the log has biased parameters in proportion. (Parameters set from the model-free mode or the
+# rigid body of whole drives keep the plain floor: their intervals come from those estimates.) Calibrated on the
+# independent generator's development sets (idev and idev2: 27 drives without an effect, 90 % intervals covering
+# the truth in 100, 93, 96 and 90 % of them with the misfit on every parameter; docs/identify.md)
 MODEL_FORM = {"stiffness": 0.01, "damping": 0.02, "mass": 0.02, "lash": 0.02}
 # ... at ten or more speed samples per period of the first mode; a coarser log widens it in proportion (the torque
 # between its samples is reconstructed, and the mode's phase with it: on the generator's low-mode chain car logged
@@ -545,7 +546,8 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
                 stat = t * float(np.sqrt(max(cov_log[k, k], 0.0)))
                 at_bound = bool(f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or
                                 min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo))
-            half = float(np.hypot(stat, np.log1p(coarse * misfit * MODEL_FORM[q])))
+            # the misfit scales the floor of what the grey-box fit gave; a pin carries its own source's uncertainty
+            half = float(np.hypot(stat, np.log1p(coarse * (1.0 if q in pins else misfit) * MODEL_FORM[q])))
             r = ratios[q]
             r_lo, r_hi = r * np.exp(-half), r * np.exp(half)
             v = ph.value(q)
