@@ -108,10 +108,8 @@ def _settled(t: FloatArray, q: FloatArray) -> npt.NDArray[np.bool_]:
     traverse and the shuffle that follows have died out) and no step over :data:`STEADY_NM` in the last
     :data:`STEADY_S` (no twist building up)."""
     sign = np.where(q > REVERSAL_BAND_NM, 1, np.where(q < -REVERSAL_BAND_NM, -1, 0))
-    held = sign.copy()  # the last sign outside the band
-    for k in range(1, held.size):
-        if held[k] == 0:
-            held[k] = held[k - 1]
+    last = np.maximum.accumulate(np.where(sign != 0, np.arange(sign.size), 0))
+    held = sign[last]  # the last sign outside the band (0 before the first)
     flips = np.concatenate(([False], (held[1:] != held[:-1]) & (held[:-1] != 0)))
     last_flip = np.maximum.accumulate(np.where(flips, t, -np.inf))
     quiet = t - last_flip >= SETTLE_S
