@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -16,7 +16,7 @@ from sim.integrate import STATUS_OK, is_kernel_layout, run_chain_batch
 from sim.metrics import peak_to_valley, unloaded_time
 from sim.model import build_chain, deflections, quasi_static_full
 from sim.params import Vehicle
-from sim.simulate import RPM, _grid, _pair_events, choose_step, initial_speed
+from sim.simulate import RPM, _grid, _pair_events, airgap_input, choose_step, initial_speed
 
 F64 = NDArray[np.float64]
 EVENTS_PER_VARIANT = 2000
@@ -67,8 +67,7 @@ def simulate_batch(
     if any("motor.torque_gain" in v for v in variants):
         raise ParameterError("variants", [dict(v) for v in variants], "the torque gain is the vehicle's, one for all "
                              "variants: scale the torque instead")
-    if vehicle.motor.torque_gain != 1.0:  # the logged torque as the air-gap torque (as sim.simulate)
-        inp = replace(inp, torque=inp.torque * vehicle.motor.torque_gain)
+    inp = airgap_input(vehicle, inp)  # the logged torque as the air-gap torque, as sim.simulate
     chains = []
     for k, change in enumerate(variants):
         try:

@@ -167,7 +167,7 @@ def simulate(
     if what_if is not None:
         t_new, q_new, resampled = what_if.apply_torque(inp.t, inp.torque)
         inp = TorqueInput(t_new, q_new, inp.linear or resampled, inp.gaps)
-    inp = _airgap(vehicle, inp)
+    inp = airgap_input(vehicle, inp)
     w0 = initial_speed(vehicle, speed0_rpm)
     if chain is None:
         return _simulate_two_inertia(vehicle, inp, w0, dt, output_dt)
@@ -195,7 +195,7 @@ def simulate(
     return res
 
 
-def _airgap(vehicle: Vehicle, inp: TorqueInput) -> TorqueInput:
+def airgap_input(vehicle: Vehicle, inp: TorqueInput) -> TorqueInput:
     """The logged torque as the air-gap torque: times the motor's ``torque_gain`` (1: unchanged)."""
     g = vehicle.motor.torque_gain
     return inp if g == 1.0 else replace(inp, torque=inp.torque * g)
@@ -249,7 +249,7 @@ def simulate_speed(
     ------
     InputSignalError, ParameterError, InstabilityError : as :func:`simulate`
     """
-    inp = _airgap(vehicle, prepare_input(t_s, torque_nm, interp))
+    inp = airgap_input(vehicle, prepare_input(t_s, torque_nm, interp))
     t0, n_out = _grid(inp, output_dt)
     span = float(inp.t[-1]) - t0
     chain = build_chain(vehicle)
