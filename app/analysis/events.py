@@ -166,13 +166,12 @@ def brake_levels(signal: Signal, threshold: float) -> tuple[float, float]:
     return rest, rest + max(threshold, BRAKE_RANGE_SHARE * (top - rest))
 
 
-def _brake_onset(signals: SignalSet, t0: float, t1: float, threshold: float) -> tuple[float, str] | None:
-    """The first time in ``[t0, t1]`` a brake is applied (:func:`brake_levels`) and what says so (None: never)."""
+def _brake_onset(signals: SignalSet, levels: dict[str, tuple[float, float]], t0: float, t1: float
+                 ) -> tuple[float, str] | None:
+    """The first time in ``[t0, t1]`` a brake is applied and what says so (None: never); ``levels``: each brake
+    channel's :func:`brake_levels`, taken once per log."""
     first: tuple[float, str] | None = None
-    for name in sorted(signals):
-        if not name.startswith("brake"):
-            continue
-        rest, level = brake_levels(signals[name], threshold)
+    for name, (rest, level) in levels.items():
         w = signals[name].window(t0, t1)
         t = np.concatenate([[t0], w.t])
         vals = np.concatenate([signals[name].at([t0]), w.values])
@@ -240,6 +239,8 @@ def find_events(signals: SignalSet, params: EventParams | None = None, drive: Dr
             continue
         accepted.append((c, before, after))
 
+    brakes = {name: brake_levels(signals[name], p.brake_threshold) for name in sorted(signals)
+              if name.startswith("brake")}
     events: list[Event] = []
     for n, (c, before, after) in enumerate(accepted):
         kind = EventKind.TIP_IN if c.tip_in else EventKind.TIP_OUT
@@ -265,7 +266,7 @@ def find_events(signals: SignalSet, params: EventParams | None = None, drive: Dr
                 exclusion = exclusion or (
                     f"pedal does not corroborate the {kind.value}: {pb:.1f} % -> {pa:.1f} % "
                     f"(need a {p.min_pedal_step_pct:g} % step)")
-        onset = _brake_onset(signals, t_start, t_end, p.brake_threshold)
+        onset = _brake_onset(signals, brakes, t_start, t_end)
         if onset is not None and onset[0] - c.t_cross >= p.min_post_s:
             t_end = onset[0]  # braked after the reversal's response: the window ends where the brakes act
         elif onset is not None:
