@@ -184,7 +184,7 @@ class Identification:
         return {
             "params": {k: p.to_dict() for k, p in self.params.items()},
             "named": self.named,
-            "torque_gain_written": self.written_vehicle.motor.torque_gain if self.written_vehicle is not self.vehicle
+            "torque_gain_written": self.params["torque_gain"].value if gain_moved(self.params["torque_gain"])
             else None,
             "not_identified": self.not_identified,
             "nuisance": {k: round(v, 6) for k, v in self.nuisance.items()},
@@ -613,6 +613,22 @@ RIGID_FORM = 0.08  # model-form floor of the whole drives' figure: on the indepe
 RIGID_GAIN_FREE = 1e-3  # the torque gain's freedom (relative) once the mass comes from the rigid body
 
 
+def _rigid_span(rigid: RigidBody) -> float | None:
+    """The whole drives' figure's 90 % half-width on the log scale where it is clear enough to set the mass (within
+    :data:`MAX_RIGID_SPAN`); None where there is no figure or it is wider."""
+    if rigid.ci is None:
+        return None
+    span = 0.5 * float(np.log(rigid.ci[1] / rigid.ci[0]))
+    return span if span <= np.log1p(MAX_RIGID_SPAN) else None
+
+
+def _rigid_found(rigid: RigidBody, ratio: float, span: float, why: str) -> tuple[float, float, str]:
+    """The mass scale from the rigid body, its 90 % half-width (the figure's and :data:`RIGID_FORM`), and why."""
+    return (float(ratio), float(np.hypot(span, np.log1p(RIGID_FORM))),
+            why + f" Mass {ratio:.2f}x with the file's torque gain (or the file's mass with a torque reading "
+            f"{rigid.ratio or 1.0:.2f}x high: the logs cannot tell these apart)")
+
+
 def rigid_pin(vehicle: Vehicle, names: Sequence[str], joint: FitResult, rigid: RigidBody
               ) -> tuple[float, float, str] | None:
     """The mass scale the whole drives' rigid-body response gives, its 90 % half-width and why, where the event
@@ -624,24 +640,20 @@ def rigid_pin(vehicle: Vehicle, names: Sequence[str], joint: FitResult, rigid: R
     :data:`RIGID_APART` from the whole drives' figure, and outside its interval, the mass is set from that figure
     with the torque gain held at the file's (the drives cannot tell a heavier car from a torque reading high: the
     report says so). ``vehicle`` is the one the joint fit ran on (the mode's stiffness and damping applied)."""
-    if "mass" not in names or rigid.inertia_kgm2 is None or rigid.ci is None:
+    span = _rigid_span(rigid)
+    if "mass" not in names or rigid.inertia_kgm2 is None or rigid.ci is None or span is None:
         return None
     j, (lo, hi) = rigid.inertia_kgm2, rigid.ci
-    span = 0.5 * float(np.log(hi / lo))
-    mass_id = BASE_EFFECTS["mass"].id
-    r_fit = ratio_of("mass", joint.values[mass_id][BASE_EFFECTS["mass"].params[0].name])
+    r_fit = ratio_of("mass", joint.values[BASE_EFFECTS["mass"].id][BASE_EFFECTS["mass"].params[0].name])
     gain = joint.nuisance.gain * vehicle.motor.torque_gain
     j_fit = rigid_inertia(with_base(vehicle, {"mass": r_fit})) / gain
-    if span > np.log1p(MAX_RIGID_SPAN) or lo <= j_fit <= hi or abs(np.log(j_fit / j)) <= np.log1p(RIGID_APART):
-        return None
     ratio = _mass_for(vehicle, j)
-    if ratio is None:
+    if lo <= j_fit <= hi or abs(np.log(j_fit / j)) <= np.log1p(RIGID_APART) or ratio is None:
         return None
-    why = (f"mass from the rigid-body response of the whole drives ({rigid.driving_s:.0f} s of driving): "
-           f"{j:.4g} kg m^2 at the motor per logged N m [{lo:.4g}, {hi:.4g}]; the event windows' mass {r_fit:.2f}x "
-           f"with torque gain {gain:.3f} put it at {j_fit:.4g}. Mass {ratio:.2f}x with the file's torque gain "
-           f"(or the file's mass with a torque reading {ratio:.2f}x high: the logs cannot tell these apart)")
-    return float(ratio), float(np.hypot(span, np.log1p(RIGID_FORM))), why
+    return _rigid_found(rigid, ratio, span, f"mass from the rigid-body response of the whole drives "
+                        f"({rigid.driving_s:.0f} s of driving): {j:.4g} kg m^2 at the motor per logged N m "
+                        f"[{lo:.4g}, {hi:.4g}]; the event windows' mass {r_fit:.2f}x with torque gain {gain:.3f} "
+                        f"put it at {j_fit:.4g}.")
 
 
 def _rigid_mass(vehicle: Vehicle, pins: Mapping[str, tuple[float, float]], found: tuple[float, float, str],
@@ -660,18 +672,17 @@ def rigid_fill(vehicle: Vehicle, rigid: RigidBody) -> tuple[float, float, str] |
     """The mass scale from the whole drives' rigid body where the event windows cannot pin the mass (too few or
     too similar events), the drives' figure is clear (its interval within :data:`MAX_RIGID_SPAN`) and off the file's;
     None otherwise. Its 90 % half-width and why, as :func:`rigid_pin`."""
-    if rigid.inertia_kgm2 is None or rigid.ci is None or not rigid.off_the_file:
+    span = _rigid_span(rigid)
+    if rigid.inertia_kgm2 is None or rigid.ci is None or not rigid.off_the_file or span is None:
         return None
     j, (lo, hi) = rigid.inertia_kgm2, rigid.ci
-    span = 0.5 * float(np.log(hi / lo))
     ratio = _mass_for(vehicle, j)
-    if span > np.log1p(MAX_RIGID_SPAN) or ratio is None:
+    if ratio is None:
         return None
-    why = (f"mass from the rigid-body response of the whole drives ({rigid.driving_s:.0f} s of driving), which the "
-           f"event windows do not pin down: {j:.4g} kg m^2 at the motor per logged N m [{lo:.4g}, {hi:.4g}], the "
-           f"file's {rigid.file_inertia_kgm2:.4g}. Mass {ratio:.2f}x with the file's torque gain (or the file's mass "
-           f"with a torque reading {rigid.ratio or 1.0:.2f}x high: the logs cannot tell these apart)")
-    return ratio, float(np.hypot(span, np.log1p(RIGID_FORM))), why
+    return _rigid_found(rigid, ratio, span, f"mass from the rigid-body response of the whole drives "
+                        f"({rigid.driving_s:.0f} s of driving), which the event windows do not pin down: {j:.4g} kg "
+                        f"m^2 at the motor per logged N m [{lo:.4g}, {hi:.4g}], the file's "
+                        f"{rigid.file_inertia_kgm2:.4g}.")
 
 
 def _mass_for(vehicle: Vehicle, j: float) -> float | None:
