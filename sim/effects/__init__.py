@@ -1,26 +1,23 @@
 """Library of candidate unmodelled effects, one module each (see :mod:`sim.effects.base`).
 
-``EFFECTS`` maps an effect id to its :class:`~sim.effects.base.Effect`; :func:`get_effect` raises
-an error that lists the known ids. :func:`apply_effects` returns a vehicle with effect values set,
-which is how a diagnosed effect becomes a new vehicle version.
+Every module of this package except :mod:`sim.effects.base` defines ``EFFECT``, an
+:class:`~sim.effects.base.Effect` whose ``id`` is the module's name. The registry imports them all
+when the package is first imported and orders them by ``(order, id)``: a new effect is one new
+module here plus its test (docs/architecture.md, "Where an extension goes"). ``EFFECTS`` maps an
+effect id to its :class:`~sim.effects.base.Effect`; :func:`get_effect` raises an error that lists
+the known ids. :func:`apply_effects` returns a vehicle with effect values set, which is how a
+diagnosed effect becomes a new vehicle version.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+import importlib
+import pkgutil
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 from sim import params
-from sim.effects import (
-    backlash,
-    drag,
-    housing_mount,
-    progressive_stiffness,
-    speed_sensor,
-    torque_lag,
-    tyre_slip,
-)
 from sim.effects.base import Effect, ParamSpec
 from sim.errors import ParameterError
 
@@ -30,19 +27,32 @@ def _model_has(section: str) -> bool:
     return section in {f.name for f in dataclasses.fields(params.Effects)}
 
 
-EFFECTS: dict[str, Effect] = {
-    e.id: e
-    for e in (
-        backlash.EFFECT,
-        housing_mount.EFFECT,
-        torque_lag.EFFECT,
-        speed_sensor.EFFECT,
-        drag.EFFECT,
-        progressive_stiffness.EFFECT,
-        tyre_slip.EFFECT,
-    )
-    if e.id not in ("progressive_stiffness", "tyre_slip") or _model_has(e.id)
-}
+# effects that act through an ``effects.<id>`` section of the vehicle description, listed only when the
+# simulator has that section
+_MODEL_HOOKS = ("progressive_stiffness", "tyre_slip")
+
+
+def discover(package: str = __name__, path: Iterable[str] | None = None) -> dict[str, Effect]:
+    """The effects defined by the modules of ``package`` (its ``path``), by id in ``(order, id)`` order.
+
+    A module that defines no ``EFFECT``, or one whose id is not the module's name, is a ``TypeError``
+    naming the file: a library entry is never skipped silently.
+    """
+    found: list[Effect] = []
+    for info in pkgutil.iter_modules(list(path) if path is not None else __path__):
+        if info.name == "base" or info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"{package}.{info.name}")
+        effect = getattr(module, "EFFECT", None)
+        if not isinstance(effect, Effect) or effect.id != info.name:
+            raise TypeError(f"{package.replace('.', '/')}/{info.name}.py must define EFFECT, an Effect with id "
+                            f"{info.name!r}")
+        found.append(effect)
+    found.sort(key=lambda e: (e.order, e.id))
+    return {e.id: e for e in found if e.id not in _MODEL_HOOKS or _model_has(e.id)}
+
+
+EFFECTS: dict[str, Effect] = discover()
 
 
 def get_effect(effect_id: str) -> Effect:
@@ -76,4 +86,4 @@ def applicable_effects(vehicle: Any) -> dict[str, str]:
     return {eid: e.inapplicable(vehicle) for eid, e in EFFECTS.items()}
 
 
-__all__ = ["EFFECTS", "Effect", "ParamSpec", "applicable_effects", "apply_effects", "get_effect"]
+__all__ = ["EFFECTS", "Effect", "ParamSpec", "applicable_effects", "apply_effects", "discover", "get_effect"]

@@ -42,4 +42,5 @@ EFFECT = Effect(
         ParamSpec("halfshaft_scale", "-", 0.25, 2.0, 1.0, "half-shaft gaps x nominal"),
     ),
     vehicle_change=_changes,
+    order=10,
 )

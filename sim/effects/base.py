@@ -85,6 +85,8 @@ class Effect:
     applies : ``f(vehicle) -> reason`` ("" when the effect exists on that vehicle), or None (always).
         An effect that does not apply changes nothing (:meth:`apply` returns the vehicle as it is),
         so a fit over it finds nothing; callers should skip it and show the reason.
+    order : its place among the candidates (reports, the order of the fits): the registry
+        (:mod:`sim.effects`) sorts by ``(order, id)``.
     """
 
     id: str
@@ -96,6 +98,7 @@ class Effect:
     model: str = "any"
     notes: str = ""
     applies: Applicability | None = None
+    order: int = 1000
     _names: tuple[str, ...] = field(init=False, repr=False, default=())
 
     def __post_init__(self) -> None:

@@ -31,4 +31,5 @@ EFFECT = Effect(
         ParamSpec("viscous_nms", "N m s/rad", 0.0, 0.02, 0.0, "viscous drag coefficient at the rotor"),
     ),
     vehicle_change=_changes,
+    order=50,
 )

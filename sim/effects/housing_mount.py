@@ -43,4 +43,5 @@ EFFECT = Effect(
     vehicle_change=_changes,
     model="multibody",
     applies=_applies,
+    order=20,
 )

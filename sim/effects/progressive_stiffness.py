@@ -50,4 +50,5 @@ EFFECT = Effect(
     ),
     vehicle_change=_changes,
     model="multibody",
+    order=60,
 )

@@ -32,4 +32,5 @@ EFFECT = Effect(
         ParamSpec("delay_s", "s", 0.0, 0.010, 0.0, "reporting delay"),
     ),
     vehicle_change=_changes,
+    order=40,
 )

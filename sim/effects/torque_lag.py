@@ -30,4 +30,5 @@ EFFECT = Effect(
         ParamSpec("delay_s", "s", 0.0, 0.020, 0.0, "transport delay of the air-gap torque"),
     ),
     vehicle_change=_changes,
+    order=30,
 )

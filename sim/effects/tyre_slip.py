@@ -49,4 +49,5 @@ EFFECT = Effect(
     vehicle_change=_changes,
     model="multibody",
     applies=_applies,
+    order=70,
 )
