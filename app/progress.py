@@ -32,3 +32,27 @@ def within(progress: Progress, start: float, span: float, stage: str | None = No
         progress(start + span * fraction, stage if stage is not None else name)
 
     return report
+
+
+ETA_MIN_FRACTION = 0.05  # below this share done, a straight-line estimate of the time left means nothing
+ETA_MIN_ELAPSED_S = 2.0  # ... nor after less than this long
+
+
+def eta_seconds(fraction: float, elapsed_s: float) -> float | None:
+    """Seconds left at the pace so far (``elapsed * (1 - f) / f``), or None while too little is done to say.
+
+    A straight line through the work done: the stages of a diagnosis or an identification are not equally
+    long, so the figure is a guide that firms up as the run goes on (the command line and the REST job
+    status show it as "about ... left").
+    """
+    if not (ETA_MIN_FRACTION <= fraction < 1.0) or not elapsed_s >= ETA_MIN_ELAPSED_S:
+        return None
+    return float(elapsed_s * (1.0 - fraction) / fraction)
+
+
+def eta_text(fraction: float, elapsed_s: float) -> str:
+    """``", about 40 s left"`` (minutes from 120 s on), or "" while :func:`eta_seconds` has no figure."""
+    eta = eta_seconds(fraction, elapsed_s)
+    if eta is None:
+        return ""
+    return f", about {eta:.0f} s left" if eta < 120.0 else f", about {eta / 60.0:.0f} min left"

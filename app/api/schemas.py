@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import typing
 from dataclasses import fields as dc_fields
+from datetime import UTC, datetime
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
@@ -11,7 +12,8 @@ from pydantic import BaseModel, ConfigDict, Field, create_model
 from app.analysis.events import Event
 from app.analysis.metrics import METRIC_NAMES, RippleMetrics
 from app.api.tables import EVENT_COLUMNS
-from app.storage.records import AnalysisRecord, JobRecord, LogRecord, VehicleRecord
+from app.progress import eta_seconds
+from app.storage.records import AnalysisRecord, JobRecord, JobStatus, LogRecord, VehicleRecord
 
 
 class ErrorOut(BaseModel):
@@ -68,6 +70,22 @@ class VehicleOut(BaseModel):
                           "signal_map": r.signal_map_path.name}, unchanged=unchanged)
 
 
+def job_timing(j: JobRecord, now: datetime | None = None) -> dict[str, float | None]:
+    """``elapsed_s`` since a running job started and ``eta_s``, the seconds left at its pace so far
+    (:func:`app.progress.eta_seconds`); both None unless the job is running (``eta_s`` also early on)."""
+    if j.status is not JobStatus.RUNNING or not j.started_at:
+        return {"elapsed_s": None, "eta_s": None}
+    try:
+        started = datetime.fromisoformat(j.started_at)
+    except ValueError:
+        return {"elapsed_s": None, "eta_s": None}
+    if started.tzinfo is None:
+        started = started.replace(tzinfo=UTC)
+    elapsed = max(((now or datetime.now(UTC)) - started).total_seconds(), 0.0)
+    eta = eta_seconds(j.progress, elapsed)
+    return {"elapsed_s": round(elapsed, 1), "eta_s": None if eta is None else round(eta, 1)}
+
+
 class JobOut(BaseModel):
     id: str
     status: str
@@ -78,12 +96,16 @@ class JobOut(BaseModel):
     started_at: str | None
     finished_at: str | None
     error: ErrorOut | None
+    elapsed_s: float | None = Field(None, description="seconds since a running job started")
+    eta_s: float | None = Field(None, description="seconds a running job has left at its pace so far (a guide; "
+                                "None early on)")
 
     @classmethod
     def of(cls, j: JobRecord) -> JobOut:
         err = ErrorOut(detail=j.error_detail or "", code=j.error_code) if j.error_code else None
         return cls(id=j.id, status=j.status.value, progress=j.progress, stage=j.stage, attempts=j.attempts,
-                   created_at=j.created_at, started_at=j.started_at, finished_at=j.finished_at, error=err)
+                   created_at=j.created_at, started_at=j.started_at, finished_at=j.finished_at, error=err,
+                   **job_timing(j))
 
 
 class AnalysisCreate(BaseModel):
@@ -478,6 +500,8 @@ class JobStateOut(BaseModel):
     stage: str = ""
     job_id: str | None = None
     error: ErrorOut | None = None
+    elapsed_s: float | None = None  # while running: seconds since it started (job_timing)
+    eta_s: float | None = None  # while running: seconds left at its pace so far, None early on
 
 
 class GapSensitivityJobOut(BaseModel):
@@ -517,6 +541,8 @@ class DiagnosisOut(_Open):
     status: str
     progress: float = 0.0
     stage: str = ""
+    elapsed_s: float | None = None  # while running: seconds since it started
+    eta_s: float | None = None  # while running: seconds left at its pace so far, None early on
     plots: list[str] = Field(default_factory=list)
     report: DiagnosisReportOut | None = None
     validation: DiagnosisValidationOut | None = None

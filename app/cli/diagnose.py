@@ -16,6 +16,7 @@ from typing import Any
 
 from app.cli.report import identified_param, read_lines
 from app.cli.vehicle_args import add_log_and_vehicle, event_params, vehicle_inputs
+from app.progress import eta_text
 
 
 def register(sub: Any) -> None:
@@ -51,8 +52,9 @@ def _progress(quiet: bool) -> Any:
 
     def say(fraction: float, message: str) -> None:
         if not quiet:
-            print(f"[{100 * fraction:3.0f} % {time.perf_counter() - start:5.1f} s] {message}", file=sys.stderr,
-                  flush=True)
+            elapsed = time.perf_counter() - start
+            print(f"[{100 * fraction:3.0f} % {elapsed:5.1f} s{eta_text(fraction, elapsed)}] {message}",
+                  file=sys.stderr, flush=True)
 
     return say
 

@@ -20,6 +20,7 @@ from app.api.schemas import (
     JobStateOut,
     MetricsOut,
     ToleranceOut,
+    job_timing,
     unit_of,
 )
 from app.api.tables import events_csv, metrics_csv
@@ -205,7 +206,8 @@ def job_state(job: JobRecord | None) -> JobStateOut:
         return JobStateOut(status="not_started")
     err = ErrorOut(code=job.error_code or "job_failed", detail=job.error_detail or "") \
         if job.status is JobStatus.FAILED else None
-    return JobStateOut(status=job.status.value, progress=job.progress, stage=job.stage, job_id=job.id, error=err)
+    return JobStateOut(status=job.status.value, progress=job.progress, stage=job.stage, job_id=job.id, error=err,
+                       **job_timing(job))
 
 
 def _raise_failed(analysis_id: str, job: JobRecord) -> None:

@@ -29,7 +29,7 @@ from pydantic import BaseModel, Field
 
 from app.api.deps import RunnerDep, SettingsDep, StoreDep
 from app.api.routes.analyses import room_for_a_job
-from app.api.schemas import ERRORS, AppliedOut, DiagnosisChartsOut, DiagnosisOut
+from app.api.schemas import ERRORS, AppliedOut, DiagnosisChartsOut, DiagnosisOut, job_timing
 from app.diagnosis_decision import base_ratios, chosen
 from app.errors import ConflictError, NotFoundError
 from app.identify.base import with_base
@@ -85,7 +85,8 @@ def _job_state(store: Store, doc: dict[str, Any]) -> dict[str, Any]:
         job = store.get_job(job_id)
     except NotFoundError:
         return {**doc, "status": "failed", "error": {"code": "interrupted", "detail": "its job is gone"}}
-    doc.update(status=job.status.value, progress=job.progress, stage=job.stage, attempts=job.attempts)
+    doc.update(status=job.status.value, progress=job.progress, stage=job.stage, attempts=job.attempts,
+               **job_timing(job))
     if job.status is JobStatus.FAILED:
         doc["error"] = {"code": job.error_code, "detail": job.error_detail}
     return doc

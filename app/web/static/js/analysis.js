@@ -6,7 +6,7 @@
 import { answer, api, download, saveBlob } from "./api.js";
 import { chartPng, COLORS, extraColor, holdOnto, seriesData, speedChart, valueAt } from "./chart.js";
 import { eventOverlays, eventsTable, metricsTable } from "./events.js";
-import { badge, errorBox, fmt, h, logStart, progressBar, sleep, stamp, utc } from "./util.js";
+import { badge, errorBox, etaText, fmt, h, logStart, progressBar, sleep, stamp, utc } from "./util.js";
 
 const MAX_POINTS_CAP = 4000;
 
@@ -54,7 +54,7 @@ export async function render(main, id, extra = "") {
       break;
     }
     head.replaceChildren(h("p", {}, badge(rec.status), ` ${rec.job.stage}`),
-      progressBar(rec.progress, `${rec.job.stage}: ${Math.round(100 * rec.progress)} %`));
+      progressBar(rec.progress, `${rec.job.stage}: ${Math.round(100 * rec.progress)} %${etaText(rec.job.eta_s)}`));
     await sleep(1000);
   }
   if (rec.status === "failed") {

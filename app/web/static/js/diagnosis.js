@@ -8,7 +8,7 @@ import { api } from "./api.js";
 import { lineChart } from "./chart.js";
 import { paramTable } from "./identify.js";
 import { barChart, intervalChart } from "./plots.js";
-import { badge, errorBox, fmt, h, jobError, progressBar, ratioWords, sleep } from "./util.js";
+import { badge, errorBox, etaText, fmt, h, jobError, progressBar, ratioWords, sleep } from "./util.js";
 
 export const DIAG_COLORS = { measured: "#111111", baseline: "#1f77b4", fitted: "#d62728", validation: "#7b2fbe" };
 
@@ -43,7 +43,7 @@ export async function render(main, id) {
     doc = await api(`/diagnoses/${id}`, { signal: ctrl.signal });
     if (!["queued", "running"].includes(doc.status) || ctrl.signal.aborted) break;
     head.replaceChildren(h("p", {}, badge(doc.status), ` ${doc.stage}`),
-      progressBar(doc.progress, `${doc.stage}: ${Math.round(100 * doc.progress)} %`));
+      progressBar(doc.progress, `${doc.stage}: ${Math.round(100 * doc.progress)} %${etaText(doc.eta_s)}`));
     await sleep(1500);
   }
   if (doc.status !== "done") {

@@ -3,7 +3,7 @@
 // (in words, as a table and as ratios to the file with their intervals), the model-free first mode, the
 // withheld drive's tracking before -> after, the identified vehicle file and "apply as a new version".
 import { api, download } from "./api.js";
-import { badge, errorBox, fmt, h, jobError, progressBar, ratioWords, sleep, svg, utc } from "./util.js";
+import { badge, errorBox, etaText, fmt, h, jobError, progressBar, ratioWords, sleep, svg, utc } from "./util.js";
 
 const PARAMS = {
   stiffness: "torsional stiffness at the motor",
@@ -106,7 +106,7 @@ async function result(main, id) {
       if (!head.isConnected) return null; // the user went to another page while this one polled
       if (!["queued", "running"].includes(doc.status) || ctrl.signal.aborted) break;
       head.replaceChildren(h("p", {}, badge(doc.status), ` ${doc.vehicle} v${doc.vehicle_version}: ${doc.stage}`),
-        progressBar(doc.progress, `${doc.stage || doc.status}: ${Math.round(100 * doc.progress)} %`));
+        progressBar(doc.progress, `${doc.stage || doc.status}: ${Math.round(100 * doc.progress)} %${etaText(doc.job && doc.job.eta_s)}`));
       await sleep(1500);
     }
   } catch (err) {

@@ -90,6 +90,12 @@ export function progressBar(fraction, label) {
     "aria-valuemax": 100 }, h("div", { class: "bar", style: `width:${pct}%` }), h("span", {}, label || `${pct} %`));
 }
 
+// " · about 40 s left" from a running job's eta_s (the REST status; null early on), "" without one
+export function etaText(eta) {
+  if (eta === null || eta === undefined || !Number.isFinite(eta)) return "";
+  return eta < 120 ? ` · about ${Math.round(eta)} s left` : ` · about ${Math.round(eta / 60)} min left`;
+}
+
 export const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 // A table whose columns sort on a click; columns: [{key, label, value(row), render(row), num, cls, group}].
