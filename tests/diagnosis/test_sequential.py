@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals
 from app.analysis.diagnosis.split import make_split, restricted, spread_order, stage_sizes, stratified_order
 from app.errors import InputError
+from app.progress import ETA_MIN_FRACTION
 from app.signals import SignalSet
 from tests.diagnosis.conftest import paper
 from tests.diagnosis.test_split import Ev
@@ -76,9 +78,10 @@ def test_staged_diagnosis_stops_when_two_stages_agree_and_matches_all_events(
     one-stage diagnosis names."""
     sig = signals_for("torque_lag", (("tau_s", 0.015), ("delay_s", 0.0)), 21, 120.0)
     base = dict(candidates=("torque_lag", "drag"), seed=2, max_pairs=0)
-    said: list[str] = []
+    reports: list[tuple[float, str]] = []
     staged = diagnose_signals(sig, paper(), DiagnosisOptions(**base, stage_events=4),  # type: ignore[arg-type]
-                              progress=lambda f, m: said.append(m))
+                              progress=lambda f, m: reports.append((f, m)))
+    said = [m for _, m in reports]
     whole = diagnose_signals(sig, paper(), DiagnosisOptions(**base, sequential=False))  # type: ignore[arg-type]
     assert whole.decision.status == "explained" and whole.decision.top == ("torque_lag",)
     assert (staged.decision.status, staged.decision.top) == (whole.decision.status, whole.decision.top)
@@ -88,7 +91,11 @@ def test_staged_diagnosis_stops_when_two_stages_agree_and_matches_all_events(
     assert left and len(staged.events) + len(left) == len(whole.events)
     assert len(staged.split.calibration) < len(whole.split.calibration)
     assert any(m.startswith("stage 2 (8 events per side)") for m in said)
-    assert any(m.endswith("s left)") for m in said)
+    # the fractions only grow and end at 1, so the time left the command line and the job status derive from
+    # them (app.progress.eta_seconds) is the pace of the whole staged run
+    fractions = [f for f, _ in reports]
+    assert all(0.0 <= a <= b <= 1.0 for a, b in itertools.pairwise(fractions))
+    assert fractions[-1] == 1.0 and sum(ETA_MIN_FRACTION <= f < 1.0 for f in fractions) >= 5
 
 
 def test_clusters_simulated_side_by_side_give_the_serial_result(signals_for: Callable[..., SignalSet],

@@ -222,16 +222,6 @@ def _refit_first(vehicle: Vehicle, cal: Sequence[DiagEvent], split: Split, first
     return again if again.chi2 < single.chi2 else None
 
 
-def with_eta(say: Progress, t0: float) -> Progress:
-    """``say`` with the time left appended, from the elapsed time and the fraction done (once 5 % is done)."""
-    def out(frac: float, msg: str) -> None:
-        spent = time.perf_counter() - t0
-        if 0.05 <= frac < 1.0 and spent > 0.0:
-            msg = f"{msg} (about {max(spent / frac - spent, 0.0):.0f} s left)"
-        say(frac, msg)
-    return out
-
-
 def run_diagnosis(
     events: Sequence[DiagEvent],
     noise: NoiseFloor,
@@ -256,12 +246,12 @@ def run_diagnosis(
     noise : model-free noise floor of the speed channel.
     vehicle : the diagnosed vehicle (its effects as the file says).
     options : candidate subset, split seed, model, decision rules.
-    progress : ``progress(fraction in [0, 1], message)``; messages carry the time left.
+    progress : ``progress(fraction in [0, 1], message)`` (the time left is the caller's: ``app.progress.eta_seconds``).
     skipped : events left out upstream, reported as such.
     """
     opts = options or DiagnosisOptions()
     t0 = time.perf_counter()
-    say = with_eta(progress or (lambda f, m: None), t0)
+    say = progress or (lambda f, m: None)
     split = make_split(events, opts.seed)
     cal = stratified_order(split.calibration_events(events))
     ho = stratified_order(split.heldout_events(events))
