@@ -14,7 +14,7 @@ from sim.errors import InstabilityError, ParameterError
 from sim.inputs import prepare_input
 from sim.integrate import STATUS_OK, is_kernel_layout, run_chain_batch
 from sim.metrics import peak_to_valley, unloaded_time
-from sim.model import build_chain, deflections, quasi_static_full
+from sim.model import deflections, quasi_static_full
 from sim.params import Vehicle
 from sim.simulate import RPM, _grid, _pair_events, airgap_input, choose_step, initial_speed
 
@@ -71,7 +71,7 @@ def simulate_batch(
     chains = []
     for k, change in enumerate(variants):
         try:
-            chains.append(build_chain(vehicle.with_changes(change)))
+            chains.append((vehicle.with_changes(change) if change else vehicle).compiled)
         except ParameterError as exc:
             raise ParameterError(f"variants[{k}].{exc.field}", exc.value, exc.reason) from exc
     ref = chains[0]
@@ -235,7 +235,7 @@ def _check_analysis_budget(vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLik
     inp = prepare_input(t_s, torque_nm, interp)
     t0, n_out = _grid(inp, output_dt)
     check_output(float(inp.t[-1]) - t0, output_dt, n_out, 32 * runs)  # every variant's speeds, kept for metrics
-    chain = build_chain(vehicle)
+    chain = vehicle.compiled
     _, omega0, _ = quasi_static_full(chain, float(inp.torque[0]), initial_speed(vehicle, speed0_rpm))
     step, sub = choose_step(chain, output_dt, torque_max=float(np.max(np.abs(inp.torque))),
                             omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
