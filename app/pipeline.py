@@ -62,7 +62,6 @@ from app.vehicle_check import steps_per_second, trial_vehicle
 from sim import SimError, SimResult, Vehicle, WhatIf, load_vehicle, simulate
 from sim.layout import shaft_gap
 from sim.metrics import unloaded_time
-from sim.model import build_chain
 from sim.paper import run_case, sensitivities, sensitivity_unit
 
 REQUIRED = (TORQUE, SPEED)
@@ -253,7 +252,7 @@ def free_rotor_inertia(vehicle: Vehicle) -> float:
     ratio to the rotor. With the reducer gaps open as well only the rotor moves freely; the
     gap-open estimate fits a rescaling of this inertia (``MetricParams.lash.inertia_range``).
     """
-    chain = build_chain(vehicle)
+    chain = vehicle.compiled
     last = int(chain.ca[chain.gap_coupling[shaft_gap(vehicle)]])
     return float(sum(chain.inertia[b] * chain.speed_ratio[b] ** 2 for b in range(last + 1)))
 

@@ -16,7 +16,6 @@ import tomllib
 from typing import Any
 
 from sim import ParameterError, SimError, Vehicle, dump_toml, load_vehicle
-from sim.model import build_chain
 from sim.simulate import choose_step
 
 MAX_STEPS_PER_S = 1_000_000  # the paper preset needs 15 000; a 30-min log at this cost is ~2e9 steps
@@ -78,7 +77,7 @@ def suspect_fields(vehicle: Vehicle) -> list[tuple[str, float, float]]:
 
 def steps_per_second(vehicle: Vehicle) -> float:
     """Integrator steps one simulated second of the multibody model needs at a 1 ms output grid."""
-    _, sub = choose_step(build_chain(vehicle), 0.001, torque_max=TRIAL_TORQUE_NM)
+    _, sub = choose_step(vehicle.compiled, 0.001, torque_max=TRIAL_TORQUE_NM)
     return 1000.0 * sub
 
 

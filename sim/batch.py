@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
@@ -14,7 +14,7 @@ from sim.errors import InstabilityError, ParameterError
 from sim.inputs import prepare_input
 from sim.integrate import STATUS_OK, is_kernel_layout, run_chain_batch
 from sim.metrics import peak_to_valley, unloaded_time
-from sim.model import build_chain, deflections, quasi_static_full
+from sim.model import ChainModel, deflections, quasi_static_full
 from sim.params import Vehicle
 from sim.simulate import RPM, _grid, _pair_events, airgap_input, choose_step, initial_speed
 
@@ -61,6 +61,18 @@ def simulate_batch(
     ParameterError : an invalid change, or a variant that changes the topology
     InstabilityError : a variant diverged (its index is named)
     """
+    return _simulate_batch(vehicle, variants, lambda k: (vehicle.with_changes(variants[k]) if variants[k]
+                                                         else vehicle).compiled,
+                           t_s, torque_nm, speed0_rpm=speed0_rpm, interp=interp, output_dt=output_dt,
+                           body_speed=body_speed)
+
+
+def _simulate_batch(
+    vehicle: Vehicle, variants: Sequence[Mapping[str, Any]], chain_of: Callable[[int], ChainModel], t_s: ArrayLike,
+    torque_nm: ArrayLike, *, speed0_rpm: float | None, interp: Literal["hold", "linear"], output_dt: float,
+    body_speed: bool,
+) -> BatchResult:
+    """:func:`simulate_batch` with the compiled chain of variant ``k`` from ``chain_of(k)``, asked in order."""
     inp = prepare_input(t_s, torque_nm, interp)
     if not variants:
         raise ParameterError("variants", list(variants), "need at least one variant")
@@ -69,9 +81,9 @@ def simulate_batch(
                              "variants: scale the torque instead")
     inp = airgap_input(vehicle, inp)  # the logged torque as the air-gap torque, as sim.simulate
     chains = []
-    for k, change in enumerate(variants):
+    for k in range(len(variants)):
         try:
-            chains.append(build_chain(vehicle.with_changes(change)))
+            chains.append(chain_of(k))
         except ParameterError as exc:
             raise ParameterError(f"variants[{k}].{exc.field}", exc.value, exc.reason) from exc
     ref = chains[0]
@@ -170,26 +182,48 @@ ProgressFn = Callable[[int, int], None]
 TOLERANCE_CHUNK = 100  # variants per compiled batch: progress granularity and bounded buffers
 
 
-def tolerance_analysis(
-    vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLike, *, n: int = 1000, seed: int = 0,
-    window: tuple[float, float] | None = None, distribution: Literal["uniform", "normal"] = "uniform",
-    speed0_rpm: float | None = None, interp: Literal["hold", "linear"] = "hold", output_dt: float = 0.001,
-    progress: ProgressFn | None = None, body_speed: bool = False,
-) -> ToleranceResult:
-    """Monte Carlo over every gap's [min, max] band and every ``vehicle.tolerances`` band.
+@dataclass(frozen=True)
+class ToleranceSample:
+    """The ``n`` variants of a vehicle drawn over its tolerance bands (:func:`tolerance_sample`).
 
-    ``uniform`` samples each band uniformly (a production spread with no better knowledge);
-    ``normal`` takes the band as +-3 sigma about its midpoint, clipped to the band. The
-    window (s) bounds the fluctuation metric; default: the whole input. Variants run in
-    compiled batches of ``TOLERANCE_CHUNK``; ``progress(done, n)`` is called after each (and
-    once with ``done = 0`` before the first). The same ``seed`` gives the same result.
-    ``body_speed`` keeps every run's vehicle speed (``t``, ``vehicle_speed_kmh``).
+    Each variant is built (changed, validated, its chain compiled) when first simulated and its compiled chain
+    kept here, so the windows of one log that share a sample (:func:`tolerance_analysis` with ``sample``) build
+    every variant once, not once per window.
+
+    Attributes
+    ----------
+    vehicle : the nominal vehicle; n, seed, distribution : as drawn
+    fields : the dotted fields sampled; samples : (n, p) their values; changes : per variant, field -> value
+    """
+
+    vehicle: Vehicle
+    n: int
+    seed: int
+    distribution: str
+    fields: tuple[str, ...]
+    samples: F64
+    changes: tuple[dict[str, float], ...]
+    _chains: dict[int, ChainModel] = field(default_factory=dict, repr=False, compare=False)
+
+    def chain(self, k: int) -> ChainModel:
+        """The compiled chain of variant ``k`` (ParameterError when its changes do not make a valid vehicle)."""
+        built = self._chains.get(k)
+        if built is None:
+            change = self.changes[k]
+            built = self._chains[k] = (self.vehicle.with_changes(change) if change else self.vehicle).compiled
+        return built
+
+
+def tolerance_sample(vehicle: Vehicle, n: int = 1000, seed: int = 0,
+                     distribution: Literal["uniform", "normal"] = "uniform") -> ToleranceSample:
+    """Draw ``n`` variants over every gap's [min, max] band and every ``vehicle.tolerances`` band.
+
+    ``uniform`` samples each band uniformly (a production spread with no better knowledge); ``normal`` takes
+    the band as +-3 sigma about its midpoint, clipped to the band. The same ``seed`` gives the same variants.
 
     Raises
     ------
-    ParameterError : invalid ``n``/``distribution``, or the whole analysis would take more than
-        ``sim.budget.MAX_BATCH_STEPS`` integrator steps (field ``dt``, with the numbers)
-    InputSignalError, InstabilityError : as :func:`simulate_batch`
+    ParameterError : invalid ``n``/``distribution``
     """
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ParameterError("n", n, "must be an integer >= 1")
@@ -206,16 +240,54 @@ def tolerance_analysis(
         x = rng.uniform(lo, hi, size=(n, len(fields)))
     else:
         x = np.clip(rng.normal((lo + hi) / 2, (hi - lo) / 6, size=(n, len(fields))), lo, hi)
-    variants = [dict(zip(fields, (float(v) for v in row), strict=True)) for row in x]
+    changes = tuple(dict(zip(fields, (float(v) for v in row), strict=True)) for row in x)
+    x.flags.writeable = False  # shared by every result drawn from this sample
+    return ToleranceSample(vehicle, n, seed, distribution, fields, x, changes)
+
+
+def tolerance_analysis(
+    vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLike, *, n: int = 1000, seed: int = 0,
+    window: tuple[float, float] | None = None, distribution: Literal["uniform", "normal"] = "uniform",
+    speed0_rpm: float | None = None, interp: Literal["hold", "linear"] = "hold", output_dt: float = 0.001,
+    progress: ProgressFn | None = None, body_speed: bool = False, sample: ToleranceSample | None = None,
+) -> ToleranceResult:
+    """Monte Carlo over every gap's [min, max] band and every ``vehicle.tolerances`` band.
+
+    ``uniform`` samples each band uniformly (a production spread with no better knowledge);
+    ``normal`` takes the band as +-3 sigma about its midpoint, clipped to the band. The
+    window (s) bounds the fluctuation metric; default: the whole input. Variants run in
+    compiled batches of ``TOLERANCE_CHUNK``; ``progress(done, n)`` is called after each (and
+    once with ``done = 0`` before the first). The same ``seed`` gives the same result.
+    ``body_speed`` keeps every run's vehicle speed (``t``, ``vehicle_speed_kmh``).
+    ``sample``: variants of ``vehicle`` drawn before (:func:`tolerance_sample`), shared by several inputs (the
+    windows of one log) so each variant is built once; ``n``, ``seed`` and ``distribution`` are then the
+    sample's. Without it the variants are drawn here (the same ones, for the same arguments).
+
+    Raises
+    ------
+    ParameterError : invalid ``n``/``distribution``, or the whole analysis would take more than
+        ``sim.budget.MAX_BATCH_STEPS`` integrator steps (field ``dt``, with the numbers)
+    InputSignalError, InstabilityError : as :func:`simulate_batch`
+    """
+    if sample is None:
+        sample = tolerance_sample(vehicle, n, seed, distribution)
+    elif sample.vehicle is not vehicle:
+        raise ValueError("the tolerance sample was drawn for another vehicle object")
+    n, variants = sample.n, sample.changes
     _check_analysis_budget(vehicle, t_s, torque_nm, n + 1, speed0_rpm, interp, output_dt)
     report = progress if progress is not None else (lambda done, total: None)
     report(0, n)
     runs: list[BatchResult] = []
     for start in range(0, n, TOLERANCE_CHUNK):
         chunk = variants[start:start + TOLERANCE_CHUNK]
-        runs.append(simulate_batch(vehicle, [{}, *chunk] if start == 0 else chunk, t_s, torque_nm,
-                                   speed0_rpm=speed0_rpm, interp=interp, output_dt=output_dt,
-                                   body_speed=body_speed))
+        first = 1 if start == 0 else 0  # the nominal leads the first batch
+
+        def chain_of(k: int, start: int = start, first: int = first) -> ChainModel:
+            return vehicle.compiled if k < first else sample.chain(start + k - first)
+
+        runs.append(_simulate_batch(vehicle, [{}, *chunk] if first else chunk, chain_of, t_s, torque_nm,
+                                    speed0_rpm=speed0_rpm, interp=interp, output_dt=output_dt,
+                                    body_speed=body_speed))
         report(start + len(chunk), n)
     t = runs[0].t
     speeds = np.concatenate([r.motor_speed_rpm for r in runs])
@@ -225,7 +297,7 @@ def tolerance_analysis(
     ul = np.array([unloaded_time(ev, w0, w1) for ev in events]) * 1e3
     body = (np.concatenate([r.vehicle_speed_kmh for r in runs if r.vehicle_speed_kmh is not None])
             if body_speed else None)
-    return ToleranceResult(fluct_rpm=fl[1:], unloaded_ms=ul[1:], samples=x, fields=fields,
+    return ToleranceResult(fluct_rpm=fl[1:], unloaded_ms=ul[1:], samples=sample.samples, fields=sample.fields,
                            nominal_fluct_rpm=float(fl[0]), t=t if body_speed else None, vehicle_speed_kmh=body)
 
 
@@ -235,7 +307,7 @@ def _check_analysis_budget(vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLik
     inp = prepare_input(t_s, torque_nm, interp)
     t0, n_out = _grid(inp, output_dt)
     check_output(float(inp.t[-1]) - t0, output_dt, n_out, 32 * runs)  # every variant's speeds, kept for metrics
-    chain = build_chain(vehicle)
+    chain = vehicle.compiled
     _, omega0, _ = quasi_static_full(chain, float(inp.torque[0]), initial_speed(vehicle, speed0_rpm))
     step, sub = choose_step(chain, output_dt, torque_max=float(np.max(np.abs(inp.torque))),
                             omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
@@ -245,4 +317,5 @@ def _check_analysis_budget(vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLik
                 what=f"{runs} variants at the nominal step")
 
 
-__all__ = ["BatchResult", "ToleranceResult", "simulate_batch", "tolerance_analysis"]
+__all__ = ["BatchResult", "ToleranceResult", "ToleranceSample", "simulate_batch", "tolerance_analysis",
+           "tolerance_sample"]

@@ -42,13 +42,18 @@ the relaxation-length tyre: a spring ``k_t`` in series with a damper ``n C R^2 /
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.params import Vehicle
 from sim.stagekinds.base import ChainBuilder, Wiring
+
+if TYPE_CHECKING:
+    from sim.params import Vehicle
 
 F64 = NDArray[np.float64]
 GRAVITY = 9.81
@@ -56,7 +61,11 @@ GRAVITY = 9.81
 
 @dataclass(frozen=True)
 class ChainModel:
-    """Compiled-kernel view of a vehicle. Arrays: ``nb`` bodies, ``nc`` couplings."""
+    """Compiled-kernel view of a vehicle. Arrays: ``nb`` bodies, ``nc`` couplings.
+
+    Read-only (arrays and the gap table): one is built per :class:`~sim.params.Vehicle` object
+    (:attr:`Vehicle.compiled <sim.params.Vehicle.compiled>`) and shared by every simulation of it.
+    """
 
     body_names: tuple[str, ...]
     inertia: F64  # (nb,) kg m^2
@@ -70,7 +79,7 @@ class ChainModel:
     cc: F64  # (nc,) damping, N m s/rad in a's angle
     chalf: F64  # (nc,) half clearance alpha in a's angle, rad (0 = no backlash)
     creport: F64  # (nc,) factor from tau (a side) to the reported torque at the driven member
-    gap_coupling: dict[str, int]  # gap name -> coupling index
+    gap_coupling: Mapping[str, int]  # gap name -> coupling index
     rotor: int
     housing: int  # -1 when the housing is fixed
     wheel: int
@@ -88,6 +97,11 @@ class ChainModel:
     def __post_init__(self) -> None:
         if self.cb2.size != self.ca.size:
             object.__setattr__(self, "cb2", np.full(self.ca.size, -1, dtype=np.int64))
+        object.__setattr__(self, "gap_coupling", MappingProxyType(dict(self.gap_coupling)))
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
 
     @property
     def n_bodies(self) -> int:

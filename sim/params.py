@@ -26,6 +26,7 @@ from sim.errors import ParameterError
 from sim.fields import ANY, INT_POS, NONNEG, POS, build, check, field_meta, flag, to_plain, validate
 from sim.fields import num as _f
 from sim.layout import legacy_stages, stage_checks, stage_layout
+from sim.model import ChainModel, build_chain
 from sim.optional import Drag, Effects, ProgressiveStiffness, SpeedSensor, TorqueLag, TyreSlip
 from sim.params_base import (
     DAMPING,
@@ -310,6 +311,19 @@ class Vehicle:
     def chain(self) -> tuple[Stage, ...]:
         """The driveline as stages from rotor to wheels; the classic layout as its five stages."""
         return self.stages or legacy_stages(self)
+
+    @functools.cached_property
+    def compiled(self) -> ChainModel:
+        """The chain compiled into the kernel's arrays (:func:`sim.model.build_chain`), built on first use and
+        kept: once per Vehicle object, read-only, shared by every simulation and analysis of this vehicle.
+        A changed vehicle (:meth:`with_changes`) is a new object with its own."""
+        return build_chain(self)
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the compiled chain (rebuilt on first use where it is unpickled)."""
+        state = dict(self.__dict__)
+        state.pop("compiled", None)
+        return state
 
     def as_stages(self) -> Vehicle:
         """The same driveline written as a stage chain (a classic file converted; a chain unchanged)."""

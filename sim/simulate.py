@@ -12,7 +12,7 @@ from sim.budget import check_output, check_steps
 from sim.errors import InputSignalError, ParameterError
 from sim.inputs import TorqueInput, prepare_input
 from sim.linear import step_limit, tangent_stiffness
-from sim.model import ChainModel, build_chain, quasi_static_full
+from sim.model import ChainModel, quasi_static_full
 from sim.params import Vehicle
 from sim.runner import MAX_EVENTS, RawRun, raise_status, run_from_state
 from sim.seat import seat_rail_acceleration
@@ -160,7 +160,7 @@ def simulate(
     span = float(inp.t[-1]) - t0
     if what_if is not None:
         vehicle = what_if.apply_vehicle(vehicle)
-    chain = build_chain(vehicle) if model == "multibody" else None
+    chain = vehicle.compiled if model == "multibody" else None
     # refuse before any array of the run's length exists (what-if resampling included)
     check_output(span, output_dt, n_out, TWO_INERTIA_ROW_BYTES if chain is None
                  else multibody_row_bytes(chain.n_bodies, chain.n_couplings))
@@ -171,7 +171,7 @@ def simulate(
     w0 = initial_speed(vehicle, speed0_rpm)
     if chain is None:
         return _simulate_two_inertia(vehicle, inp, w0, dt, output_dt)
-    step, raw, t, speed = _run_multibody(vehicle, chain, inp, t0, n_out, span, w0, dt, output_dt, events=True)
+    step, raw, t, speed = _run_multibody(vehicle, inp, t0, n_out, span, w0, dt, output_dt, events=True)
     torques = {name: raw.tau[:, j] * chain.creport[j] for j, name in enumerate(chain.coupling_names)}
     if chain.vehicle >= 0:
         torques["tyre"] = raw.tyre
@@ -201,11 +201,12 @@ def airgap_input(vehicle: Vehicle, inp: TorqueInput) -> TorqueInput:
     return inp if g == 1.0 else replace(inp, torque=inp.torque * g)
 
 
-def _run_multibody(vehicle: Vehicle, chain: ChainModel, inp: TorqueInput, t0: float, n_out: int, span: float,
-                   w0: float, dt: float | None, output_dt: float, *, events: bool,
+def _run_multibody(vehicle: Vehicle, inp: TorqueInput, t0: float, n_out: int, span: float, w0: float,
+                   dt: float | None, output_dt: float, *, events: bool,
                    states: bool = True) -> tuple[float, RawRun, F64, F64]:
-    """The multibody run from the quasi-static start: step, kernel output, output grid and the resolver speed
-    as reported (after the speed sensor)."""
+    """The multibody run of the vehicle's compiled chain from the quasi-static start: step, kernel output, output
+    grid and the resolver speed as reported (after the speed sensor)."""
+    chain = vehicle.compiled
     theta0, omega0, tyre0 = quasi_static_full(chain, float(inp.torque[0]), w0)
     step, sub = choose_step(chain, output_dt, dt, torque_max=float(np.max(np.abs(inp.torque))),
                             omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
@@ -252,10 +253,10 @@ def simulate_speed(
     inp = airgap_input(vehicle, prepare_input(t_s, torque_nm, interp))
     t0, n_out = _grid(inp, output_dt)
     span = float(inp.t[-1]) - t0
-    chain = build_chain(vehicle)
+    chain = vehicle.compiled
     check_output(span, output_dt, n_out, multibody_row_bytes(chain.n_bodies, chain.n_couplings))
     w0 = initial_speed(vehicle, speed0_rpm)
-    _, raw, t, speed = _run_multibody(vehicle, chain, inp, t0, n_out, span, w0, None, output_dt, events=False,
+    _, raw, t, speed = _run_multibody(vehicle, inp, t0, n_out, span, w0, None, output_dt, events=False,
                                       states=gaps)
     return SpeedRun(t, speed, {g: raw.is_open[:, chain.gap_coupling[g]] for g in vehicle.gap_names} if gaps else {})
 

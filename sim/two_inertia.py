@@ -27,7 +27,7 @@ from numba import njit
 
 from sim.integrate import STATUS_DIVERGED, STATUS_NONFINITE, STATUS_OK, input_at, road_torque
 from sim.linear import coupling_rows
-from sim.model import ChainModel, build_chain
+from sim.model import ChainModel
 from sim.params import Vehicle
 
 
@@ -53,7 +53,7 @@ class TwoInertiaParams:
         return max(math.sqrt(w2), self.khs / self.chs)
 
 
-def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaParams:
+def project(vehicle: Vehicle) -> TwoInertiaParams:
     """Reduce the multibody vehicle to eqs. 1-6.
 
     Reducer inertias are referred to the motor (paper: "equivalent to the motor inertia"), half
@@ -69,8 +69,7 @@ def project(vehicle: Vehicle, chain: ChainModel | None = None) -> TwoInertiaPara
     """
     if vehicle.effects.tyre_slip.enabled:
         vehicle = vehicle.with_changes({"effects.tyre_slip.enabled": False})
-        chain = None
-    m = chain or build_chain(vehicle)
+    m = vehicle.compiled
     i = vehicle.ratio
     n = vehicle.driven_wheels
     wheel_own = n * vehicle.wheel.inertia + vehicle.body.mass * vehicle.wheel.radius**2

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -51,6 +52,26 @@ def edited_map(tmp_path: Path, channel: str, line: str) -> Path:
     out = tmp_path / "edited.map.toml"
     out.write_text(text.replace(head, head + line + "\n"), encoding="utf-8")
     return out
+
+
+@pytest.fixture
+def chain_builds(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The name of the vehicle of every run of ``sim.model.build_chain`` during the test: the real builder,
+    counted wherever a module holds it."""
+    from sim import Vehicle
+    from sim.model import ChainModel, build_chain
+
+    real = build_chain
+    calls: list[str] = []
+
+    def counted(vehicle: Vehicle) -> ChainModel:
+        calls.append(vehicle.name)
+        return real(vehicle)
+
+    for module in list(sys.modules.values()):
+        if getattr(module, "build_chain", None) is real:
+            monkeypatch.setattr(module, "build_chain", counted)
+    return calls
 
 
 @pytest.fixture(scope="session")

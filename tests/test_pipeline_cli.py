@@ -40,6 +40,21 @@ def test_demo_alive_counters_count_and_show_the_dropped_frames(short_log: Path) 
         assert g["gaps"] == g["missed"] == Scenario().dropped_frames  # each dropped frame is one missed count
 
 
+def test_one_analysis_compiles_the_vehicle_once(short_log: Path, chain_builds: list[str]) -> None:
+    """The driveline chain is compiled once per vehicle, not once per simulation (it was N + 3 times for N
+    analysed events: each event, the whole log, and two inertias)."""
+    from app.pipeline import VehicleInputs, run_analysis
+    from sim import load_vehicle
+
+    inputs = VehicleInputs(load_vehicle("paper"), DBC / "lashscope_ev.dbc", DBC / "lashscope_ev.map.toml")
+    res = run_analysis(short_log, inputs)
+    simulated = [r for r in res.event_results if r.aligned is not None]
+    assert len(simulated) >= 4 and res.whole is not None
+    assert chain_builds == ["paper"]
+    run_analysis(short_log, inputs)  # the same vehicle again: nothing to build
+    assert chain_builds == ["paper"]
+
+
 def test_analyze_json(short_log: Path, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     out = tmp_path / "result.json"
     assert main(["analyze", str(short_log), "--vehicle", "paper", "--gap-sensitivity", "--json", "--out",

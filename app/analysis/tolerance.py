@@ -28,7 +28,7 @@ from app.errors import InputError
 from app.progress import Progress, no_progress
 from app.signals import Signal
 from sim import SimError, Vehicle
-from sim.batch import ToleranceResult, tolerance_analysis
+from sim.batch import ToleranceResult, ToleranceSample, tolerance_analysis, tolerance_sample
 from sim.metrics import peak_to_valley
 
 MAX_SAMPLES = 2000  # variants per event: the cost is linear in this
@@ -63,12 +63,13 @@ def band_of(res: ToleranceResult) -> dict[str, float]:
 
 def event_tolerance(vehicle: Vehicle, torque: Signal, speed: Signal, window: EventWindow, n: int, seed: int,
                     interp: Literal["hold", "linear"] = "linear",
-                    progress: Callable[[int, int], None] | None = None
+                    progress: Callable[[int, int], None] | None = None, sample: ToleranceSample | None = None,
                     ) -> tuple[dict[str, Any], ToleranceResult | None]:
     """Band and measured percentile for one event; the dict says ``error`` when the event cannot be run.
 
     Returns the JSON-ready row and the raw :class:`ToleranceResult` (None on error);
-    ``progress(done, n)`` follows the variants.
+    ``progress(done, n)`` follows the variants. ``sample``: the variants drawn once for all events
+    (:func:`sim.batch.tolerance_sample` of ``vehicle``, ``n``, ``seed``), so each is built once.
     """
     row: dict[str, Any] = {"index": window.index, "kind": window.kind, "t_start_s": window.t_start_s,
                            "t_end_s": window.t_end_s}
@@ -84,7 +85,7 @@ def event_tolerance(vehicle: Vehicle, torque: Signal, speed: Signal, window: Eve
     try:
         res = tolerance_analysis(vehicle, tq_t, tq_v, n=n, seed=seed, window=(window.t_start_s, window.t_end_s),
                                  speed0_rpm=speed0 if np.isfinite(speed0) else None, interp=interp,
-                                 progress=progress, body_speed=felt)
+                                 progress=progress, body_speed=felt, sample=sample)
     except SimError as exc:
         return {**row, "error": f"simulation failed: {exc}"}, None
     measured = peak_to_valley(w.t, w.values, window.t_start_s, window.t_end_s)
@@ -118,13 +119,14 @@ def tolerance_doc(vehicle: Vehicle, torque: Signal, speed: Signal, windows: Sequ
     """:func:`event_tolerance` for every window, with the sampled fields; progress 0..1 (stage ``tolerance``)
     per event done, from the simulator's count of variants."""
     check_request(n, seed)
+    sample = tolerance_sample(vehicle, n, seed)  # every event runs the same variants, each built once
     rows: list[dict[str, Any]] = []
     fields: tuple[str, ...] = ()
     for k, win in enumerate(windows):
         def step(done: int, total: int, k: int = k) -> None:
             progress((k + done / max(1, total)) / max(1, len(windows)), "tolerance")
 
-        row, res = event_tolerance(vehicle, torque, speed, win, n, seed, progress=step)
+        row, res = event_tolerance(vehicle, torque, speed, win, n, seed, progress=step, sample=sample)
         if res is not None:
             fields = res.fields
         rows.append(row)

@@ -35,7 +35,6 @@ from sim import Vehicle
 from sim.effects.base import Effect, ParamSpec, Values
 from sim.layout import FIELD_MAP
 from sim.linear import coupling_rows, state_matrix
-from sim.model import build_chain
 
 BASE_NAMES = ("stiffness", "damping", "mass", "lash")
 MIN_MODE_HZ = 0.5  # lowest torsional mode looked for
@@ -130,7 +129,7 @@ LABELS = {"stiffness": "torsional stiffness at the motor", "damping": "first-mod
 
 def effective_stiffness(vehicle: Vehicle) -> float:
     """Torque at the rotor per radian of rotor twist with the wheels (and the housing) held (N m/rad)."""
-    m = build_chain(vehicle)
+    m = vehicle.compiled
     g = coupling_rows(m)  # the housing's column drops out with the housing held
     k = g.T @ (m.ck[:, None] * g)
     held = {m.wheel, m.wheel2, m.vehicle, m.housing} - {-1}
@@ -143,7 +142,7 @@ def effective_stiffness(vehicle: Vehicle) -> float:
 
 def first_mode(vehicle: Vehicle) -> tuple[float, float]:
     """(frequency Hz, damping ratio) of the lowest oscillating mode with the rotor taking part, gaps closed."""
-    m = build_chain(vehicle)
+    m = vehicle.compiled
     omega_v = vehicle.body.speed_kmh / 3.6 / vehicle.wheel.radius
     lam, vec = np.linalg.eig(state_matrix(m, omega_v))
     nb = m.n_bodies
@@ -165,7 +164,7 @@ def first_mode(vehicle: Vehicle) -> tuple[float, float]:
 
 def lash_mrad(vehicle: Vehicle) -> float:
     """Total backlash referred to the rotor (mrad): each gap times the rotor's turns per its shaft's turn."""
-    m = build_chain(vehicle)
+    m = vehicle.compiled
     gaps = m.chalf > 0
     return float(1e3 * np.sum(2.0 * m.chalf[gaps] / m.speed_ratio[m.ca[gaps]]))
 

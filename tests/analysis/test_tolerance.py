@@ -71,3 +71,16 @@ def test_the_felt_shuffle_has_a_band_too_when_the_crossing_is_known() -> None:
     # without the crossing nothing is computed for it
     row2, res2 = event_tolerance(vehicle, torque, speed, WIN, n=10, seed=2)
     assert "band_shuffle_pp_ms2" not in row2 and res2 is not None and res2.vehicle_speed_kmh is None
+
+
+def test_the_events_share_one_sample_each_variant_built_once(chain_builds: list[str]) -> None:
+    vehicle = load_vehicle("paper")
+    torque, speed = Signal("motor_torque_nm", T, TORQUE, "N m"), _nominal_speed()
+    windows = [WIN, EventWindow(1, "tip_in", 0.1, 0.2, 1.2), EventWindow(2, "tip_in", 0.2, 0.3, 1.1)]
+    chain_builds.clear()  # the measured speed's own run above
+    doc = tolerance_doc(vehicle, torque, speed, windows, n=12, seed=3)
+    assert len(chain_builds) == 1 + 12  # the nominal and each variant, once for all three events (was 3 x 13)
+    # the same rows as each event on its own, drawing its own variants
+    for row, win in zip(doc["events"], windows, strict=True):
+        alone, _ = event_tolerance(load_vehicle("paper"), torque, speed, win, n=12, seed=3)
+        assert row == alone

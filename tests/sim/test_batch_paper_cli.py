@@ -9,7 +9,7 @@ import pytest
 
 from app.cli import main
 from sim import ParameterError, WhatIf, load_vehicle, simulate
-from sim.batch import simulate_batch, tolerance_analysis
+from sim.batch import simulate_batch, tolerance_analysis, tolerance_sample
 from sim.paper import reproduce, sensitivities, sensitivity_table, sensitivity_unit, tip_in_torque
 
 PAPER = load_vehicle("paper")
@@ -113,3 +113,16 @@ def test_cli_reproduce_and_simulate(tmp_path, capsys) -> None:  # type: ignore[n
     bad.write_text("time,torque\n0,1\n")
     assert main(["simulate", str(bad)]) == 2
     assert main(["simulate", str(csv_in), "--vehicle", "nosuch"]) == 2
+
+
+def test_a_tolerance_sample_drawn_once_gives_the_same_results() -> None:
+    t, q = tip_in_torque(duration_s=0.5)
+    sample = tolerance_sample(PAPER, 24, 5)
+    assert not sample.samples.flags.writeable
+    for window in ((0.1, 0.5), (0.2, 0.4)):
+        a = tolerance_analysis(PAPER, t, q, n=24, seed=5, interp="linear", window=window)
+        b = tolerance_analysis(PAPER, t, q, interp="linear", window=window, sample=sample)
+        assert np.array_equal(a.fluct_rpm, b.fluct_rpm) and np.array_equal(a.unloaded_ms, b.unloaded_ms)
+        assert np.array_equal(a.samples, b.samples) and a.fields == b.fields
+    with pytest.raises(ValueError, match="another vehicle"):
+        tolerance_analysis(load_vehicle("paper"), t, q, sample=sample)

@@ -35,7 +35,6 @@ from app.analysis.diagnosis.forward import (
 )
 from app.analysis.diagnosis.noise import NoiseFloor
 from sim import Vehicle
-from sim.model import build_chain
 
 FORM_WINDOW_S = 0.15  # s: local window of the model-form tolerance (about one shuffle period)
 NOISE_DRAWS = 6  # Monte Carlo draws of the torque noise (the variance is then averaged over SMOOTH_S too)
@@ -92,7 +91,7 @@ def input_uncertainty(events: Sequence[DiagEvent], vehicle: Vehicle, nuisance: N
 
 def rigid_inertia(vehicle: Vehicle) -> float:
     """Inertia of the whole driveline and vehicle as one rigid body, referred to the rotor (kg m^2)."""
-    m = build_chain(vehicle)
+    m = vehicle.compiled
     return float(np.sum(m.inertia * m.speed_ratio**2))
 
 
