@@ -57,6 +57,7 @@ from app.ingest.readreport import read_summary
 from app.ingest.signalmap import load_signal_map
 from app.log_source import LogSource, opened
 from app.progress import Progress, no_progress, within
+from app.serial import Serial
 from app.signals import Signal, SignalSet
 from app.vehicle_check import steps_per_second, trial_vehicle
 from sim import SimError, SimResult, Vehicle, WhatIf, load_vehicle, simulate
@@ -70,7 +71,7 @@ RATE_SUFFIXES = ("_nm_s", "_rpm_s")  # fields ending in _s that are rates (min_r
 
 
 @dataclass(frozen=True)
-class AnalysisOptions:
+class AnalysisOptions(Serial):
     model: Literal["multibody", "two_inertia"] = "multibody"
     events: EventParams = field(default_factory=EventParams)
     metrics: MetricParams = field(default_factory=MetricParams)
@@ -82,9 +83,6 @@ class AnalysisOptions:
     whole_log: bool = True  # also simulate the whole log in one open-loop run
     torque_interp: Literal["hold", "linear"] = "linear"
     drivability: DrivabilityParams = field(default_factory=DrivabilityParams)  # acceleration criteria per event
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> AnalysisOptions:

@@ -22,7 +22,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -35,6 +34,7 @@ from app.ingest.readers import open_log
 from app.ingest.signalmap import CANONICAL, REQUIRED, TIME_BASE, ChannelSpec, SignalMap, unit_factor
 from app.ingest.stats import DecodeReport, StatsAccumulator
 from app.ingest.suggest import Candidate, observed, suggest_candidates, suggest_signal_map
+from app.serial import Serial, rule
 from app.signals import Signal, SignalSet
 
 MIN_SIGN_CORRELATION = 0.3  # as app.analysis.logchecks.CheckParams: below -this the torque is proposed inverted
@@ -42,7 +42,7 @@ MOVING_RPM = 100.0  # motor speed samples beyond this (either way) say which way
 
 
 @dataclass(frozen=True)
-class ChannelEvidence:
+class ChannelEvidence(Serial):
     """What the log says about one proposed channel."""
 
     channel: str
@@ -62,29 +62,22 @@ class ChannelEvidence:
     correlation_with: str  # what the correlation is taken against, in words
     sign: str  # the sign check in words
 
-    def to_dict(self) -> dict[str, Any]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
-
 
 @dataclass
-class Proposal:
+class Proposal(Serial):
     """The proposed map, its evidence per channel, and the other candidates per channel."""
 
-    smap: SignalMap
-    evidence: dict[str, ChannelEvidence]
-    candidates: dict[str, list[Candidate]]
+    smap: SignalMap = field(metadata=rule(key="signal_map_toml", convert=SignalMap.to_toml))
+    evidence: dict[str, ChannelEvidence] = field(metadata=rule(key="channels", convert=lambda ev: list(ev.values())))
+    candidates: dict[str, list[Candidate]] = field(metadata=rule(convert=lambda cs: {
+        ch: [f"{c.message}.{c.signal}" for c in cands] for ch, cands in cs.items()}))
     database: str
     log_format: str
     frames: int
     duration_s: float
     missing: list[str] = field(default_factory=list)  # required channels with no signal
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"database": self.database, "log_format": self.log_format, "frames": self.frames,
-                "duration_s": self.duration_s, "missing": self.missing,
-                "channels": [e.to_dict() for e in self.evidence.values()],
-                "candidates": {ch: [f"{c.message}.{c.signal}" for c in cands] for ch, cands in self.candidates.items()},
-                "signal_map_toml": self.smap.to_toml()}
+    serial_order = ("database", "log_format", "frames", "duration_s", "missing", "evidence", "candidates", "smap")
 
 
 def parse_overrides(items: list[str] | tuple[str, ...]) -> dict[str, str | None]:

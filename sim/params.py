@@ -219,7 +219,7 @@ class Vehicle:
                     check(f"tolerances.{path}[{end}]", b, meta["rule"], meta.get("limits"), meta.get("unit", ""))
 
     # ---- dict round trip -------------------------------------------------------------
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:  # by hand: the file format's round trip (from_dict), not a payload
         """Plain nested dict (tuples as lists) that :meth:`from_dict` accepts; JSON/TOML friendly."""
         out = to_plain(self)
         for key in ("reducer", "halfshaft", "gaps", "stages"):

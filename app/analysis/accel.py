@@ -53,6 +53,7 @@ from app.analysis.series import FloatArray, finite_signal, noise_rms
 from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
 from app.analysis.zerophase import butter_sos, zero_phase
 from app.errors import InsufficientDataError
+from app.serial import Serial, lists, rule
 from app.signals import Signal, SignalSet
 from sim.units import rpm_to_rad_s
 
@@ -66,15 +67,12 @@ ACCEL_SIGN, ACCEL_UNIT, ACCEL_INCONSISTENT, ACCEL_SATURATED = (
 
 
 @dataclass(frozen=True)
-class AccelCheck:
+class AccelCheck(Serial):
     verdict: str  # ok | sign | unit_g | unit_ms2 | inconsistent | unchecked
     slope: float = math.nan
     offset_ms2: float = math.nan
-    saturated: tuple[tuple[float, float], ...] = ()  # (t0, t1) s of runs at the sensor's range
-
-    def to_dict(self) -> dict[str, object]:
-        return {"verdict": self.verdict, "slope": self.slope, "offset_ms2": self.offset_ms2,
-                "saturated_s": [list(s) for s in self.saturated]}
+    # (t0, t1) s of runs at the sensor's range
+    saturated: tuple[tuple[float, float], ...] = field(default=(), metadata=rule(key="saturated_s", convert=lists))
 
 
 @dataclass(frozen=True)

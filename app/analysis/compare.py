@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from app.analysis.metrics import METRIC_NAMES, RippleMetrics
 from app.analysis.series import FloatArray
+from app.serial import Serial, rule
 
 
 @dataclass(frozen=True)
@@ -19,24 +20,12 @@ class SpeedError:
 
 
 @dataclass(frozen=True)
-class EventComparison:
+class EventComparison(Serial):
     event_index: int
     measured: RippleMetrics
     simulated: RippleMetrics
     difference: dict[str, float]  # simulated - measured, per metric name
-    error: SpeedError
-
-    def to_dict(self) -> dict[str, object]:
-        return {
-            "event_index": self.event_index,
-            "measured": self.measured.to_dict(),
-            "simulated": self.simulated.to_dict(),
-            "difference": dict(self.difference),
-            "rms_rpm": self.error.rms_rpm,
-            "nrmse": self.error.nrmse,
-            "bias_rpm": self.error.bias_rpm,
-            "samples": self.error.samples,
-        }
+    error: SpeedError = field(metadata=rule(flatten=True))
 
 
 def speed_error(measured: FloatArray, simulated: FloatArray) -> SpeedError:

@@ -51,7 +51,7 @@ saturated sensor in the window, or an acceleration derived from speed whose band
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import optimize
@@ -68,6 +68,7 @@ from app.analysis.feel_kernels import (
 from app.analysis.iso2631 import vdv
 from app.analysis.series import FloatArray, parabolic_vertex
 from app.analysis.zerophase import butter_sos, zero_phase
+from app.serial import Serial
 from app.signals import Signal
 
 #: criterion -> unit (the order of every table, CSV and store column)
@@ -128,7 +129,7 @@ class DrivabilityParams:
 
 
 @dataclass(frozen=True)
-class Drivability:
+class Drivability(Serial):
     """The criteria of one acceleration trace around one event (NaN where not determinable)."""
 
     response_delay_s: float
@@ -149,9 +150,6 @@ class Drivability:
 
     def values(self) -> dict[str, float]:
         return {k: getattr(self, k) for k in CRITERIA_NAMES}
-
-    def to_dict(self) -> dict[str, object]:
-        return asdict(self)
 
 
 def _rate(fs: float) -> float:

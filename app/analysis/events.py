@@ -26,7 +26,8 @@ short by the next reversal.
 from __future__ import annotations
 
 import enum
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, field
+from operator import attrgetter
 
 import numpy as np
 
@@ -34,6 +35,7 @@ from app.analysis.reversals import Reversal, ReversalParams, find_reversals
 from app.analysis.series import finite_signal, median_in
 from app.analysis.slip import Drive, slip_problem
 from app.errors import InsufficientDataError, MissingSignalError
+from app.serial import PLAIN, Serial, computed, rule
 from app.signals import Signal, SignalSet
 
 TORQUE = "motor_torque_nm"
@@ -86,11 +88,11 @@ class EventParams:
 
 
 @dataclass(frozen=True)
-class Event:
+class Event(Serial):
     """One torque reversal. Times in s since the start of the measurement."""
 
     index: int
-    kind: EventKind
+    kind: EventKind = field(metadata=rule(convert=attrgetter("value")))
     t_cross_s: float
     t_start_s: float
     t_end_s: float
@@ -105,6 +107,8 @@ class Event:
     from_coast: bool = False  # the not-driving side is a coast (|T| <= hysteresis), not regeneration
     exclusion: str | None = None  # why the event is not analysed; None = included
 
+    serial_computed = computed(included=PLAIN)
+
     @property
     def included(self) -> bool:
         return self.exclusion is None
@@ -113,12 +117,6 @@ class Event:
     def direction(self) -> float:
         """+1 for tip-in, -1 for tip-out: the sign the gap-open speed excursion takes."""
         return 1.0 if self.kind is EventKind.TIP_IN else -1.0
-
-    def to_dict(self) -> dict[str, object]:
-        d = asdict(self)
-        d["kind"] = self.kind.value
-        d["included"] = self.included
-        return d
 
 
 MAX_INVALID_SHARE = 0.05  # invalid samples in an event window beyond which the channel is not available there

@@ -11,7 +11,7 @@ simulation is shifted by the analysis' torque-to-speed offset like the simulated
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,27 +26,21 @@ from app.analysis.drivability import (
 )
 from app.analysis.series import FloatArray
 from app.analysis.zerophase import butter_sos, zero_phase
+from app.serial import Serial, rule
 from app.signals import Signal
 
 PAD_S = 0.3  # filter run-in on each side of the event window
 
 
 @dataclass(frozen=True)
-class FeelComparison:
+class FeelComparison(Serial):
     source: str  # accelerometer | vehicle_speed | wheel_speed
     measured: Drivability
     simulated: Drivability  # the simulated side compared (difference): the body's, or the seat rail's on request
     difference: dict[str, float]
     simulated_at: str = "body"  # body | seat_rail: where ``simulated`` was taken
-    simulated_seat: Drivability | None = None  # the seat rail's criteria where the simulation has them
-
-    def to_dict(self) -> dict[str, object]:
-        out: dict[str, object] = {"source": self.source, "measured": self.measured.to_dict(),
-                                  "simulated": self.simulated.to_dict(), "difference": dict(self.difference),
-                                  "simulated_at": self.simulated_at}
-        if self.simulated_seat is not None:
-            out["simulated_seat"] = self.simulated_seat.to_dict()
-        return out
+    # the seat rail's criteria where the simulation has them
+    simulated_seat: Drivability | None = field(default=None, metadata=rule(omit_none=True))
 
 
 def event_feel(src: AccelSource, sim_t: FloatArray, sim_speed_ms: FloatArray, sim_accel_ms2: FloatArray,

@@ -38,7 +38,7 @@ events at all) without a word; :func:`check_log` finds them and says so, one
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -47,6 +47,7 @@ from app.analysis.sampling import timer_times
 from app.analysis.series import FloatArray, finite_signal, moving_mean, quantisation_step
 from app.analysis.slip import VEHICLE_SPEED, WHEEL_PREFIX
 from app.errors import ImplausibleSignalError
+from app.serial import Serial
 from app.signals import Signal, SignalSet
 from sim import Vehicle
 from sim.units import RAD_S_PER_RPM
@@ -105,15 +106,12 @@ class Limits:
 
 
 @dataclass(frozen=True)
-class Finding:
+class Finding(Serial):
     """One problem of the log as decoded: a stable ``code``, the channel, and what was found in words."""
 
     code: str
     channel: str
     message: str
-
-    def to_dict(self) -> dict[str, str]:
-        return asdict(self)
 
 
 @dataclass(frozen=True)

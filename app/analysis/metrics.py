@@ -25,7 +25,7 @@ reflected inertia known, ``g = 60 / (2 pi J_eq)`` rpm/(N m s) is fixed and only 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -35,6 +35,7 @@ from app.analysis.lash import NO_GAP, LashParams, free_rotor_interval
 from app.analysis.sampling import Spacing, uniform_by_timestamps
 from app.analysis.series import FloatArray, noise_rms, parabolic_vertex
 from app.errors import InsufficientDataError
+from app.serial import Serial
 from app.signals import Signal
 
 METRIC_NAMES: tuple[str, ...] = (
@@ -66,7 +67,7 @@ class MetricParams:
 
 
 @dataclass(frozen=True)
-class RippleMetrics:
+class RippleMetrics(Serial):
     """Metrics of one speed trace around one event (NaN where not determinable)."""
 
     fluctuation_rpm: float
@@ -91,9 +92,6 @@ class RippleMetrics:
 
     def values(self) -> dict[str, float]:
         return {k: getattr(self, k) for k in METRIC_NAMES}
-
-    def to_dict(self) -> dict[str, float]:
-        return asdict(self)
 
 
 def rigid_trend(

@@ -38,6 +38,7 @@ from scipy.optimize import nnls
 
 from app.analysis.series import FloatArray
 from app.errors import InputError, InsufficientDataError
+from app.serial import PLAIN, Serial, computed
 
 FORMAT = 1
 FEATURES: tuple[str, ...] = ("shuffle_pp_ms2", "kick_ms2", "max_jerk_ms3", "clunk_ms2", "response_delay_s",
@@ -49,7 +50,7 @@ SCORE_RANGE = (1.0, 10.0)
 
 
 @dataclass(frozen=True)
-class RatingModel:
+class RatingModel(Serial):
     features: tuple[str, ...]
     knots: tuple[tuple[float, ...], ...]  # per feature, criterion units
     scales: tuple[float, ...]  # per feature
@@ -61,14 +62,13 @@ class RatingModel:
     created_at: str = ""
     format: int = FORMAT
 
+    serial_computed = computed(version=PLAIN)
+
     @property
     def version(self) -> str:
         """A short content hash: two models with the same fit have the same version."""
         body = json.dumps({k: v for k, v in asdict(self).items() if k != "created_at"}, sort_keys=True)
         return hashlib.sha256(body.encode()).hexdigest()[:12]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {**asdict(self), "version": self.version}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], where: str = "rating model") -> RatingModel:

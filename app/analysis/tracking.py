@@ -31,6 +31,7 @@ import numpy as np
 
 from app.analysis.compare import EventComparison
 from app.analysis.series import FloatArray, moving_mean
+from app.serial import Serial
 
 GOOD, POOR, UNKNOWN = "good", "poor", "unknown"
 
@@ -54,12 +55,9 @@ class TrackingParams:
 
 
 @dataclass(frozen=True)
-class Verdict:
+class Verdict(Serial):
     verdict: str  # good, poor or unknown
     reasons: list[str] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, object]:
-        return {"verdict": self.verdict, "reasons": list(self.reasons)}
 
 
 def event_verdict(c: EventComparison, p: TrackingParams) -> Verdict:

@@ -53,6 +53,7 @@ from app.identify.base import (
 )
 from app.identify.modal import EventWindow, ModalEstimate, estimate_modes
 from app.identify.rigid import RigidBody
+from app.serial import Serial, rule
 from sim import Vehicle
 from sim.errors import SimError
 
@@ -107,32 +108,29 @@ class FitOptions:
     passes_per_param: int = PASSES_PER_PARAM
 
 
+FIGURE = rule(convert=float, nonfinite=None, digits=6)  # a figure: 6 digits, None when not finite
+FLAG = rule(convert=bool)
+
+
 @dataclass(frozen=True)
-class Param:
+class Param(Serial):
     """One identified quantity (physical units) with its interval and status."""
 
     name: str
     label: str
     unit: str
-    value: float
-    lo: float
-    hi: float
-    nominal: float
-    ratio: float  # fitted parameter / the file's (the damping: its scale on every damper)
-    ratio_lo: float
-    ratio_hi: float
-    identified: bool
-    at_bound: bool
-    named: bool
+    value: float = field(metadata=FIGURE)
+    lo: float = field(metadata=FIGURE)
+    hi: float = field(metadata=FIGURE)
+    nominal: float = field(metadata=FIGURE)
+    # fitted parameter / the file's (the damping: its scale on every damper)
+    ratio: float = field(metadata=FIGURE)
+    ratio_lo: float = field(metadata=FIGURE)
+    ratio_hi: float = field(metadata=FIGURE)
+    identified: bool = field(metadata=FLAG)
+    at_bound: bool = field(metadata=FLAG)
+    named: bool = field(metadata=FLAG)
     note: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        def r(x: float) -> float | None:
-            return round(float(x), 6) if np.isfinite(x) else None
-        return {"name": self.name, "label": self.label, "unit": self.unit, "value": r(self.value), "lo": r(self.lo),
-                "hi": r(self.hi), "nominal": r(self.nominal), "ratio": r(self.ratio), "ratio_lo": r(self.ratio_lo),
-                "ratio_hi": r(self.ratio_hi), "identified": bool(self.identified), "at_bound": bool(self.at_bound),
-                "named": bool(self.named), "note": self.note}
 
     def describe(self) -> str:
         """One line: "torsional stiffness at the motor 0.70x nominal [0.66, 0.75] (79.0 N m/rad)"."""
@@ -180,7 +178,7 @@ class Identification:
             return self.vehicle
         return self.vehicle.with_changes({"motor.torque_gain": float(g.value)})
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:  # by hand: a report in its own order, six entries derived from the fit
         return {
             "params": {k: p.to_dict() for k, p in self.params.items()},
             "named": self.named,

@@ -99,7 +99,7 @@ class IdentifyResult:
         """The new vehicle version: the identified base parameters, and the torque gain where it moved."""
         return self.identification.written_vehicle
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, Any]:  # by hand: the identification's entries between the logs and the validation
         return {
             "vehicle": self.base_vehicle.name,
             "logs": self.logs,

@@ -63,8 +63,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -75,6 +74,7 @@ from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, prepare
 from app.analysis.diagnosis.retime import retime_bursts
 from app.analysis.events import Event
 from app.errors import InputError, InsufficientDataError
+from app.serial import Serial, rule
 from app.signals import SignalSet
 
 FloatArray = npt.NDArray[np.float64]
@@ -133,7 +133,7 @@ class WindowMode:
 
 
 @dataclass(frozen=True)
-class ModalEstimate:
+class ModalEstimate(Serial):
     """The pooled mode over windows (and logs), with the windows used and the ones that gave none."""
 
     freq_hz: float
@@ -143,13 +143,9 @@ class ModalEstimate:
     n_windows: int  # windows offered (with or without a mode)
     n_used: int  # windows pooled
     windows: tuple[WindowMode, ...]  # the pooled ones
-    rejected: tuple[tuple[float, str], ...]  # (t_event, reason)
+    rejected: tuple[tuple[float, str], ...] = field(metadata=rule(  # (t_event, reason)
+        convert=lambda rs: [{"t_event": t, "reason": r} for t, r in rs]))
     method: str
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["rejected"] = [{"t_event": t, "reason": r} for t, r in self.rejected]
-        return d
 
 
 @dataclass(frozen=True)

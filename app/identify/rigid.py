@@ -24,8 +24,7 @@ stands out (a spinning or locking wheel) are trimmed once.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -33,6 +32,7 @@ import numpy.typing as npt
 from app.analysis.diagnosis.uncertainty import rigid_inertia
 from app.analysis.events import SPEED, TORQUE, EventParams, brake_levels
 from app.analysis.series import FloatArray, finite_signal, moving_mean
+from app.serial import PLAIN, Rule, Serial, computed, lists, rule
 from app.signals import SignalSet
 from sim import Vehicle
 
@@ -54,15 +54,19 @@ MIN_R2 = 0.5  # a fit that explains less of the speed changes is no estimate
 
 
 @dataclass(frozen=True)
-class RigidBody:
+class RigidBody(Serial):
     """Inertia at the motor per logged N m, from whole drives (None figures: no estimate, ``reason`` says why)."""
 
-    inertia_kgm2: float | None
-    ci: tuple[float, float] | None
-    file_inertia_kgm2: float
-    driving_s: float
-    r2: float | None
-    reason: str = ""
+    inertia_kgm2: float | None = field(metadata=rule(digits=6))
+    ci: tuple[float, float] | None = field(metadata=rule(convert=lists, digits=6))
+    file_inertia_kgm2: float = field(metadata=rule(digits=6))
+    driving_s: float = field(metadata=rule(digits=3))
+    r2: float | None = field(metadata=rule(digits=6))
+    reason: str = field(default="", metadata=rule(falsy_none=True))
+
+    serial_computed = computed(ratio=Rule(digits=6), off_the_file=PLAIN, describe=Rule(key="summary"))
+    serial_order = ("inertia_kgm2", "ci", "file_inertia_kgm2", "ratio", "off_the_file", "driving_s", "r2", "reason",
+                    "describe")
 
     @property
     def ratio(self) -> float | None:
@@ -84,14 +88,6 @@ class RigidBody:
             line += (f" -- a heavier car (its inertia at the motor {self.ratio:.2f}x the file's), or a torque channel "
                      f"reading {self.ratio:.2f}x the air-gap torque: the logs cannot tell these apart")
         return line
-
-    def to_dict(self) -> dict[str, Any]:
-        def r(x: float | None) -> float | None:
-            return None if x is None else round(float(x), 6)
-        return {"inertia_kgm2": r(self.inertia_kgm2), "ci": None if self.ci is None else [r(x) for x in self.ci],
-                "file_inertia_kgm2": r(self.file_inertia_kgm2), "ratio": r(self.ratio),
-                "off_the_file": self.off_the_file, "driving_s": round(self.driving_s, 3), "r2": r(self.r2),
-                "reason": self.reason or None, "summary": self.describe()}
 
 
 @dataclass(frozen=True)

@@ -11,10 +11,12 @@ stamps, never ``n * median``. :func:`spacing` measures a signal's time stamps;
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
+from app.serial import Serial
 
 BURST_MEDIAN_RATIO = 0.5  # median spacing below this fraction of the mean: bursts
 GAP_MEANS = 5.0  # a gap longer than this many mean spacings: the stream has holes
@@ -22,7 +24,7 @@ MIN_INTERVALS = 10  # fewer spacings than this are not judged
 
 
 @dataclass(frozen=True, slots=True)
-class Spacing:
+class Spacing(Serial):
     """Spacing of consecutive samples in ms (None with fewer than two samples).
 
     ``bursty`` is True when the median is far below the mean or a gap spans several means;
@@ -58,9 +60,6 @@ class Spacing:
     @property
     def max_s(self) -> float:
         return _seconds(self.max_ms)
-
-    def to_dict(self) -> dict[str, object]:
-        return asdict(self)
 
 
 def _seconds(ms: float | None) -> float:

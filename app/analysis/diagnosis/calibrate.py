@@ -35,6 +35,7 @@ from app.analysis.diagnosis.forward import (
     weighted_residual,
 )
 from app.analysis.diagnosis.split import Split, require_calibration
+from app.serial import Rule, Serial, computed, lists, rule
 from sim import Vehicle
 from sim.effects.base import Effect, ParamSpec
 from sim.errors import SimError
@@ -82,7 +83,7 @@ class Bounds:
 
 
 @dataclass(frozen=True)
-class FitResult:
+class FitResult(Serial):
     """Outcome of one fit on the calibration events.
 
     Attributes
@@ -96,31 +97,28 @@ class FitResult:
         effect parameter resting at its ``off`` value).
     """
 
-    effects: tuple[str, ...]
-    nuisance: Nuisance
-    values: dict[str, dict[str, float]]
-    chi2: float
-    n: int
-    nfev: int
-    at_bound: tuple[str, ...] = ()
-    message: str = ""
-    trade_offs: tuple[tuple[str, str, float], ...] = ()
-    settings: tuple[EffectSetting, ...] = field(default=(), repr=False, compare=False)
+    effects: tuple[str, ...] = field(metadata=rule(convert=lists))
+    nuisance: Nuisance = field(metadata=rule(digits=6))
+    values: dict[str, dict[str, float]] = field(metadata=rule(key="params", digits=6))
+    chi2: float = field(metadata=rule(skip=True))
+    n: int = field(metadata=rule(skip=True))
+    nfev: int = field(metadata=rule(key="simulator_passes"))
+    at_bound: tuple[str, ...] = field(default=(), metadata=rule(convert=lists))
+    message: str = field(default="", metadata=rule(skip=True))
+    trade_offs: tuple[tuple[str, str, float], ...] = field(default=(), metadata=rule(convert=lambda t: [
+        {"params": [a, b], "correlation": round(r, 4)} for a, b, r in t]))
+    settings: tuple[EffectSetting, ...] = field(default=(), repr=False, compare=False, metadata=rule(skip=True))
     # at the solution, for interval estimates: the weighted residual (events in order) and its Jacobian in the
     # unit box (nuisance columns first, then the effects'; None when it was not computed, e.g. the baseline)
-    residual: FloatArray | None = field(default=None, repr=False, compare=False)
-    jac: FloatArray | None = field(default=None, repr=False, compare=False)
+    residual: FloatArray | None = field(default=None, repr=False, compare=False, metadata=rule(skip=True))
+    jac: FloatArray | None = field(default=None, repr=False, compare=False, metadata=rule(skip=True))
 
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "effects": list(self.effects),
-            "nuisance": {k: round(v, 6) for k, v in self.nuisance.to_dict().items()},
-            "params": {e: {k: round(v, 6) for k, v in vals.items()} for e, vals in self.values.items()},
-            "calibration_chi2_per_sample": round(self.chi2 / max(self.n, 1), 4),
-            "simulator_passes": self.nfev,
-            "at_bound": list(self.at_bound),
-            "trade_offs": [{"params": [a, b], "correlation": round(r, 4)} for a, b, r in self.trade_offs],
-        }
+    serial_computed = computed(chi2_per_sample=Rule(key="calibration_chi2_per_sample", digits=4))
+    serial_order = ("effects", "nuisance", "values", "chi2_per_sample", "nfev", "at_bound", "trade_offs")
+
+    @property
+    def chi2_per_sample(self) -> float:
+        return self.chi2 / max(self.n, 1)
 
 
 Progress = Callable[[str], None]

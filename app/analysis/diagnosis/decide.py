@@ -52,6 +52,7 @@ import numpy.typing as npt
 from app.analysis.diagnosis.orders import OrderTone
 from app.analysis.diagnosis.score import Interval, explained_interval, paired_better_probability, shrink_interval
 from app.analysis.diagnosis.structure import Remainder, RemainderTest, remainder_test, totals_only
+from app.serial import Serial, lists, rule
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -60,7 +61,7 @@ STATUSES = ("explained", "partial", "ambiguous", "none_of_candidates", "no_signi
 
 
 @dataclass(frozen=True)
-class DecisionRules:
+class DecisionRules(Serial):
     min_events_per_side: int = 3
     min_gap_ratio: float = 1.5
     min_gap_ratio_lo: float = 1.15
@@ -78,9 +79,6 @@ class DecisionRules:
     n_boot: int = 2000
     level: float = 0.9
     max_event_share: float = 0.5  # one held-out event with more of the baseline's excess does not decide rule 2
-
-    def to_dict(self) -> dict[str, Any]:
-        return dict(self.__dict__)
 
 
 @dataclass(frozen=True)
@@ -125,28 +123,15 @@ class CandidateScore:
 
 
 @dataclass(frozen=True)
-class Decision:
+class Decision(Serial):
     status: str
-    top: tuple[str, ...] = ()
-    confusable: tuple[str, ...] = ()
+    top: tuple[str, ...] = field(default=(), metadata=rule(convert=lists))
+    confusable: tuple[str, ...] = field(default=(), metadata=rule(convert=lists, falsy_none=True))
     reason: str = ""
-    gap_ratio: Interval | None = None
-    best: CandidateScore | None = None
-    details: dict[str, Any] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "status": self.status,
-            "top": list(self.top),
-            "confusable": list(self.confusable) or None,
-            "reason": self.reason,
-            "residual_to_noise_before": self.gap_ratio.to_dict() if self.gap_ratio else None,
-        }
-        if self.best is not None:
-            out["explained_share"] = self.best.explained.to_dict()
-            out["heldout_shrink"] = self.best.shrink.to_dict()
-        out.update(self.details)
-        return out
+    gap_ratio: Interval | None = field(default=None, metadata=rule(key="residual_to_noise_before"))
+    best: CandidateScore | None = field(default=None, metadata=rule(convert=lambda b: {} if b is None else {
+        "explained_share": b.explained, "heldout_shrink": b.shrink}, flatten=True))
+    details: dict[str, Any] = field(default_factory=dict, metadata=rule(flatten=True))
 
 
 def bootstrap_draws(n_events: int, rules: DecisionRules, seed: int) -> npt.NDArray[np.int64]:

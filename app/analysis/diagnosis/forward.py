@@ -36,6 +36,7 @@ import numpy.typing as npt
 from scipy.interpolate import PchipInterpolator
 
 from app.analysis.diagnosis.offset_kernel import shifted_residuals
+from app.serial import Serial, rule
 from sim import SimResult, Vehicle, simulate
 from sim.effects.base import Effect
 from sim.simulate import SpeedRun, simulate_speed
@@ -133,15 +134,12 @@ class DiagEvent:
 
 
 @dataclass(frozen=True)
-class Nuisance:
+class Nuisance(Serial):
     """Nuisance parameters: torque-speed time offset (s), torque gain (-), road load (grade %)."""
 
     offset_s: float = 0.0
     gain: float = 1.0
-    grade_pct: float = 0.0
-
-    def to_dict(self) -> dict[str, float]:
-        return {"offset_s": self.offset_s, "gain": self.gain, "road_load_grade_pct": self.grade_pct}
+    grade_pct: float = field(default=0.0, metadata=rule(key="road_load_grade_pct"))
 
 
 EffectSetting = tuple[Effect, Mapping[str, float]]

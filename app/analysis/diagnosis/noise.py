@@ -27,8 +27,7 @@ on the samples makes the simulated driveline ring where the real one does not (s
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -37,6 +36,7 @@ from app.analysis.diagnosis.orders import OrderTone, find_order_tones
 from app.analysis.sampling import sample_period
 from app.analysis.series import quantisation_step
 from app.errors import InsufficientDataError
+from app.serial import Serial
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -44,7 +44,7 @@ _MAD_TO_SIGMA = 1.4826
 
 
 @dataclass(frozen=True)
-class NoiseFloor:
+class NoiseFloor(Serial):
     """Noise of a measured speed channel, estimated without a model.
 
     Attributes
@@ -81,9 +81,6 @@ class NoiseFloor:
         """Per-sample residual variance (rpm^2) no model can remove, for samples with slope ``slope_rpm_s``."""
         s = np.asarray(slope_rpm_s, dtype=np.float64)
         return self.sigma_rpm**2 + (self.jitter_s * s) ** 2
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def timestamp_jitter(t: FloatArray, period_s: float) -> float:

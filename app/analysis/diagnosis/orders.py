@@ -22,11 +22,13 @@ beside the decision as structured remainder that no candidate in the library mod
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 from scipy import stats
+
+from app.serial import Serial
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -45,7 +47,7 @@ OUTLIER_RSS = 5.0  # a block whose trend residual exceeds this many times the me
 
 
 @dataclass(frozen=True)
-class OrderTone:
+class OrderTone(Serial):
     """A tone locked to the rotor angle.
 
     Attributes
@@ -65,9 +67,6 @@ class OrderTone:
 
     def describe(self) -> str:
         return f"motor order {self.order} ({self.amplitude_rpm:.2f} rpm)"
-
-    def to_dict(self) -> dict[str, float | int]:
-        return asdict(self)
 
 
 def _blocks(t: FloatArray, quiet: npt.NDArray[np.bool_], period: float) -> npt.NDArray[np.int64]:

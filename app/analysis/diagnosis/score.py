@@ -13,10 +13,13 @@ set of held-out events and two models (baseline ``b``, candidate ``c``):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
+
+from app.serial import Serial, rule
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -53,18 +56,14 @@ class EventScore:
     band_energy: dict[str, float]
 
 
+ROUNDED = rule(convert=float, digits=4, nonfinite=math.nan)  # an interval's figures: 4 digits, NaN if not finite
+
+
 @dataclass(frozen=True)
-class Interval:
-    value: float
-    lo: float
-    hi: float
-
-    def to_dict(self) -> dict[str, float]:
-        return {"value": _r(self.value), "lo": _r(self.lo), "hi": _r(self.hi)}
-
-
-def _r(x: float) -> float:
-    return float(round(x, 4)) if np.isfinite(x) else float("nan")
+class Interval(Serial):
+    value: float = field(metadata=ROUNDED)
+    lo: float = field(metadata=ROUNDED)
+    hi: float = field(metadata=ROUNDED)
 
 
 def resample_indices(n_events: int, n_boot: int, seed: int) -> npt.NDArray[np.int64]:

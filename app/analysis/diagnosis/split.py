@@ -17,11 +17,12 @@ import hashlib
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, TypeVar
+from typing import Protocol, TypeVar
 
 import numpy as np
 
 from app.errors import AnalysisError, InsufficientDataError
+from app.serial import Serial, lists, rule
 
 
 class SplitEvent(Protocol):
@@ -50,7 +51,7 @@ HELDOUT = "heldout"
 
 
 @dataclass(frozen=True)
-class Split:
+class Split(Serial):
     """A frozen event split.
 
     Attributes
@@ -61,9 +62,9 @@ class Split:
     """
 
     seed: int
-    calibration: tuple[int, ...]
-    heldout: tuple[int, ...]
-    digest: str
+    calibration: tuple[int, ...] = field(metadata=rule(convert=lists))
+    heldout: tuple[int, ...] = field(metadata=rule(convert=lists))
+    digest: str = field(metadata=rule(key="sha256"))
     strata: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -85,15 +86,6 @@ class Split:
     def heldout_events(self, events: Sequence[E]) -> tuple[E, ...]:
         ho = set(self.heldout)
         return tuple(e for e in events if e.index in ho)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "seed": self.seed,
-            "calibration": list(self.calibration),
-            "heldout": list(self.heldout),
-            "sha256": self.digest,
-            "strata": dict(self.strata),
-        }
 
 
 def require_calibration(split: Split, events: Sequence[SplitEvent]) -> None:

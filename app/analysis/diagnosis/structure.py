@@ -40,13 +40,14 @@ sign-flip p-value below ``(1 - level) / 2``), i.e. what is left would itself be 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
 from app.analysis.diagnosis.forward import DiagEvent, Prediction, weighted_residual
 from app.analysis.diagnosis.score import EventScore, Interval
+from app.serial import Rule, Serial, computed, rule
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -165,8 +166,12 @@ def locked_test(rem: Remainder, n_flip: int = 1000, seed: int = 0, chunk: int = 
     return value, p, float(np.quantile(null, 0.95))
 
 
+# an interval's own figures, 4 digits, None where not finite (Interval.to_dict writes NaN)
+FIGURES = rule(convert=asdict, nonfinite=None, digits=4)
+
+
 @dataclass(frozen=True)
-class RemainderTest:
+class RemainderTest(Serial):
     """The three statistics of the module docstring.
 
     Attributes
@@ -177,13 +182,21 @@ class RemainderTest:
     level : interval level; a statistic is significant at ``(1 - level) / 2`` one-sided.
     """
 
-    overall: Interval
-    impact: Interval
-    locked: float
-    locked_p: float
-    locked_null95: float
-    level: float = 0.9
-    phases: tuple[tuple[str, Interval], ...] = ()
+    overall: Interval = field(metadata=FIGURES)
+    impact: Interval = field(metadata=FIGURES)
+    locked: float = field(metadata=rule(skip=True))  # written with its p-value and null as "locked"
+    locked_p: float = field(metadata=rule(skip=True))
+    locked_null95: float = field(metadata=rule(skip=True))
+    level: float = field(default=0.9, metadata=rule(skip=True))
+    phases: tuple[tuple[str, Interval], ...] = field(default=(), metadata=rule(
+        convert=lambda ps: {k: asdict(v) for k, v in ps}, nonfinite=None, digits=4))
+
+    serial_computed = computed(locked_statistic=Rule(key="locked", nonfinite=None, digits=4))
+    serial_order = ("overall", "impact", "locked_statistic", "phases")
+
+    @property
+    def locked_statistic(self) -> dict[str, float]:
+        return {"value": self.locked, "p_value": self.locked_p, "null_95": self.locked_null95}
 
     def above_noise(self, value_max: float, lo_max: float) -> list[str]:
         """Names of the statistics that show a remainder above noise (large and significant)."""
@@ -199,18 +212,6 @@ class RemainderTest:
                 f"in the lash-traverse and impact phases {self.impact.value:.2f}x "
                 f"[{self.impact.lo:.2f}, {self.impact.hi:.2f}]",
                 f"event-locked {self.locked:.2f}x (sign-flip p = {self.locked_p:.3f})"]
-
-    def to_dict(self) -> dict[str, object]:
-        def iv(x: Interval) -> dict[str, float | None]:
-            return {"value": _r(x.value), "lo": _r(x.lo), "hi": _r(x.hi)}
-
-        return {"overall": iv(self.overall), "impact": iv(self.impact),
-                "locked": {"value": _r(self.locked), "p_value": _r(self.locked_p), "null_95": _r(self.locked_null95)},
-                "phases": {k: iv(v) for k, v in self.phases}}
-
-
-def _r(x: float) -> float | None:
-    return round(float(x), 4) if np.isfinite(x) else None
 
 
 def remainder_test(rem: Remainder, draws: IntArray, level: float = 0.9) -> RemainderTest:

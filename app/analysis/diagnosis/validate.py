@@ -9,8 +9,7 @@ the baseline on every event of that drive, with event-bootstrap intervals.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -33,6 +32,7 @@ from app.analysis.events import EventParams, detect_events
 from app.analysis.logchecks import CheckParams, Limits, LogChecks, check_log
 from app.errors import AnalysisError, InsufficientDataError
 from app.identify.base import with_base
+from app.serial import Serial, rule
 from app.signals import SignalSet
 from sim import Vehicle
 from sim.effects import apply_effects
@@ -88,29 +88,16 @@ def augmented_vehicle(result: DiagnosisResult, base: Vehicle) -> Vehicle:
 
 
 @dataclass(frozen=True)
-class Validation:
+class Validation(Serial):
     effects: dict[str, dict[str, float]]
-    n_events: int
+    n_events: int = field(metadata=rule(key="events"))
     shrink: Interval
-    explained: Interval
-    improved_fraction: float
-    baseline_ratio: float
-    augmented_ratio: float
-    baseline_nuisance: dict[str, float]
-    augmented_nuisance: dict[str, float]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "effects": self.effects,
-            "events": self.n_events,
-            "shrink": self.shrink.to_dict(),
-            "explained_share": self.explained.to_dict(),
-            "improved_fraction": round(self.improved_fraction, 4),
-            "residual_to_noise_baseline": round(self.baseline_ratio, 4),
-            "residual_to_noise_augmented": round(self.augmented_ratio, 4),
-            "nuisance_baseline": self.baseline_nuisance,
-            "nuisance_augmented": self.augmented_nuisance,
-        }
+    explained: Interval = field(metadata=rule(key="explained_share"))
+    improved_fraction: float = field(metadata=rule(digits=4))
+    baseline_ratio: float = field(metadata=rule(key="residual_to_noise_baseline", digits=4))
+    augmented_ratio: float = field(metadata=rule(key="residual_to_noise_augmented", digits=4))
+    baseline_nuisance: dict[str, float] = field(metadata=rule(key="nuisance_baseline"))
+    augmented_nuisance: dict[str, float] = field(metadata=rule(key="nuisance_augmented"))
 
 
 def _all_calibration(events: Sequence[DiagEvent]) -> Split:
