@@ -29,7 +29,6 @@ raises :class:`FormatDeclarationError` naming the file, when this module is impo
 from __future__ import annotations
 
 import ast
-import re
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -61,10 +60,21 @@ class FormatDeclarationError(Exception):
 
 _DECLARED = ("name", "reader", "label", "suffixes", "magic", "lines", "order")  # what a declaration may give
 _REQUIRED = ("name", "reader", "label", "order")
-_STATEMENT = re.compile(r"^FORMAT\b[^=\n]*=", re.M)  # the top-level FORMAT assignment, however written
-_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _MAX_LINES = 40  # a declaration is a few lines
 _LITERAL_NODES = (ast.Constant, ast.Tuple, ast.Name, ast.Load, ast.UnaryOp, ast.USub)  # what an argument may hold
+
+
+def _assignment(source: str, name: str) -> int:
+    """Where the top-level assignment of ``name`` starts (``NAME = ...`` or ``NAME: type = ...``), -1 if none
+    (plain string search: this runs over every reader's source at import)."""
+    text = "\n" + source
+    at = text.find("\n" + name)  # at: the newline before the name in text, the name itself in source
+    while at >= 0:
+        after = text[at + 1 + len(name):at + 201 + len(name)].split("\n", 1)[0].lstrip()
+        if after.startswith(":") or (after.startswith("=") and not after.startswith("==")):
+            return at
+        at = text.find("\n" + name, at + 1)
+    return -1
 
 
 def _statement(source: str, start: int, where: str) -> ast.stmt:
@@ -94,11 +104,11 @@ def _statement(source: str, start: int, where: str) -> ast.stmt:
 
 def _string_constant(source: str, name: str, where: str) -> str:
     """The string a top-level ``NAME = "..."`` of the same file assigns."""
-    m = re.search(rf"^{re.escape(name)}\s*(:[^=\n]*)?=", source, re.M)
-    if m is None:
+    at = _assignment(source, name)
+    if at < 0:
         raise FormatDeclarationError(f"{where}: FORMAT refers to {name}, which is not a string constant "
                                      "assigned at the top of the file")
-    node = _statement(source, m.start(), where)
+    node = _statement(source, at, where)
     value = getattr(node, "value", None)
     if not (isinstance(value, ast.Constant) and isinstance(value.value, str)):
         raise FormatDeclarationError(f"{where}: FORMAT refers to {name}, which is not a string literal")
@@ -118,7 +128,7 @@ def _check(where: str, key: str, value: object) -> None:
         return FormatDeclarationError(f"{where}: FORMAT {key}= must be {what}, not {value!r}")
 
     if key in ("name", "reader"):
-        if not (isinstance(value, str) and _IDENT.match(value)):
+        if not (isinstance(value, str) and value.isidentifier()):
             raise fail("an identifier string")
     elif key == "label":
         if not (isinstance(value, str) and value.strip()):
@@ -139,14 +149,17 @@ def read_declaration(path: Path) -> LogFormat | None:
     """The ``FORMAT`` a reader module's source declares (None when it declares none), read without
     importing the module; a malformed declaration raises :class:`FormatDeclarationError`."""
     try:
-        source = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
+        if b"FORMAT" not in data:
+            return None
+        source = data.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise FormatDeclarationError(f"{path}: cannot be read for its FORMAT: {exc}") from None
-    m = _STATEMENT.search(source)
-    if m is None:
+    at = _assignment(source, "FORMAT")
+    if at < 0:
         return None
     where = str(path)
-    node = _statement(source, m.start(), where)
+    node = _statement(source, at, where)
     call = getattr(node, "value", None)
     if not (isinstance(node, ast.Assign | ast.AnnAssign) and isinstance(call, ast.Call)
             and isinstance(call.func, ast.Name) and call.func.id == "LogFormat"):

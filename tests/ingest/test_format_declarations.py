@@ -80,7 +80,9 @@ def test_a_declaration_may_name_a_string_constant_of_its_file(tmp_path: Path) ->
         'FORMAT: LogFormat = LogFormat(\n    name="lashtest", reader="LashTestReader", label="test lines",\n'
         '    suffixes=(".lt",), magic=(b"LSHT",),\n    lines=(HEAD, r"^\\d+\\.\\d+ [0-9A-F]{3} "), order=5,\n)\n'
         '# a helper module, no declaration:\n')
-    (tmp_path / "lashtest_helpers.py").write_text("X = 1\n")
+    (tmp_path / "lashtest_helpers.py").write_text(
+        '"""No FORMAT here."""\nFORMATS = ("a",)\nFORMAT_NAMES: tuple[str, ...] = ()\n'
+        'if FORMATS == ():\n    FORMAT = None\n')
     (tmp_path / "_private.py").write_text("FORMAT = broken(\n")
     (f,) = discover_formats(tmp_path)
     assert f == log_formats.LogFormat("lashtest", "LashTestReader", "test lines", (".lt",), (b"LSHT",),
