@@ -1,9 +1,11 @@
-"""The sniffer knows a format only from its entry in the format table (app/log_formats.py)."""
+"""The sniffer knows a format only from its declaration (``FORMAT`` of its reader module, collected by
+app/log_formats.py)."""
 
 from __future__ import annotations
 
 import importlib
 import re
+from pathlib import Path
 
 import pytest
 
@@ -20,13 +22,17 @@ def test_every_sniffed_format_says_how_it_is_known() -> None:
             re.compile(p)
 
 
-def test_a_new_format_is_one_entry_in_the_table(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_new_format_is_one_declaration(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     head = b"#LASHTEST v1\n0.001 7E8 02 10 20\n0.002 7E8 02 10 21\n"
     with pytest.raises(UnsupportedFormatError):
         sniff.sniff_format(head, "drive.lt")
-    extra = (log_formats.LogFormat("lashtest", "lashtest:LashTestReader", "test lines", (".lt",),
-                                   lines=(r"^#LASHTEST v\d+$", r"^\d+\.\d+ [0-9A-F]{3} ")),
-             log_formats.LogFormat("lashbin", "lashbin:LashBinReader", "test binary", magic=(b"LSHB",)))
+    (tmp_path / "lashtest.py").write_text(
+        'FORMAT = LogFormat(name="lashtest", reader="LashTestReader", label="test lines", order=95,\n'
+        '                   suffixes=(".lt",), lines=(r"^#LASHTEST v\\d+$", r"^\\d+\\.\\d+ [0-9A-F]{3} "))\n')
+    (tmp_path / "lashbin.py").write_text(
+        'FORMAT = LogFormat(name="lashbin", reader="LashBinReader", label="test binary", order=96, magic=(b"LSHB",))\n')
+    extra = log_formats.discover_formats(tmp_path)
+    assert [f.name for f in extra] == ["lashtest", "lashbin"]
     monkeypatch.setattr(log_formats, "LOG_FORMATS", (*log_formats.LOG_FORMATS, *extra))
     try:
         fresh = importlib.reload(sniff)

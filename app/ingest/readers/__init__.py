@@ -1,4 +1,4 @@
-"""CAN log readers, chosen by content (the formats are listed once, in :mod:`app.log_formats`).
+"""CAN log readers, chosen by content (each reader module declares its format; :mod:`app.log_formats` collects them).
 
 Usage::
 
@@ -61,7 +61,7 @@ class LogReader(Protocol):
                  tb: TracebackType | None) -> None: ...
 
 
-READERS: dict[str, str] = {f.name: f.reader for f in LOG_FORMATS}  # format -> "module:class", imported when needed
+READERS: dict[str, str] = {f.name: f.reader_path for f in LOG_FORMATS}  # format -> "module:Class", imported when needed
 
 
 def reader_class(fmt: str) -> type[BaseReader]:

@@ -36,11 +36,16 @@ from app.ingest.readers._text import (
     parse_int,
     printable,
 )
-from app.log_formats import ANALYSER_HEADER
+from app.log_formats import LogFormat
 
 EXT, RTR, TX = int(FrameFlag.EXTENDED), int(FrameFlag.REMOTE), int(FrameFlag.TX)
 
-HEADER = re.compile(ANALYSER_HEADER)  # the export's header line, as the format table knows it
+HEADER_LINE = r"(?i)^\ufeff?ParserFlags\tCh\tCounter\tT/R\tTime\t"
+ROW = r"(?i)^\d+\t\d+\t\d+\t(RX|TX)\t\d+(\.\d+)?\t[^\t]*\t(0x)?[0-9A-Fa-f]{1,8}\t\d+\t"
+FORMAT = LogFormat(name="analyser_tsv", reader="AnalyserTsvReader", label="USB-CAN analyser tab export", order=80,
+                   lines=(HEADER_LINE, ROW))
+
+HEADER = re.compile(HEADER_LINE)  # the export's header line, as the sniffer knows it
 
 _DEFAULT_COLUMNS = {"ch": 1, "t/r": 3, "time": 4, "flags": 5, "can id": 6, "len": 7, "data": 8}
 _FLAG_EXT = re.compile(r"ext|\bx\b", re.I)

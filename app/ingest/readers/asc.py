@@ -36,6 +36,7 @@ from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader, ChunkBuilder
 from app.ingest.readers._text import BadLine, LineSource, decimal_to_ns, dlc2len, hex_bytes, parse_int, printable
 from app.ingest.readers.asc_scan import scan_block
+from app.log_formats import LogFormat
 
 _TS = re.compile(r"^\d+\.\d+$")
 _MONTHS = {"jan": 1, "feb": 2, "mar": 3, "mär": 3, "mrz": 3, "apr": 4, "may": 5, "mai": 5, "jun": 6, "jul": 7,
@@ -93,6 +94,12 @@ def parse_asc_date(text: str) -> tuple[datetime, str] | None:
     if utc:
         return dt.replace(tzinfo=UTC), "asc_date_header_utc"
     return dt, "asc_date_header_local"
+
+
+EVENT_LINE = r"(?i)^\s*\d+\.\d+\s+(\d+\s+\w+x?\s+(Rx|Tx)\b|\d+\s+ErrorFrame|CANFD\s+\d+)"
+FORMAT = LogFormat(name="asc", reader="ASCReader", label="Vector ASC", order=20, suffixes=(".asc",), lines=(
+    r"(?i)^\s*date\s+\S+", r"(?i)^\s*base\s+(hex|dec)\b", r"(?i)^\s*(no\s+)?internal\s+events\s+logged",
+    r"(?i)^\s*begin\s+triggerblock", EVENT_LINE))
 
 
 class ASCReader(BaseReader):

@@ -44,6 +44,7 @@ from app.ingest.readers.blf_containers import (
     read_ahead,
 )
 from app.ingest.readers.blf_vector import decode_run
+from app.log_formats import LogFormat
 
 FILE_HEADER = struct.Struct("<4sLBBBBBBBBQQLL8H8H")
 
@@ -85,6 +86,10 @@ def systemtime(fields: tuple[int, ...]) -> datetime | None:
         return datetime(year, month, day, hour, minute, second, ms * 1000)
     except ValueError:
         return None
+
+
+FORMAT = LogFormat(name="blf", reader="BLFReader", label="Vector BLF", order=10, suffixes=(".blf",),
+                   magic=(b"LOGG",))
 
 
 class BLFReader(BaseReader):

@@ -31,6 +31,7 @@ from app.ingest.readers._text import (
     first_stamp,
     printable,
 )
+from app.log_formats import LogFormat
 
 _LINE = re.compile(r"^\(([^)]*)\)\s+(\S+)\s+(\S+)(?:\s+([RrTt]))?$")
 _HEX = re.compile(r"^[0-9A-Fa-f]*$")
@@ -85,6 +86,10 @@ def parse_candump_line(s: str) -> Frame | None:
     if ident & CAN_ERR_FLAG and not fl & FD:
         return t, iface, ident & 0x1FFFFFFF, fl | ERR, len(payload), payload
     return t, iface, ident & 0x1FFFFFFF, fl | (EXT if len(id_str) > 3 else 0), len(payload), payload
+
+
+FORMAT = LogFormat(name="candump", reader="CandumpReader", label="candump -L", order=30, suffixes=(".log",),
+                   lines=(r"^\s*\(\d+(\.\d+)?\)\s+\S+\s+[0-9A-Fa-f]{3,8}#",))
 
 
 class CandumpReader(LineFrameReader):

@@ -59,6 +59,7 @@ from app.ingest.readers._text import (
     parse_int,
     printable,
 )
+from app.log_formats import LogFormat
 
 EXT, FD, TX = int(FrameFlag.EXTENDED), int(FrameFlag.FD), int(FrameFlag.TX)
 
@@ -355,6 +356,10 @@ def _cached(path: Path) -> TextLayout:
     layout = load_layout(path)
     _cache[path] = (mtime, layout)
     return layout
+
+
+FORMAT = LogFormat(name="described", reader="DescribedReader", label="a text format described in a TOML file",
+                   order=1000)  # last: the help texts end with it ("... or a text format described in a TOML file")
 
 
 class DescribedReader(LineFrameReader):

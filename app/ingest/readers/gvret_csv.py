@@ -29,11 +29,17 @@ from app.ingest.readers._text import (
     parse_int,
     printable,
 )
+from app.log_formats import LogFormat
 
 EXT, FD, TX = int(FrameFlag.EXTENDED), int(FrameFlag.FD), int(FrameFlag.TX)
 _BOOL = {"true": True, "false": False, "1": True, "0": False}
 
 Frame = tuple[int, int, int, int, int, bytes]
+
+
+ROW = r"(?i)^\d+(\.\d+)?,(0x)?[0-9A-Fa-f]{1,8},(true|false),((Rx|Tx),)?\d+,\d+(,[0-9A-Fa-f]{1,2})*,?\s*$"
+FORMAT = LogFormat(name="gvret_csv", reader="GvretCsvReader", label="SavvyCAN/GVRET CSV", order=50,
+                   suffixes=(".csv",), lines=(r"(?i)^\s*Time Stamp,ID,Extended,(Dir,)?Bus,LEN", ROW))
 
 
 class GvretCsvReader(LineFrameReader):

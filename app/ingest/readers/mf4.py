@@ -42,6 +42,7 @@ from app.ingest.readers import mf4_native as native
 from app.ingest.readers._base import BaseReader
 from app.ingest.readers._source import StreamDamage, inflate_cap, too_large
 from app.ingest.readers.mf4_blocks import Damaged, MdfFile, Unsupported
+from app.log_formats import LogFormat
 from app.settings import Settings
 from app.tempfiles import owner_tag
 
@@ -97,6 +98,10 @@ def frames_from_samples(kind: str, samples: Any, timestamps: npt.NDArray[np.floa
     channel = np.clip(_field(samples, p + "BusChannel", n, default=1) - 1, -1, 32767)
     return FrameChunk(t_ns, channel.astype(np.int16), (ident & 0x1FFFFFFF).astype(np.uint32),
                       fl, dlc.astype(np.uint8), data)
+
+
+FORMAT = LogFormat(name="mf4", reader="MF4Reader", label="MF4", order=60, suffixes=(".mf4", ".mdf"),
+                   magic=(b"MDF     ", b"UnFinMF "))
 
 
 class MF4Reader(BaseReader):

@@ -37,6 +37,7 @@ from app.ingest.readers._text import (
     hex_bytes,
     printable,
 )
+from app.log_formats import LogFormat
 
 EXT, FD, TX = int(FrameFlag.EXTENDED), int(FrameFlag.FD), int(FrameFlag.TX)
 
@@ -76,6 +77,10 @@ def parse_serial_line(line: str) -> tuple[int, int, int, int, int, bytes] | None
         raise BadLine("bad_line", f"{len(data)} data bytes, but the length says {length}")
     fl = (EXT if len(id_str) > 3 else 0) | (FD if length > 8 else 0) | (TX if m.group(2) in "Tt" else 0)
     return t, channel, ident, fl, length, hex_bytes(data, length)
+
+
+FORMAT = LogFormat(name="serial_dump", reader="SerialDumpReader", label="serial RXn/TXn dump", order=90,
+                   lines=(r"^\(\d+(\.\d+)?\)\s+[RT]X\d+\s+[0-9A-Fa-f]{1,8}\s+\[\d+\]",))
 
 
 class SerialDumpReader(LineFrameReader):

@@ -2,7 +2,7 @@
 
 Binary formats have magic bytes (BLF ``LOGG``, MDF ``MDF     `` / ``UnFinMF ``). Text formats
 are scored by how many of the first lines have that format's unmistakable shape; a gzip
-head is inflated first. Both come from the format table, :data:`app.log_formats.LOG_FORMATS`.
+head is inflated first. Both come from the formats the readers declare, :data:`app.log_formats.LOG_FORMATS`.
 CANedge's compressed/encrypted MF4 containers (``Generic File``)
 are recognised only to refuse them with a clear message.
 """

@@ -20,6 +20,7 @@ import re
 
 from app.ingest.frames import FrameFlag
 from app.ingest.readers._text import BadLine, LineFrame, LineFrameReader, first_stamp, printable
+from app.log_formats import LogFormat
 
 EXT = int(FrameFlag.EXTENDED)
 _LINE = re.compile(r"^([0-9A-Fa-f]{1,12})x([0-9A-Fa-f]{8})([0-9A-Fa-f]*)$")
@@ -52,6 +53,10 @@ def parse_tcu_line(line: str) -> Frame | None:
     if len(data) > 16:
         raise BadLine("bad_line", f"{len(data) // 2} data bytes; a CAN frame has at most 8")
     return t_ms * 1_000_000, ident, EXT, bytes.fromhex(data)
+
+
+FORMAT = LogFormat(name="tcu", reader="TcuReader", label="TCU SD-card text", order=70,
+                   lines=(r"^[0-9A-Fa-f]{8}x[0-9A-Fa-f]{8}(?:[0-9A-Fa-f]{2}){0,8}\s*$",))
 
 
 class TcuReader(LineFrameReader):

@@ -26,6 +26,7 @@ from app.errors import LogFormatError
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader, ChunkBuilder
 from app.ingest.readers._text import BadLine, LineSource, decimal_to_ns, dlc2len, hex_bytes, parse_int, printable
+from app.log_formats import LogFormat
 
 EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFlag.FD, FrameFlag.ERROR,
                                                     FrameFlag.REMOTE, FrameFlag.BRS, FrameFlag.ESI, FrameFlag.TX))
@@ -42,6 +43,11 @@ def _bus(tok: str) -> int:
     if not 1 <= bus <= 32767:
         raise BadLine("bad_line", f"bus number {tok} out of range")
     return bus
+
+
+FORMAT = LogFormat(name="trc", reader="TRCReader", label="PEAK TRC", order=40, suffixes=(".trc",), lines=(
+    r"^;\$(FILEVERSION|STARTTIME|COLUMNS)=", r"^\s*\d+\)\s+\d+(\.\d+)?\s+",
+    r"^\s*\d+\s+\d+\.\d+\s+(DT|FD|FB|FE|BI|RR|ST|ER|EC|EV)\s"))
 
 
 class TRCReader(BaseReader):
