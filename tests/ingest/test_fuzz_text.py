@@ -98,6 +98,7 @@ def test_asc_gzip_truncated_salvages_and_reports() -> None:
     assert isinstance(run_bounded(packed[: len(packed) * 2 // 3], strict=True).error, TruncatedLogError)
 
 
+SCREEN = " (1436509052.249713)  can0  123   [3]  11 22 33\n"  # candump -t a screen output (candump_screen)
 TSV_HEAD = "ParserFlags\tCh\tCounter\tT/R\tTime\tFlags\tCAN ID\tLen\tData\tParser Name\tdefault\n"
 
 
@@ -132,6 +133,13 @@ TSV_HEAD = "ParserFlags\tCh\tCounter\tT/R\tTime\tFlags\tCAN ID\tLen\tData\tParse
     ("(566.87) RX0 3BE [2] FD 0B\n", "(566.88) RX0 3BE [9] FD 0B\n", "bad_line"),
     ("(566.87) RX0 3BE [2] FD 0B\n", "(56x.88) RX0 3BE [2] FD 0B\n", "bad_timestamp"),
     ("(566.87) RX0 3BE [2] FD 0B\n", " 00 10 00 00\n", "bad_line"),
+    (SCREEN, " (1436509052.25x713)  can0  123   [3]  11 22 33\n", "bad_timestamp"),
+    (SCREEN, " (-1436509052.259713)  can0  123   [3]  11 22 33\n", "bad_timestamp"),
+    (SCREEN, " (1436509052.259713)  can0  1G3   [3]  11 22 33\n", "non_hex"),
+    (SCREEN, " (1436509052.259713)  can0  123   [3]  11 2Z 33\n", "non_hex"),
+    (SCREEN, " (1436509052.259713)  can0  123   [3]  11 22\n", "short_data"),
+    (SCREEN, " (1436509052.259713)  can0  123   [9]  11 22 33 44 55 66 77 88 99\n", "bad_line"),
+    (SCREEN, "garbage line here\n", "bad_line"),
 ])
 def test_other_text_formats_damage(fmt_text: str, bad: str, kind: str) -> None:
     good_line = fmt_text.splitlines()[-1] + "\n"
@@ -163,4 +171,18 @@ def test_random_lines_inside_an_asc_never_cost_valid_frames(inserts: list[tuple[
         lines.insert(min(at, len(lines)), text.encode("latin-1") + b"\n")
     out = run_bounded(b"".join(lines), fmt="asc")
     assert out.chunk is not None and out.report is not None
+    assert len(out.chunk) >= 200
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.integers(0, 200), LINE), max_size=8))
+def test_random_lines_inside_candump_screen_output_never_cost_valid_frames(inserts: list[tuple[int, str]]) -> None:
+    """The newest reader under the same abuse as the ASC one: any inserted line is reported or read, never a crash,
+    a hang or a lost frame (the format is named: a few garbage lines must not change what the log is)."""
+    lines = [f" ({1436509052.0 + 0.01 * i:.6f})  can0  {0x100 + i % 7:03X}   [2]  {i % 256:02X} 7F\n".encode()
+             for i in range(200)]
+    for at, text in sorted(inserts, reverse=True):
+        lines.insert(min(at, len(lines)), text.encode("latin-1") + b"\n")
+    out = run_bounded(b"".join(lines), fmt="candump_screen")
+    assert out.chunk is not None and out.report is not None, out.error
     assert len(out.chunk) >= 200
