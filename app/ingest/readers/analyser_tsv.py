@@ -55,7 +55,7 @@ _FLAG_RTR = re.compile(r"rtr|remote", re.I)
 class AnalyserTsvReader(LineFrameReader):
     """USB-CAN analyser tab export reader (see the module docstring)."""
 
-    fmt = "analyser_tsv"
+    fmt = FORMAT.name
     unit = "row"
 
     def _open(self) -> None:

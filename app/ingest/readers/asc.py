@@ -105,7 +105,7 @@ FORMAT = LogFormat(name="asc", reader="ASCReader", label="Vector ASC", order=20,
 class ASCReader(BaseReader):
     """Vector ASC reader (see the module docstring)."""
 
-    fmt = "asc"
+    fmt = FORMAT.name
 
     def _open(self) -> None:
         self.base = 16

@@ -95,7 +95,7 @@ FORMAT = LogFormat(name="blf", reader="BLFReader", label="Vector BLF", order=10,
 class BLFReader(BaseReader):
     """Vector BLF reader; see the module docstring for the layout and policies."""
 
-    fmt = "blf"
+    fmt = FORMAT.name
 
     def _open(self) -> None:
         head = self._head

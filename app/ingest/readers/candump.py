@@ -95,7 +95,7 @@ FORMAT = LogFormat(name="candump", reader="CandumpReader", label="candump -L", o
 class CandumpReader(LineFrameReader):
     """``candump -L`` reader (see the module docstring)."""
 
-    fmt = "candump"
+    fmt = FORMAT.name
 
     def _open(self) -> None:
         self._ifaces: dict[str, int] = {}

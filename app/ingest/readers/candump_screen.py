@@ -115,7 +115,7 @@ def parse_screen_line(line: str) -> Frame | None:
 class CandumpScreenReader(LineFrameReader):
     """``candump -t a|z|A`` screen output reader (see the module docstring)."""
 
-    fmt = "candump_screen"
+    fmt = FORMAT.name
 
     def _open(self) -> None:
         self._ifaces: dict[str, int] = {}

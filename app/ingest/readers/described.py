@@ -365,7 +365,7 @@ FORMAT = LogFormat(name="described", reader="DescribedReader", label="a text for
 class DescribedReader(LineFrameReader):
     """Reads a text log with a :class:`TextLayout` (see the module docstring)."""
 
-    fmt = "described"
+    fmt = FORMAT.name
 
     def __init__(self, stream: ByteStream, head: bytes, *, layout: TextLayout, **kwargs: Any) -> None:
         self.layout = layout

@@ -45,7 +45,7 @@ FORMAT = LogFormat(name="gvret_csv", reader="GvretCsvReader", label="SavvyCAN/GV
 class GvretCsvReader(LineFrameReader):
     """SavvyCAN/GVRET CSV reader (see the module docstring)."""
 
-    fmt = "gvret_csv"
+    fmt = FORMAT.name
     unit = "row"
 
     def _open(self) -> None:

@@ -107,7 +107,7 @@ FORMAT = LogFormat(name="mf4", reader="MF4Reader", label="MF4", order=60, suffix
 class MF4Reader(BaseReader):
     """MDF 4 bus-logging reader (see the module docstring)."""
 
-    fmt = "mf4"
+    fmt = FORMAT.name
 
     def _open(self) -> None:
         self._spool: str | None = None

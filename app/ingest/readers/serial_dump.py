@@ -86,7 +86,7 @@ FORMAT = LogFormat(name="serial_dump", reader="SerialDumpReader", label="serial 
 class SerialDumpReader(LineFrameReader):
     """Serial ``(t) RXn ID [len] bytes`` dump reader (see the module docstring)."""
 
-    fmt = "serial_dump"
+    fmt = FORMAT.name
 
     def _open(self) -> None:
         head = self._head.decode("latin-1")

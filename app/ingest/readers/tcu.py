@@ -62,7 +62,7 @@ FORMAT = LogFormat(name="tcu", reader="TcuReader", label="TCU SD-card text", ord
 class TcuReader(LineFrameReader):
     """TCU hex-stamped text reader (see the module docstring)."""
 
-    fmt = "tcu"
+    fmt = FORMAT.name
 
     def _open(self) -> None:
         self.meta.extra["time_base"] = "logger clock (milliseconds since power-up)"

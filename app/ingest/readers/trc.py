@@ -53,7 +53,7 @@ FORMAT = LogFormat(name="trc", reader="TRCReader", label="PEAK TRC", order=40, s
 class TRCReader(BaseReader):
     """PEAK TRC reader (see the module docstring)."""
 
-    fmt = "trc"
+    fmt = FORMAT.name
 
     def _open(self) -> None:
         self.version = "1.0"
