@@ -36,7 +36,8 @@ def test_tolerance_band_job(server: Server, demo_log: Path) -> None:
             r = c.get(url, params={"n": 40, "seed": 0})
         assert r.status_code == 200, r.text
         assert c.get(f"{url}/status", params={"n": 40}).json() == {
-            "status": "done", "progress": 1.0, "stage": "", "job_id": None, "error": None}
+            "status": "done", "progress": 1.0, "stage": "", "job_id": None, "error": None,
+            "elapsed_s": None, "eta_s": None}
         assert c.get(f"{url}/status", params={"n": 41}).json()["status"] == "not_started"
         doc: dict[str, Any] = r.json()
         metrics = c.get(f"/analyses/{analysis['id']}/metrics").json()

@@ -115,7 +115,8 @@ def test_gap_sensitivity_started_in_the_background_reports_progress(client: Test
     r = client.get("/vehicles/ev/gap-sensitivity", params={"compute": False})  # a read that never starts work
     assert r.status_code == 404 and r.json()["code"] == "gap_sensitivity_not_started"
     assert client.get("/vehicles/ev/gap-sensitivity/status").json() == {
-        "status": "not_started", "progress": 0.0, "stage": "", "job_id": None, "error": None}
+        "status": "not_started", "progress": 0.0, "stage": "", "job_id": None, "error": None,
+        "elapsed_s": None, "eta_s": None}
     r = client.post("/vehicles/ev/gap-sensitivity")
     assert r.status_code == 202, r.text
     job = r.json()
