@@ -7,7 +7,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from app.analysis.diagnosis.decide import CandidateScore, DecisionRules, bootstrap_draws, decide, score_candidate
+from app.analysis.diagnosis.decide import (
+    CandidateScore,
+    Decision,
+    DecisionRules,
+    bootstrap_draws,
+    decide,
+    lags_apart,
+    score_candidate,
+)
 from app.analysis.diagnosis.score import Interval
 from app.analysis.diagnosis.structure import Remainder, remainder_test
 
@@ -267,3 +275,35 @@ def test_a_second_effect_that_takes_the_first_off_its_prior_bound_is_not_named()
     d = decide(BASE, N, [single, cand("drag", BASE, 0.9, seed=5)], [relief], draws, RULES, 8)
     assert (d.status, d.top) == ("partial", ("progressive_stiffness",))
     assert "takes progressive_stiffness.mount_rel off its prior bound (20 alone, 3.1 in the pair)" in d.reason
+
+
+ALL = ("backlash", "housing_mount", "torque_lag", "speed_sensor", "drag")
+
+
+def _lag_decision(top: str) -> Decision:
+    others = [c for c in ("torque_lag", "speed_sensor", "drag") if c != top]
+    return decide(BASE, N, [cand(top, BASE, 0.03), cand(others[0], BASE, 0.6, seed=1),
+                            cand(others[1], BASE, 1.0, seed=2)], [], bootstrap_draws(8, RULES, 1), RULES, 8)
+
+
+@pytest.mark.parametrize("top", ["torque_lag", "speed_sensor"])
+def test_a_lag_is_not_told_from_a_filter_where_the_lash_traverse_is_not_resolved(top: str) -> None:
+    """Between one and two samples of lash traverse, a torque lag and a speed filter are the same to the log: the one
+    held-out events prefer is named with the other as confusable, and the reason says why."""
+    d = _lag_decision(top)
+    assert (d.status, d.top) == ("explained", (top,))
+    out = lags_apart(d, 1.0, 2, ALL)
+    other = "speed_sensor" if top == "torque_lag" else "torque_lag"
+    assert (out.status, out.top, out.confusable) == ("ambiguous", (top,), (top, other))
+    assert "1 speed samples" in out.reason and f"{top} is not told from {other}" in out.reason
+    assert out.details["lags_unresolved"] == {"traverse_samples": 1.0, "min_samples": 2}
+    assert out.best is d.best and out.gap_ratio is d.gap_ratio  # the figures stay those of the chosen fit
+
+
+def test_a_resolved_traverse_other_effects_or_one_lag_asked_for_keep_the_decision() -> None:
+    d = _lag_decision("torque_lag")
+    assert lags_apart(d, 3.0, 2, ALL) is d  # the traverse spans enough samples to separate them
+    assert lags_apart(d, 1.0, 2, ("torque_lag", "drag")) is d  # only one lag was a candidate: nothing to confuse
+    drag = decide(BASE, N, [cand("drag", BASE, 0.03), cand("torque_lag", BASE, 0.9, seed=1)], [],
+                  bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert drag.top == ("drag",) and lags_apart(drag, 0.0, 2, ALL) is drag

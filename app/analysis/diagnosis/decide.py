@@ -297,6 +297,34 @@ def decide(
 
 OVER_FULL = " (above 100 %: the fit also removed part of the noise floor)"
 
+# an input lag and an output filter: on a driveline that is otherwise linear they are the same operator, and only the
+# lash traverse and the impact tell them apart (sim/effects/speed_sensor.py)
+LAG_EFFECTS = ("torque_lag", "speed_sensor")
+
+
+def lags_apart(decision: Decision, traverse_samples: float, min_samples: float,
+               candidates: Sequence[str]) -> Decision:
+    """``decision``, or "ambiguous" between the two lags when the log cannot tell them apart.
+
+    Where the lash traverse spans fewer than ``min_samples`` speed samples in the median event, the phases
+    that separate a torque lag from a speed filter fall between samples: the offset takes the delay and the
+    base model's damping the rest, so a single lag named alone is a guess between the two (on the independent
+    generator's chain car at 20-50 Hz, real torque lags read as speed filters). The decision then names the
+    best one with the other as confusable, as when held-out events do not separate two candidates.
+    """
+    if (traverse_samples >= min_samples or decision.status not in ("explained", "partial")
+            or len(decision.top) != 1 or decision.top[0] not in LAG_EFFECTS
+            or not all(e in candidates for e in LAG_EFFECTS)):
+        return decision
+    top = decision.top[0]
+    other = next(e for e in LAG_EFFECTS if e != top)
+    return replace(decision, status="ambiguous", confusable=(top, other), reason=(
+        f"{decision.reason}. The lash traverse spans {traverse_samples:g} speed samples in the median event (under "
+        f"{min_samples:g}): a lag of the torque ({LAG_EFFECTS[0]}) and a filter of the speed ({LAG_EFFECTS[1]}) "
+        f"differ only there, so {top} is not told from {other} by this log"),
+        details={**decision.details, "lags_unresolved": {"traverse_samples": traverse_samples,
+                                                          "min_samples": min_samples}})
+
 
 def _figures(c: CandidateScore) -> str:
     """The two held-out figures of a candidate, each under its one name (see :mod:`.score`)."""

@@ -40,6 +40,7 @@ from app.analysis.diagnosis.decide import (
     decide,
     gap_ratio,
     has_gap,
+    lags_apart,
     score_candidate,
     separation,
     structured,
@@ -517,6 +518,7 @@ def _diagnose(
                                                    held=refit_with)
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
+    decision = lags_apart(decision, traverse, MIN_TRAVERSE_SAMPLES, candidates)
     if too_few and decision.status in ("explained", "partial", "ambiguous"):
         # the vehicle could not be identified first: what the effect explains may be the data sheet's error (a
         # speed-sensor filter on its bound standing in for a damping twice the file's), so nothing is attributed
