@@ -228,6 +228,16 @@ class LineFrameReader(BaseReader):
     def _set_origin(self, t: int) -> None:
         self._t0 = epoch_origin(self.meta, t)
 
+    def _named_channel(self, name: str) -> int:
+        """The channel number of an interface named in the log (``can0``...), numbered in order of appearance and
+        listed in ``meta.channels``."""
+        names: dict[str, int] = self.__dict__.setdefault("_channel_numbers", {})
+        ch = names.get(name)
+        if ch is None:
+            ch = names[name] = len(names)
+            self.meta.channels[ch] = name
+        return ch
+
     def _iter_chunks(self) -> Iterator[FrameChunk]:
         builder = ChunkBuilder(self.chunk_frames)
         lines = LineSource(self._stream, self._long_line, self.damage)

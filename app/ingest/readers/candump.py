@@ -98,21 +98,13 @@ class CandumpReader(LineFrameReader):
     fmt = FORMAT.name
 
     def _open(self) -> None:
-        self._ifaces: dict[str, int] = {}
         t = first_stamp(self._head.decode("latin-1").splitlines()[:1000], parse_candump_line)
         if t is not None:
             self._set_origin(t)
-
-    def _channel(self, iface: str) -> int:
-        ch = self._ifaces.get(iface)
-        if ch is None:
-            ch = self._ifaces[iface] = len(self._ifaces)
-            self.meta.channels[ch] = iface
-        return ch
 
     def _frame(self, line: str) -> LineFrame | None:
         frame = parse_candump_line(line)
         if frame is None:
             return None
         t, iface, ident, fl, dlc, payload = frame
-        return t, self._channel(iface), ident, fl, dlc, payload
+        return t, self._named_channel(iface), ident, fl, dlc, payload

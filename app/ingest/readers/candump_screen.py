@@ -118,7 +118,6 @@ class CandumpScreenReader(LineFrameReader):
     fmt = FORMAT.name
 
     def _open(self) -> None:
-        self._ifaces: dict[str, int] = {}
         self._dated: bool | None = None
         self._last = 0
         lines = self._head.decode("latin-1").splitlines()[:1000]
@@ -148,16 +147,9 @@ class CandumpScreenReader(LineFrameReader):
         self.meta.start_time = _EPOCH + timedelta(microseconds=t // 1000)
         self.meta.start_clock = "candump_date_local"
 
-    def _channel(self, iface: str) -> int:
-        ch = self._ifaces.get(iface)
-        if ch is None:
-            ch = self._ifaces[iface] = len(self._ifaces)
-            self.meta.channels[ch] = iface
-        return ch
-
     def _frame(self, line: str) -> LineFrame | None:
         frame = self._parse(line)
         if frame is None:
             return None
         t, iface, ident, fl, dlc, payload, _ = frame
-        return t, self._channel(iface), ident, fl, dlc, payload
+        return t, self._named_channel(iface), ident, fl, dlc, payload
