@@ -61,8 +61,7 @@ def simulate_batch(
     ParameterError : an invalid change, or a variant that changes the topology
     InstabilityError : a variant diverged (its index is named)
     """
-    return _simulate_batch(vehicle, variants, lambda k: (vehicle.with_changes(variants[k]) if variants[k]
-                                                         else vehicle).compiled,
+    return _simulate_batch(vehicle, variants, lambda k: vehicle.with_changes(variants[k]).compiled,
                            t_s, torque_nm, speed0_rpm=speed0_rpm, interp=interp, output_dt=output_dt,
                            body_speed=body_speed)
 
@@ -209,8 +208,7 @@ class ToleranceSample:
         """The compiled chain of variant ``k`` (ParameterError when its changes do not make a valid vehicle)."""
         built = self._chains.get(k)
         if built is None:
-            change = self.changes[k]
-            built = self._chains[k] = (self.vehicle.with_changes(change) if change else self.vehicle).compiled
+            built = self._chains[k] = self.vehicle.with_changes(self.changes[k]).compiled
         return built
 
 

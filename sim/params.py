@@ -262,7 +262,8 @@ class Vehicle:
         return obj
 
     def with_changes(self, changes: Mapping[str, Any] | None = None, **kw: Any) -> Vehicle:
-        """A copy with dotted fields replaced; ``"gaps.<name>"`` sets that gap's nominal size.
+        """A copy with dotted fields replaced (no changes: this vehicle itself); ``"gaps.<name>"`` sets that gap's
+        nominal size.
 
         Example: ``v.with_changes({"gaps.halfshaft": 0.0, "body.mass": 2000.0})``. Gap sizes may
         also be set in mm of circumferential clearance: ``{"gaps.mesh2.nominal_mm": 0.1}``
@@ -271,6 +272,8 @@ class Vehicle:
         """
         all_changes = dict(changes or {})
         all_changes.update({k.replace("__", "."): v for k, v in kw.items()})
+        if not all_changes:
+            return self  # nothing to change: the same (frozen) vehicle, its compiled chain with it
         data = self.to_dict()
         if self.stages:  # stage tables by name while editing
             data["stage"] = {s["name"]: s for s in data["stage"]}

@@ -61,7 +61,7 @@ class WhatIf:
             s = self.gap_scale.get(name, 1.0) * self.gap_scale.get("all", 1.0)
             if s != 1.0:
                 changes[f"gaps.{name}"] = v.gap(name).nominal * s
-        return v.with_changes(changes) if changes else v
+        return v.with_changes(changes)
 
     def apply_torque(self, t: F64, torque: F64) -> tuple[F64, F64, bool]:
         """Scaled and (if asked) rate-limited torque. Returns ``(t, torque, resampled)``.

@@ -104,7 +104,7 @@ def with_base(vehicle: Vehicle, ratios: Mapping[str, float]) -> Vehicle:
         eff = BASE_EFFECTS[name]
         key = eff.params[0].name
         changes.update(eff.vehicle_change(vehicle, {key: value_of(name, r)}) if eff.vehicle_change is not None else {})
-    return vehicle.with_changes(changes) if changes else vehicle
+    return vehicle.with_changes(changes)
 
 
 @dataclass(frozen=True)

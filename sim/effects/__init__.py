@@ -78,7 +78,7 @@ def apply_effects(vehicle: Any, settings: Mapping[str, Mapping[str, float]]) -> 
         if eff.inapplicable(vehicle):  # e.g. housing_mount on a chain without a housing: nothing to change
             continue
         changes.update(eff.vehicle_change(vehicle, eff.values(values)))
-    return vehicle.with_changes(changes) if changes else vehicle
+    return vehicle.with_changes(changes)
 
 
 def applicable_effects(vehicle: Any) -> dict[str, str]:

@@ -190,7 +190,7 @@ def vehicle_with(base: Vehicle, nuisance: Nuisance, effects: Sequence[EffectSett
     for eff, vals in effects:
         if eff.vehicle_change is not None:
             changes.update(eff.vehicle_change(base, vals))
-    return base.with_changes(changes) if changes else base
+    return base.with_changes(changes)
 
 
 def _cluster_torque(events: Sequence[DiagEvent]) -> tuple[FloatArray, FloatArray]:
