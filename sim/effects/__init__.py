@@ -12,14 +12,13 @@ diagnosed effect becomes a new vehicle version.
 from __future__ import annotations
 
 import dataclasses
-import importlib
-import pkgutil
 from collections.abc import Iterable, Mapping
 from typing import Any
 
 from sim import params
 from sim.effects.base import Effect, ParamSpec
 from sim.errors import ParameterError
+from sim.modules import module_entries
 
 
 def _model_has(section: str) -> bool:
@@ -38,16 +37,8 @@ def discover(package: str = __name__, path: Iterable[str] | None = None) -> dict
     A module that defines no ``EFFECT``, or one whose id is not the module's name, is a ``TypeError``
     naming the file: a library entry is never skipped silently.
     """
-    found: list[Effect] = []
-    for info in pkgutil.iter_modules(list(path) if path is not None else __path__):
-        if info.name == "base" or info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{package}.{info.name}")
-        effect = getattr(module, "EFFECT", None)
-        if not isinstance(effect, Effect) or effect.id != info.name:
-            raise TypeError(f"{package.replace('.', '/')}/{info.name}.py must define EFFECT, an Effect with id "
-                            f"{info.name!r}")
-        found.append(effect)
+    found = module_entries(package, path if path is not None else __path__, "EFFECT", Effect, lambda e: e.id,
+                           "an Effect with id {!r}")
     found.sort(key=lambda e: (e.order, e.id))
     return {e.id: e for e in found if e.id not in _MODEL_HOOKS or _model_has(e.id)}
 

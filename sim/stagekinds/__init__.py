@@ -9,10 +9,8 @@ kind is a :class:`~sim.errors.ParameterError` naming the known ones.
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
-
 from sim.errors import ParameterError
+from sim.modules import module_entries
 from sim.stagekinds.base import DIFFERENTIAL, DRIVE, SHAFTS, KindDoc, StageKind
 
 __all__ = ["ALIASES", "DIFFERENTIAL", "DRIVE", "KINDS", "SHAFTS", "KindDoc", "StageKind", "kind_names", "kind_of",
@@ -20,15 +18,7 @@ __all__ = ["ALIASES", "DIFFERENTIAL", "DRIVE", "KINDS", "SHAFTS", "KindDoc", "St
 
 
 def _discover() -> dict[str, StageKind]:
-    found: list[StageKind] = []
-    for info in pkgutil.iter_modules(__path__):
-        if info.name == "base" or info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
-        kind = getattr(module, "KIND", None)
-        if not isinstance(kind, StageKind) or kind.name != info.name:
-            raise TypeError(f"sim/stagekinds/{info.name}.py must define KIND, a StageKind named {info.name!r}")
-        found.append(kind)
+    found = module_entries(__name__, __path__, "KIND", StageKind, lambda k: k.name, "a StageKind named {!r}")
     found.sort(key=lambda k: (k.order, k.name))
     return {k.name: k for k in found}
 
