@@ -345,10 +345,10 @@ def _tolerance_per_event(args: argparse.Namespace, vehicle: Any, t: np.ndarray, 
     (at the nominal run's speed there), its ripple band, and the median over the events."""
     import numpy as np
 
-    from sim.batch import ToleranceSample, tolerance_analysis, tolerance_sample
+    from sim.batch import tolerance_analysis, tolerance_sample
 
     lead = 0.05  # s simulated before the window, as the analysis' tolerance band
-    sample: ToleranceSample | None = None  # the same variants for every event, each built once
+    sample = tolerance_sample(vehicle, args.n, args.seed, args.distribution)  # every event runs these, built once
     rows: list[dict[str, Any]] = []
     fields: tuple[str, ...] = ()
     for k, ev in enumerate(events):
@@ -360,8 +360,6 @@ def _tolerance_per_event(args: argparse.Namespace, vehicle: Any, t: np.ndarray, 
             print(f"tolerance: event {k + 1}/{len(events)}: {done}/{total} variants", file=sys.stderr, flush=True)
 
         speed0 = float(np.interp(t[m][0], base.t, base.motor_speed_rpm))
-        if sample is None:
-            sample = tolerance_sample(vehicle, args.n, args.seed, args.distribution)
         res = tolerance_analysis(vehicle, t[m], q[m], n=args.n, seed=args.seed, distribution=args.distribution,
                                  window=(ev.t_start_s, ev.t_end_s), interp=args.interp, speed0_rpm=speed0,
                                  output_dt=args.output_dt, progress=progress, sample=sample)
