@@ -119,7 +119,6 @@ class CandumpScreenReader(LineFrameReader):
 
     def _open(self) -> None:
         self._dated: bool | None = None
-        self._last = 0
         lines = self._head.decode("latin-1").splitlines()[:1000]
         for line in lines:  # the first frame says which stamps the log has
             try:
