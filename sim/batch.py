@@ -121,7 +121,7 @@ def _simulate_batch(
     eff = vehicle.effects
     run_chain_batch(
         stack("inertia"), ref.ca, ref.cb, ref.cr, ref.ce, stack("ck"), stack("ck3"), stack("cc"), stack("chalf"),
-        ref.cb2, ref.rotor, ref.housing, ref.wheel, ref.wheel2, stack("wheel_drag"), stack("road"),
+        stack("cramp"), ref.cb2, ref.rotor, ref.housing, ref.wheel, ref.wheel2, stack("wheel_drag"), stack("road"),
         stack("rotor_drag"),
         np.array([eff.torque_lag.delay_s, eff.torque_lag.tau_s]), eff.speed_sensor.tau_s,
         ref.vehicle, np.stack([[c.tyre[0], c.tyre[1], s[2]] for c, s in zip(chains, states, strict=True)]),

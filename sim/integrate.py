@@ -8,11 +8,14 @@ limit of the linearised system (:func:`sim.linear.step_limit`).
 Sampled torque makes every sample a kink, which ruins the step control of adaptive solvers;
 a fixed step does not care.
 
-Contact law (clamped elasto-backlash, as Modelica's ``ElastoBacklash``): inside the dead zone
-``|delta| <= alpha`` the torque is zero; outside, spring ``k x + k3 x^3`` (``x`` the
-penetration) plus damping ``c d(delta)/dt``, where the damping part is limited to the spring
-part (continuous torque at contact) and the total never pulls (clamped at zero). With
-``alpha == 0`` the coupling is a plain linear spring-damper (both flanks always engaged).
+Contact law (clamped elasto-backlash): inside the dead zone ``|delta| <= alpha`` the torque is
+zero; outside, spring ``k x + k3 x^3`` (``x`` the penetration) plus damping ``c d(delta)/dt``, and
+the total never pulls (clamped at zero). How the damper engages is the vehicle's ``contact_damping``:
+``limited`` (as Modelica's ``ElastoBacklash``, ramp width 0) limits the damping part to the spring
+part, so the torque is continuous at contact and a soft, heavily damped compliance is hardly damped
+while its penetration is small; ``full`` lets the damper act in full once the penetration exceeds a
+small ramp width ``w`` (its share grows as ``x / w`` below it). With ``alpha == 0`` the coupling is a
+plain linear spring-damper (both flanks always engaged).
 
 Status codes returned by the kernels: 0 ok, 1 non-finite state, 2 diverging speed.
 """
@@ -31,14 +34,17 @@ GRAVITY = 9.81
 
 
 @njit(cache=True, inline="always")
-def contact_torque(delta: float, ddelta: float, k: float, k3: float, c: float, half: float) -> float:
-    """Clamped elasto-backlash torque (N m) for deflection ``delta`` and its rate ``ddelta``."""
+def contact_torque(delta: float, ddelta: float, k: float, k3: float, c: float, half: float, ramp: float) -> float:
+    """Clamped elasto-backlash torque (N m) for deflection ``delta`` and its rate ``ddelta``; ``ramp`` the
+    penetration over which the damper engages in full (0: the damping limited to the spring torque)."""
     if half <= 0.0:
         return k * delta + k3 * delta * delta * delta + c * ddelta
     if delta > half:
         x = delta - half
         tc = k * x + k3 * x * x * x
         td = c * ddelta
+        if ramp > 0.0:
+            return max(tc + td * min(x / ramp, 1.0), 0.0)
         if td > -tc:
             return tc + min(tc, td)
         return 0.0
@@ -46,6 +52,8 @@ def contact_torque(delta: float, ddelta: float, k: float, k3: float, c: float, h
         x = delta + half
         tc = k * x + k3 * x * x * x
         td = c * ddelta
+        if ramp > 0.0:
+            return min(tc + td * min(-x / ramp, 1.0), 0.0)
         if td < -tc:
             return tc + max(tc, td)
         return 0.0
@@ -127,7 +135,7 @@ def _gap_event(j: int, d: float, t: float, dt: float, chalf: np.ndarray, is_open
 @njit(cache=True, nogil=True)
 def _initial_forces(
     theta: np.ndarray, omega: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
-    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cb2: np.ndarray, rotor: int, housing: int,
+    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cramp: np.ndarray, cb2: np.ndarray, rotor: int, housing: int,
     wheel: int, wheel2: int, wheel_drag: np.ndarray,
     vehicle: int, road: np.ndarray, rotor_drag: np.ndarray, t_air: float, tyre_tau: float,
     delta: np.ndarray, acc: np.ndarray,
@@ -150,7 +158,7 @@ def _initial_forces(
         elif bb >= 0:
             d -= cr[j] * theta[bb]
             dd -= cr[j] * omega[bb]
-        f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+        f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
         delta[j] = d
         acc[a] -= f
         if b2 >= 0:
@@ -179,7 +187,7 @@ def _initial_forces(
 @njit(cache=True, nogil=True)
 def run_chain(
     inertia: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
-    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cb2: np.ndarray,
+    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cramp: np.ndarray, cb2: np.ndarray,
     rotor: int, housing: int, wheel: int, wheel2: int, wheel_drag: np.ndarray, road: np.ndarray,
     rotor_drag: np.ndarray, lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray,
     tin: np.ndarray, tq: np.ndarray, linear: bool,
@@ -230,7 +238,7 @@ def run_chain(
     a_sen = 1.0 - math.exp(-dt / sensor_tau) if sensor_tau > 0.0 else 1.0
     c_sen = min(1.0, 0.5 * dt / sensor_tau) if sensor_tau > 0.0 else 1.0
     # start: speeds half a step back, so the first kick lands on the midpoint
-    _initial_forces(theta, omega, ca, cb, cr, ce, ck, ck3, cc, chalf, cb2, rotor, housing, wheel, wheel2, wheel_drag,
+    _initial_forces(theta, omega, ca, cb, cr, ce, ck, ck3, cc, chalf, cramp, cb2, rotor, housing, wheel, wheel2, wheel_drag,
                     vehicle, road, rotor_drag, t_air, tyre_tau, d_prev, acc)
     for j in range(nc):
         is_open[j] = chalf[j] > 0.0 and abs(d_prev[j]) < chalf[j]
@@ -256,7 +264,7 @@ def run_chain(
                 for j in range(nch):
                     d = theta[j] - cr[j] * theta[j + 1] - ce[j] * th_h
                     dd = omega[j] - cr[j] * omega[j + 1] - ce[j] * om_h
-                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
                     tau[j] = f
                     acc[j] -= f
                     acc[j + 1] += cr[j] * f
@@ -276,7 +284,7 @@ def run_chain(
                     else:
                         d = theta[a] - cr[j] * (0.5 * (theta[bb] + theta[b2])) - ce[j] * th_h
                         dd = omega[a] - cr[j] * (0.5 * (omega[bb] + omega[b2])) - ce[j] * om_h
-                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j])
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
                     tau[j] = f
                     acc[a] -= f
                     if b2 < 0:
@@ -290,7 +298,7 @@ def run_chain(
                             n_ev = _gap_event(j, d, t, dt, chalf, is_open, d_prev, ev_gap, ev_t, ev_kind, n_ev)
                         d_prev[j] = d
             if housing >= 0:
-                f = contact_torque(th_h, om_h, ck[nch], ck3[nch], cc[nch], 0.0)  # mount to ground
+                f = contact_torque(th_h, om_h, ck[nch], ck3[nch], cc[nch], 0.0, 0.0)  # mount to ground
                 tau[nch] = f
                 acc[housing] = acc_h - f - t_air  # ... and the stator reaction
             w_r = omega[rotor]
@@ -351,7 +359,7 @@ def run_chain(
 @njit(cache=True, nogil=True)
 def run_chain_batch(
     inertia: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
-    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cb2: np.ndarray,
+    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cramp: np.ndarray, cb2: np.ndarray,
     rotor: int, housing: int, wheel: int, wheel2: int, wheel_drag: np.ndarray, road: np.ndarray,
     rotor_drag: np.ndarray,
     lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray, tin: np.ndarray, tq: np.ndarray, linear: bool,
@@ -373,7 +381,7 @@ def run_chain_batch(
     torq = np.zeros(n_out)
     for v in range(nv):
         st, _, ne = run_chain(
-            inertia[v], ca, cb, cr, ce, ck[v], ck3[v], cc[v], chalf[v], cb2, rotor, housing, wheel, wheel2,
+            inertia[v], ca, cb, cr, ce, ck[v], ck3[v], cc[v], chalf[v], cramp[v], cb2, rotor, housing, wheel, wheel2,
             wheel_drag[v], road[v], rotor_drag[v], lag, sensor_tau, vehicle, tyre[v], tin, tq, linear, t0, dt[v],
             n_out, sub[v],
             theta0[v], omega0[v],

@@ -57,6 +57,10 @@ if TYPE_CHECKING:
 
 F64 = NDArray[np.float64]
 GRAVITY = 9.81
+# contact_damping = "full": a contact's damper engages over this share of its half clearance of penetration (a
+# smooth start; the motor speed hardly depends on it: 0.01 to 0.5 moved a heavily damped chain car's reversals by
+# under 0.5 rpm RMS)
+CONTACT_RAMP = 0.1
 
 
 @dataclass(frozen=True)
@@ -93,10 +97,15 @@ class ChainModel:
     wheel2: int = -1  # second wheel body (unequal shafts): each wheel carries half the car and road load
     wheel_drag: F64 = field(default_factory=lambda: np.zeros(2))  # (2,) per wheel body: N m s/rad, N m
     wheel_sense: float = 1.0  # true turning sense of the wheels in the rotor's (and the housing angle's) frame
+    # (nc,) penetration over which a contact's damper engages in full, rad in a's angle; 0 = the damping limited to
+    # the spring torque (the vehicle's contact_damping, sim.integrate's contact law)
+    cramp: F64 = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if self.cb2.size != self.ca.size:
             object.__setattr__(self, "cb2", np.full(self.ca.size, -1, dtype=np.int64))
+        if self.cramp.size != self.ca.size:
+            object.__setattr__(self, "cramp", np.zeros(self.ca.size))
         object.__setattr__(self, "gap_coupling", MappingProxyType(dict(self.gap_coupling)))
         for f in fields(self):
             value = getattr(self, f.name)
@@ -181,6 +190,8 @@ def _finish(v: Vehicle, bld: ChainBuilder, wheel: int, wheel2: int, per_body: fl
         ck=np.asarray(cols[6], dtype=np.float64),
         cc=np.asarray(cols[7], dtype=np.float64),
         chalf=np.asarray(cols[8], dtype=np.float64),
+        cramp=CONTACT_RAMP * np.asarray(cols[8], dtype=np.float64) if v.contact_damping == "full"
+        else np.zeros(len(cols[8])),
         creport=np.asarray(cols[9], dtype=np.float64),
         ck3=np.asarray(cols[10], dtype=np.float64),
         gap_coupling=dict(bld.gaps),

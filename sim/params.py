@@ -160,6 +160,7 @@ class Gaps:
         return tuple(getattr(self, n).nominal for n in GAP_NAMES)
 
 
+CONTACT_LAWS = ("limited", "full")  # Vehicle.contact_damping, the default first
 MAX_NAME_CHARS = 200
 MAX_DESCRIPTION_CHARS = 4000  # a note for people; a vehicle's summary (and every listing of vehicles) carries it
 
@@ -181,6 +182,9 @@ class Vehicle:
     housing: Housing = field(default_factory=Housing)
     effects: Effects = field(default_factory=Effects)
     body_pitch: BodyPitch = field(default_factory=BodyPitch)
+    # how a contact's damper engages (sim.integrate): "limited" to the spring torque (Modelica's ElastoBacklash), or
+    # "full" once in contact; an identification chooses between them on the log (app.identify.form)
+    contact_damping: str = "limited"
     description: str = ""
     # dotted field -> (min, max): uncertain non-gap parameters for tolerance analysis
     tolerances: Mapping[str, tuple[float, float]] = field(default_factory=dict)
@@ -196,6 +200,9 @@ class Vehicle:
                     raise ParameterError(name, None, "required field missing (or describe the driveline as "
                                          "[[stage]] tables)")
         validate(self, "", _cross_checks)
+        if self.contact_damping not in CONTACT_LAWS:
+            raise ParameterError("contact_damping", self.contact_damping,
+                                 f"must be one of {', '.join(repr(x) for x in CONTACT_LAWS)}")
         for text, limit in (("name", MAX_NAME_CHARS), ("description", MAX_DESCRIPTION_CHARS)):
             value = getattr(self, text)
             if not isinstance(value, str) or len(value) > limit:
@@ -225,6 +232,8 @@ class Vehicle:
         for key in ("reducer", "halfshaft", "gaps", "stages"):
             if not out[key]:
                 out.pop(key)
+        if self.contact_damping == CONTACT_LAWS[0]:  # the default law: files without the key read as before
+            out.pop("contact_damping")
         if self.stages:
             out.pop("stages")
             out["stage"] = [stage_dict(s) for s in self.stages]
@@ -274,7 +283,7 @@ class Vehicle:
         all_changes.update({k.replace("__", "."): v for k, v in kw.items()})
         if not all_changes:
             return self  # nothing to change: the same (frozen) vehicle, its compiled chain with it
-        data = self.to_dict()
+        data = self.to_dict() | {"contact_damping": self.contact_damping}
         if self.stages:  # stage tables by name while editing
             data["stage"] = {s["name"]: s for s in data["stage"]}
         moved: set[str] = set()  # gaps whose nominal changed

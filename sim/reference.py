@@ -34,6 +34,10 @@ def contact_torques(m: ChainModel, delta: F64, ddelta: F64) -> F64:
     td = m.cc * ddelta
     pos = np.where(td > -tc, tc + np.minimum(tc, td), 0.0)
     neg = np.where(td < -tc, tc + np.maximum(tc, td), 0.0)
+    full = m.cramp > 0  # the damper engaging in full over the ramp (contact_damping = "full")
+    share = np.minimum(np.abs(x) / np.where(full, m.cramp, 1.0), 1.0)
+    pos = np.where(full, np.maximum(tc + td * share, 0.0), pos)
+    neg = np.where(full, np.minimum(tc + td * share, 0.0), neg)
     clamped = np.where(delta > half, pos, np.where(delta < -half, neg, 0.0))
     return np.where(half > 0, clamped, m.ck * delta + m.ck3 * delta**3 + td)
 
