@@ -8,7 +8,8 @@ Public entry points::
 
 Modules: :mod:`.base` (the identifiable base parameters and their physical figures), :mod:`.modal`
 (the model-free first mode), :mod:`.fit` (the grey-box fit, intervals, identifiability),
-:mod:`.logs` (logs in, identified vehicle version out, validation on a withheld drive).
+:mod:`.form` (the contact law the log chooses), :mod:`.logs` (logs in, identified vehicle version out,
+validation on a withheld drive).
 """
 
 from __future__ import annotations

@@ -39,6 +39,7 @@ from app.analysis.diagnosis.noise import NoiseFloor
 from app.analysis.diagnosis.split import Split, stage_sizes, stratified_order
 from app.analysis.diagnosis.uncertainty import rigid_inertia, with_input_uncertainty
 from app.errors import InsufficientDataError, NotIdentifiableError
+from app.identify import form
 from app.identify.base import (
     BASE_EFFECTS,
     BASE_NAMES,
@@ -162,6 +163,8 @@ class Identification:
     modal: ModalEstimate | None = None
     modal_error: str = ""
     rigid: RigidBody | None = None
+    on: Vehicle | None = None  # the vehicle ``fit`` applies to: the file's, under the contact law chosen (form)
+    form: dict[str, Any] | None = None  # the contact law the log chose (app.identify.form.choose)
 
     @property
     def named(self) -> list[str]:
@@ -196,6 +199,7 @@ class Identification:
             "modal": self.modal.to_dict() if self.modal is not None else None,
             "modal_error": self.modal_error or None,
             "rigid_body": self.rigid.to_dict() if self.rigid is not None else None,
+            "contact_damping": self.form,
             "elapsed_s": round(self.elapsed_s, 3),
         }
 
@@ -311,21 +315,42 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     if len(evs) < MIN_EVENTS:
         raise InsufficientDataError(f"identification needs at least {MIN_EVENTS} usable tip-in/tip-out events; "
                                     f"the log gives {len(evs)}")
-    names = [n for n in opts.params if _fittable(vehicle, n)]
-    if not names:
+    if not any(_fittable(vehicle, n) for n in opts.params):
         raise NotIdentifiableError(f"the vehicle {vehicle.name!r} has nothing identifiable: no stiffness, damping, "
                                    "mass or lash field with a value above zero")
+    if baseline is None:
+        bounds = Bounds.for_period(noise.period_s)
+        say(0.02, f"baseline nuisance fit on {len(evs)} events")
+        base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
+        evs = with_input_uncertainty(evs, vehicle, base, opts.model, noise, 0.0, opts.seed)
+        baseline = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, start=base, seed=opts.seed)
+    other = form.alternative(vehicle)
+    share = 0.55 if other is not None else 1.0
+    found = _identify_on(evs, noise, vehicle, opts, lambda f, m: say(0.05 + (share - 0.05) * f, m), split, baseline,
+                         rigid)
+    if other is not None:
+        law = other.contact_damping
+        try:
+            second: Identification | None = _identify_on(
+                evs, noise, other, opts, lambda f, m: say(share + (1.0 - share) * f, f"contact damping {law}: {m}"),
+                split, baseline, rigid)
+        except (InsufficientDataError, NotIdentifiableError):
+            second = None
+        found = form.choose(found, second)
+    found.elapsed_s = time.process_time() - clock
+    return found
+
+
+def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts: FitOptions, say: Progress,
+                 split: Split, base: FitResult, rigid: RigidBody | None) -> Identification:
+    """:func:`identify_events` under ``vehicle``'s contact law, on calibration events that carry the input
+    uncertainty, from the nuisance baseline ``base``."""
+    clock = time.process_time()
+    names = [n for n in opts.params if _fittable(vehicle, n)]
     bounds = Bounds.for_period(noise.period_s)
     log: list[str] = []
     say(0.02, f"model-free first mode of {len(evs)} event windows")
     modal, modal_error = model_free_mode(evs, opts.level)
-    if baseline is None:
-        say(0.05, f"baseline nuisance fit on {len(evs)} events")
-        base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
-        evs = with_input_uncertainty(evs, vehicle, base, opts.model, noise, 0.0, opts.seed)
-        base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, start=base, seed=opts.seed)
-    else:
-        base = baseline
     log.append(f"baseline: chi2/n {base.chi2 / base.n:.3g}, nuisance {base.nuisance.to_dict()}")
     _require_response(vehicle, evs, base, opts.model)
     pins = mode_pins(vehicle, names, modal, noise.period_s)
@@ -580,7 +605,7 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
         vehicle=identified, params=params, nuisance=_nuisance_dict(nui), ratios=ratios, chi2_before=chi2_before,
         chi2_after=joint.chi2, n_samples=joint.n, n_events=n_events, fit=_with_pins(joint, pins),
         nominal_physical=ph_nom,
-        physical=ph, not_identified=list(dropped))
+        physical=ph, not_identified=list(dropped), on=vehicle)
 
 
 GAIN_PRACTICAL = 0.02  # a fitted torque gain this far (relative) from the file's, beyond its interval, is written

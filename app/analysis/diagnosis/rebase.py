@@ -13,6 +13,9 @@ scored on the held-out events against the file's, like a candidate (:func:`.deci
   less than :data:`LEFT_SHARE` of the gap), ``base_parameters`` ("your data sheet is off", with the
   values and intervals); otherwise the identified vehicle becomes the base every candidate effect
   is fitted on, so that an effect is named only for what the identified base cannot explain;
+- no parameter named, but the log chose the other contact law (:mod:`app.identify.form`) with a
+  significant held-out improvement: the identified vehicle becomes the base, and the candidates
+  decide on it (the law is model form, not a data sheet that is off);
 - anything else: the file's vehicle stays the base (the identification is reported).
 """
 
@@ -64,9 +67,19 @@ def base_items(ident: Identification) -> list[dict[str, Any]]:
             for p in ident.params.values() if p.named and p.nominal]
 
 
+def form_changed(ident: Identification) -> bool:
+    """Whether the log chose the other contact law than the file's (:mod:`app.identify.form`)."""
+    return bool(ident.form and ident.form.get("changed"))
+
+
 def sentence(ident: Identification) -> str:
-    """"torsional stiffness at the motor 0.70x nominal [0.66, 0.75] (...); vehicle mass ..." for the named ones."""
-    return "; ".join(ident.params[k].describe() for k in ident.named)
+    """"torsional stiffness at the motor 0.70x nominal [0.66, 0.75] (...); vehicle mass ..." for the named ones,
+    and the contact law where the log chose another than the file's."""
+    parts = [ident.params[k].describe() for k in ident.named]
+    if form_changed(ident) and ident.form is not None:
+        parts.append(f"contact damping {ident.form['contact_damping']} (the file's law {ident.form['file']} fits the "
+                     "impacts worse)")
+    return "; ".join(parts)
 
 
 def judge(ident: Identification, score: CandidateScore, n_heldout: Any, draws: Any, rules: DecisionRules,
@@ -83,12 +96,15 @@ def judge(ident: Identification, score: CandidateScore, n_heldout: Any, draws: A
         return Rebase(Decision(BASE_ID, reason=reason, gap_ratio=nominal_gap,
                                details={"base_parameters": base_items(ident), "identify_first": True,
                                         "at_bound": [p.name for p in bound]}), False, reason)
-    if not ident.named or not score.significant:
+    if not score.significant or not (ident.named or form_changed(ident)):
         why = ("no base parameter differs from the file beyond its interval" if not ident.named else
                f"the identified base does not improve the held-out events significantly (explained share "
                f"{100 * score.explained.value:.0f} % [{100 * score.explained.lo:.0f}, {100 * score.explained.hi:.0f}])")
         return Rebase(None, False, f"identification: {why}; the file's vehicle stays the base")
     left = gap_ratio(score.chi2, n_heldout, draws, rules.level)
+    if not ident.named:  # the contact law alone: model form, not a data sheet that is off; the candidates decide on it
+        return Rebase(None, True, f"identification: {sentence(ident)}; the candidates are fitted on the identified "
+                                  f"vehicle (held-out residual {left.value:.2f}x the noise floor left)")
     if not has_gap(left, rules) or left.value < LEFT_GAP or score.explained.lo >= 1.0 - LEFT_SHARE:
         reason = (f"the vehicle file is off, and that explains the gap: {sentence(ident)}. With the identified "
                   f"values the held-out residual is {left.value:.2f}x the noise floor (from {nominal_gap.value:.2f}x): "

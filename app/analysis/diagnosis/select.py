@@ -383,7 +383,9 @@ def _diagnose(
     if ident is not None:
         fit_order.append(f"identification ({', '.join(ident.ratios) or 'nothing fitted'}): "
                          f"{[e.index for e in cal]}")
-        id_eval = evaluate(vehicle, ident.fit, ho, opts.model, phases, period)
+        # the identification's fits apply to the file's vehicle under the contact law the log chose (form)
+        nominal = ident.on or vehicle
+        id_eval = evaluate(nominal, ident.fit, ho, opts.model, phases, period)
         ident_score = score_candidate(BASE_ID, (), b, id_eval.chi2(ho_idx), n, draws, rules,
                                       remainder(ho, id_eval.scores, id_eval.predictions, period))
         outcome = judge(ident, ident_score, n, draws, rules, nominal_gap)

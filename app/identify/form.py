@@ -1,0 +1,69 @@
+"""The model form a log chooses: how a contact's damper engages (:attr:`sim.params.Vehicle.contact_damping`).
+
+The default contact law is Modelica's elasto-backlash: the damping torque is limited to the spring torque, so
+the torque is continuous at contact and never pulls. On a stiff, lightly damped driveline (the paper's car) that
+limit hardly acts. On a soft, heavily damped compliance behind a lash -- a formula-student car whose tyre and chassis
+compliance sit in its half-shafts, damping ratio near 0.5 -- it removes most of the damping while the penetration
+is small, i.e. at every impact after the lash closes: the first overshoot then swings 10-20 % further than a damper
+acting in full (``full``). Which law a car follows is a property of the car, so the log decides it.
+
+Where the vehicle has a contact with both a clearance and damping, the identification runs under both laws on the
+same events, weights and nuisance baseline (:func:`app.identify.fit.identify_events`) and keeps the other law only
+where the file's law leaves more than :data:`FORM_MIN_GAP` times the noise floor and the other at most
+:data:`FORM_SHARE` of that. The law is model form, not a base parameter: it is reported and written into the
+identified vehicle, never *named* as a data-sheet error.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from sim import Vehicle
+from sim.params import CONTACT_LAWS
+
+if TYPE_CHECKING:
+    from app.identify.fit import Identification
+
+FORM_SHARE = 0.9  # the other law must leave at most this share of the file law's identified residual ...
+FORM_MIN_GAP = 1.5  # ... where the file's law leaves more than this many times the noise floor
+
+
+def alternative(vehicle: Vehicle) -> Vehicle | None:
+    """``vehicle`` under the other contact law, or None where the law cannot matter (no contact has both a clearance
+    and damping)."""
+    m = vehicle.compiled
+    if not np.any((m.chalf > 0.0) & (m.cc > 0.0)):
+        return None
+    other = CONTACT_LAWS[1] if vehicle.contact_damping == CONTACT_LAWS[0] else CONTACT_LAWS[0]
+    return vehicle.with_changes({"contact_damping": other})
+
+
+def residual(ident: Identification) -> float:
+    """The identified vehicle's calibration residual, in units of the noise floor."""
+    return ident.chi2_after / max(ident.n_samples, 1)
+
+
+def choose(first: Identification, second: Identification | None) -> Identification:
+    """``first`` (the file's law) or ``second`` (the other), with the choice recorded on the one returned."""
+    a = residual(first)
+    b = residual(second) if second is not None else float("nan")
+    take = second is not None and a > FORM_MIN_GAP and b <= FORM_SHARE * a
+    chosen = second if take and second is not None else first
+    file_law = first.on.contact_damping if first.on is not None else CONTACT_LAWS[0]
+    law = chosen.on.contact_damping if chosen.on is not None else file_law
+    chosen.form = {"contact_damping": law, "file": file_law, "changed": law != file_law,
+                   "residual_to_noise": {file_law: round(a, 4)} | (
+                       {second.on.contact_damping: round(b, 4)} if second is not None and second.on is not None
+                       else {})}
+    if second is None:
+        why = "the other contact law could not be identified"
+    elif take:
+        why = f"its residual is {b / a:.2f}x the file's law's ({b:.3g} against {a:.3g} times the noise floor)"
+    elif a <= FORM_MIN_GAP:
+        why = f"the file's law leaves {a:.3g} times the noise floor, nothing to choose on"
+    else:
+        why = f"the other law leaves {b / a:.2f}x its residual, not below {FORM_SHARE:g}x"
+    chosen.fit_log.append(f"contact damping: {law}{' (the file says ' + file_law + ')' if take else ''}: {why}")
+    return chosen
