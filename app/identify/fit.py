@@ -327,13 +327,13 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     other = form.alternative(vehicle)
     share = 0.55 if other is not None else 1.0
     found = _identify_on(evs, noise, vehicle, opts, lambda f, m: say(0.05 + (share - 0.05) * f, m), split, baseline,
-                         rigid)
+                         rigid, vehicle.contact_damping)
     if other is not None:
         law = other.contact_damping
         try:
             second: Identification | None = _identify_on(
                 evs, noise, other, opts, lambda f, m: say(share + (1.0 - share) * f, f"contact damping {law}: {m}"),
-                split, baseline, rigid)
+                split, baseline, rigid, vehicle.contact_damping)
         except (InsufficientDataError, NotIdentifiableError):
             second = None
         found = form.choose(found, second)
@@ -342,9 +342,9 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
 
 
 def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts: FitOptions, say: Progress,
-                 split: Split, base: FitResult, rigid: RigidBody | None) -> Identification:
+                 split: Split, base: FitResult, rigid: RigidBody | None, base_law: str) -> Identification:
     """:func:`identify_events` under ``vehicle``'s contact law, on calibration events that carry the input
-    uncertainty, from the nuisance baseline ``base``."""
+    uncertainty, from the nuisance baseline ``base`` (fitted under the contact law ``base_law``)."""
     clock = time.process_time()
     names = [n for n in opts.params if _fittable(vehicle, n)]
     bounds = Bounds.for_period(noise.period_s)
@@ -353,36 +353,62 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
     modal, modal_error = model_free_mode(evs, opts.level)
     log.append(f"baseline: chi2/n {base.chi2 / base.n:.3g}, nuisance {base.nuisance.to_dict()}")
     _require_response(vehicle, evs, base, opts.model)
+
+    def path(pins: dict[str, tuple[float, float]], names: list[str], log: list[str]) -> tuple[
+            FitResult, list[str], dict[str, tuple[float, float]], Vehicle, list[str], dict[str, str]]:
+        """The joint fit with stiffness and damping ``pins`` from the model-free mode (none: fitted)."""
+        fitted_on = with_base(vehicle, {k: r for k, (r, _) in pins.items()})
+        if pins:
+            log.append("stiffness and damping from the model-free first mode: " + ", ".join(
+                f"{k} x{r:.3f} (+-{100 * np.expm1(h):.1f} %)" for k, (r, h) in pins.items()))
+            names = [n for n in names if n not in pins]
+        unresolved = _unresolved(vehicle, names, noise.period_s) if not pins else []
+        why = dict.fromkeys(unresolved, "the speed channel is too slow for the first mode")
+        if unresolved:
+            log.append(f"not identifiable: {', '.join(unresolved)} (the file's first mode at "
+                       f"{physical(vehicle).freq_hz:.1f} Hz is not resolved by a {1.0 / noise.period_s:.0f} Hz speed "
+                       "channel, and no clear mode was measured)")
+            names = [n for n in names if n not in unresolved]
+            if not names:
+                raise NotIdentifiableError(
+                    f"{', '.join(unresolved)}: the speed channel samples at {1.0 / noise.period_s:.0f} Hz, too slow for "
+                    f"the file's first mode at {physical(vehicle).freq_hz:.1f} Hz, and no clear mode was measured")
+        short = _short_traverse(fitted_on, evs, base, noise.period_s, opts.model) if "lash" in names else ""
+        if short:
+            log.append(f"not identifiable: lash ({short})")
+            names = [n for n in names if n != "lash"]
+            unresolved.append("lash")
+            why["lash"] = short
+            if not names and not pins:
+                raise NotIdentifiableError(f"lash: {short}, and nothing else of the vehicle is left to identify")
+        starts = _starts(names, fitted_on, None if pins else
+                         ({"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None))
+        say(0.15, f"joint fit of {', '.join(names) or 'the nuisance'} with the nuisance")
+        joint = _joint(fitted_on, evs, split, names, bounds, opts, base, starts)
+        log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
+        return joint, names, pins, fitted_on, unresolved, why
+
     pins = mode_pins(vehicle, names, modal, noise.period_s)
-    fitted_on = with_base(vehicle, {k: r for k, (r, _) in pins.items()})
-    if pins:
-        log.append("stiffness and damping from the model-free first mode: " + ", ".join(
-            f"{k} x{r:.3f} (+-{100 * np.expm1(h):.1f} %)" for k, (r, h) in pins.items()))
-        names = [n for n in names if n not in pins]
-    unresolved = _unresolved(vehicle, names, noise.period_s) if not pins else []
-    why = dict.fromkeys(unresolved, "the speed channel is too slow for the first mode")
-    if unresolved:
-        log.append(f"not identifiable: {', '.join(unresolved)} (the file's first mode at "
-                   f"{physical(vehicle).freq_hz:.1f} Hz is not resolved by a {1.0 / noise.period_s:.0f} Hz speed "
-                   "channel, and no clear mode was measured)")
-        names = [n for n in names if n not in unresolved]
-        if not names:
-            raise NotIdentifiableError(
-                f"{', '.join(unresolved)}: the speed channel samples at {1.0 / noise.period_s:.0f} Hz, too slow for "
-                f"the file's first mode at {physical(vehicle).freq_hz:.1f} Hz, and no clear mode was measured")
-    short = _short_traverse(fitted_on, evs, base, noise.period_s, opts.model) if "lash" in names else ""
-    if short:
-        log.append(f"not identifiable: lash ({short})")
-        names = [n for n in names if n != "lash"]
-        unresolved.append("lash")
-        why["lash"] = short
-        if not names and not pins:
-            raise NotIdentifiableError(f"lash: {short}, and nothing else of the vehicle is left to identify")
-    starts = _starts(names, fitted_on, None if pins else
-                     ({"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None))
-    say(0.15, f"joint fit of {', '.join(names) or 'the nuisance'} with the nuisance")
-    joint = _joint(fitted_on, evs, split, names, bounds, opts, base, starts)
-    log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
+    tried = list(log)
+    joint, got, pins_used, fitted_on, unresolved, why = path(pins, names, log)
+    # the file's values under this vehicle's contact law (the baseline is under the file's law)
+    own = base
+    if pins and vehicle.contact_damping != base_law:
+        own = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, start=base, seed=opts.seed)
+    if pins and joint.chi2 > own.chi2:
+        # the measured mode's stiffness and damping fit worse than the file's own values: a heavily damped mode read
+        # through the lash is biased, so the grey box fits them instead (kept where it does better)
+        log_free = [*tried, f"stiffness and damping from the model-free first mode leave chi2/n "
+                    f"{joint.chi2 / joint.n:.3g}, more than the file's values ({own.chi2 / own.n:.3g}): fitted "
+                    "by the grey box instead"]
+        try:
+            free = path({}, names, log_free)
+        except NotIdentifiableError:
+            free = None
+        if free is not None and free[0].chi2 < joint.chi2:
+            joint, got, pins_used, fitted_on, unresolved, why = free
+            log[:] = log_free
+    names, pins = got, pins_used
     notes: dict[str, str] = {}
     by_rigid = rigid_pin(fitted_on, names, joint, rigid) if rigid is not None else None
     if by_rigid is not None:
