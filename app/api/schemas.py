@@ -636,6 +636,16 @@ class ModalOut(_Open):
     n_used: int
 
 
+class ContactLawOut(_Open):
+    """How the identified vehicle's contact dampers engage (``Vehicle.contact_damping``), as the log chose."""
+
+    contact_damping: str = Field(description="limited | full: the law the identified vehicle carries")
+    file: str = Field(description="the vehicle file's law")
+    changed: bool
+    residual_to_noise: dict[str, float] = Field(description="law -> the identified vehicle's calibration residual "
+                                                "(times the noise floor) under it")
+
+
 class IdentificationResultOut(_Open):
     """The result of an identification (``lashscope identify --json``)."""
 
@@ -648,6 +658,8 @@ class IdentificationResultOut(_Open):
     residual_to_noise_before: float
     residual_to_noise_after: float
     events: int
+    contact_damping: ContactLawOut | None = Field(default=None, description="the contact law the log chose; null "
+                                                  "where the vehicle has no damped clearance to choose on")
     validation: dict[str, Any] = Field(default_factory=dict, description="withheld drives: nrmse_before, "
                                        "nrmse_after, verdict_before, verdict_after, per drive before/after")
 

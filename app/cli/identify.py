@@ -64,6 +64,12 @@ def summary(doc: dict[str, Any], out: Path | None) -> str:
         lines.append(f"{p['label']:{width}s}  {identified_param(p)}")
     lines.append(f"\nresidual / noise on the fitted events: {doc['residual_to_noise_before']:.2f} with the file, "
                  f"{doc['residual_to_noise_after']:.2f} identified")
+    form = doc.get("contact_damping")
+    if form:
+        res = ", ".join(f"{law} {x:.2f}" for law, x in form["residual_to_noise"].items())
+        lines.append(f"contact damping: {form['contact_damping']}"
+                     + (f" (the file says {form['file']}; the new version carries it)" if form["changed"] else
+                        " (as the file)") + f"; residual / noise under each law: {res}")
     v = doc.get("validation")
     if v:
         lines.append(f"withheld drive: NRMSE {v['nrmse_before']} -> {v['nrmse_after']} (median over events), "

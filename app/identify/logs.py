@@ -120,6 +120,7 @@ class IdentifyResult:
             "residual_to_noise_before": _r(self.identification.chi2_before / max(self.identification.n_samples, 1)),
             "residual_to_noise_after": _r(self.identification.chi2_after / max(self.identification.n_samples, 1)),
             "events": self.identification.n_events,
+            **({"contact_damping": self.identification.form} if self.identification.form else {}),
         }
 
     def vehicle_toml(self, name: str | None = None) -> str:

@@ -2,15 +2,23 @@
 
 from __future__ import annotations
 
+import tomllib
+
 import numpy as np
 import pytest
 
+from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals
+from app.cli import main
 from app.identify import FitOptions, identify_events
 from app.identify.form import FORM_SHARE, alternative
+from app.ingest.database import load_database
+from app.ingest.signalmap import load_signal_map
 from sim import Vehicle, load_vehicle
+from sim.vehicle_file import dump_toml
 from tests.conftest import REPO
 from tests.identify.drives import prepared
-from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, measure_frames, run_truth, to_signals
+from tests.support.truthlog import write_blf
 
 CHAIN = load_vehicle(str(REPO / "bench" / "indep" / "chain_low.toml"))
 # the chain car with its shafts damped to a ratio near 0.5: where the two laws part
@@ -50,6 +58,11 @@ def test_a_car_whose_dampers_act_in_full_gets_the_full_law(chosen_full) -> None:
     assert ident.written_vehicle.to_dict()["contact_damping"] == "full"
     assert ident.to_dict()["contact_damping"] == form
     assert any(line.startswith("contact damping: full (the file says limited)") for line in ident.fit_log)
+    # this heavily damped mode, read through the lash, puts stiffness and damping 4-7 % low; the file's values fit
+    # better, so the grey box fits them instead, and they come back at the truth
+    assert any("fitted by the grey box instead" in line for line in ident.fit_log)
+    for name in ("stiffness", "damping", "mass"):
+        assert ident.ratios[name] == pytest.approx(1.0, abs=0.02)
     # model form, not a data sheet that is off: nothing is named on a file whose values are the truth's
     assert ident.named == []
 
@@ -60,3 +73,42 @@ def test_a_car_that_follows_the_files_law_keeps_it() -> None:
     assert ident.vehicle.contact_damping == "limited"
     assert "contact_damping" not in ident.written_vehicle.to_dict()
     assert ident.named == []
+
+
+def test_identify_writes_the_chosen_law_into_the_new_version(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """End to end: a BLF of the full-law car, identified against the limited file; the new vehicle version carries
+    the law, its provenance the evidence, and `analyze` reads it back like any vehicle file."""
+    truth = SOFT.with_changes({"contact_damping": "full"})
+    rng = np.random.default_rng(13)
+    drive = make_drive(truth, rng, DriveSpec(duration_s=40.0))
+    frames = measure_frames(drive, run_truth(truth, drive), CanSampling(period_s=0.01, offset_s=0.004), rng)
+    log = tmp_path / "soft.blf"
+    write_blf(log, frames, load_database(REPO / "dbc" / "lashscope_ev.dbc"),
+                    load_signal_map(REPO / "dbc" / "lashscope_ev.map.toml"))
+    file = tmp_path / "soft.toml"
+    file.write_text(dump_toml(SOFT), encoding="utf-8")
+    out = tmp_path / "soft_identified.toml"
+    assert main(["identify", str(log), "--vehicle", str(file), "--out", str(out), "--quiet"]) == 0
+    written = load_vehicle(str(out))
+    assert written.contact_damping == "full"
+    prov = tomllib.loads(out.read_text(encoding="utf-8"))["provenance"]
+    assert prov["contact_damping"]["file"] == "limited" and prov["contact_damping"]["changed"] is True
+    assert prov["contact_damping"]["residual_to_noise"]["full"] < FORM_SHARE * \
+        prov["contact_damping"]["residual_to_noise"]["limited"]
+
+
+def test_the_diagnosis_judges_on_the_law_the_log_chose_and_attributes_nothing() -> None:
+    """A car whose dampers act in full, diagnosed against the file's limited law: the file's vehicle leaves a
+    clear gap, the identification chooses the full law and names no parameter, and with it nothing is left for an
+    unmodelled effect to explain (no attribution of any kind)."""
+    truth = SOFT.with_changes({"contact_damping": "full"})
+    rng = np.random.default_rng(21)
+    drive = make_drive(truth, rng, DriveSpec(duration_s=60.0))
+    signals = to_signals(measure(drive, run_truth(truth, drive), CanSampling(period_s=0.01), rng))
+    res = diagnose_signals(signals, SOFT, DiagnosisOptions(seed=1))
+    d = res.decision
+    assert res.nominal_gap is not None and res.nominal_gap.value > 3.0  # the file's law leaves a clear gap
+    assert d.status == "no_significant_gap" and d.top == ()
+    assert d.details["contact_damping"]["contact_damping"] == "full" and d.details["contact_damping"]["changed"]
+    assert "contact damping full, which the log chose over the file's limited" in d.reason
+    assert any(line.startswith("candidates: not fitted") for line in res.fit_order)

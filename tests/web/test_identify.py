@@ -112,6 +112,11 @@ def test_identify_page_finds_the_file_off_and_applies_it(page: Any, server: Serv
     assert f"{res['modal']['freq_hz']:.2f} Hz" in (page.text_content("#identify-modal") or "")
     rigid = page.text_content("#identify-rigid") or ""
     assert f"{res['rigid_body']['inertia_kgm2']:.4g} kg m^2 at the motor per logged N m" in rigid
+    # the paper car's drive: the file's contact law kept, with both laws' residuals shown
+    form = res["contact_damping"]
+    assert form["contact_damping"] == "limited" and form["changed"] is False
+    contact = page.text_content("#identify-contact") or ""
+    assert contact.startswith("limited, as the file") and f"full {form['residual_to_noise']['full']:.2f}" in contact
     val = res["validation"]
     text = page.text_content("#identify-validation") or ""
     assert f"{val['nrmse_before']:.3f} -> {val['nrmse_after']:.3f}" in text and val["verdict_after"] in text

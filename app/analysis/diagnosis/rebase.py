@@ -184,6 +184,17 @@ def base_only(decision: Decision, ident: Identification, score: CandidateScore, 
                             "residual_to_noise_identified": round(left, 4)})
 
 
+def with_form(decision: Decision, ident: Identification) -> Decision:
+    """``decision``, made on the identified vehicle, saying so where the log chose another contact law than the
+    file's (:mod:`app.identify.form`): the reason names the law and ``details.contact_damping`` carries the choice."""
+    if not form_changed(ident) or ident.form is None:
+        return decision
+    law, file = ident.form["contact_damping"], ident.form["file"]
+    return replace(decision, reason=f"{decision.reason}. Judged on the vehicle with contact damping {law}, which the "
+                                    f"log chose over the file's {file}",
+                   details={**decision.details, "contact_damping": ident.form})
+
+
 def base_trade(decision: Decision, fit: FitResult | None) -> list[tuple[str, str, float]]:
     """The trade-offs of the chosen fit between a parameter of the chosen effect(s) and a base parameter
     (``(effect parameter, base parameter, correlation)``)."""

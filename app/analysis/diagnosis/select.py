@@ -70,6 +70,7 @@ from app.analysis.diagnosis.rebase import (
     base_only,
     base_trade,
     joint_with_base,
+    with_form,
     judge,
     mimicked_by,
     not_separable,
@@ -436,7 +437,11 @@ def _diagnose(
         rem = remainder(ho, evals[cid].scores, evals[cid].predictions, period)
         return score_candidate(cid, effects, b, evals[cid].chi2(ho_idx), n, draws, rules, rem)
 
-    for cid in candidates:
+    quiet = rebased is not None and not rebased.named and not has_gap(gap_ratio(b, n, draws, rules.level), rules)
+    if quiet:  # the contact law the log chose leaves no clear gap: nothing for a candidate to explain
+        fit_order.append("candidates: not fitted (with the contact law the log chose, the residual is not clearly "
+                         "above the noise floor)")
+    for cid in () if quiet else candidates:
         say(step[0] / n_steps, f"fitting {cid}")
         f = fit(vehicle, cal, split, (get_effect(cid),), bounds=bounds, model=opts.model, start=base_fit,
                 seed=opts.seed)
@@ -544,7 +549,7 @@ def _diagnose(
             return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
                           draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=ident,
                           identified_score=ident_score, nominal_gap=nominal_gap, identification_note=ident_note)
-    if rebased is not None and ident_score is not None and decision.status == "none_of_candidates":
+    if rebased is not None and rebased.named and ident_score is not None and decision.status == "none_of_candidates":
         decision = base_only(decision, rebased, ident_score, nominal_gap)
         evals[BASE_ID] = evaluate(nominal, rebased.fit, ho, opts.model, phases, period)
     elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
@@ -571,6 +576,8 @@ def _diagnose(
                                                       if k != "base_parameters"})
             if mixed and apart is not None:
                 decision = told_apart(decision, mixed, *apart)
+    if rebased is not None:
+        decision = with_form(decision, rebased)
     decision = with_tones(decision, noise.tones)
     say(1.0, f"decision: {decision.status} {' + '.join(decision.top)}".rstrip())
     return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,

@@ -212,6 +212,14 @@ function ratioChart(rows) {
     "vertical line: the file's value (1.0x). Red: off the file; orange: at a prior bound."));
 }
 
+// the contact law the log chose (app/identify/form.py): its name, and each law's residual where both were fitted
+function contactWords(c) {
+  if (!c) return "the file's (no damped clearance to choose on)";
+  const res = Object.entries(c.residual_to_noise || {}).map(([law, x]) => `${law} ${fmt(x, 2)}`).join(", ");
+  const head = c.changed ? `${c.contact_damping} (the file says ${c.file})` : `${c.contact_damping}, as the file`;
+  return res ? `${head}; residual / noise: ${res}` : head;
+}
+
 function checks(r) {
   const m = r.modal;
   const v = r.validation || {};
@@ -225,6 +233,8 @@ function checks(r) {
     h("dd", { id: "identify-rigid" }, r.rigid_body ? r.rigid_body.summary.replace(/^rigid body \(model-free\): /, "")
       .replace(/^rigid body \(model-free, /, "(")
       : "not estimated"),
+    h("dt", {}, "contact damping"),
+    h("dd", { id: "identify-contact" }, contactWords(r.contact_damping)),
     h("dt", {}, "residual / noise, fitted events"),
     h("dd", {}, `${fmt(r.residual_to_noise_before, 2)} with the file -> ${fmt(r.residual_to_noise_after, 2)} identified`),
     h("dt", {}, "withheld drive(s)"),
