@@ -328,7 +328,7 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     share = 0.55 if other is not None else 1.0
     found = _identify_on(evs, noise, vehicle, opts, lambda f, m: say(0.05 + (share - 0.05) * f, m), split, baseline,
                          rigid, vehicle.contact_damping)
-    if other is not None:
+    if other is not None and form.residual(found) > form.FORM_MIN_GAP:  # else the file's law fits: nothing to choose
         law = other.contact_damping
         try:
             second: Identification | None = _identify_on(
@@ -337,6 +337,8 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
         except (InsufficientDataError, NotIdentifiableError):
             second = None
         found = form.choose(found, second)
+    elif other is not None:
+        found = form.choose(found, None)
     found.elapsed_s = time.process_time() - clock
     return found
 

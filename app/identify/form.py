@@ -7,10 +7,10 @@ compliance sit in its half-shafts, damping ratio near 0.5 -- it removes most of 
 is small, i.e. at every impact after the lash closes: the first overshoot then swings 10-20 % further than a damper
 acting in full (``full``). Which law a car follows is a property of the car, so the log decides it.
 
-Where the vehicle has a contact with both a clearance and damping, the identification runs under both laws on the
-same events, weights and nuisance baseline (:func:`app.identify.fit.identify_events`) and keeps the other law only
-where the file's law leaves more than :data:`FORM_MIN_GAP` times the noise floor and the other at most
-:data:`FORM_SHARE` of that. The law is model form, not a base parameter: it is reported and written into the
+Where the vehicle has a contact with both a clearance and damping and the identification under the file's law
+leaves more than :data:`FORM_MIN_GAP` times the noise floor, it is run again under the other law on the same events,
+weights and nuisance baseline (:func:`app.identify.fit.identify_events`); the other law is kept where it leaves at
+most :data:`FORM_SHARE` of the file law's residual. The law is model form, not a base parameter: it is reported and written into the
 identified vehicle, never *named* as a data-sheet error.
 """
 
@@ -46,7 +46,8 @@ def residual(ident: Identification) -> float:
 
 
 def choose(first: Identification, second: Identification | None) -> Identification:
-    """``first`` (the file's law) or ``second`` (the other), with the choice recorded on the one returned."""
+    """``first`` (the file's law) or ``second`` (the other; None where it was not tried -- the file's law leaves no
+    more than :data:`FORM_MIN_GAP` -- or could not be identified), with the choice recorded on the one returned."""
     a = residual(first)
     b = residual(second) if second is not None else float("nan")
     take = second is not None and a > FORM_MIN_GAP and b <= FORM_SHARE * a
@@ -57,12 +58,12 @@ def choose(first: Identification, second: Identification | None) -> Identificati
                    "residual_to_noise": {file_law: round(a, 4)} | (
                        {second.on.contact_damping: round(b, 4)} if second is not None and second.on is not None
                        else {})}
-    if second is None:
+    if a <= FORM_MIN_GAP:
+        why = f"the file's law leaves {a:.3g} times the noise floor, nothing to choose on"
+    elif second is None:
         why = "the other contact law could not be identified"
     elif take:
         why = f"its residual is {b / a:.2f}x the file's law's ({b:.3g} against {a:.3g} times the noise floor)"
-    elif a <= FORM_MIN_GAP:
-        why = f"the file's law leaves {a:.3g} times the noise floor, nothing to choose on"
     else:
         why = f"the other law leaves {b / a:.2f}x its residual, not below {FORM_SHARE:g}x"
     chosen.fit_log.append(f"contact damping: {law}{' (the file says ' + file_law + ')' if take else ''}: {why}")
