@@ -135,8 +135,8 @@ def _gap_event(j: int, d: float, t: float, dt: float, chalf: np.ndarray, is_open
 @njit(cache=True, nogil=True)
 def _initial_forces(
     theta: np.ndarray, omega: np.ndarray, ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray,
-    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cramp: np.ndarray, cb2: np.ndarray, rotor: int, housing: int,
-    wheel: int, wheel2: int, wheel_drag: np.ndarray,
+    ck: np.ndarray, ck3: np.ndarray, cc: np.ndarray, chalf: np.ndarray, cramp: np.ndarray, cb2: np.ndarray, rotor: int,
+    housing: int, wheel: int, wheel2: int, wheel_drag: np.ndarray,
     vehicle: int, road: np.ndarray, rotor_drag: np.ndarray, t_air: float, tyre_tau: float,
     delta: np.ndarray, acc: np.ndarray,
 ) -> None:
@@ -238,8 +238,8 @@ def run_chain(
     a_sen = 1.0 - math.exp(-dt / sensor_tau) if sensor_tau > 0.0 else 1.0
     c_sen = min(1.0, 0.5 * dt / sensor_tau) if sensor_tau > 0.0 else 1.0
     # start: speeds half a step back, so the first kick lands on the midpoint
-    _initial_forces(theta, omega, ca, cb, cr, ce, ck, ck3, cc, chalf, cramp, cb2, rotor, housing, wheel, wheel2, wheel_drag,
-                    vehicle, road, rotor_drag, t_air, tyre_tau, d_prev, acc)
+    _initial_forces(theta, omega, ca, cb, cr, ce, ck, ck3, cc, chalf, cramp, cb2, rotor, housing, wheel, wheel2,
+                    wheel_drag, vehicle, road, rotor_drag, t_air, tyre_tau, d_prev, acc)
     for j in range(nc):
         is_open[j] = chalf[j] > 0.0 and abs(d_prev[j]) < chalf[j]
     for b in range(nb):

@@ -67,7 +67,8 @@ def run_from_state(
     ev_t = np.zeros(MAX_EVENTS)
     ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
     status, t_fail, n_ev = run_chain(
-        chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf, chain.cramp, chain.cb2,
+        chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf, chain.cramp,
+        chain.cb2,
         chain.rotor, chain.housing, chain.wheel, chain.wheel2, chain.wheel_drag, chain.road, chain.rotor_drag,
         np.array(lag, dtype=np.float64),
         float(sensor_tau), chain.vehicle, np.array([chain.tyre[0], chain.tyre[1], tyre0]),

@@ -373,8 +373,8 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
             names = [n for n in names if n not in unresolved]
             if not names:
                 raise NotIdentifiableError(
-                    f"{', '.join(unresolved)}: the speed channel samples at {1.0 / noise.period_s:.0f} Hz, too slow for "
-                    f"the file's first mode at {physical(vehicle).freq_hz:.1f} Hz, and no clear mode was measured")
+                    f"{', '.join(unresolved)}: the speed channel samples at {1.0 / noise.period_s:.0f} Hz, too slow "
+                    f"for the file's first mode at {physical(vehicle).freq_hz:.1f} Hz, and no clear mode was measured")
         short = _short_traverse(fitted_on, evs, base, noise.period_s, opts.model) if "lash" in names else ""
         if short:
             log.append(f"not identifiable: lash ({short})")

@@ -10,8 +10,8 @@ acting in full (``full``). Which law a car follows is a property of the car, so 
 Where the vehicle has a contact with both a clearance and damping and the identification under the file's law
 leaves more than :data:`FORM_MIN_GAP` times the noise floor, it is run again under the other law on the same events,
 weights and nuisance baseline (:func:`app.identify.fit.identify_events`); the other law is kept where it leaves at
-most :data:`FORM_SHARE` of the file law's residual. The law is model form, not a base parameter: it is reported and written into the
-identified vehicle, never *named* as a data-sheet error.
+most :data:`FORM_SHARE` of the file law's residual. The law is model form, not a base parameter: it is reported
+and written into the identified vehicle, never *named* as a data-sheet error.
 """
 
 from __future__ import annotations

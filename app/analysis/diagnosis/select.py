@@ -70,13 +70,13 @@ from app.analysis.diagnosis.rebase import (
     base_only,
     base_trade,
     joint_with_base,
-    with_form,
     judge,
     mimicked_by,
     not_separable,
     nuisance_only,
     told_apart,
     with_base,
+    with_form,
 )
 from app.analysis.diagnosis.score import EventScore, Interval
 from app.analysis.diagnosis.split import STAGE_EVENTS, Split, make_split, restricted, stage_sizes, stratified_order
