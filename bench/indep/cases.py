@@ -307,7 +307,8 @@ def plan_identify(which: str, quick: bool) -> list[Case]:
 
 def _plan_chain_effects(which: str, quick: bool) -> list[Case]:
     """``ichain`` and its fresh ``ichain2`` and ``ichain3``: the low-mode chain car, its damping off as in the chain
-    ``base`` cases, with one effect of :data:`CHAIN_EFFECT_DRAWS` (four each; two with ``quick``), every other case at 50 Hz, the rest slower."""
+    ``base`` cases, with one effect of :data:`CHAIN_EFFECT_DRAWS` (four each; two with ``quick``), every other case
+    at 50 Hz, the rest slower."""
     s = SEED_BASE[which]
     chain = CHAIN_CAR[which]
     out: list[Case] = []
