@@ -202,7 +202,9 @@ def run_chain(
     output row adds the half kick of the force already computed for the next step, so the
     reported speeds are synchronous with the angles (second order) at no extra force evaluation.
 
-    ``out_omega``/``out_tau``/``out_open`` may have zero rows (batch mode: resolver speed only).
+    ``out_omega``/``out_tau``/``out_open`` may have zero rows (batch mode: resolver speed only); with zero rows
+    there and zero-length ``ev_*`` too, nothing but the speeds is kept (no coupling torques, gap states or events):
+    the same output rows, less work per step.
     ``lag = [delay_s, tau_s]`` of the air-gap torque. Tyre slip (``vehicle >= 0``): ``tyre =
     [k_t, R/sigma, tau_t at t0]``; its torque goes to column ``nc`` of ``out_tau`` if present.
     Gap events (coupling index, time interpolated within the step, 1=open 0=close) go to
@@ -218,6 +220,9 @@ def run_chain(
     nch = nc - 1 if housing >= 0 else nc  # chain couplings; the mount (if any) is last
     full = out_omega.shape[0] > 0
     out_tyre = full and out_tau.shape[1] > nc
+    # coupling torques and gap states are read (state rows, or room for gap events); without either the serial
+    # chain takes the speed-only loop below (the same operations on the speeds, in the same order)
+    track = full or ev_gap.size > 0
     theta = theta0.copy()
     omega = omega0.copy()
     acc = np.zeros(nb)
@@ -257,10 +262,21 @@ def run_chain(
             om_h = omega[housing] if housing >= 0 else 0.0
             t_cmd, k_lag = input_at(tin, tq, linear, t - lag[0], k_lag)
             t_air += a_lag * (t_cmd - t_air)
-            for b in range(nb):
+            for b in range(nch + 1 if serial and not track else 0, nb):  # the speed-only loop sets bodies 0..nch
                 acc[b] = 0.0
             acc_h = 0.0  # torque on the housing: mesh reactions, stator, mount
-            if serial:  # the usual chain, body j to body j + 1: no index loads in the hot loop
+            if serial and not track:  # speed only: each chain body's torque set once, the next one's share carried
+                # in a register; acc[j] = (0.0 + cr[j-1] f[j-1]) - f[j] exactly as the loop below accumulates it
+                carry = 0.0
+                for j in range(nch):
+                    d = theta[j] - cr[j] * theta[j + 1] - ce[j] * th_h
+                    dd = omega[j] - cr[j] * omega[j + 1] - ce[j] * om_h
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
+                    acc[j] = carry - f
+                    carry = 0.0 + cr[j] * f
+                    acc_h += ce[j] * f
+                acc[nch] = carry
+            elif serial:  # the usual chain, body j to body j + 1: no index loads in the hot loop
                 for j in range(nch):
                     d = theta[j] - cr[j] * theta[j + 1] - ce[j] * th_h
                     dd = omega[j] - cr[j] * omega[j + 1] - ce[j] * om_h
@@ -299,7 +315,8 @@ def run_chain(
                         d_prev[j] = d
             if housing >= 0:
                 f = contact_torque(th_h, om_h, ck[nch], ck3[nch], cc[nch], 0.0, 0.0)  # mount to ground
-                tau[nch] = f
+                if track:
+                    tau[nch] = f
                 acc[housing] = acc_h - f - t_air  # ... and the stator reaction
             w_r = omega[rotor]
             ext = t_air - rotor_drag[0] * w_r

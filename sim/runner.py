@@ -47,9 +47,10 @@ def run_from_state(
 ) -> RawRun:
     """Integrate ``chain`` from ``(theta0, omega0, tyre0)`` at ``t0`` with step ``step``, ``sub`` steps per row.
 
-    ``events=False`` leaves ``RawRun.events`` empty (the kernel still logs them; they are not converted);
-    ``states=False`` leaves ``omega``, ``tau``, ``tyre`` and ``is_open`` with no rows (the kernel does not
-    write them; the resolver, sensor and torque rows are the same numbers).
+    ``events=False`` leaves ``RawRun.events`` empty (the kernel still logs them when ``states`` is on; they are not
+    converted); ``states=False`` leaves ``omega``, ``tau``, ``tyre`` and ``is_open`` with no rows (the kernel does
+    not write them; the resolver, sensor and torque rows are the same numbers). Both off: the kernel's speed-only
+    loop (no gap states kept at all), again the same numbers.
 
     Raises
     ------
@@ -63,9 +64,10 @@ def run_from_state(
     rows = n_out if states else 0
     out_omega, out_tau = np.zeros((rows, nb)), np.zeros((rows, nc + int(tyre_on)))
     out_open = np.zeros((rows, nc), dtype=np.bool_)
-    ev_gap = np.zeros(MAX_EVENTS, dtype=np.int64)
-    ev_t = np.zeros(MAX_EVENTS)
-    ev_kind = np.zeros(MAX_EVENTS, dtype=np.int64)
+    n_ev = MAX_EVENTS if events or states else 0  # neither read: the kernel keeps no gap states (same speeds)
+    ev_gap = np.zeros(n_ev, dtype=np.int64)
+    ev_t = np.zeros(n_ev)
+    ev_kind = np.zeros(n_ev, dtype=np.int64)
     status, t_fail, n_ev = run_chain(
         chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf, chain.cramp,
         chain.cb2,

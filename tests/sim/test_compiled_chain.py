@@ -63,3 +63,43 @@ def test_equality_pickling_and_copies_ignore_it() -> None:
     assert back == v and "compiled" not in back.__dict__
     assert _same(back.compiled, m)
     assert copy.deepcopy(v) == v and _same(copy.copy(v).compiled, m)
+
+
+SPEED_ONLY_EFFECTS = {"drag": {"coulomb_nm": 4.0, "viscous_nms": 0.01},
+                      "progressive_stiffness": {"halfshaft_rel": 0.5, "mount_rel": 0.5},
+                      "tyre_slip": {"compliance_per_mn": 40.0, "relaxation_m": 0.3},
+                      "torque_lag": {"delay_s": 0.004, "tau_s": 0.003},
+                      "speed_sensor": {"tau_s": 0.002, "delay_s": 0.003}}
+
+
+@pytest.mark.parametrize("which", ["paper", "paper_effects", "chain_drive", "single_reduction", "unequal"])
+def test_speed_only_loop_gives_the_tracked_loop_s_rows_bit_for_bit(which: str) -> None:
+    """Without state rows or gap events the kernel keeps no coupling torques or gap states (the serial chain's
+    speed-only loop): the resolver, sensor and torque rows are those of the run that keeps them all."""
+    from sim.effects import apply_effects
+    from sim.model import quasi_static_full
+    from sim.runner import run_from_state
+    from sim.simulate import choose_step
+    from tests.sim.test_topologies import unequal_chain_drive
+
+    if which == "unequal":
+        v = unequal_chain_drive()
+    elif which == "paper_effects":
+        v = apply_effects(load_vehicle("paper"), SPEED_ONLY_EFFECTS)
+    else:
+        v = load_vehicle(which)
+    m = v.compiled
+    t = np.arange(0.0, 3.0, 0.01)
+    q = np.where(t < 1.0, -30.0, 90.0) + 5.0 * np.sin(7.0 * t)
+    theta0, omega0, tyre0 = quasi_static_full(m, float(q[0]), 150.0)
+    step, sub = choose_step(m, 1e-3, torque_max=90.0)
+    eff = v.effects
+    kw = {"lag": (eff.torque_lag.delay_s, eff.torque_lag.tau_s), "sensor_tau": eff.speed_sensor.tau_s}
+    runs = [run_from_state(m, t, q, True, 0.0, step, sub, 2901, theta0, omega0, tyre0, events=ev, states=st, **kw)
+            for ev, st in ((True, True), (True, False), (False, False))]
+    full = runs[0]
+    assert full.events and any(full.is_open[:, j].any() and not full.is_open[:, j].all() for j in range(m.n_couplings))
+    for run in runs[1:]:
+        for name in ("resolver", "sensor", "torque"):
+            assert np.array_equal(getattr(run, name), getattr(full, name)), name
+    assert runs[2].events == [] and runs[2].omega.shape[0] == 0
