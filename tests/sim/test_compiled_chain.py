@@ -11,9 +11,12 @@ import pytest
 
 from sim import WhatIf, load_vehicle, simulate
 from sim.batch import simulate_batch
-from sim.model import build_chain
+from sim.effects import apply_effects
+from sim.model import build_chain, quasi_static_full
 from sim.paper import tip_in_torque
-from sim.simulate import simulate_speed
+from sim.runner import run_from_state
+from sim.simulate import choose_step, simulate_speed
+from tests.sim.test_topologies import unequal_chain_drive
 
 
 def _same(a: object, b: object) -> bool:
@@ -72,20 +75,17 @@ SPEED_ONLY_EFFECTS = {"drag": {"coulomb_nm": 4.0, "viscous_nms": 0.01},
                       "speed_sensor": {"tau_s": 0.002, "delay_s": 0.003}}
 
 
-@pytest.mark.parametrize("which", ["paper", "paper_effects", "chain_drive", "single_reduction", "unequal"])
+@pytest.mark.parametrize("which", ["paper", "paper_effects", "chain_drive", "chain_full", "single_reduction",
+                                   "unequal"])
 def test_speed_only_loop_gives_the_tracked_loop_s_rows_bit_for_bit(which: str) -> None:
     """Without state rows or gap events the kernel keeps no coupling torques or gap states (the serial chain's
     speed-only loop): the resolver, sensor and torque rows are those of the run that keeps them all."""
-    from sim.effects import apply_effects
-    from sim.model import quasi_static_full
-    from sim.runner import run_from_state
-    from sim.simulate import choose_step
-    from tests.sim.test_topologies import unequal_chain_drive
-
     if which == "unequal":
         v = unequal_chain_drive()
     elif which == "paper_effects":
         v = apply_effects(load_vehicle("paper"), SPEED_ONLY_EFFECTS)
+    elif which == "chain_full":  # the dampers engaging in full (contact_damping)
+        v = load_vehicle("chain_drive").with_changes({"contact_damping": "full"})
     else:
         v = load_vehicle(which)
     m = v.compiled
