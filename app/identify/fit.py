@@ -328,7 +328,9 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     share = 0.55 if other is not None else 1.0
     found = _identify_on(evs, noise, vehicle, opts, lambda f, m: say(0.05 + (share - 0.05) * f, m), split, baseline,
                          rigid, vehicle.contact_damping)
-    if other is not None and form.residual(found) > form.FORM_MIN_GAP:  # else the file's law fits: nothing to choose
+    change = form.law_change(found, other, evs, opts.model) \
+        if other is not None and form.residual(found) > form.FORM_MIN_GAP else None
+    if other is not None and change is not None and change > form.FORM_SKIP:  # else nothing to choose on
         law = other.contact_damping
         try:
             second: Identification | None = _identify_on(
@@ -338,7 +340,7 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
             second = None
         found = form.choose(found, second)
     elif other is not None:
-        found = form.choose(found, None)
+        found = form.choose(found, None, change)
     found.elapsed_s = time.process_time() - clock
     return found
 

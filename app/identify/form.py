@@ -16,10 +16,13 @@ and written into the identified vehicle, never *named* as a data-sheet error.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from app.analysis.diagnosis.calibrate import FitResult
+from app.analysis.diagnosis.forward import DiagEvent, prediction, simulate_events, vehicle_with, weighted_residual
 from sim import Vehicle
 from sim.params import CONTACT_LAWS
 
@@ -28,6 +31,9 @@ if TYPE_CHECKING:
 
 FORM_SHARE = 0.9  # the other law must leave at most this share of the file law's identified residual ...
 FORM_MIN_GAP = 1.5  # ... where the file's law leaves more than this many times the noise floor
+# ... and where, at the identified values, the other law moves that residual by more than this share: below it the
+# two laws are the same model for this car (the paper car's drives: 0.2-5 %; the low-mode chain car's: 126-1080 %)
+FORM_SKIP = 0.1
 
 
 def alternative(vehicle: Vehicle) -> Vehicle | None:
@@ -40,14 +46,31 @@ def alternative(vehicle: Vehicle) -> Vehicle | None:
     return vehicle.with_changes({"contact_damping": other})
 
 
+def chi2_under(vehicle: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], model: str) -> float:
+    """Weighted residual sum of squares of ``fitted`` on ``vehicle`` over ``events`` (one simulator pass)."""
+    veh = vehicle_with(vehicle, fitted.nuisance, fitted.settings)
+    outs = simulate_events(events, veh, fitted.nuisance.gain, fitted.settings, model)
+    return float(sum(float(r @ r) for r in (weighted_residual(ev, prediction(ev, out, fitted.nuisance.offset_s))
+                                            for ev, out in zip(events, outs, strict=True))))
+
+
+def law_change(first: Identification, other: Vehicle, events: Sequence[DiagEvent], model: str) -> float:
+    """How far the other law moves the identified vehicle's residual at the identified values (relative): two
+    simulator passes, against a whole identification under the other law."""
+    assert first.on is not None
+    a = chi2_under(first.on, first.fit, events, model)
+    return abs(chi2_under(other, first.fit, events, model) - a) / max(a, 1e-300)
+
+
 def residual(ident: Identification) -> float:
     """The identified vehicle's calibration residual, in units of the noise floor."""
     return ident.chi2_after / max(ident.n_samples, 1)
 
 
-def choose(first: Identification, second: Identification | None) -> Identification:
+def choose(first: Identification, second: Identification | None, change: float | None = None) -> Identification:
     """``first`` (the file's law) or ``second`` (the other; None where it was not tried -- the file's law leaves no
-    more than :data:`FORM_MIN_GAP` -- or could not be identified), with the choice recorded on the one returned."""
+    more than :data:`FORM_MIN_GAP`, or the other law moves it by less than :data:`FORM_SKIP` (``change``) -- or could
+    not be identified), with the choice recorded on the one returned."""
     a = residual(first)
     b = residual(second) if second is not None else float("nan")
     take = second is not None and a > FORM_MIN_GAP and b <= FORM_SHARE * a
@@ -60,6 +83,9 @@ def choose(first: Identification, second: Identification | None) -> Identificati
                        else {})}
     if a <= FORM_MIN_GAP:
         why = f"the file's law leaves {a:.3g} times the noise floor, nothing to choose on"
+    elif second is None and change is not None and change <= FORM_SKIP:
+        why = (f"at the identified values the other law moves the residual by {100 * change:.1f} %, under "
+               f"{100 * FORM_SKIP:g} %: the same model for this car")
     elif second is None:
         why = "the other contact law could not be identified"
     elif take:
