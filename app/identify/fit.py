@@ -13,6 +13,10 @@ offset, torque gain, road load) free as always. Procedure::
         quantiles of Student's t with G-1 degrees of freedom (G events)
     identifiability: a parameter whose interval spans more than IDENT_SPAN of its prior range is not
         identified; it is held at the file's value and the rest refitted once
+    stiffness and damping set from a clear model-free mode are kept only where the joint fit on them
+        beats the file's values; otherwise the grey box fits them too
+    the contact law (app.identify.form): where the file's law leaves a gap and the other law differs
+        for this car, the whole procedure again under the other law, kept where it fits clearly better
 
 A parameter resting within 1 % of its prior bound is reported ``at_bound`` (the fit says so, the
 value is not trusted). A parameter is *named* (the data sheet is off) when it is identified, not at a
