@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -144,6 +144,18 @@ class Param(Serial):
         bound = ", at a prior bound" if self.at_bound else ""
         return (f"{self.label} {self.value / self.nominal:.2f}x nominal [{self.lo / self.nominal:.2f}, "
                 f"{self.hi / self.nominal:.2f}] ({self.value:.4g} {self.unit}, file {self.nominal:.4g}{bound})")
+
+
+class _Path(NamedTuple):
+    """One way through the joint fit (:func:`_identify_on`): with the model-free mode's stiffness and damping, or
+    without."""
+
+    joint: FitResult
+    names: list[str]  # the base parameters the joint fit fitted
+    pins: dict[str, tuple[float, float]]  # set from the mode: name -> (ratio, 90 % half-width of its log)
+    fitted_on: Vehicle  # the vehicle with the pins applied
+    unresolved: list[str]  # held at the file's values, for want of resolution
+    why: dict[str, str]  # ... and why
 
 
 @dataclass
@@ -362,8 +374,7 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
     log.append(f"baseline: chi2/n {base.chi2 / base.n:.3g}, nuisance {base.nuisance.to_dict()}")
     _require_response(vehicle, evs, base, opts.model)
 
-    def path(pins: dict[str, tuple[float, float]], names: list[str], log: list[str]) -> tuple[
-            FitResult, list[str], dict[str, tuple[float, float]], Vehicle, list[str], dict[str, str]]:
+    def path(pins: dict[str, tuple[float, float]], names: list[str], log: list[str]) -> _Path:
         """The joint fit with stiffness and damping ``pins`` from the model-free mode (none: fitted)."""
         fitted_on = with_base(vehicle, {k: r for k, (r, _) in pins.items()})
         if pins:
@@ -394,29 +405,29 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
         say(0.15, f"joint fit of {', '.join(names) or 'the nuisance'} with the nuisance")
         joint = _joint(fitted_on, evs, split, names, bounds, opts, base, starts)
         log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
-        return joint, names, pins, fitted_on, unresolved, why
+        return _Path(joint, names, pins, fitted_on, unresolved, why)
 
     pins = mode_pins(vehicle, names, modal, noise.period_s)
     tried = list(log)
-    joint, got, pins_used, fitted_on, unresolved, why = path(pins, names, log)
+    taken = path(pins, names, log)
     # the file's values under this vehicle's contact law (the baseline is under the file's law)
     own = base
     if pins and vehicle.contact_damping != base_law:
         own = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, start=base, seed=opts.seed)
-    if pins and joint.chi2 > own.chi2:
+    if pins and taken.joint.chi2 > own.chi2:
         # the measured mode's stiffness and damping fit worse than the file's own values: a heavily damped mode read
         # through the lash is biased, so the grey box fits them instead (kept where it does better)
-        log_free = [*tried, f"stiffness and damping from the model-free first mode leave chi2/n "
-                    f"{joint.chi2 / joint.n:.3g}, more than the file's values ({own.chi2 / own.n:.3g}): fitted "
-                    "by the grey box instead"]
+        left = taken.joint.chi2 / taken.joint.n
+        log_free = [*tried, f"stiffness and damping from the model-free first mode leave chi2/n {left:.3g}, more than "
+                    f"the file's values ({own.chi2 / own.n:.3g}): fitted by the grey box instead"]
         try:
             free = path({}, names, log_free)
         except NotIdentifiableError:
             free = None
-        if free is not None and free[0].chi2 < joint.chi2:
-            joint, got, pins_used, fitted_on, unresolved, why = free
+        if free is not None and free.joint.chi2 < taken.joint.chi2:
+            taken = free
             log[:] = log_free
-    names, pins = got, pins_used
+    joint, names, pins, fitted_on, unresolved, why = taken
     notes: dict[str, str] = {}
     by_rigid = rigid_pin(fitted_on, names, joint, rigid) if rigid is not None else None
     if by_rigid is not None:
