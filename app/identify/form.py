@@ -7,11 +7,14 @@ compliance sit in its half-shafts, damping ratio near 0.5 -- it removes most of 
 is small, i.e. at every impact after the lash closes: the first overshoot then swings 10-20 % further than a damper
 acting in full (``full``). Which law a car follows is a property of the car, so the log decides it.
 
-Where the vehicle has a contact with both a clearance and damping and the identification under the file's law
-leaves more than :data:`FORM_MIN_GAP` times the noise floor, it is run again under the other law on the same events,
-weights and nuisance baseline (:func:`app.identify.fit.identify_events`); the other law is kept where it leaves at
-most :data:`FORM_SHARE` of the file law's residual. The law is model form, not a base parameter: it is reported
-and written into the identified vehicle, never *named* as a data-sheet error.
+Where the vehicle has a contact with both a clearance and damping, the identification under the file's law leaves
+more than :data:`FORM_MIN_GAP` times the noise floor, and the other law, at the identified values, moves that residual
+by more than :data:`FORM_SKIP` (two simulator passes, :func:`law_change`), the identification is run again under the
+other law on the same events, weights and nuisance baseline (:func:`app.identify.fit.identify_events`); the other law
+is kept where it leaves at most :data:`FORM_SHARE` of the file law's residual. (The two-inertia model has one lumped
+lash and no contact law: there the two laws are the same model and the second run is skipped.) The law is model
+form, not a base parameter: it is reported and written into the identified vehicle, never *named* as a data-sheet
+error.
 """
 
 from __future__ import annotations
