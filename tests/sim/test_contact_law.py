@@ -117,3 +117,10 @@ def test_batch_variants_may_differ_in_law() -> None:
         single = simulate(PAPER.with_changes(change), t, q, interp="linear")
         assert np.allclose(batch.motor_speed_rpm[k], single.motor_speed_rpm, atol=1e-9)
         assert batch.gap_events[k] == single.gap_events
+
+
+def test_the_two_inertia_model_has_no_contact_law() -> None:
+    """Its one lumped lash follows the paper's equations: the law leaves it unchanged, bit for bit."""
+    t, q = tip_in_torque(duration_s=0.3)
+    a = simulate(PAPER, t, q, model="two_inertia").motor_speed_rpm
+    assert np.array_equal(a, simulate(FULL, t, q, model="two_inertia").motor_speed_rpm)
