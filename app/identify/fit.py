@@ -334,16 +334,18 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     if not any(_fittable(vehicle, n) for n in opts.params):
         raise NotIdentifiableError(f"the vehicle {vehicle.name!r} has nothing identifiable: no stiffness, damping, "
                                    "mass or lash field with a value above zero")
+    say(0.02, f"model-free first mode of {len(evs)} event windows")
+    modal = model_free_mode(evs, opts.level)  # needs no vehicle file: one estimate for either contact law
     if baseline is None:
         bounds = Bounds.for_period(noise.period_s)
-        say(0.02, f"baseline nuisance fit on {len(evs)} events")
+        say(0.04, f"baseline nuisance fit on {len(evs)} events")
         base = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, seed=opts.seed)
         evs = with_input_uncertainty(evs, vehicle, base, opts.model, noise, 0.0, opts.seed)
         baseline = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, start=base, seed=opts.seed)
     other = form.alternative(vehicle)
     share = 0.55 if other is not None else 1.0
     found = _identify_on(evs, noise, vehicle, opts, lambda f, m: say(0.05 + (share - 0.05) * f, m), split, baseline,
-                         rigid, vehicle.contact_damping)
+                         rigid, vehicle.contact_damping, modal)
     change = form.law_change(found, other, evs, opts.model) \
         if other is not None and form.residual(found) > form.FORM_MIN_GAP else None
     if other is not None and change is not None and change > form.FORM_SKIP:  # else nothing to choose on
@@ -351,7 +353,7 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
         try:
             second: Identification | None = _identify_on(
                 evs, noise, other, opts, lambda f, m: say(share + (1.0 - share) * f, f"contact damping {law}: {m}"),
-                split, baseline, rigid, vehicle.contact_damping)
+                split, baseline, rigid, vehicle.contact_damping, modal)
         except (InsufficientDataError, NotIdentifiableError):
             second = None
         found = form.choose(found, second)
@@ -362,15 +364,15 @@ def identify_events(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
 
 
 def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts: FitOptions, say: Progress,
-                 split: Split, base: FitResult, rigid: RigidBody | None, base_law: str) -> Identification:
+                 split: Split, base: FitResult, rigid: RigidBody | None, base_law: str,
+                 mode: tuple[ModalEstimate | None, str]) -> Identification:
     """:func:`identify_events` under ``vehicle``'s contact law, on calibration events that carry the input
-    uncertainty, from the nuisance baseline ``base`` (fitted under the contact law ``base_law``)."""
-    clock = time.process_time()
+    uncertainty, from the nuisance baseline ``base`` (fitted under the contact law ``base_law``), with the
+    model-free ``mode`` of the events (:func:`model_free_mode`)."""
+    modal, modal_error = mode
     names = [n for n in opts.params if _fittable(vehicle, n)]
     bounds = Bounds.for_period(noise.period_s)
     log: list[str] = []
-    say(0.02, f"model-free first mode of {len(evs)} event windows")
-    modal, modal_error = model_free_mode(evs, opts.level)
     log.append(f"baseline: chi2/n {base.chi2 / base.n:.3g}, nuisance {base.nuisance.to_dict()}")
     _require_response(vehicle, evs, base, opts.model)
 
@@ -471,7 +473,6 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
     result.rigid = rigid
     result.fit_log = log
     result.modal, result.modal_error = modal, modal_error
-    result.elapsed_s = time.process_time() - clock
     say(1.0, "identified: " + (", ".join(result.named) or "nothing off the file"))
     return result
 

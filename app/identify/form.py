@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from app.analysis.diagnosis.calibrate import FitResult
-from app.analysis.diagnosis.forward import DiagEvent, prediction, simulate_events, vehicle_with, weighted_residual
+from app.analysis.diagnosis.forward import DiagEvent
+from app.analysis.diagnosis.partners import residual_at
 from sim import Vehicle
 from sim.params import CONTACT_LAWS
 
@@ -49,20 +49,17 @@ def alternative(vehicle: Vehicle) -> Vehicle | None:
     return vehicle.with_changes({"contact_damping": other})
 
 
-def chi2_under(vehicle: Vehicle, fitted: FitResult, events: Sequence[DiagEvent], model: str) -> float:
-    """Weighted residual sum of squares of ``fitted`` on ``vehicle`` over ``events`` (one simulator pass)."""
-    veh = vehicle_with(vehicle, fitted.nuisance, fitted.settings)
-    outs = simulate_events(events, veh, fitted.nuisance.gain, fitted.settings, model)
-    return float(sum(float(r @ r) for r in (weighted_residual(ev, prediction(ev, out, fitted.nuisance.offset_s))
-                                            for ev, out in zip(events, outs, strict=True))))
-
-
 def law_change(first: Identification, other: Vehicle, events: Sequence[DiagEvent], model: str) -> float:
     """How far the other law moves the identified vehicle's residual at the identified values (relative): two
-    simulator passes, against a whole identification under the other law."""
+    simulator passes, against a whole identification under the other law (inf where the simulator rejects one)."""
     assert first.on is not None
-    a = chi2_under(first.on, first.fit, events, model)
-    return abs(chi2_under(other, first.fit, events, model) - a) / max(a, 1e-300)
+    fit = first.fit
+    ra = residual_at(first.on, events, fit.nuisance, fit.settings, model)
+    rb = residual_at(other, events, fit.nuisance, fit.settings, model)
+    if ra is None or rb is None:
+        return float("inf")
+    a = float(ra @ ra)
+    return abs(float(rb @ rb) - a) / max(a, 1e-300)
 
 
 def residual(ident: Identification) -> float:

@@ -70,8 +70,10 @@ class PartnerScreen:
         return f"{self.id} {self.gain:.1f}"
 
 
-def _residual(base: Vehicle, events: Sequence[DiagEvent], nui: Nuisance, settings: Sequence[EffectSetting],
-              model: str) -> FloatArray | None:
+def residual_at(base: Vehicle, events: Sequence[DiagEvent], nui: Nuisance, settings: Sequence[EffectSetting],
+                model: str) -> FloatArray | None:
+    """The weighted residual of every event, in order, at fixed nuisance (offset included) and effect settings: one
+    simulator pass (non-finite values as 0); None when the simulator rejects the parameters."""
     try:
         veh = vehicle_with(base, nui, settings)
         outs = simulate_events(events, veh, nui.gain, settings, model)
@@ -97,12 +99,12 @@ def screen_partners(base: Vehicle, events: Sequence[DiagEvent], first: FitResult
     """Linearised gain of each of ``partners`` on top of ``first`` on calibration ``events``, best first."""
     nui = first.nuisance
     settings = tuple(first.settings)
-    r0 = _residual(base, events, nui, settings, model)
+    r0 = residual_at(base, events, nui, settings, model)
     if r0 is None:
         return [PartnerScreen(c, 0.0) for c in partners]
     n_cols: list[FloatArray] = []
     for name, step in NUISANCE_STEPS.items():
-        moved = _residual(base, events, replace(nui, **{name: getattr(nui, name) + step}), settings, model)
+        moved = residual_at(base, events, replace(nui, **{name: getattr(nui, name) + step}), settings, model)
         if moved is not None:
             n_cols.append(moved - r0)
     jn = np.column_stack(n_cols) if n_cols else np.zeros((r0.size, 0))
@@ -120,7 +122,7 @@ def screen_partners(base: Vehicle, events: Sequence[DiagEvent], first: FitResult
                 vals = eff.values({**off, p.name: p.off + step})
             except (SimError, ValueError):
                 continue
-            moved = _residual(base, events, nui, (*settings, (eff, vals)), model)
+            moved = residual_at(base, events, nui, (*settings, (eff, vals)), model)
             if moved is None:
                 continue
             a_lo, a_hi = sorted(((p.lo - p.off) / step, (p.hi - p.off) / step))
