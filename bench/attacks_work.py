@@ -293,6 +293,11 @@ def attacks(url: str, short: bool = False) -> list[tuple[str, Callable[[httpx.Cl
         ("vehicle file field x4 (200 KiB each)", repeated_fields),
         ("driveline of 10 000 stages (1 MiB)", lambda c: post_vehicle(c, "ev", driveline=many_stage_driveline(10_000))),
         ("driveline of 30 stages", lambda c: post_vehicle(c, "ev", driveline=many_stage_driveline(30))),
+        ("driveline, contact_damping a 200 KiB string",
+         lambda c: post_vehicle(c, "ev", driveline=b'contact_damping = "' + b"f" * (200 << 10) + b'"\n'
+                                + many_stage_driveline(4))),
+        ("driveline, contact_damping a table",
+         lambda c: post_vehicle(c, "ev", driveline=b"contact_damping = {law = 'full'}\n" + many_stage_driveline(4))),
         ("DBC, 1100 signals in one message", lambda c: post_vehicle(c, "ev", dbc=overlapping_dbc(1100))),
         ("DBC, 400 overlapping + 500 messages (124 KB)",
          lambda c: post_vehicle(c, "ev", dbc=overlapping_dbc(400, filler_messages=500))),

@@ -69,6 +69,21 @@ def test_vehicle_texts_are_capped_and_listings_stay_small(client: TestClient) ->
         assert len(item["summary"]["description"]) == 203 and item["summary"]["description"].endswith("...")
 
 
+def test_a_contact_law_that_is_not_one_is_refused_by_name(client: TestClient) -> None:
+    """``contact_damping`` (a word, not a number): a long string or a table is a short one-line error naming the
+    field, nothing is stored; a right one is stored and read back."""
+    for value in ('"' + "f" * 200_000 + '"', "{law = 'full'}", "3"):
+        body = f"contact_damping = {value}\n" + PAPER
+        r = client.post("/vehicles", data={"name": "law"}, files={"driveline": ("law.toml", body.encode())})
+        detail = _error(r, 422, "invalid_parameter")
+        assert detail.startswith("contact_damping = ") and "'limited', 'full'" in detail and len(detail) < 500
+    assert client.get("/vehicles/law").status_code == 404
+    body = 'contact_damping = "full"\n' + PAPER
+    assert client.post("/vehicles", data={"name": "law"}, files={"driveline": ("law.toml", body.encode())}) \
+        .status_code == 201
+    assert 'contact_damping = "full"' in client.get("/vehicles/law/versions/1/driveline").text
+
+
 def test_error_messages_are_capped(client: TestClient) -> None:
     """Thousands of keys where a table belongs: the message names a dozen, not all of them (half a million made a
     9 MB message; such a file is now refused by its size, vehicle_file_too_large)."""
