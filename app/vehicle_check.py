@@ -52,10 +52,10 @@ def suspect_fields(vehicle: Vehicle) -> list[tuple[str, float, float]]:
     paper = load_vehicle("paper")
     mine = _flat_vehicle(vehicle)
     ref = _flat_vehicle(paper)
-    if vehicle.stages:
+    if any(key.startswith("stage.") for key in mine):  # a stage file: compared in its own layout
         ref.update(_flat_vehicle(paper.as_stages()))
         # each stage against the paper's stage of the same kind (its kind's reference_stage)
-        by_kind = {s.name: s.spec.reference_stage for s in vehicle.stages}
+        by_kind = {s.name: s.spec.reference_stage for s in vehicle.chain}
         paper_stages = _flat_vehicle(paper.as_stages())
         for key in list(mine):
             parts = key.split(".")

@@ -63,6 +63,20 @@ FIELD_MAP = {classic: f"stage.{c.name}.{key}" for c in CLASSIC_STAGES for key, c
              if key in ("inertia", "stiffness", "damping")}
 
 
+def classic_field(stage: str, attr: str) -> str:
+    """The classic file's dotted field holding ``attr`` of its stage ``stage`` (ParameterError where the classic
+    layout has no such stage or field)."""
+    for c in CLASSIC_STAGES:
+        if c.name != stage:
+            continue
+        if attr in c.fields:
+            return c.fields[attr]
+        if attr == "cubic_stiffness":
+            return f"effects.progressive_stiffness.{stage}"
+        raise ParameterError(f"stage.{stage}.{attr}", attr, f"the classic layout's {stage} has no such field")
+    raise ParameterError(f"stage.{stage}", stage, f"no such stage; known: {[c.name for c in CLASSIC_STAGES]}")
+
+
 def legacy_stages(v: Vehicle) -> tuple[Stage, ...]:
     """The classic layout as stages: spline, mesh1, mesh2 (gear pairs), differential, halfshaft."""
     red, g, ps = v.reducer, v.gaps, v.effects.progressive_stiffness

@@ -25,7 +25,7 @@ from typing import Any
 from sim.errors import ParameterError
 from sim.fields import ANY, INT_POS, NONNEG, POS, build, check, field_meta, flag, to_plain, validate
 from sim.fields import num as _f
-from sim.layout import legacy_stages, stage_checks, stage_layout
+from sim.layout import classic_field, legacy_stages, stage_checks, stage_layout
 from sim.model import ChainModel, build_chain
 from sim.optional import Drag, Effects, ProgressiveStiffness, SpeedSensor, TorqueLag, TyreSlip
 from sim.params_base import (
@@ -375,6 +375,23 @@ class Vehicle:
     @property
     def has_housing(self) -> bool:
         return self.housing.enabled
+
+    @property
+    def housing_described(self) -> bool:
+        """Whether the file describes a drive-unit housing on mounts: a classic layout always does (its
+        ``[housing]`` may be switched off), a stage chain only where it has an enabled ``[housing]``."""
+        return self.housing.enabled or not self.stages
+
+    def field_of(self, stage: str, attr: str) -> str:
+        """The dotted field holding stage ``stage``'s ``attr`` in this vehicle's own file layout: a stage chain's
+        ``stage.<stage>.<attr>`` (``right.<attr>`` for an unequal right shaft), a classic file's section and key
+        (:data:`sim.layout.CLASSIC_STAGES`; a cubic term in ``[effects.progressive_stiffness]``). Every reader
+        of the vehicle outside the file format goes through :attr:`chain` and this, never through the
+        classic sections."""
+        if self.stages:
+            self.stage(stage)  # validates the name
+            return f"stage.{stage}.{attr}"
+        return classic_field(stage, attr)
 
     @property
     def driven_wheels(self) -> int:

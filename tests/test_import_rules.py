@@ -210,3 +210,36 @@ def test_an_import_inside_a_function_says_why() -> None:
             silent.append(f"{path.relative_to(REPO)}:{line}")
     assert not silent, f"in-function imports without a reason: {silent}"
     assert len(found) <= MAX_IN_FUNCTION_IMPORTS, f"{len(found)} in-function imports; move new ones to the top"
+
+
+# the classic file's sections (``[reducer]``, ``[halfshaft]``, ``[gaps.*]``) are a file format: sim/params.py reads
+# and writes them and sim/layout.py translates them into the stage chain; every other reader of a vehicle takes the
+# chain (``Vehicle.chain``) and the file's own dotted fields (``Vehicle.field_of``)
+CLASSIC_FORMAT_FILES = ("sim/params.py", "sim/layout.py")
+CLASSIC_SECTIONS = ("reducer", "halfshaft", "stages")
+
+
+def _classic_reads(path: Path, root: Path = REPO) -> list[str]:
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if not isinstance(node, ast.Attribute):
+            continue
+        base = ast.unparse(node.value)
+        of_vehicle = base == "v" or base.endswith(("vehicle", "veh", "self.vehicle"))
+        if node.attr in CLASSIC_SECTIONS or (node.attr == "gaps" and of_vehicle):
+            out.append(f"{path.relative_to(root)}:{node.lineno}: {ast.unparse(node)}")
+    return out
+
+
+def test_only_the_file_format_reads_the_classic_sections() -> None:
+    hits = [hit for root in ("app", "sim", "bench") for f in sorted((REPO / root).rglob("*.py"))
+            if str(f.relative_to(REPO)) not in CLASSIC_FORMAT_FILES for hit in _classic_reads(f)]
+    assert hits == []
+
+
+def test_the_classic_read_check_sees_a_read(tmp_path: Path) -> None:
+    f = tmp_path / "probe.py"
+    f.write_text("def k(vehicle, counts):\n    return vehicle.halfshaft.stiffness, vehicle.gaps, vehicle.stages, "
+                 "counts.gaps\n", encoding="utf-8")
+    assert sorted(h.split(": ")[1] for h in _classic_reads(f, tmp_path)) == [
+        "vehicle.gaps", "vehicle.halfshaft", "vehicle.stages"]

@@ -33,7 +33,6 @@ import numpy as np
 
 from sim import Vehicle
 from sim.effects.base import Effect, ParamSpec, Values
-from sim.layout import FIELD_MAP
 from sim.linear import coupling_rows, state_matrix
 
 BASE_NAMES = ("stiffness", "damping", "mass", "lash")
@@ -42,11 +41,8 @@ MIN_MODE_HZ = 0.5  # lowest torsional mode looked for
 
 def stage_paths(vehicle: Vehicle, attr: str) -> tuple[str, ...]:
     """Dotted fields of every stage's ``attr`` (``stiffness`` or ``damping``) in the file's own layout."""
-    if vehicle.stages:
-        return tuple(f"stage.{s.name}.{attr}" for s in vehicle.stages
-                     if s.kind not in ("rotor", "wheel") and s.has_coupling and float(getattr(s, attr)) > 0.0)
-    return tuple(classic for classic, staged in FIELD_MAP.items()
-                 if staged.endswith(f".{attr}") and float(vehicle.get(classic)) > 0.0)
+    return tuple(vehicle.field_of(s.name, attr) for s in vehicle.chain
+                 if s.kind not in ("rotor", "wheel") and s.has_coupling and float(getattr(s, attr)) > 0.0)
 
 
 def _scaled(paths: Callable[[Vehicle], tuple[str, ...]], key: str, log2: bool = False

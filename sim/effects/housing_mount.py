@@ -17,7 +17,7 @@ from sim.effects.base import Effect, ParamSpec, Values
 
 
 def _applies(vehicle: Any) -> str:
-    if vehicle.stages and not vehicle.housing.enabled:
+    if not vehicle.housing_described:
         return "the vehicle has no drive-unit housing on mounts (no [housing] in its stage chain)"
     return ""
 

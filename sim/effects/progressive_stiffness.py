@@ -27,17 +27,15 @@ MOUNT_REF_RAD = 0.02
 
 
 def _changes(vehicle: Any, v: Values) -> dict[str, Any]:
-    mount = {"effects.progressive_stiffness.mount": v["mount_rel"] * vehicle.housing.mount_stiffness / MOUNT_REF_RAD**2}
-    if not vehicle.stages:
-        return {"effects.progressive_stiffness.halfshaft": v["halfshaft_rel"] * vehicle.halfshaft.stiffness
-                / HALFSHAFT_REF_RAD**2, **mount}
-    out: dict[str, Any] = mount if vehicle.housing.enabled else {}
-    for s in vehicle.stages:  # a stage chain: the cubic term of each half-shaft (both when unequal)
+    # the mount's term wherever the file describes a housing (a classic layout always does)
+    out: dict[str, Any] = ({"effects.progressive_stiffness.mount": v["mount_rel"] * vehicle.housing.mount_stiffness
+                            / MOUNT_REF_RAD**2} if vehicle.housing_described else {})
+    for s in vehicle.chain:  # the cubic term of each half-shaft (both when unequal)
         if s.spec.role == SHAFTS:
-            out[f"stage.{s.name}.cubic_stiffness"] = v["halfshaft_rel"] * s.stiffness / HALFSHAFT_REF_RAD**2
+            out[vehicle.field_of(s.name, "cubic_stiffness")] = v["halfshaft_rel"] * s.stiffness / HALFSHAFT_REF_RAD**2
             if s.right is not None:
-                out[f"stage.{s.name}.right.cubic_stiffness"] = (v["halfshaft_rel"] * s.right.stiffness
-                                                                / HALFSHAFT_REF_RAD**2)
+                out[vehicle.field_of(s.name, "right.cubic_stiffness")] = (v["halfshaft_rel"] * s.right.stiffness
+                                                                          / HALFSHAFT_REF_RAD**2)
     return out
 
 

@@ -22,7 +22,7 @@ MIN_COMPLIANCE = 0.05  # below this (C above 20 MN per unit slip) the tyre is ri
 
 
 def _applies(vehicle: Any) -> str:
-    if any(s.right is not None for s in vehicle.stages):
+    if any(s.right is not None for s in vehicle.chain):
         return "not modelled with unequal half-shafts (two wheel bodies)"
     return ""
 

@@ -206,3 +206,37 @@ def test_the_documented_full_example_loads_and_runs() -> None:
     t, q = tip_in_torque(0.3, duration_s=0.3)
     r = simulate(v, t, q, speed0_rpm=1500.0)
     assert np.ptp(r.motor_speed_rpm) > 10.0 and "shafts_right" in r.coupling_torques
+
+
+def test_every_stage_value_is_reached_through_the_chain_and_the_file_s_own_field() -> None:
+    paper = load_vehicle("paper")
+    assert paper.field_of("halfshaft", "stiffness") == "halfshaft.stiffness"
+    assert paper.field_of("mesh1", "damping") == "reducer.mesh1_damping"
+    assert paper.field_of("spline", "inertia") == "reducer.input_shaft_inertia"
+    assert paper.field_of("mesh2", "cubic_stiffness") == "effects.progressive_stiffness.mesh2"
+    staged = paper.as_stages()
+    for v in (paper, staged, load_vehicle("chain_drive"), load_vehicle("single_reduction")):
+        for s in v.chain:
+            for attr in ("stiffness", "damping", "cubic_stiffness"):
+                if s.has_coupling:
+                    assert v.get(v.field_of(s.name, attr)) == getattr(s, attr), (v.name, s.name, attr)
+    assert staged.field_of("halfshaft", "stiffness") == "stage.halfshaft.stiffness"
+    # a value changed through the file's own field is the chain's value, in either layout
+    for v in (paper, staged):
+        moved = v.with_changes({v.field_of("mesh2", "stiffness"): 1.5 * v.stage("mesh2").stiffness})
+        assert moved.stage("mesh2").stiffness == 1.5 * v.stage("mesh2").stiffness
+    with pytest.raises(ParameterError, match="no such stage"):
+        paper.field_of("gearbox", "stiffness")
+    with pytest.raises(ParameterError, match="no such stage"):
+        staged.field_of("gearbox", "stiffness")
+    with pytest.raises(ParameterError, match="no such field"):
+        paper.field_of("halfshaft", "ratio")
+
+
+def test_a_classic_file_always_describes_a_housing_and_a_stage_file_only_with_one() -> None:
+    paper = load_vehicle("paper")
+    assert paper.housing_described
+    assert paper.with_changes({"housing.enabled": False}).housing_described
+    assert not load_vehicle("chain_drive").housing.enabled
+    assert not load_vehicle("chain_drive").housing_described
+    assert paper.as_stages().housing_described
