@@ -400,10 +400,9 @@ class Vehicle:
 
     @property
     def ratio(self) -> float:
-        """Total ratio motor speed / wheel speed."""
-        if self.reducer is not None:
-            return self.reducer.ratio
-        return math.prod(s.ratio for s in self.stages)
+        """Total ratio motor speed / wheel speed (a classic file's is its two gear pairs': the other stages are 1,
+        so the product is the reducer's exactly)."""
+        return math.prod(s.ratio for s in self.chain)
 
     @property
     def motor_side_gaps(self) -> tuple[float, ...]:
