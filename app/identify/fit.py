@@ -80,16 +80,17 @@ MIN_RESPONSE = 0.1  # measured / predicted speed swing below which the speed doe
 MIN_LASH_SAMPLES = float(MIN_TRAVERSE_SAMPLES)
 PRACTICAL = {"stiffness": 0.04, "damping": 0.15, "mass": 0.03, "lash": 0.08}  # smallest change worth naming
 # relative 90 % half-width of what the model form alone leaves uncertain: the simulator is not the car, and a fit
-# at a high signal-to-noise ratio is as tight as its statistics only within its own family. It grows with the
-# misfit the identified model leaves, x sqrt(residual / noise) (1 where the fit reaches the noise floor): a model
-# that cannot follow the log has biased parameters in proportion. (Parameters set from the model-free mode or the
-# rigid body of whole drives keep the plain floor: their intervals come from those estimates.) Calibrated on the
-# independent generator's development sets (idev and idev2: 27 drives without an effect, 90 % intervals covering
-# the truth in 100, 93, 96 and 90 % of them with the misfit on every parameter; docs/identify.md)
-MODEL_FORM = {"stiffness": 0.01, "damping": 0.02, "mass": 0.02, "lash": 0.02}
-# ... at ten or more speed samples per period of the first mode; a coarser log widens it in proportion (the torque
-# between its samples is reconstructed, and the mode's phase with it: on the generator's low-mode chain car logged
-# at 20-25 Hz the mass came out 6-17 % off with intervals of +-4 %)
+# at a high signal-to-noise ratio is as tight as its statistics only within its own family. Per parameter, (at ten
+# or more speed samples per period of the first mode, added per unit of model_form_scale beyond 1): a coarser log
+# reconstructs the torque between its samples, and the mode's phase with it. It grows with the misfit the identified
+# model leaves, x sqrt(residual / noise) (1 where the fit reaches the noise floor): a model that cannot follow the
+# log has biased parameters in proportion. (Parameters set from the model-free mode or the rigid body of whole
+# drives keep the plain floor: their intervals come from those estimates.) Calibrated on the independent
+# generator's development sets (idev, idev2, ifinal to ifinal5: 126 paper-car and 47 low-mode chain-car drives
+# without an effect) so that the 90 % intervals cover the truth in about 90 % of either car's drives; the earlier
+# single floor (1, 2, 2, 2 % x the scale) covered 98-100 % on the paper car and 77-94 % on the chain car
+# (docs/identify.md)
+MODEL_FORM = {"stiffness": (0.0045, 0.015), "damping": (0.005, 0.02), "mass": (0.01, 0.06), "lash": (0.009, 0.02)}
 MODE_SAMPLES = 10.0
 
 
@@ -495,6 +496,14 @@ def model_form_scale(freq_hz: float, period_s: float) -> float:
     return float(max(1.0, freq_hz * period_s * MODE_SAMPLES))
 
 
+def model_form(name: str, scale: float) -> float:
+    """Relative 90 % half-width of the model form for base parameter ``name`` on a log whose
+    :func:`model_form_scale` is ``scale`` (before the misfit): :data:`MODEL_FORM`'s level, and its slope per unit
+    of scale beyond 1."""
+    level, slope = MODEL_FORM[name]
+    return level + slope * (scale - 1.0)
+
+
 def _short_traverse(vehicle: Vehicle, events: Sequence[DiagEvent], base: FitResult, period_s: float,
                     model: str) -> str:
     """Why the lash cannot be fitted when its free traverse is too short for the speed channel (else "").
@@ -583,7 +592,8 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
     nuisance; ``cov`` is the unit-box covariance of all its parameters. ``pins``: parameters set from the
     model-free mode (name -> (ratio, 90 % half-width of its log)), on top of which ``joint`` was fitted.
     ``unresolved``: parameters the log cannot show at all (name -> why), held at the file's values. ``period_s``:
-    the speed channel's sampling period (the model-form floor widens below :data:`MODE_SAMPLES` per mode period).
+    the speed channel's sampling period (the model-form floor widens below :data:`MODE_SAMPLES` per mode period,
+    :func:`model_form`).
     ``notes``: a parameter's note in the report (where a pin came from). ``gain_held``: the torque gain was held at
     the file's (the mass came from the rigid-body response, with which a gain would trade).
     """
@@ -616,7 +626,7 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
                 at_bound = bool(f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or
                                 min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo))
             # the misfit scales the floor of what the grey-box fit gave; a pin carries its own source's uncertainty
-            half = float(np.hypot(stat, np.log1p(coarse * (1.0 if q in pins else misfit) * MODEL_FORM[q])))
+            half = float(np.hypot(stat, np.log1p(model_form(q, coarse) * (1.0 if q in pins else misfit))))
             r = ratios[q]
             r_lo, r_hi = r * np.exp(-half), r * np.exp(half)
             v = ph.value(q)

@@ -146,6 +146,23 @@ def test_the_model_form_floor_widens_below_ten_samples_per_mode_period() -> None
     assert model_form_scale(float("nan"), 0.04) == 1.0 and model_form_scale(5.5, 0.0) == 1.0
 
 
+
+def test_the_model_form_floor_has_its_calibrated_level_and_slope() -> None:
+    from app.identify.fit import MODEL_FORM, model_form, model_form_scale
+
+    # at ten or more samples per mode period: the level alone (the paper car at 100 Hz and 1 kHz)
+    assert {q: model_form(q, model_form_scale(7.7, 0.01)) for q in MODEL_FORM} == {
+        "stiffness": 0.0045, "damping": 0.005, "mass": 0.01, "lash": 0.009}
+    # the low-mode chain car at 25 Hz (2.2x the scale): each parameter's slope on top, the mass' steepest
+    scale = model_form_scale(5.5, 0.04)
+    assert model_form("stiffness", scale) == pytest.approx(0.0045 + 0.015 * 1.2)
+    assert model_form("damping", scale) == pytest.approx(0.005 + 0.02 * 1.2)
+    assert model_form("mass", scale) == pytest.approx(0.01 + 0.06 * 1.2)
+    assert model_form("lash", scale) == pytest.approx(0.009 + 0.02 * 1.2)
+    with pytest.raises(KeyError):
+        model_form("torque_gain", 1.0)
+
+
 def test_staged_identification_stops_once_two_stages_agree() -> None:
     """Stages of 8, 16, ... of a 2-minute drive's events in the stratified order: the design stops when the new
     stage's intervals hold the previous stage's values and the same parameters are named, and holds the truth."""
