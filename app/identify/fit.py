@@ -94,6 +94,15 @@ MODEL_FORM = {"stiffness": (0.0045, 0.015), "damping": (0.005, 0.02), "mass": (0
 MODE_SAMPLES = 10.0
 
 
+class IntervalParts(NamedTuple):
+    """What an identified parameter's 90 % half-width (log scale) is made of: ``hypot(stat, log1p(model_form(name,
+    scale) * misfit))``."""
+
+    stat: float  # the statistics' (event-clustered, or the pin's source's)
+    scale: float  # model_form_scale of the log
+    misfit: float  # the misfit factor on the model form (1 for a pinned parameter)
+
+
 @dataclass(frozen=True)
 class FitOptions:
     """What is fitted and how.
@@ -182,6 +191,9 @@ class Identification:
     rigid: RigidBody | None = None
     on: Vehicle | None = None  # the vehicle ``fit`` applies to: the file's, under the contact law chosen (form)
     form: dict[str, Any] | None = None  # the contact law the log chose (app.identify.form.choose)
+    # each identified base parameter's 90 % half-width in parts (log scale), for calibration
+    # (bench/interval_coverage.py)
+    interval_parts: dict[str, IntervalParts] = field(default_factory=dict)
 
     @property
     def named(self) -> list[str]:
@@ -614,6 +626,7 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
     coarse = model_form_scale(ph.freq_hz, period_s)
     misfit = float(np.sqrt(max(joint.chi2 / max(joint.n, 1), 1.0)))
     params: dict[str, Param] = {}
+    parts: dict[str, IntervalParts] = {}
     for q in BASE_NAMES:
         if q in names or q in pins:
             # 90 % half-width on the log scale: the statistics (event-clustered, or the mode's) and the model form,
@@ -626,7 +639,8 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
                 at_bound = bool(f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or
                                 min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo))
             # the misfit scales the floor of what the grey-box fit gave; a pin carries its own source's uncertainty
-            half = float(np.hypot(stat, np.log1p(model_form(q, coarse) * (1.0 if q in pins else misfit))))
+            parts[q] = IntervalParts(float(stat), coarse, 1.0 if q in pins else misfit)
+            half = float(np.hypot(stat, np.log1p(model_form(q, coarse) * parts[q].misfit)))
             r = ratios[q]
             r_lo, r_hi = r * np.exp(-half), r * np.exp(half)
             v = ph.value(q)
@@ -661,7 +675,7 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
         vehicle=identified, params=params, nuisance=_nuisance_dict(nui), ratios=ratios, chi2_before=chi2_before,
         chi2_after=joint.chi2, n_samples=joint.n, n_events=n_events, fit=_with_pins(joint, pins),
         nominal_physical=ph_nom,
-        physical=ph, not_identified=list(dropped), on=vehicle)
+        physical=ph, not_identified=list(dropped), on=vehicle, interval_parts=parts)
 
 
 GAIN_PRACTICAL = 0.02  # a fitted torque gain this far (relative) from the file's, beyond its interval, is written
