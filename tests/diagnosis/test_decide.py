@@ -15,6 +15,7 @@ from app.analysis.diagnosis.decide import (
     decide,
     lags_apart,
     score_candidate,
+    timing_unresolved,
 )
 from app.analysis.diagnosis.score import Interval
 from app.analysis.diagnosis.structure import Remainder, remainder_test
@@ -307,3 +308,24 @@ def test_a_resolved_traverse_other_effects_or_one_lag_asked_for_keep_the_decisio
     drag = decide(BASE, N, [cand("drag", BASE, 0.03), cand("torque_lag", BASE, 0.9, seed=1)], [],
                   bootstrap_draws(8, RULES, 1), RULES, 8)
     assert drag.top == ("drag",) and lags_apart(drag, 0.0, 2, ALL) is drag
+
+
+def test_an_effect_fitted_with_the_time_offset_on_its_bound_is_not_attributed() -> None:
+    d = decide(BASE, N, [cand("housing_mount", BASE, 0.3), cand("drag", BASE, 0.9, seed=1)], [],
+               bootstrap_draws(8, RULES, 1), RULES, 8)
+    assert d.status in ("explained", "partial") and d.top == ("housing_mount",)
+    out = timing_unresolved(d, ("nuisance.offset_s", "housing_mount.damping_log2"), 0.02)
+    assert (out.status, out.top) == ("none_of_candidates", ())
+    assert out.details == {"would_attribute": ["housing_mount"], "offset_at_bound_s": 0.02}
+    assert "on its bound (+20.0 ms)" in out.reason and "nothing is attributed" in out.reason
+    assert out.best is d.best and out.gap_ratio is d.gap_ratio
+    # the offset inside its bound, an effect parameter on its own bound, or no attribution to withdraw: unchanged
+    assert timing_unresolved(d, (), 0.012) is d
+    assert timing_unresolved(d, ("housing_mount.damping_log2",), 0.012) is d
+    quiet = Decision("no_significant_gap")
+    assert timing_unresolved(quiet, ("nuisance.offset_s",), -0.02) is quiet
+    amb = replace(d, status="ambiguous", confusable=("housing_mount", "drag"))
+    assert timing_unresolved(amb, ("nuisance.offset_s",), 0.02) is amb
+    # an answer that models a delay itself (a lag of the torque or a filter of the speed) keeps its name
+    lag = _lag_decision("torque_lag")
+    assert timing_unresolved(lag, ("nuisance.offset_s",), 0.0197) is lag

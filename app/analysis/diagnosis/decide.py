@@ -326,6 +326,32 @@ def lags_apart(decision: Decision, traverse_samples: float, min_samples: float,
                                                           "min_samples": min_samples}})
 
 
+OFFSET_AT_BOUND = "nuisance.offset_s"  # FitResult.at_bound's name of the torque-to-speed time offset on its bound
+
+
+def timing_unresolved(decision: Decision, fit_at_bound: Sequence[str], offset_s: float) -> Decision:
+    """``decision``, or no attribution when the chosen effect's fit rests the torque-to-speed time offset on its
+    bound (``fit_at_bound``: that fit's ``at_bound``; ``offset_s``: its offset).
+
+    The offset is a nuisance, bounded to what a logger's timing can be (``calibrate.OFFSET_MIN_S``, or two sample
+    periods). A fit that needs it on the bound has not aligned the logged torque and speed: the timing itself is
+    what the log shows, and an effect fitted under that misalignment explains a shape it was not made for (on the
+    independent generator, a 21 ms speed filter with 7 ms delay at 100 Hz read as a mount plus backlash, while the
+    offset sat at +20 ms in every fit but the torque lag's). Right answers on the benchmarks bring the offset inside
+    its bound, or name a lag or filter (:data:`LAG_EFFECTS`), which models a delay itself: a torque lag of 20 ms on a
+    right data sheet was fitted with the offset on its bound beside it, and named rightly. So where no effect of the
+    answer models a delay, nothing is attributed, and the reason names the offset."""
+    if (decision.status not in ("explained", "partial") or OFFSET_AT_BOUND not in fit_at_bound
+            or any(e in LAG_EFFECTS for e in decision.top)):
+        return decision
+    top = " + ".join(decision.top)
+    return Decision("none_of_candidates", gap_ratio=decision.gap_ratio, best=decision.best, reason=(
+        f"{top} would explain part of the gap, but only with the time offset between the logged torque and speed on "
+        f"its bound ({1000 * offset_s:+.1f} ms): no candidate aligns the two, so the timing itself is unexplained "
+        f"(a speed filter or delay, or time stamps, beyond what the library models) and nothing is attributed"),
+        details={"would_attribute": list(decision.top), "offset_at_bound_s": offset_s})
+
+
 def _figures(c: CandidateScore) -> str:
     """The two held-out figures of a candidate, each under its one name (see :mod:`.score`)."""
     return (f"explained share {100 * c.explained.value:.0f} % [{100 * c.explained.lo:.0f}, "

@@ -44,6 +44,7 @@ from app.analysis.diagnosis.decide import (
     score_candidate,
     separation,
     structured,
+    timing_unresolved,
     with_tones,
 )
 from app.analysis.diagnosis.forward import (
@@ -526,6 +527,8 @@ def _diagnose(
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     decision = lags_apart(decision, traverse, MIN_TRAVERSE_SAMPLES, candidates)
+    if (chosen_fit := evals.get("+".join(decision.top))) is not None:
+        decision = timing_unresolved(decision, chosen_fit.fit.at_bound, chosen_fit.fit.nuisance.offset_s)
     if too_few and decision.status in ("explained", "partial", "ambiguous"):
         # the vehicle could not be identified first: what the effect explains may be the data sheet's error (a
         # speed-sensor filter on its bound standing in for a damping twice the file's), so nothing is attributed
