@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from app.analysis.diagnosis.decide import DecisionRules, bootstrap_draws
-from app.analysis.diagnosis.structure import Remainder, remainder_test
+from app.analysis.diagnosis.structure import Remainder, _locked, _locked_flips, remainder_test
 
 RULES = DecisionRules(n_boot=500)
 H, K = 8, 130  # held-out events, locked bins (one sample per bin)
@@ -84,3 +84,19 @@ def test_a_remainder_confined_to_one_phase_is_structure() -> None:
     assert ratios["oscillation"].lo > 2.0 and ratios["pre_event"].value < 1.2
     assert t.above_noise(RULES.min_gap_ratio, RULES.min_gap_ratio_lo) == ["phase:oscillation"]
     assert set(t.to_dict()["phases"]) == {"pre_event", "oscillation"}  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_sign_flip_null_is_the_chunked_one_bit_for_bit(seed: int) -> None:
+    """The event-locked null accumulated event by event (without the (flips, events, bins) arrays) gives the numbers
+    of the statistic evaluated on every sign-flipped copy, so the p-value and the 95th percentile are unchanged."""
+    rng = np.random.default_rng(seed)
+    h, k = int(rng.integers(3, 30)), int(rng.integers(2, 200))
+    lsum = rng.normal(size=(h, k)) * rng.exponential(10.0, size=(h, 1))
+    lcnt = rng.integers(0, 4, size=(h, k)).astype(np.float64)
+    lsum[lcnt == 0] = 0.0
+    kinds = rng.integers(0, 2, size=h)
+    signs = rng.choice(np.array([-1.0, 1.0]), size=(1000, h))
+    chunked = np.concatenate([_locked(lsum[None] * sg[:, :, None], lcnt[None], kinds[None])
+                              for sg in (signs[i:i + 200] for i in range(0, 1000, 200))])
+    assert np.array_equal(_locked_flips(lsum, lcnt, kinds, signs), chunked, equal_nan=True)

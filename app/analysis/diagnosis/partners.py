@@ -73,10 +73,11 @@ class PartnerScreen:
 def residual_at(base: Vehicle, events: Sequence[DiagEvent], nui: Nuisance, settings: Sequence[EffectSetting],
                 model: str) -> FloatArray | None:
     """The weighted residual of every event, in order, at fixed nuisance (offset included) and effect settings: one
-    simulator pass (non-finite values as 0); None when the simulator rejects the parameters."""
+    simulator pass (non-finite values as 0); None when the simulator rejects the parameters. The speed only: no
+    gap states (the same speed, :func:`~.forward.simulate_events` with ``gaps=False``)."""
     try:
         veh = vehicle_with(base, nui, settings)
-        outs = simulate_events(events, veh, nui.gain, settings, model)
+        outs = simulate_events(events, veh, nui.gain, settings, model, gaps=False)
     except SimError:
         return None
     r = np.concatenate([weighted_residual(ev, prediction(ev, out, nui.offset_s))
