@@ -340,7 +340,9 @@ def timing_unresolved(decision: Decision, fit_at_bound: Sequence[str], offset_s:
     offset sat at +20 ms in every fit but the torque lag's). Right answers on the benchmarks bring the offset inside
     its bound, or name a lag or filter (:data:`LAG_EFFECTS`), which models a delay itself: a torque lag of 20 ms on a
     right data sheet was fitted with the offset on its bound beside it, and named rightly. So where no effect of the
-    answer models a delay, nothing is attributed, and the reason names the offset."""
+    answer models a delay, nothing is attributed, and the reason names the offset. (The rule also withdraws half
+    answers: two drives whose truth pairs a torque lag with tyre slip read ``partial tyre_slip`` with the offset on
+    its bound, the lag the offset could not take unnamed; docs/diagnosis.md.)"""
     if (decision.status not in ("explained", "partial") or OFFSET_AT_BOUND not in fit_at_bound
             or any(e in LAG_EFFECTS for e in decision.top)):
         return decision
