@@ -53,10 +53,10 @@ def suspect_fields(vehicle: Vehicle) -> list[tuple[str, float, float]]:
     mine = _flat_vehicle(vehicle)
     ref = _flat_vehicle(paper)
     if any(key.startswith("stage.") for key in mine):  # a stage file: compared in its own layout
-        ref.update(_flat_vehicle(paper.as_stages()))
+        paper_stages = _flat_vehicle(paper.as_stages())
+        ref.update(paper_stages)
         # each stage against the paper's stage of the same kind (its kind's reference_stage)
         by_kind = {s.name: s.spec.reference_stage for s in vehicle.chain}
-        paper_stages = _flat_vehicle(paper.as_stages())
         for key in list(mine):
             parts = key.split(".")
             if parts[0] == "stage" and len(parts) >= 3 and parts[1] in by_kind:
