@@ -26,7 +26,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from app.identify import IdentifyOptions, identify_logs  # noqa: E402
-from app.identify.fit import MODEL_FORM  # noqa: E402
+from app.identify.fit import MODEL_FORM, model_form  # noqa: E402
 from bench.diagnosis_indep import generate  # noqa: E402
 from bench.identify_indep import OURS, PARAMS  # noqa: E402
 from bench.indep.car import is_chain, vehicle_source  # noqa: E402
@@ -67,10 +67,10 @@ def collect(sets: list[str]) -> list[dict[str, Any]]:
     return rows
 
 
-def half_width(p: dict[str, Any], level: float, slope: float) -> float:
-    """90 % half-width (log scale) of a saved parameter under the model-form floor ``level`` + ``slope`` x
-    (scale - 1), as ``app.identify.fit.assemble`` computes it."""
-    return math.hypot(p["stat"], math.log1p((level + slope * (p["scale"] - 1.0)) * p["misfit"]))
+def half_width(name: str, p: dict[str, Any], form: dict[str, tuple[float, float]]) -> float:
+    """90 % half-width (log scale) of saved parameter ``name`` under the model-form floors ``form``, as
+    ``app.identify.fit.assemble`` computes it."""
+    return math.hypot(p["stat"], math.log1p(model_form(name, p["scale"], form) * p["misfit"]))
 
 
 def score(rows: list[dict[str, Any]], form: dict[str, tuple[float, float]]) -> None:
@@ -83,7 +83,7 @@ def score(rows: list[dict[str, Any]], form: dict[str, tuple[float, float]]) -> N
             if p is None:
                 continue
             c = counts["chain" if is_chain(r["car"]) else "paper"]
-            c[0] += abs(math.log(p["value"] / p["truth"])) <= half_width(p, level, slope)
+            c[0] += abs(math.log(p["value"] / p["truth"])) <= half_width(q, p, form)
             c[1] += 1
         cells = [f"{h:3d}/{n:3d} {100 * h / n:5.1f} %" if n else f"{'-':>16s}" for h, n in counts.values()]
         h = counts["paper"][0] + counts["chain"][0]
@@ -98,7 +98,7 @@ def check_parts(rows: list[dict[str, Any]]) -> int:
     for r in rows:
         for q, p in r["params"].items():
             half = math.log(p["hi"] / p["value"])
-            bad += abs(half - half_width(p, *MODEL_FORM[q])) > 1e-9 * max(1.0, half)
+            bad += abs(half - half_width(q, p, MODEL_FORM)) > 1e-9 * max(1.0, half)
     return bad
 
 

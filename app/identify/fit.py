@@ -508,11 +508,11 @@ def model_form_scale(freq_hz: float, period_s: float) -> float:
     return float(max(1.0, freq_hz * period_s * MODE_SAMPLES))
 
 
-def model_form(name: str, scale: float) -> float:
+def model_form(name: str, scale: float, table: Mapping[str, tuple[float, float]] = MODEL_FORM) -> float:
     """Relative 90 % half-width of the model form for base parameter ``name`` on a log whose
-    :func:`model_form_scale` is ``scale`` (before the misfit): :data:`MODEL_FORM`'s level, and its slope per unit
-    of scale beyond 1."""
-    level, slope = MODEL_FORM[name]
+    :func:`model_form_scale` is ``scale`` (before the misfit): ``table``'s level (:data:`MODEL_FORM`; another table
+    to score other floors, bench/interval_coverage.py), and its slope per unit of scale beyond 1."""
+    level, slope = table[name]
     return level + slope * (scale - 1.0)
 
 
