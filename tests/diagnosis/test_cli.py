@@ -55,7 +55,7 @@ def test_cli_summary_and_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture
     assert "decision: EXPLAINED  top: torque_lag" in out and "held-out shrink" in out
     # the residual in rpm beside its ratio to the noise floor, before (the file's vehicle) and after the effect (fitted
     # jointly with the base parameters the identification found: none moves here)
-    assert "held-out residual: 10.31 rpm RMS (30.91x the noise floor), 1.09 rpm after torque_lag (0.95x)" in out
+    assert "held-out residual: 10.31 rpm RMS (30.91x the noise floor), 1.08 rpm after torque_lag (0.94x)" in out
     assert main(["diagnose", str(log), "--vehicle", "paper", "--candidates", "gremlins", "--quiet"]) == 2
     assert "gremlins" in capsys.readouterr().err
     assert main(["diagnose", str(log), "--vehicle", "paper", "--model-form-tolerance", "2", "--quiet"]) == 2

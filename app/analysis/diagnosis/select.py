@@ -516,7 +516,7 @@ def _diagnose(
         for top in tops:
             say(step[0] / n_steps, f"refitting {top} jointly with the base parameters")
             joint = joint_with_base(nominal, refit_with, cal, split, top, evals[top].fit, bounds, opts.model,
-                                    from_file.get(top))
+                                    from_file.get(top), single_on_file=rebased is None)
             fit_order.append(f"{top} + base parameters (jointly, from the file's vehicle): {[e.index for e in cal]}")
             if joint is not None and joint.chi2 < evals[top].fit.chi2:  # kept on calibration events, like every fit
                 again = held_out(top, (top,), joint, on=nominal)
@@ -552,7 +552,8 @@ def _diagnose(
             return result(decision, baseline=base_eval, candidates=evals, singles=singles, pairs=pairs, phases=phases,
                           draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=ident,
                           identified_score=ident_score, nominal_gap=nominal_gap, identification_note=ident_note)
-    if rebased is not None and rebased.named and ident_score is not None and decision.status == "none_of_candidates":
+    if rebased is not None and rebased.named and ident_score is not None and decision.status == "none_of_candidates" \
+            and "offset_at_bound_s" not in decision.details:
         decision = base_only(decision, rebased, ident_score, nominal_gap)
         evals[BASE_ID] = evaluate(nominal, rebased.fit, ho, opts.model, phases, period)
     elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
