@@ -87,8 +87,9 @@ SEED_BASE = {"dev": 10_000, "final": 50_000, "holdout": 90_000, "check": 130_000
              "ifinal6": 510_000, "ifinal7": 530_000, "ifinal8": 550_000}
 # ifinal5 and ichain3: fresh sets for the contact law the log chooses (app/identify/form.py), scored once;
 # ifinal6: the fresh set for the intervals as calibrated after them (app/identify/fit.py), scored once; ifinal7: the
-# next, for the diagnosis' time-offset rule (app/analysis/diagnosis/decide.py:timing_unresolved), scored once; ifinal8:
-# the next, for the joint refits from both sides of the effect-base ridge (app/analysis/diagnosis/rebase.py), scored once
+# next, for the diagnosis' time-offset rule (app/analysis/diagnosis/decide.py:timing_unresolved), scored once;
+# ifinal8: the next, for the joint refits from both sides of the effect-base ridge (app/analysis/diagnosis/rebase.py),
+# scored once
 IDENTIFY_SETS = ("idev", "ifinal", "idev2", "ifinal2", "ifinal3", "ichain", "ichain2", "ifinal4", "ifinal5",
                  "ichain3", "ifinal6", "ifinal7", "ifinal8")
 # the chain car of each identification set: idev and ifinal kept the preset's ~16 Hz mode (above what a 20-33 Hz
