@@ -16,6 +16,7 @@ from app.analysis.diagnosis.decide import (
     lags_apart,
     score_candidate,
     timing_unresolved,
+    withdrawn_for_timing,
 )
 from app.analysis.diagnosis.score import Interval
 from app.analysis.diagnosis.structure import Remainder, remainder_test
@@ -319,6 +320,7 @@ def test_an_effect_fitted_with_the_time_offset_on_its_bound_is_not_attributed() 
     assert out.details == {"would_attribute": ["housing_mount"], "offset_at_bound_s": 0.02}
     assert "on its bound (+20.0 ms)" in out.reason and "nothing is attributed" in out.reason
     assert out.best is d.best and out.gap_ratio is d.gap_ratio
+    assert withdrawn_for_timing(out) and not withdrawn_for_timing(d)  # select keeps it from base_only
     # the offset inside its bound, an effect parameter on its own bound, or no attribution to withdraw: unchanged
     assert timing_unresolved(d, (), 0.012) is d
     assert timing_unresolved(d, ("housing_mount.damping_log2",), 0.012) is d

@@ -354,6 +354,11 @@ def timing_unresolved(decision: Decision, fit_at_bound: Sequence[str], offset_s:
         details={"would_attribute": list(decision.top), "offset_at_bound_s": offset_s})
 
 
+def withdrawn_for_timing(decision: Decision) -> bool:
+    """Whether ``decision`` is an attribution :func:`timing_unresolved` withdrew (its details carry the offset)."""
+    return "offset_at_bound_s" in decision.details
+
+
 def _figures(c: CandidateScore) -> str:
     """The two held-out figures of a candidate, each under its one name (see :mod:`.score`)."""
     return (f"explained share {100 * c.explained.value:.0f} % [{100 * c.explained.lo:.0f}, "

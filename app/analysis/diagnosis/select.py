@@ -46,6 +46,7 @@ from app.analysis.diagnosis.decide import (
     structured,
     timing_unresolved,
     with_tones,
+    withdrawn_for_timing,
 )
 from app.analysis.diagnosis.forward import (
     DiagEvent,
@@ -553,7 +554,7 @@ def _diagnose(
                           draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=ident,
                           identified_score=ident_score, nominal_gap=nominal_gap, identification_note=ident_note)
     if rebased is not None and rebased.named and ident_score is not None and decision.status == "none_of_candidates" \
-            and "offset_at_bound_s" not in decision.details:
+            and not withdrawn_for_timing(decision):
         decision = base_only(decision, rebased, ident_score, nominal_gap)
         evals[BASE_ID] = evaluate(nominal, rebased.fit, ho, opts.model, phases, period)
     elif ident is not None:  # the base parameters as identified with the chosen effect, where refitted with them
