@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal as sps
 
 from sim.model import GRAVITY, ChainModel
 from sim.params import Vehicle
@@ -75,6 +74,8 @@ def seat_rail_acceleration(vehicle: Vehicle, chain: ChainModel, dt: float, accel
     wp = 2.0 * np.pi * bp.frequency_hz
     den = [bp.inertia, 2.0 * bp.damping_ratio * wp * bp.inertia, wp**2 * bp.inertia]
     num = [bp.seat_rail_height - bp.cg_height, 0.0, -GRAVITY]
+    from scipy import signal as sps  # here, not at the top: scipy.signal costs about a second of import
+
     b, a = sps.bilinear(num, den, fs=1.0 / dt)
     extra, _ = sps.lfilter(b, a, moment, zi=sps.lfilter_zi(b, a) * moment[0])
     return np.asarray(accel_ms2 + extra, dtype=np.float64)
