@@ -294,6 +294,11 @@ def test_rank_one_updates_take_fewer_passes_and_leave_a_full_jacobian_at_the_sol
     assert False in seen and True in seen  # updates between finite-difference Jacobians
     assert upd.nfev < every.nfev
     assert upd.values["drag"]["coulomb_nm"] == pytest.approx(4.0, rel=0.5)
-    prob = _problem(cal, bounds)  # the reported Jacobian is the finite-difference one at the solution
+    # the reported Jacobian is the finite-difference one at the solution, not the last rank-one update (off by
+    # percents): the solution is re-encoded from its reported values, and that round trip through the physical units
+    # may move a unit-box coordinate by an ulp, which the finite difference turns into a few 1e-7 of its column
+    prob = _problem(cal, bounds)
     u = prob.encode(upd.nuisance, upd.values)
-    assert upd.jac is not None and np.array_equal(upd.jac, prob.jacobian(u, prob.residuals(u)))
+    fresh = prob.jacobian(u, prob.residuals(u))
+    assert upd.jac is not None
+    assert np.all(np.abs(upd.jac - fresh).max(axis=0) <= 1e-5 * np.abs(fresh).max(axis=0))
