@@ -21,7 +21,8 @@ FORBIDDEN = {
     # package prefix -> modules it must never import
     "sim": ("app", "fastapi", "can", "cantools", "uvicorn", "starlette", "pandas"),
     "app/signals": ("app.ingest", "app.analysis", "app.pipeline", "app.api", "app.storage", "app.cli"),
-    "app/ingest": ("app.analysis", "app.pipeline", "app.api", "app.cli"),
+    # and not the simulator: a process that only reads a log would load numba (bench/ingest.py's whole-process ratio)
+    "app/ingest": ("app.analysis", "app.pipeline", "app.api", "app.cli", "sim"),
     "app/analysis": ("app.pipeline", "app.api", "app.cli", "fastapi", "app.identify.logs"),
     "app/identify/base.py": ("app.pipeline", "app.api", "app.cli", "fastapi", "app.analysis.diagnosis.select"),
     "app/identify/fit.py": ("app.pipeline", "app.api", "app.cli", "fastapi", "app.analysis.diagnosis.select"),

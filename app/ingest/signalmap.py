@@ -42,7 +42,11 @@ from cantools.database.can import Signal as CanSignal
 
 from app.errors import SignalMapError
 from app.signals.signal import Interp
-from sim.units import RPM_PER_RAD_S
+
+# 1 rad/s in rpm: sim.units.RPM_PER_RAD_S, the same expression (tests/ingest/test_signalmap.py holds them equal), not
+# imported from there: importing sim loads the simulator and numba, about half a second of start-up for every
+# process that only reads a log (tests/test_import_rules.py keeps app.ingest off sim)
+RPM_PER_RAD_S = 30.0 / math.pi
 
 #: Canonical channels: name -> (canonical unit, interpolation, required by the analyses).
 CANONICAL: dict[str, tuple[str, Interp, bool]] = {

@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from app.errors import SignalMapError
+from app.ingest import signalmap
 from app.ingest.database import load_database
 from app.ingest.signalmap import REQUIRED, load_signal_map, parse_signal_map, unit_factor
 from app.ingest.suggest import suggest_candidates, suggest_signal_map
 from app.signals.signal import Interp
+from sim import units
 from tests.conftest import shared_file
 
 DBC_DIR = Path(__file__).resolve().parents[2] / "dbc"
@@ -129,3 +133,13 @@ def test_suggestions_on_production_dbc() -> None:
     assert routes["motor_speed_rpm"] == ("DI_torque1", "DI_motorRPM")
     assert routes["pedal_pct"] == ("DI_torque1", "DI_pedalPos")
     assert routes["motor_torque_nm"][0] in ("DI_torque1", "DI_torque2")
+
+
+def test_the_ingest_conversion_of_rad_s_is_the_simulators() -> None:
+    """app.ingest keeps its own copy of 1 rad/s in rpm so that reading a log never loads the simulator; it must be
+    the simulator's to the bit."""
+    assert signalmap.RPM_PER_RAD_S == units.RPM_PER_RAD_S
+    code = "import sys, app.ingest.pipeline_signals; print('sim' in sys.modules, 'numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "False"]
