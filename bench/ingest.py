@@ -39,7 +39,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 # the project first: run as a script, bench/ is sys.path[0], and its sim.py would stand in for the simulator package
-# that app.ingest.signalmap imports (sim.units)
+# wherever a child imports it
 sys.path.insert(0, str(REPO))
 DBC = REPO / "dbc" / "lashscope_ev.dbc"
 FOREIGN_DBC = REPO / "bench" / "data" / "foreign_ev.dbc"  # written by the project for this benchmark
