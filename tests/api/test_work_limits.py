@@ -71,13 +71,16 @@ def test_gap_sensitivity_past_its_work_limit_is_refused_before_simulating(client
 
 
 @pytest.mark.parametrize("fmt", ["candump", "asc", "trc", "mf4"])
-def test_compression_bombs_get_413_naming_the_cap(client: TestClient, fmt: str) -> None:
+def test_compression_bombs_get_413_naming_the_cap(tmp_path: Path, fmt: str) -> None:
+    # the inflation cap, not the reading's CPU limit (test_validating_an_upload_stops_at_its_cpu_limit): on a slow or
+    # loaded machine the candump bomb's 0.46 M lines took over the default 8 s to read before the cap was reached
     bomb = gzip_bomb(fmt, 40 * 2**20)
-    r = client.post("/logs", params={"filename": f"drive.{fmt}.gz"}, content=bomb,
-                    headers={"content-type": "application/octet-stream"})
-    assert r.status_code == 413 and r.json()["code"] == "inflated_too_large", r.text
-    assert "32 MiB cap for compressed logs (32x its compressed size)" in r.json()["detail"]
-    assert client.get("/logs").json() == []
+    with in_process(tmp_path / "data", validate_cpu_s=300.0) as client:
+        r = client.post("/logs", params={"filename": f"drive.{fmt}.gz"}, content=bomb,
+                        headers={"content-type": "application/octet-stream"})
+        assert r.status_code == 413 and r.json()["code"] == "inflated_too_large", r.text
+        assert "32 MiB cap for compressed logs (32x its compressed size)" in r.json()["detail"]
+        assert client.get("/logs").json() == []
 
 
 def test_validating_an_upload_stops_at_its_cpu_limit(tmp_path: Path) -> None:
