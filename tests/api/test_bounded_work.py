@@ -4,8 +4,6 @@ from a stored log. Past a limit the answer is typed and names it; the server's t
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -87,14 +85,3 @@ def test_an_id_longer_than_a_file_name_is_not_found(tmp_path: Path, path: str) -
             assert r.status_code in (404, 405), (method, r.status_code, r.text)
         assert c.get(path).json()["code"] in ("batch_not_found", "identification_not_found")
 
-
-def test_the_proposal_child_does_not_import_scipy_signal() -> None:
-    """A bounded child imports its target afresh, and that import is CPU the client's request costs:
-    ``scipy.signal`` alone is about a second (scipy 1.17), paid six times by six proposals at once. Nothing a
-    signal-map proposal runs filters a signal, so the simulator imports it where the seat filter needs it."""
-    code = ("import sys, app.signal_proposal; "
-            "print(sorted(m for m in ('scipy.signal', 'scipy.stats') if m in sys.modules))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                         cwd=Path(__file__).resolve().parents[2])
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == "[]"

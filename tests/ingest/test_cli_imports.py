@@ -1,4 +1,5 @@
-"""Building the command line stays cheap: decode/replay/live/sim/report import their heavy libraries lazily."""
+"""Start-up stays cheap: decode/replay/live/sim/report import their heavy libraries lazily, reading a log does not
+load the simulator, and a bounded child proposing a signal map does not load ``scipy.signal``."""
 
 from __future__ import annotations
 
@@ -67,3 +68,23 @@ def test_reading_asc_and_mf4_loads_neither_numba_nor_asammdf() -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == ""
+
+
+def test_reading_a_log_loads_neither_the_simulator_nor_numba() -> None:
+    """app.ingest keeps its own copy of 1 rad/s in rpm (tests/ingest/test_signalmap.py holds it to the simulator's) so
+    that a process that only reads a log never loads the simulator and numba."""
+    code = "import sys, app.ingest.pipeline_signals; print('sim' in sys.modules, 'numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "False"]
+
+
+def test_the_proposal_child_does_not_import_scipy_signal() -> None:
+    """A bounded child (app.bounded) imports its target afresh, and that import is CPU the client's request costs:
+    ``scipy.signal`` alone is about a second (scipy 1.17), paid six times by six proposals at once. Nothing a
+    signal-map proposal runs filters a signal, so the simulator imports it where the seat filter needs it."""
+    code = ("import sys, app.signal_proposal; "
+            "print(sorted(m for m in ('scipy.signal', 'scipy.stats') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
