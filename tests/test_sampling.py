@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from app.ingest.frames import FrameChunk
-from app.ingest.stats import DecodeReport, GapHistogram, StatsAccumulator
+from app.ingest.stats import DecodeReport, GapHistogram, StatsAccumulator, gap_bins
 from app.signals.sampling import burst_reason, spacing
 
 
@@ -62,6 +62,31 @@ def test_histogram_quantiles() -> None:
     h3 = GapHistogram()
     h3.add(np.zeros(3))
     assert h3.quantile(0.5) == 0.0 and GapHistogram().quantile(0.5) is None
+    h4 = GapHistogram()  # a stamp going backwards: zero and negative gaps share the lowest bin
+    h4.add(np.array([10e6, -5.0, 10e6, 0.0, 10e6]))
+    assert h4.quantile(0.0) == -2.5 and h4.quantile(1.0) == 10e6
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_histogram_matches_its_bins_exactly(seed: int) -> None:
+    """A quantile is the mean of the gaps in the bin of the exact order statistic, pauses and resets included."""
+    rng = np.random.default_rng(seed)
+    parts = []
+    for _ in range(rng.integers(1, 6)):  # chunks of a periodic message with jitter, lost frames and pauses
+        n = int(rng.integers(1, 3000))
+        dt = np.round(rng.normal(10e6, 0.2e6, n) * rng.choice([1, 2, 3], n, p=[0.9, 0.08, 0.02]))
+        dt[rng.random(n) < 0.002] = rng.uniform(1e9, 6e10)  # pauses far above the band
+        dt[rng.random(n) < 0.001] = rng.choice([0.0, -3e6])
+        parts.append(dt)
+    h = GapHistogram()
+    for dt in parts:
+        h.add(dt)
+    every = np.concatenate(parts)
+    bins = gap_bins(every)
+    for q in (0.0, 0.5, 0.95, 0.999, 1.0):
+        ranked = np.sort(every)[round(q * (every.size - 1))]
+        assert h.quantile(q) == pytest.approx(every[bins == gap_bins(np.array([ranked]))[0]].mean(), rel=1e-12)
+    assert np.all(np.diff(gap_bins(np.sort(every[every > 0]))) >= 0)  # the bins grow with the gap
 
 
 def test_per_id_report_across_chunks() -> None:

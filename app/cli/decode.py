@@ -86,9 +86,7 @@ def decode_log(log: Path, loaded: LoadedDatabase, *, strict: bool = False, table
     try:
         with open_log(log, strict=strict, chunk_frames=chunk_frames) as reader:
             for chunk in reader.chunks():
-                stats.add_chunk(chunk)
-                decoded = decoder.decode(chunk)
-                stats.add_decoded(decoded)
+                decoded = stats.add(chunk, decoder)
                 if tables is not None:
                     tables.add(decoded)
             report = DecodeReport(source=str(log), format=reader.meta.format, database=loaded.name,

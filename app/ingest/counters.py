@@ -265,7 +265,7 @@ def _step_candidate_normal(rows: I64, width: int, hint: int) -> I64:
     r = rows.shape[0]
     a, b = rows[:, :-1], rows[:, 1:]
     ri = np.arange(r, dtype=np.int64)[:, None]
-    d = np.mod(b - a, width)
+    d = (b - a) & (width - 1)  # modulo the power of two, without an integer division
     hist = np.bincount((ri * width + d).ravel(), minlength=r * width).reshape(r, width)
     hist[:, 0] = 0  # zero steps do not vote
     moved = hist.any(axis=1)
@@ -281,35 +281,41 @@ def _step_candidate_normal(rows: I64, width: int, hint: int) -> I64:
     mode = np.bincount((ri * width + rows).ravel(), minlength=r * width).reshape(r, width).argmax(axis=1)
     start = np.mod(mode, modulus)
     m, s, st, gg = modulus[:, None], step[:, None], start[:, None], np.maximum(g, 1)[:, None]
-    on_orbit = (a < m) & (np.mod(a - st, gg) == 0)
-    normal = (on_orbit & (b == np.mod(a + s, m))).sum(axis=1)
+    on_orbit = a < m
+    if (g > 1).any():  # an orbit of every g-th value (a gcd of 1 takes every value)
+        on_orbit &= np.mod(a - st, gg) == 0
+    succ = a + s  # s in [0, m): below 2m wherever a is on the orbit; the modulo as one subtraction
+    succ -= m * (succ >= m)
+    normal = (on_orbit & (b == succ)).sum(axis=1)
     return np.where(moved & (step != 0), normal, -1)
 
 
-def _sequence_may_win(rows: I64, normal: npt.NDArray[np.bool_], width: int) -> npt.NDArray[np.bool_]:
-    """Per row: False when no :func:`_sequence_pattern` candidate can explain more steps than the pattern.
+def _successors_may_win(rows: I64, normal: npt.NDArray[np.bool_],
+                        width: int) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """Per row: whether any pattern, and whether a :func:`_sequence_pattern` candidate, may explain more steps.
 
-    A sequence links each value to one successor seen at least twice; it explains more steps
-    than the pattern only if some value's other successor (a deviating, moving step) is seen
-    at least twice and more often than the pattern's successor of that value.
+    Every pattern explains the steps ``a -> b`` with ``b`` its successor of ``a`` (:meth:`Steps.of`),
+    so another pattern gains over the current one only at values ``a`` whose deviating step
+    ``a -> w`` is seen more often than ``a -> successor``: where no value has one, no candidate
+    can win (first array). A sequence links each value to one successor seen at least twice, so
+    it may win only if such a deviating, moving step is seen at least twice (second array).
     """
     r = rows.shape[0]
     a, b = rows[:, :-1], rows[:, 1:]
-    ri = np.broadcast_to(np.arange(r, dtype=np.int64)[:, None], a.shape)
-    dev = ~normal & (a != b)
-    codes = (ri[dev] * width + a[dev]) * width + b[dev]
-    if codes.size < 2:
-        return np.zeros(r, bool)
-    pairs, counts = np.unique(codes, return_counts=True)
-    twice = counts >= 2
-    if not twice.any():
-        return np.zeros(r, bool)
-    pairs, counts = pairs[twice], counts[twice]
+    ri, ci = np.nonzero(~normal)
+    none = np.zeros(r, bool)
+    if not ri.size:
+        return none, none.copy()
+    av, bv = a[ri, ci], b[ri, ci]
+    pairs, first, counts = np.unique((ri * width + av) * width + bv, return_index=True, return_counts=True)
     src = pairs // width  # row * width + value
-    own = np.bincount((ri * width + a)[normal], minlength=r * width)  # the pattern's successor, per value
-    out = np.zeros(r, bool)
-    out[(src // width)[counts > own[src]]] = True
-    return out
+    own = np.bincount((np.arange(r, dtype=np.int64)[:, None] * width + a)[normal], minlength=r * width)
+    more = counts > own[src]  # the pattern's successor of that value, per row
+    rows_of = src // width
+    any_win, seq_win = none, none.copy()
+    any_win[rows_of[more]] = True
+    seq_win[rows_of[more & (counts >= 2) & (av[first] != bv[first])]] = True
+    return any_win, seq_win
 
 
 class CounterTrack:
@@ -420,7 +426,9 @@ class CounterTrack:
             a, b, nb = rows[:, :-1], rows[:, 1:], normal[bad]
             p = pattern.pos[rows]
             size = pattern.cycle.size
-            k = np.where((p[:, 1:] >= 0) & (p[:, :-1] >= 0), np.mod(p[:, 1:] - p[:, :-1], size), -1)
+            k = p[:, 1:] - p[:, :-1]  # positions along the cycle, modulo its size: one addition, no division
+            k += size * (k < 0)
+            k[(p[:, 1:] < 0) | (p[:, :-1] < 0)] = -1
             repeat = (a == b) & ~nb
             gap = ~nb & ~repeat
             n_gaps[bad], n_repeats[bad] = gap.sum(axis=1), repeat.sum(axis=1)
@@ -429,11 +437,15 @@ class CounterTrack:
             if size > 1:  # a constant pattern that deviates: window by window
                 maybe = np.flatnonzero((n_normal[bad] / WINDOW >= MIN_FIT) & ~gap[:, -1] & ~_runs_at_least(gap, RUN))
                 if maybe.size:
-                    beaten = _step_candidate_normal(rows[maybe], self.width, self.hint) > n_normal[bad[maybe]]
-                    beaten |= _sequence_may_win(rows[maybe], nb[maybe], self.width)
+                    any_win, beaten = _successors_may_win(rows[maybe], nb[maybe], self.width)
+                    step = np.flatnonzero(any_win & ~beaten)  # the step candidate is built only where it may win
+                    if step.size:
+                        beaten[step] = (_step_candidate_normal(rows[maybe[step]], self.width, self.hint)
+                                        > n_normal[bad[maybe[step]]])
                     ok[bad[maybe[~beaten]]] = True
-        normal_c, gaps_c, missed_c, repeats_c = (np.r_[0, np.cumsum(x)]
-                                                 for x in (n_normal, n_gaps, n_missed, n_repeats))
+        totals = np.zeros((4, m + 1), np.int64)  # one leading zero per row
+        np.cumsum(np.stack((n_normal, n_gaps, n_missed, n_repeats)), axis=1, out=totals[:, 1:])
+        normal_c, gaps_c, missed_c, repeats_c = totals
         return _Plan(pattern, self._bv, self._off, ok, normal_c, gaps_c, missed_c, repeats_c, first_gap)
 
     def finish(self) -> CounterGaps:

@@ -45,18 +45,13 @@ from cantools.database.can import Signal as CanSignal
 from cantools.database.conversion import BaseConversion, IdentityConversion, LinearIntegerConversion
 
 from app.ingest.bitfields import SignalLayout, extract_raw
-from app.ingest.frames import FrameChunk, FrameFlag, distinct, group_rows
+from app.ingest.frames import EXTENDED_KEY, SMALL_CHUNK, FrameChunk, FrameGroups, distinct, frame_groups
 from app.ingest.j1939 import j1939_messages, pgn
 
 F64 = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
-EXTENDED_KEY = 0x8000_0000  # key bit for extended IDs, as cantools uses internally
 _IDENTITY, _PYTHON, _INTEGER, _FLOAT = range(4)  # scaling arithmetic, see _scale
-_SMALL = 64  # batches up to this many frames take the per-call-cheap paths
-# frame flags byte -> key bits: extended ID -> bit 31 (EXTENDED_KEY), error/remote -> bit 30 (never a message)
-_FLAGS = np.arange(256)  # every flags byte (numpy: 256 enum operations would cost a millisecond of start-up)
-_KEY_BITS = (np.where(_FLAGS & FrameFlag.EXTENDED, EXTENDED_KEY, 0)
-             | np.where(_FLAGS & (FrameFlag.ERROR | FrameFlag.REMOTE), 1 << 30, 0)).astype(np.uint32)
+_SMALL = SMALL_CHUNK  # batches up to this many frames take the per-call-cheap paths
 
 NA_LABELS: tuple[str, ...] = (
     "sna", "signal not available", "not available", "n/a", "na", "unavailable",
@@ -296,8 +291,10 @@ class VectorDecoder:
         return _SignalPlan(s.name, layout, conv, na, exact, None if match is None or match.empty else match, arithmetic)
 
     # -- decoding -------------------------------------------------------------------------
-    def decode(self, chunk: FrameChunk) -> dict[str, DecodedMessage]:
+    def decode(self, chunk: FrameChunk, groups: FrameGroups | None = None) -> dict[str, DecodedMessage]:
         """Decode every frame of ``chunk`` that belongs to a database message.
+
+        ``groups``: the chunk's :func:`~app.ingest.frames.frame_groups` when the caller has them.
 
         Returns
         -------
@@ -309,16 +306,7 @@ class VectorDecoder:
         if len(chunk) == 0 or not self._plans:
             return {}
         # key = ID | extended << 31, with bit 30 set for error/remote frames so they match no message
-        key = chunk.arb_id | _KEY_BITS[chunk.flags]
-        groups: list[tuple[int, npt.NDArray[np.intp]]]
-        if key.size <= _SMALL:  # a live batch: grouping in Python costs less than the array calls
-            rows: dict[int, list[int]] = {}
-            for i, k in enumerate(key.tolist()):
-                rows.setdefault(k, []).append(i)
-            groups = [(k, np.array(r, np.intp)) for k, r in rows.items()]
-        else:
-            groups = group_rows(key)
-        groups = self._match(groups)
+        groups = self._match(frame_groups(chunk) if groups is None else groups)
         out: dict[str, DecodedMessage] = {}
         with np.errstate(all="ignore"):  # inf/NaN float signals scale like Python floats, silently
             for k, idx in groups:
@@ -337,7 +325,7 @@ class VectorDecoder:
             got = self._resolved[key] = self._by_pgn.get(pgn(key & 0x1FFF_FFFF))
         return got
 
-    def _match(self, groups: list[tuple[int, npt.NDArray[np.intp]]]) -> list[tuple[int, npt.NDArray[np.intp]]]:
+    def _match(self, groups: FrameGroups) -> FrameGroups:
         """Frame groups by ID -> row groups by message (J1939: several IDs share one message, rows in order)."""
         if not self._by_pgn:
             return [(k, idx) for k, idx in groups if k in self._plans]

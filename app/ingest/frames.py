@@ -42,6 +42,14 @@ class FrameFlag(enum.IntFlag):
     TX = 64
 
 
+EXTENDED_KEY = 0x8000_0000  # frame key bit for extended IDs, as cantools uses internally
+NO_MESSAGE_KEY = 1 << 30  # frame key bit of error and remote frames (they carry no message)
+SMALL_CHUNK = 64  # chunks up to this many frames take the per-call-cheap paths (a live batch)
+_FLAGS = np.arange(256)  # every flags byte (numpy: 256 enum operations would cost a millisecond of start-up)
+_KEY_BITS = (np.where(_FLAGS & FrameFlag.EXTENDED, EXTENDED_KEY, 0)
+             | np.where(_FLAGS & (FrameFlag.ERROR | FrameFlag.REMOTE), NO_MESSAGE_KEY, 0)).astype(np.uint32)
+
+
 @dataclass(frozen=True, slots=True)
 class FrameChunk:
     t_ns: npt.NDArray[np.int64]
@@ -169,6 +177,24 @@ def distinct(values: npt.NDArray[np.generic]) -> list[Any]:
         return [lo.item()]
     ordered = np.sort(values)
     return ordered[np.concatenate(([True], ordered[1:] != ordered[:-1]))].tolist()
+
+
+FrameGroups = list[tuple[int, npt.NDArray[np.intp]]]
+
+
+def frame_groups(chunk: FrameChunk) -> FrameGroups:
+    """Rows of each frame key of ``chunk``: ID | extended << 31 | (error or remote) << 30, rows in order.
+
+    Computed once per chunk and handed to the decoder and the bus statistics, which both work
+    per ID.
+    """
+    key = chunk.arb_id | _KEY_BITS[chunk.flags]
+    if key.size > SMALL_CHUNK:
+        return group_rows(key)
+    rows: dict[int, list[int]] = {}  # a live batch: grouping in Python costs less than the array calls
+    for i, k in enumerate(key.tolist()):
+        rows.setdefault(k, []).append(i)
+    return [(k, np.array(r, np.intp)) for k, r in rows.items()]
 
 
 def group_rows(key: npt.NDArray[np.integer]) -> list[tuple[int, npt.NDArray[np.intp]]]:

@@ -117,9 +117,7 @@ def load_signals(
     try:
         chunk: FrameChunk
         for chunk in reader.chunks():
-            stats.add_chunk(chunk)
-            decoded = decoder.decode(chunk)
-            stats.add_decoded(decoded)
+            decoded = stats.add(chunk, decoder)
             for channel, samples in map_decoded(decoded, resolved).items():
                 parts[channel].append(samples)
             frac = _fraction(reader)

@@ -31,8 +31,8 @@ from cantools.database.can import Signal as CanSignal
 
 from app.ingest.counters import CounterGaps, CounterTrack, dbc_modulus
 from app.ingest.database import Repair
-from app.ingest.decode import EXTENDED_KEY, DecodedMessage
-from app.ingest.frames import FrameChunk, FrameFlag, ReadIssue, distinct, group_rows
+from app.ingest.decode import EXTENDED_KEY, DecodedMessage, VectorDecoder
+from app.ingest.frames import FrameChunk, FrameFlag, FrameGroups, ReadIssue, distinct, frame_groups, group_rows
 from app.ingest.j1939 import database_is_j1939, j1939_messages, pgn
 from app.signals.sampling import Spacing, burst_reason
 
@@ -105,11 +105,22 @@ def counter_modulus(sig: CanSignal) -> int | None:
 
 
 _EXTENDED_BIT = np.where(np.arange(256) & FrameFlag.EXTENDED, EXTENDED_KEY, 0).astype(np.uint32)  # by flags byte
-BINS_PER_DECADE = 5000  # bin width 0.046 %: 1000 and 1001 ms fall into different bins
+MANTISSA_BITS = 12  # bin width 2**-12 of the gap (0.012-0.024 %): 1000 and 1001 ms fall into different bins
+_BIN_SHIFT = 52 - MANTISSA_BITS
+
+
+def gap_bins(dt_ns: np.ndarray) -> np.ndarray:
+    """The histogram bin of each gap: its float's exponent and leading mantissa bits (0: gaps of zero or less).
+
+    A positive float64's bit pattern read as an integer grows with its value, so dropping the low
+    mantissa bits bins the gaps on a log-like scale with no logarithm: one shift and one clamp.
+    """
+    bins = np.ascontiguousarray(dt_ns, np.float64).view(np.int64) >> _BIN_SHIFT
+    return np.maximum(bins, 0, out=bins)  # negative floats read as negative integers
 
 
 class GapHistogram:
-    """Gaps (ns) in log-spaced bins, each with its count and sum; percentiles without keeping the gaps.
+    """Gaps (ns) in log-like bins (:func:`gap_bins`), each with its count and sum; percentiles without keeping the gaps.
 
     Each :meth:`add` keeps its chunk's bins as arrays; they are merged (counts and sums added
     per bin, in the order added) when a quantile is asked or many chunks wait, so a jittery
@@ -121,32 +132,38 @@ class GapHistogram:
     _MERGE_AFTER = 64  # pending chunks before a merge (bounds memory on long logs)
 
     def __init__(self) -> None:
-        self._keys: np.ndarray = np.empty(0, np.int64)  # bin (-1: zero gaps), ascending
+        self._keys: np.ndarray = np.empty(0, np.int64)  # bin (0: zero or negative gaps), ascending
         self._counts: np.ndarray = np.empty(0, np.float64)
         self._sums: np.ndarray = np.empty(0, np.float64)
         self._parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
-    def add(self, dt_ns: np.ndarray) -> None:
+    def add(self, dt_ns: np.ndarray, lo_hi: tuple[float, float] | None = None) -> None:
+        """Count the gaps ``dt_ns``; ``lo_hi``: their smallest and largest one when the caller has them."""
         if not dt_ns.size:
             return
-        b = np.maximum(dt_ns, 1.0)  # in place from here: the same arithmetic as floor(log10(..) * BINS_PER_DECADE)
-        np.log10(b, out=b)
-        b *= BINS_PER_DECADE
-        np.floor(b, out=b)
-        if float(dt_ns.min()) <= 0:
-            b[dt_ns <= 0] = -1
-        b = b.astype(np.int64)
-        lo = int(b.min())
-        span = int(b.max()) - lo + 1
-        if span <= 4 * b.size + 4096:  # a periodic message's gaps fill a narrow band: count without sorting
-            counts = np.bincount(b - lo, minlength=span)
-            sums = np.bincount(b - lo, weights=dt_ns, minlength=span)
-            keys = np.flatnonzero(counts)
-            counts, sums, keys = counts[keys], sums[keys], keys + lo
-        else:
-            keys, inverse = np.unique(b, return_inverse=True)
-            counts = np.bincount(inverse)
-            sums = np.bincount(inverse, weights=dt_ns)
+        b = gap_bins(dt_ns)
+        lo_dt, hi_dt = (float(dt_ns.min()), float(dt_ns.max())) if lo_hi is None else lo_hi
+        lo, hi = (int(x) for x in gap_bins(np.array([lo_dt, hi_dt])))  # the bins are monotonic in the gap
+        band = 4 * b.size + 4096  # bins counted densely from the smallest gap up (periodic gaps fill a narrow band)
+        if lo:
+            b -= lo
+        if hi - lo < band:
+            near, gaps = b, dt_ns
+            far = None
+        else:  # a pause or a reset far above the band: those few gaps are sorted, not a sparse band counted
+            out = b >= band
+            far = np.unique(b[out], return_inverse=True)
+            far_sums = np.bincount(far[1], weights=dt_ns[out])
+            near, gaps = b[~out], dt_ns[~out]
+        counts = np.bincount(near, minlength=hi - lo + 1 if far is None else 0)  # as long as the band's top gap
+        sums = np.bincount(near, weights=gaps, minlength=counts.size)
+        keys = np.flatnonzero(counts != 0)  # a bool array: twice as fast on a sparse band
+        counts, sums = counts[keys], sums[keys]
+        if far is not None:
+            keys = np.concatenate((keys, far[0]))
+            counts = np.concatenate((counts, np.bincount(far[1])))
+            sums = np.concatenate((sums, far_sums))
+        keys += lo
         self._parts.append((keys, counts.astype(np.float64), sums))
         if len(self._parts) >= self._MERGE_AFTER:
             self._merge()
@@ -171,6 +188,19 @@ class GapHistogram:
         rank = round(q * (n - 1))
         i = int(np.searchsorted(np.cumsum(self._counts), rank, side="right"))
         return float(self._sums[i] / self._counts[i])
+
+
+def _gaps(seg: npt.NDArray[np.int64], last: int | None) -> npt.NDArray[np.float64]:
+    """The gaps (ns, as floats) between the stamps of ``seg``, the first one from ``last`` when given.
+
+    One subtraction into the float array: no prepended copy and no second pass to convert.
+    """
+    first = 0 if last is None else 1
+    dt = np.empty(seg.size - 1 + first, np.float64)
+    if first:
+        dt[0] = seg[0] - last
+    np.subtract(seg[1:], seg[:-1], out=dt[first:], casting="unsafe")
+    return dt
 
 
 class _Run:
@@ -221,7 +251,19 @@ class StatsAccumulator:
         """Frames seen so far."""
         return self._frames
 
-    def add_chunk(self, chunk: FrameChunk) -> None:
+    def add(self, chunk: FrameChunk, decoder: VectorDecoder) -> dict[str, DecodedMessage]:
+        """Count ``chunk``, decode it with ``decoder`` and count what it decoded; returns the decoded messages.
+
+        The frames are grouped by ID once, for the decoder and the statistics.
+        """
+        groups = frame_groups(chunk) if len(chunk) else None
+        self.add_chunk(chunk, groups)
+        decoded = decoder.decode(chunk, groups)
+        self.add_decoded(decoded)
+        return decoded
+
+    def add_chunk(self, chunk: FrameChunk, groups: FrameGroups | None = None) -> None:
+        """Count a chunk of frames; ``groups``: its :func:`~app.ingest.frames.frame_groups` when the caller has them."""
         n = len(chunk)
         if n == 0:
             return
@@ -239,28 +281,35 @@ class StatsAccumulator:
             self._remote += int(np.count_nonzero(chunk.flags & np.uint8(FrameFlag.REMOTE)))
         c_lo, c_hi = int(chunk.channel.min()), int(chunk.channel.max())
         self._timestamps(chunk, start, c_lo, c_hi)
-        key: npt.NDArray[np.integer] = chunk.arb_id  # ID | extended << 31
-        if seen & FrameFlag.EXTENDED:
-            key = key | _EXTENDED_BIT[chunk.flags]
-        if c_lo != c_hi:  # several buses: the bus goes into the key
-            key = (chunk.channel.astype(np.int64) + 1) << 33 | key.astype(np.int64)
-        if error is not None and errors:
-            usable = error == 0
-            key, t = key[usable], t[usable]
-        for k, rows in group_rows(key):
+        if groups is None or c_lo != c_hi or seen & (FrameFlag.ERROR | FrameFlag.REMOTE):
+            groups = self._groups(chunk, seen, c_lo != c_hi, None if not errors or error is None else error == 0)
+        for k, rows in groups:
             run = self._runs.setdefault(((k >> 33) - 1, k & ((1 << 33) - 1)) if c_lo != c_hi else (c_lo, k), _Run())
             seg = t[rows]
-            dt = np.diff(seg) if run.last is None else np.diff(seg, prepend=run.last)
-            dt = dt.astype(np.float64)
+            dt = _gaps(seg, run.last)
             run.count += int(rows.size)
             run.last = int(seg[-1])
             if dt.size:
                 run.n += dt.size
                 run.s1 += float(dt.sum())
                 run.s2 += float(np.square(dt).sum())  # not np.dot: BLAS threads cost ms per call on a busy machine
-                run.min = min(run.min, float(dt.min()))
-                run.max = max(run.max, float(dt.max()))
-                run.hist.add(dt)
+                dt_lo, dt_hi = float(dt.min()), float(dt.max())
+                run.min = min(run.min, dt_lo)
+                run.max = max(run.max, dt_hi)
+                run.hist.add(dt, (dt_lo, dt_hi))
+
+    @staticmethod
+    def _groups(chunk: FrameChunk, seen: int, buses: bool, usable: npt.NDArray[np.bool_] | None) -> FrameGroups:
+        """Rows per ID (remote frames with their ID's data frames), per bus when ``buses``, of the ``usable`` rows."""
+        key: npt.NDArray[np.integer] = chunk.arb_id  # ID | extended << 31
+        if seen & FrameFlag.EXTENDED:
+            key = key | _EXTENDED_BIT[chunk.flags]
+        if buses:  # several buses: the bus goes into the key
+            key = (chunk.channel.astype(np.int64) + 1) << 33 | key.astype(np.int64)
+        if usable is None:
+            return group_rows(key)
+        rows = np.flatnonzero(usable)
+        return [(k, rows[r]) for k, r in group_rows(key[rows])]
 
     def _timestamps(self, chunk: FrameChunk, start: int, lo: int, hi: int) -> None:
         """Backward and jumping time stamps, per bus (``lo``, ``hi``: the chunk's smallest and largest bus)."""
