@@ -574,6 +574,15 @@ class FieldChange(BaseModel):
     ratio: float | None = Field(description="b / a for numbers (null when a is 0)")
 
 
+class FigureChange(BaseModel):
+    key: str = Field(description="stiffness, freq, damping, mass, lash, torque_gain")
+    label: str
+    unit: str
+    a: float | None = Field(description="null where the chain has no oscillating mode")
+    b: float | None
+    ratio: float | None = Field(description="b / a")
+
+
 class VehicleCompareOut(BaseModel):
     name: str
     a: int
@@ -581,6 +590,9 @@ class VehicleCompareOut(BaseModel):
     changed: int
     fields: list[FieldChange]
     files_changed: list[str]
+    figures: list[FigureChange] = Field(description="what the base parameters are reported as, both versions")
+    provenance: dict[str, dict[str, Any] | None] = Field(
+        description="'a'/'b': the version's [provenance] table when it was identified, else null")
 
 
 class BatchCreate(BaseModel):

@@ -21,7 +21,7 @@ from app.errors import AppError
 
 # Subcommand modules, in the order they appear in --help.
 COMMANDS: tuple[str, ...] = ("decode", "sim", "serve", "keys", "analyze", "identify", "diagnose", "batch", "fleet",
-                             "demo", "replay", "live", "init", "ratings")
+                             "demo", "replay", "live", "init", "ratings", "vehicles")
 
 
 def build_parser() -> argparse.ArgumentParser:

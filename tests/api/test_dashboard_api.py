@@ -112,6 +112,10 @@ def test_two_vehicle_versions_compared_field_by_field(served: tuple[httpx.Client
     assert mass["ratio"] == pytest.approx(b["body.mass"] / a["body.mass"])
     assert doc["changed"] == sum(1 for k in fields if a.get(k) != b.get(k)) > 0
     assert doc["files_changed"] == []  # both versions use the project's DBC and signal map
+    figures = {f["key"]: f for f in doc["figures"]}  # what the fields mean for the car, both versions
+    assert figures["mass"]["ratio"] == pytest.approx(b["body.mass"] / a["body.mass"])
+    assert figures["freq"]["unit"] == "Hz" and figures["freq"]["a"] > 0 and figures["freq"]["b"] > 0
+    assert doc["provenance"] == {"a": None, "b": None}
     same = c.get("/vehicles/cmp/compare", params={"a": 2, "b": 2}).json()
     assert same["changed"] == 0 and not any(f["changed"] for f in same["fields"])
     missing = c.get("/vehicles/cmp/compare", params={"a": 1, "b": 9})
@@ -119,7 +123,7 @@ def test_two_vehicle_versions_compared_field_by_field(served: tuple[httpx.Client
 
 
 def _flat(toml_text: str) -> dict[str, Any]:
-    from app.api.routes.dashboard import flatten
+    from app.vehicle_compare import flatten
 
     return flatten(tomllib.loads(toml_text))
 

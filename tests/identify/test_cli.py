@@ -30,6 +30,11 @@ def test_identify_writes_the_identified_vehicle_with_its_provenance(tmp_path: Pa
     prov = tomllib.loads(out.read_text(encoding="utf-8"))["provenance"]
     assert prov["logs"][0]["name"] == "a.blf" and len(prov["logs"][0]["sha256"]) == 64
     assert prov["fitted"]["lash"]["ratio"] == pytest.approx(1.3, rel=0.05)
+    assert main(["vehicles", "compare", "paper", str(out), "--json"]) == 0  # what moved, and where it came from
+    cmp = json.loads(capsys.readouterr().out)
+    figures = {f["key"]: f["ratio"] for f in cmp["figures"]}
+    assert figures["lash"] == pytest.approx(prov["fitted"]["lash"]["ratio"], rel=1e-4)
+    assert cmp["provenance"]["a"] is None and cmp["provenance"]["b"]["logs"][0]["name"] == "a.blf"
     assert main(["identify", str(a), "--vehicle", "paper", "--out", str(tmp_path / "j.toml"), "--json",
                  "--quiet", "--params", "lash,mass"]) == 0
     doc = json.loads(capsys.readouterr().out)

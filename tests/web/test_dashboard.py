@@ -268,6 +268,11 @@ def test_vehicles_page_compares_two_versions_field_by_field(page: Any, server: S
     assert len(changed) == diff["changed"]
     first = next(f for f in diff["fields"] if f["changed"])
     assert first["field"] in (changed[0].text_content() or "")
+    figures = page.query_selector_all("#compare-figures tbody tr")  # the engineering figures above the fields
+    assert [f["key"] for f in diff["figures"]] == ["stiffness", "freq", "damping", "mass", "lash", "torque_gain"]
+    assert len(figures) == 6 and "vehicle mass (kg)" in (figures[3].text_content() or "")
+    mass = diff["figures"][3]
+    assert f"{mass['ratio']:.3f}x" in (figures[3].text_content() or "")
     screenshot(page, "vehicles-compare")
 
 

@@ -50,7 +50,18 @@ export async function render(main) {
 
   function diffTable(doc) {
     const changed = doc.fields.filter((f) => f.changed);
-    return h("div", {}, h("p", {}, `${changed.length} of ${doc.fields.length} driveline fields differ between v${doc.a} and v${doc.b}` +
+    const figures = h("table", { id: "compare-figures" },
+      h("thead", {}, h("tr", {}, ["figure", `v${doc.a}`, `v${doc.b}`, "ratio"].map((c) => h("th", {}, c)))),
+      h("tbody", {}, doc.figures.map((f) => h("tr", { class: f.ratio != null && Math.abs(f.ratio - 1) > 1e-9 ? "changed" : null },
+        h("td", {}, f.unit === "-" ? f.label : `${f.label} (${f.unit})`), h("td", { class: "num" }, show(f.a)),
+        h("td", { class: "num" }, show(f.b)), h("td", { class: "num" }, f.ratio == null ? "" : `${fmt(f.ratio, 3)}x`)))));
+    const identified = ["a", "b"].filter((side) => doc.provenance[side]).map((side) => {
+      const p = doc.provenance[side];
+      const fitted = Object.entries(p.fitted || {}).map(([k, v]) => `${k} ${fmt(v.ratio, 2)}x [${show(v.lo)}, ${show(v.hi)}] ${v.unit}`);
+      return h("p", { class: "provenance" }, `v${doc[side]} identified from ${p.identified_from} on ${p.date}, ` +
+        `${p.events} events of ${(p.logs || []).map((l) => l.name).join(", ")}: ${fitted.join("; ") || "nothing off the file"}`);
+    });
+    return h("div", {}, figures, ...identified, h("p", {}, `${changed.length} of ${doc.fields.length} driveline fields differ between v${doc.a} and v${doc.b}` +
       (doc.files_changed.length ? `; files changed: ${doc.files_changed.join(", ")}` : "; DBC and signal map identical")),
     h("label", {}, h("input", { type: "checkbox", onchange: (e) => {
       for (const tr of e.target.closest("div").querySelectorAll("tbody tr:not(.changed)")) tr.hidden = !e.target.checked;
