@@ -45,8 +45,9 @@ def run(args: argparse.Namespace) -> int:
     from app.cli.report import drivability_table, events_table, metrics_table, summary_line, tracking_lines
     from app.demo.build import build_demo_log
     from app.demo.plot import overlay_png
+    from app.ingest.inspect import inspect_log
     from app.jobs import JobRunner
-    from app.pipeline import check_vehicle_files, inspect_log
+    from app.pipeline import check_vehicle_files
     from app.settings import Settings
     from app.storage.records import JobStatus
     from app.storage.results import ResultFiles

@@ -21,10 +21,11 @@ from typing import Any
 
 from app.analysis.metrics import MetricParams
 from app.errors import ConflictError, InputError, NotFoundError
+from app.ingest.inspect import inspect_log
 from app.live.analyzer import LiveAnalyzer
 from app.live.bus import BusConfig, supported_interfaces
 from app.live.session import ChannelSource, LiveSession, SessionOptions
-from app.pipeline import free_rotor_inertia, inspect_log
+from app.pipeline import free_rotor_inertia
 from app.storage.base import Store
 from sim import load_vehicle
 

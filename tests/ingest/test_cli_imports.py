@@ -88,3 +88,15 @@ def test_the_proposal_child_does_not_import_scipy_signal() -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+def test_the_upload_check_child_reads_the_log_and_nothing_else() -> None:
+    """``POST /logs`` with a text layout checks the upload in a bounded child (``app.ingest.inspect:inspect_log``),
+    which imports its target afresh: the analysis (scipy.signal), the simulator and numba were about two seconds of
+    that child's CPU when the check lived in app.pipeline, for a function that only reads the log."""
+    code = ("import sys, app.ingest.inspect; "
+            "print(sorted(m for m in ('app.analysis', 'app.pipeline', 'sim', 'numba', 'scipy.signal') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from app.errors import InflatedTooLargeError
+from app.ingest.inspect import inspect_log
 from app.ingest.readers import _source, open_log
-from app.pipeline import inspect_log
 from tests.api.attacks import BOMB_LINES, gzip_bomb
 
 INFLATED = 48 * 2**20  # past the 32 MiB floor a small file may always inflate to

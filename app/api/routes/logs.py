@@ -16,9 +16,9 @@ from app.api.timezones import TZ_DOC, time_zone, zoned_start
 from app.api.upload import UploadedFile, receive_upload, user_file_names
 from app.bounded import run_bounded
 from app.errors import FormatFileError, InputError
+from app.ingest.inspect import inspect_log
 from app.ingest.readers.described import MAX_DESCRIPTION_BYTES, parse_layout
 from app.log_formats import LOG_FORMATS, formats_sentence, sidecar_of
-from app.pipeline import inspect_log
 
 router = APIRouter(prefix="/logs", tags=["logs"], responses=ERRORS)
 
@@ -95,7 +95,8 @@ async def upload_log(request: Request, response: Response, store: StoreDep, sett
                 info = await run_in_threadpool(inspect_log, f.path, cpu_s=settings.validate_cpu_s)
             else:  # the client's regular expression may backtrack for hours on one line: read in a child process
                 info = await run_in_threadpool(
-                    run_bounded, "app.pipeline:inspect_log", f.path, root=store.root, what=f"reading {f.filename}",
+                    run_bounded, "app.ingest.inspect:inspect_log", f.path, root=store.root,
+                    what=f"reading {f.filename}",
                     setting="LASHSCOPE_VALIDATE_CPU_S", cpu_s=settings.validate_cpu_s,
                     memory_mb=settings.bounded_memory_mb, code="validation_limit",
                     kwargs={"cpu_s": settings.validate_cpu_s})
