@@ -110,3 +110,40 @@ def test_id_type_mismatch_reported(db: cantools.database.can.Database) -> None:
     acc = StatsAccumulator(db)
     acc.add_chunk(make_chunk([0, 1], [256, 256], [0, 0], flags=np.array([FrameFlag.EXTENDED] * 2, np.uint8)))
     assert acc.fill(DecodeReport()).id_type_mismatch == {"Fast": 2}
+
+
+@pytest.mark.parametrize("size", [40, 700])  # a live batch (grouped in Python) and an array-grouped chunk
+def test_one_grouping_for_decoder_and_statistics_changes_no_figure(db: cantools.database.can.Database,
+                                                                    size: int) -> None:
+    """``StatsAccumulator.add`` groups a chunk's frames once for the decoder and the statistics; the report equals
+    the one of the separate calls, with error, remote and extended frames, unknown IDs and a second bus."""
+    rng = np.random.default_rng(size)
+    n = 3000
+    t = np.cumsum(rng.integers(200_000, 2_000_000, n))
+    ids = rng.choice([256, 512, 0x7FF, 256], n)
+    flags = rng.choice(np.array([0, FrameFlag.ERROR, FrameFlag.REMOTE, FrameFlag.EXTENDED], np.uint8), n,
+                       p=[0.94, 0.02, 0.02, 0.02])
+    channel = np.where(np.arange(n) > 2000, rng.integers(0, 2, n), 0)  # one bus, then two
+    data = rng.integers(0, 256, (n, 8)).astype(np.uint8)
+    data[:, 6] = np.arange(n) % 15  # Fast_Alive counting 0..14
+    data[:, 0] = np.arange(n) % 256  # Slow's rolling counter
+    shared, separate = StatsAccumulator(db), StatsAccumulator(db)
+    dec_a, dec_b = VectorDecoder(db), VectorDecoder(db)
+    for lo in range(0, n, size):
+        chunk = make_chunk(t[lo:lo + size], ids[lo:lo + size], channel[lo:lo + size], data[lo:lo + size],
+                           flags[lo:lo + size])
+        got = shared.add(chunk, dec_a)
+        separate.add_chunk(chunk)
+        want = dec_b.decode(chunk)
+        separate.add_decoded(want)
+        assert got.keys() == want.keys()
+        for name, dm in want.items():
+            np.testing.assert_array_equal(got[name].t_ns, dm.t_ns)
+            for sig, values in dm.signals.items():
+                np.testing.assert_array_equal(got[name].signals[sig], values)
+    a, b = shared.fill(DecodeReport()), separate.fill(DecodeReport())
+    assert a.ids == b.ids and a.counter_gaps == b.counter_gaps and a.timestamp_anomalies == b.timestamp_anomalies
+    assert (a.frames_read, a.frames_decoded, a.error_frames, a.remote_frames, a.frames_unknown_id) == \
+        (b.frames_read, b.frames_decoded, b.error_frames, b.remote_frames, b.frames_unknown_id)
+    assert a.error_frames > 0 and a.remote_frames > 0 and a.frames_unknown_id > 0 and a.id_type_mismatch
+    assert {s.channel for s in a.ids} == {0, 1}
