@@ -69,6 +69,10 @@ PASSES_PER_PARAM = 10  # simulator passes of the joint refinement per parameter 
 IDENT_SPAN = 0.5  # a parameter whose interval covers more than this share of its prior range is not identified
 MIN_MODE_WINDOWS = 4  # windows the model-free mode must rest on to set stiffness and damping
 MAX_MODE_SPAN = 0.05  # ... its frequency's 90 % half-width, relative, at most
+# where the fit on those pins leaves more than this many times the noise floor, the grey box fits stiffness and damping
+# too, and is kept where it alone comes within this many times the noise floor: the pins were off (a heavily damped
+# mode read through the lash: 4 % of stiffness the lash took up), not the model short of an effect
+PIN_RECHECK = 1.5
 MAX_MODE_NYQUIST = 0.3  # ... and its frequency at most this many times the speed channel's sampling rate
 MAX_FILE_MODE_NYQUIST = 0.45  # the file's own first mode beyond this share of the sampling rate: not resolved
 N_NUISANCE = 2  # unit-box columns before the effects': torque gain and road load (the offset is profiled)
@@ -390,8 +394,10 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
     log.append(f"baseline: chi2/n {base.chi2 / base.n:.3g}, nuisance {base.nuisance.to_dict()}")
     _require_response(vehicle, evs, base, opts.model)
 
-    def path(pins: dict[str, tuple[float, float]], names: list[str], log: list[str]) -> _Path:
-        """The joint fit with stiffness and damping ``pins`` from the model-free mode (none: fitted)."""
+    def path(pins: dict[str, tuple[float, float]], names: list[str], log: list[str],
+             start: Values | None = None) -> _Path:
+        """The joint fit with stiffness and damping ``pins`` from the model-free mode (none: fitted), from ``start``
+        (default: the file's values, and the model-free mode's where there are no pins)."""
         fitted_on = with_base(vehicle, {k: r for k, (r, _) in pins.items()})
         if pins:
             log.append("stiffness and damping from the model-free first mode: " + ", ".join(
@@ -416,8 +422,10 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
             why["lash"] = short
             if not names and not pins:
                 raise NotIdentifiableError(f"lash: {short}, and nothing else of the vehicle is left to identify")
-        starts = _starts(names, fitted_on, None if pins else
-                         ({"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None))
+        starts = _starts(names, fitted_on, None if pins else (
+            {"freq_hz": modal.freq_hz, "zeta": modal.zeta} if modal else None))
+        if start is not None:  # the given values of the parameters fitted here, the file's for the others
+            starts = [{k: start.get(k, v) for k, v in starts[-1].items()}]
         say(0.15, f"joint fit of {', '.join(names) or 'the nuisance'} with the nuisance")
         joint = _joint(fitted_on, evs, split, names, bounds, opts, base, starts)
         log.append(f"joint {names}: chi2/n {joint.chi2 / joint.n:.3g} after {joint.nfev} passes ({joint.message})")
@@ -430,19 +438,32 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
     own = base
     if pins and vehicle.contact_damping != base_law:
         own = fit(vehicle, evs, split, (), bounds=bounds, model=opts.model, start=base, seed=opts.seed)
-    if pins and taken.joint.chi2 > own.chi2:
-        # the measured mode's stiffness and damping fit worse than the file's own values: a heavily damped mode read
-        # through the lash is biased, so the grey box fits them instead (kept where it does better)
-        left = taken.joint.chi2 / taken.joint.n
-        log_free = [*tried, f"stiffness and damping from the model-free first mode leave chi2/n {left:.3g}, more than "
-                    f"the file's values ({own.chi2 / own.n:.3g}): fitted by the grey box instead"]
+    left = taken.joint.chi2 / taken.joint.n
+    worse = pins and taken.joint.chi2 > own.chi2
+    if worse or (pins and left > PIN_RECHECK):
+        # the measured mode's stiffness and damping fit worse than the file's own values, or leave more than the noise
+        # floor: a heavily damped mode read through the lash is biased, so the grey box fits them instead -- kept
+        # where it does better than the file's values, or where it alone reaches the noise floor (an effect the
+        # model lacks must not be taken up by stiffness and damping the mode does not support)
+        reason = (f"more than the file's values ({own.chi2 / own.n:.3g})" if worse else
+                  f"more than {PIN_RECHECK:g}x the noise floor")
+        log_free = [*tried, f"stiffness and damping from the model-free first mode leave chi2/n {left:.3g}, {reason}: "
+                    "fitted by the grey box instead"]
+        # past the file's values the grey box starts where the pins left off (one start: the pinned solution)
+        at = None if worse else {
+            **{BASE_EFFECTS[n].id: {"log2_scale": float(np.log2(r))} for n, (r, _) in pins.items()},
+            **{BASE_EFFECTS[n].id: taken.joint.values[BASE_EFFECTS[n].id] for n in taken.names}}
         try:
-            free = path({}, names, log_free)
+            free = path({}, names, log_free, at)
         except NotIdentifiableError:
             free = None
-        if free is not None and free.joint.chi2 < taken.joint.chi2:
+        if free is not None and free.joint.chi2 < taken.joint.chi2 and (
+                worse or free.joint.chi2 / free.joint.n <= PIN_RECHECK):
             taken = free
             log[:] = log_free
+        elif not worse:
+            log.append(f"the grey box fitting stiffness and damping too leaves chi2/n "
+                       f"{'-' if free is None else f'{free.joint.chi2 / free.joint.n:.3g}'}: the mode's values kept")
     joint, names, pins, fitted_on, unresolved, why = taken
     notes: dict[str, str] = {}
     by_rigid = rigid_pin(fitted_on, names, joint, rigid) if rigid is not None else None

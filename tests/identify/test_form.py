@@ -10,6 +10,8 @@ import pytest
 from app.analysis.diagnosis import DiagnosisOptions, diagnose_signals
 from app.cli import main
 from app.identify import FitOptions, identify_events
+from app.identify.base import with_base
+from app.identify.fit import PIN_RECHECK
 from app.identify.form import FORM_MIN_GAP, FORM_SHARE, FORM_SKIP, alternative, law_change, residual
 from app.ingest.database import load_database
 from app.ingest.signalmap import load_signal_map
@@ -66,6 +68,26 @@ def test_a_car_whose_dampers_act_in_full_gets_the_full_law(chosen_full) -> None:
         assert ident.ratios[name] == pytest.approx(1.0, abs=0.02)
     # model form, not a data sheet that is off: nothing is named on a file whose values are the truth's
     assert ident.named == []
+
+
+def test_a_mode_read_through_the_lash_gives_way_to_the_grey_box_when_the_file_is_further_off() -> None:
+    """The file's damping 2.2x too low: the mode's stiffness (4 % low) and damping fit far better than the file's
+    values, but leave several times the noise floor, with the lash taking up the stiffness; the grey box fitting
+    stiffness and damping too reaches the noise floor, and every parameter comes back at the truth."""
+    truth = with_base(CHAIN.with_changes({"contact_damping": "full"}), {"damping": 2.2, "lash": 1.3})
+    rng = np.random.default_rng(42)
+    drive = make_drive(truth, rng, DriveSpec(duration_s=60.0))
+    signals = to_signals(measure(drive, run_truth(truth, drive), CanSampling(period_s=0.005), rng))
+    events, noise = prepared(signals)
+    ident = identify_events(events, noise, CHAIN, FitOptions(seed=42))
+    assert any(f"more than {PIN_RECHECK:g}x the noise floor: fitted by the grey box instead" in line
+               for line in ident.fit_log)
+    assert ident.chi2_after / ident.n_samples <= PIN_RECHECK
+    assert ident.ratios["lash"] == pytest.approx(1.3, rel=0.03)  # 1.11x (0.854 of the truth) on the mode's values
+    assert ident.ratios["damping"] == pytest.approx(2.2, rel=0.03)
+    for name in ("stiffness", "mass"):
+        assert ident.ratios[name] == pytest.approx(1.0, abs=0.02)
+    assert {"damping", "lash"} <= set(ident.named)
 
 
 def test_a_car_that_follows_the_files_law_keeps_it() -> None:
