@@ -51,7 +51,6 @@ from app.ingest.j1939 import j1939_messages, pgn
 F64 = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 _IDENTITY, _PYTHON, _INTEGER, _FLOAT = range(4)  # scaling arithmetic, see _scale
-_SMALL = SMALL_CHUNK  # batches up to this many frames take the per-call-cheap paths
 
 NA_LABELS: tuple[str, ...] = (
     "sna", "signal not available", "not available", "n/a", "na", "unavailable",
@@ -372,7 +371,7 @@ class VectorDecoder:
         msg = plan.message
         errors: dict[str, int] = {}
         dlc = chunk.dlc[idx]
-        if min(dlc.tolist()) < msg.length if idx.size <= _SMALL else int(dlc.min()) < msg.length:
+        if min(dlc.tolist()) < msg.length if idx.size <= SMALL_CHUNK else int(dlc.min()) < msg.length:
             ok = dlc >= msg.length
             errors["short_frame"] = int(idx.size - np.count_nonzero(ok))
             idx, payload = idx[ok], payload[ok]
