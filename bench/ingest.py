@@ -20,7 +20,7 @@ VmHWM; time in-process after the imports, and the whole process with interpreter
 The baseline is python-can ``BLFReader``/``ASCReader`` -> ``db.decode_message(id, data,
 decode_choices=False)`` per frame -> per-signal lists -> float64 arrays. Usage::
 
-    .venv/bin/python bench/ingest.py [--seconds 200] [--workdir DIR] [--formats blf,asc] [--mf4-copies 100]
+    .venv/bin/python bench/ingest.py [--seconds 200] [--workdir DIR] [--formats blf,asc,trc] [--mf4-copies 100]
 """
 
 from __future__ import annotations
@@ -196,7 +196,7 @@ def write_logs(workdir: Path, seconds: float, formats: list[str], kind: str = "o
         paths[fmt] = path
         if path.exists():
             continue
-        writer_cls = can.BLFWriter if fmt == "blf" else can.ASCWriter
+        writer_cls = {"blf": can.BLFWriter, "asc": can.ASCWriter, "trc": can.TRCWriter}[fmt]
         tmp = path.with_suffix(".tmp")
         with writer_cls(str(tmp)) as w:
             for ts, arb, row in zip((t + START_EPOCH_S).tolist(), ids.tolist(), data, strict=True):
@@ -237,7 +237,7 @@ def child_baseline(log: Path, only: set[str] | None = None, dbc: Path = DBC) -> 
     parquet = only == {"parquet"}
     only = None if parquet else only or None
     db = cantools.database.load_file(str(dbc))
-    reader_cls = can.BLFReader if log.suffix == ".blf" else can.ASCReader
+    reader_cls = {".blf": can.BLFReader, ".asc": can.ASCReader, ".trc": can.TRCReader}[log.suffix]
     columns: dict[str, dict[str, list[float]]] = {m.name: {s.name: [] for s in m.signals} for m in db.messages}
     times: dict[str, list[float]] = {m.name: [] for m in db.messages}
     names = {m.frame_id: m.name for m in db.messages if only is None or m.name in only}

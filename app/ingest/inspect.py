@@ -23,18 +23,24 @@ def inspect_log(path: Path, progress: Progress = no_progress, cpu_s: float | Non
 
     Raises the reader's typed errors (UnsupportedFormatError, LogFormatError) when nothing
     usable is there, and :class:`~app.errors.WorkLimitError` (``validation_limit``) once reading
-    has taken more than ``cpu_s`` seconds of this thread's CPU (checked after each chunk).
+    has taken more than ``cpu_s`` seconds of this thread's CPU (checked after each block read from the
+    log, so a log of damaged lines that never fills a chunk is stopped too).
     """
     frames = 0
     t_first: int | None = None
     t_last = 0
     started = time.thread_time()
+
+    def check() -> None:
+        if cpu_s is not None and time.thread_time() - started > cpu_s:
+            raise WorkLimitError(f"{path.name}: reading it took more than {cpu_s:g} s of CPU "
+                                 f"(LASHSCOPE_VALIDATE_CPU_S) and {frames} frames were read by then; "
+                                 "split the log or raise the limit", code="validation_limit")
+
     with open_log(path) as reader:
+        reader.limit_work(check)
         for chunk in reader.chunks():
-            if cpu_s is not None and time.thread_time() - started > cpu_s:
-                raise WorkLimitError(f"{path.name}: reading it took more than {cpu_s:g} s of CPU "
-                                     f"(LASHSCOPE_VALIDATE_CPU_S) and {frames} frames were read by then; "
-                                     "split the log or raise the limit", code="validation_limit")
+            check()
             if len(chunk):
                 frames += len(chunk)
                 t_first = int(chunk.t_ns[0]) if t_first is None else min(t_first, int(chunk.t_ns[0]))

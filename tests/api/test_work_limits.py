@@ -99,6 +99,22 @@ def test_validating_an_upload_stops_at_its_cpu_limit(tmp_path: Path) -> None:
         assert r.status_code == 201 and r.json()["frames"] == 400_000, r.text
 
 
+def test_a_log_of_damaged_lines_stops_at_the_cpu_limit_too(tmp_path: Path) -> None:
+    # no line gives a frame, so no chunk is ever complete: the limit is checked as the log is read, not per chunk
+    log = b";$FILEVERSION=1.1\n" + b"     1)         0.0  Rx         0123  8  00 11 22 ZZ 44 55 66 77\n" * 200_000
+    with in_process(tmp_path / "data", validate_cpu_s=0.05) as client:
+        r = client.post("/logs", params={"filename": "drive.trc"}, content=log,
+                        headers={"content-type": "application/octet-stream"})
+        assert r.status_code == 422 and r.json()["code"] == "validation_limit", r.text
+        assert "0 frames were read by then" in r.json()["detail"]
+        assert client.get("/logs").json() == []
+    with in_process(tmp_path / "data") as client:  # read to the end: nothing in it is a frame
+        r = client.post("/logs", params={"filename": "drive.trc"}, content=log,
+                        headers={"content-type": "application/octet-stream"})
+        assert r.status_code == 422 and "no frames could be read" in r.json()["detail"], r.text
+        assert "data byte 4 'ZZ'" in r.json()["detail"] and "line 2" in r.json()["detail"]
+
+
 def test_a_blf_of_compressible_containers_stops_at_the_ratio_cap(client: TestClient) -> None:
     bomb = blf_bomb(800_000)  # 38 MB of frame objects in about 140 kB
     r = client.post("/logs", params={"filename": "drive.blf"}, content=bomb,

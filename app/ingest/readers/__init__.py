@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import importlib
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from types import TracebackType
 from typing import BinaryIO, Protocol, runtime_checkable
 
@@ -52,6 +52,9 @@ class LogReader(Protocol):
 
     def position(self) -> int | None:
         """Bytes of the log consumed so far (``position() / size`` is the progress); None when unknown."""
+
+    def limit_work(self, check: Callable[[], None]) -> None:
+        """Call ``check`` after every block read from the source; what it raises ends the reading."""
 
     def close(self) -> None: ...
 

@@ -8,7 +8,7 @@ problem through :meth:`BaseReader.problem`, which either records a
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import TracebackType
 from typing import ClassVar
@@ -151,6 +151,14 @@ class BaseReader:
     def _iter_chunks(self) -> Iterator[FrameChunk]:  # pragma: no cover - abstract
         raise NotImplementedError
         yield
+
+    def limit_work(self, check: Callable[[], None]) -> None:
+        """Call ``check`` after every block read from the source; what it raises ends the reading.
+
+        A limit checked only between chunks never fires on a log whose lines are all damaged:
+        no chunk is ever complete (``app.ingest.inspect.inspect_log``).
+        """
+        self._stream.on_read = check
 
     # -- reporting ------------------------------------------------------------------------------
     @staticmethod

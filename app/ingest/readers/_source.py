@@ -139,6 +139,7 @@ class ByteStream:
         self._closers = closers
         self._pending: StreamDamage | None = None
         self._dead = False
+        self.on_read: Callable[[], None] | None = None  # called after every read; may raise to stop the reading
         # gzip: read1 hands out what one inflate step produced, so the bytes before damage are
         # returned first (a buffered read(n) would discard them together with the error)
         read1 = getattr(raw, "read1", None) if compressed else None
@@ -180,6 +181,8 @@ class ByteStream:
                 break
             self._dead = True
             raise damage
+        if self.on_read is not None:
+            self.on_read()
         return chunks[0] if len(chunks) == 1 else b"".join(chunks)
 
     def position(self) -> int | None:

@@ -30,12 +30,12 @@ from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader, ChunkBuilder
 from app.ingest.readers._text import BadLine, LineSource, decimal_to_ns, dlc2len, hex_bytes, parse_int, printable
 from app.ingest.readers.asc_scan import scan_block
+from app.ingest.readers.text_scan import Frame, merge_rows
 from app.log_formats import LogFormat
 
 _TS = re.compile(r"^\d+\.\d+$")
@@ -47,7 +47,6 @@ _I64_MAX = 2**63 - 1
 EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFlag.FD, FrameFlag.ERROR,
                                                     FrameFlag.REMOTE, FrameFlag.BRS, FrameFlag.ESI, FrameFlag.TX))
 
-Frame = tuple[int, int, int, int, int, bytes]  # t_ns, channel, arb_id, flags, dlc, payload
 
 # Text blocks of at least this many bytes go through the vectorised scanner (``asc_scan``);
 # smaller ones are parsed line by line (the same result; tests switch between the two).
@@ -311,7 +310,7 @@ class ASCReader(BaseReader):
             stamp = dict(zip((e[0] for e in events), absolute[n_fast:].tolist(), strict=True))
             frames = [(j, (stamp[j], *fr[1:])) for j, fr in frames]
         if frames:
-            cols, data = _merge(fast_line, cols, data, frames)
+            cols, data = merge_rows(fast_line, cols, data, frames)
         return used, (*cols, data)
 
     def _slow(self, raw: bytes, line_no: int) -> tuple[int, Frame | None] | None:
@@ -328,17 +327,3 @@ class ASCReader(BaseReader):
     def _long_line(self, line_no: int) -> None:
         self.problem("bad_line", "line skipped: longer than 64 kB (binary data?)", line=line_no)
 
-
-def _merge(fast_line: npt.NDArray[np.int64], cols: list[Any], data: npt.NDArray[np.uint8],
-           frames: list[tuple[int, Frame]]) -> tuple[list[Any], npt.NDArray[np.uint8]]:
-    """Scanner rows and parser frames as one set of columns in line order."""
-    line = np.concatenate([fast_line, np.array([j for j, _ in frames], np.int64)])
-    order = np.argsort(line, kind="stable")
-    extra = list(zip(*(fr for _, fr in frames), strict=True))
-    merged = [np.concatenate([c, np.array(e, np.int64)])[order] for c, e in zip(cols, extra[:5], strict=True)]
-    width = max([data.shape[1], *(len(p) for p in extra[5])])
-    wide = np.zeros((len(line), width), np.uint8)
-    wide[:len(data), :data.shape[1]] = data
-    for k, payload in enumerate(extra[5]):
-        wide[len(data) + k, :len(payload)] = np.frombuffer(payload, np.uint8)
-    return merged, wide[order]

@@ -21,11 +21,16 @@ from __future__ import annotations
 import re
 from collections.abc import Iterator
 from datetime import datetime, timedelta
+from typing import Any
+
+import numpy as np
 
 from app.errors import LogFormatError
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader, ChunkBuilder
 from app.ingest.readers._text import BadLine, LineSource, decimal_to_ns, dlc2len, hex_bytes, parse_int, printable
+from app.ingest.readers.text_scan import Frame, merge_rows
+from app.ingest.readers.trc_scan import Layout, scan_block
 from app.log_formats import LogFormat
 
 EXT, FD, ERR, RTR, BRS, ESI, TX = (int(f) for f in (FrameFlag.EXTENDED, FrameFlag.FD, FrameFlag.ERROR,
@@ -34,7 +39,8 @@ _COMMENT_START = re.compile(r"Start time:\s*(\d{1,2})\.(\d{1,2})\.(\d{4})\s+(\d{
 _V2_FRAME_TYPES = {"DT": 0, "FD": FD, "FB": FD | BRS, "FE": FD | ESI, "BI": FD | BRS | ESI, "RR": RTR}
 _V2_EVENTS = {"ST", "EC", "EV", "ER"}
 
-Frame = tuple[int, int, int, int, int, bytes]  # t_ns, channel, arb_id, flags, dlc, payload
+# Text blocks of at least this many bytes go through the vectorised scanner (``trc_scan``)
+FAST_PATH_MIN_BYTES = 4096
 
 
 def _bus(tok: str) -> int:
@@ -50,6 +56,23 @@ FORMAT = LogFormat(name="trc", reader="TRCReader", label="PEAK TRC", order=40, s
     r"^\s*\d+\s+\d+\.\d+\s+(DT|FD|FB|FE|BI|RR|ST|ER|EC|EV)\s"))
 
 
+def _version_by_shape(line: str) -> str | None:
+    """The 1.x version a frame line's columns show, for files without ``;$FILEVERSION`` (1.0 by default).
+
+    1.0 has the identifier where 1.1 has the direction, and 1.2/1.3 a bus number before it; 1.3 a
+    reserved ``-`` after the identifier. None where the line does not say.
+    """
+    tok = line.split()
+    kinds = ("Rx", "Tx", "Warng", "Error")
+    if len(tok) < 4 or not tok[0].endswith(")"):
+        return None
+    if tok[2] in kinds:
+        return "1.1"
+    if tok[3] in kinds and tok[2].isdigit():
+        return "1.3" if len(tok) > 5 and tok[5] == "-" else "1.2"
+    return None
+
+
 class TRCReader(BaseReader):
     """PEAK TRC reader (see the module docstring)."""
 
@@ -58,15 +81,17 @@ class TRCReader(BaseReader):
     def _open(self) -> None:
         self.version = "1.0"
         self.columns: dict[str, int] = {}
+        declared, first_line = False, ""
         for line in self._head.decode("latin-1").splitlines()[:200]:
             s = line.strip()
             if not s.startswith(";"):
                 if s:
+                    first_line = s
                     break
                 continue
             key, _, value = s[1:].partition("=")
             if key == "$FILEVERSION":
-                self.version = value.strip()
+                self.version, declared = value.strip(), True
             elif key == "$STARTTIME":
                 try:
                     days = float(value)
@@ -84,6 +109,9 @@ class TRCReader(BaseReader):
                     self.meta.start_clock = "trc_comment_local"
                 except ValueError:
                     pass
+        if not declared and (shaped := _version_by_shape(first_line)) is not None:
+            self.version = shaped
+            self.meta.extra["trc_version_from"] = "line shape (no $FILEVERSION)"
         self.meta.extra["trc_version"] = self.version
         if self.version not in ("1.0", "1.1", "1.2", "1.3", "2.0", "2.1"):
             self.problem("bad_header", f"unknown TRC version {self.version!r}; reading as 1.0")
@@ -171,21 +199,50 @@ class TRCReader(BaseReader):
     def _iter_chunks(self) -> Iterator[FrameChunk]:
         builder = ChunkBuilder(self.chunk_frames)
         lines = LineSource(self._stream, self._long_line, self.damage)
-        for line_no, line in lines.lines():
-            s = line.strip()
-            if not s or s.startswith(";"):
-                continue
-            try:
-                frame = self.parse_line(s)
-            except BadLine as bad:
-                self.problem(bad.kind, f"line skipped: {bad.message}", line=line_no)
-                continue
+        layout = Layout(self.version, self.columns)
+        for block, first in lines.blocks():
+            if len(block) < FAST_PATH_MIN_BYTES:
+                yield from self._line_by_line(block, first, builder)
+            else:
+                yield from builder.extend(*self._scan(block, first, layout))
+        if builder.n:
+            yield builder.take()
+
+    def _line_by_line(self, block: bytes, first: int, builder: ChunkBuilder) -> Iterator[FrameChunk]:
+        """Every line through :meth:`parse_line` (small blocks, and the reference the scanner is tested against)."""
+        parts = block.split(b"\n")
+        if block.endswith(b"\n"):
+            parts.pop()
+        for i, raw in enumerate(parts):
+            frame = self._slow(raw, first + i)
             if frame is not None:
                 builder.add(*frame)
                 if builder.full:
                     yield builder.take()
-        if builder.n:
-            yield builder.take()
+
+    def _scan(self, block: bytes, first: int, layout: Layout) -> tuple[Any, ...]:
+        """Frames of ``block`` in line order: the scanner's, and the parser's for the lines it left."""
+        tk, fast, cols, data = scan_block(block, layout)
+        frames: list[tuple[int, Frame]] = []
+        for j in np.flatnonzero(~fast & ~tk.blank).tolist():
+            frame = self._slow(block[tk.starts[j]:tk.ends[j]], first + j)
+            if frame is not None:
+                frames.append((j, frame))
+        if not frames:
+            return (*cols, data)
+        merged, data = merge_rows(np.flatnonzero(fast), list(cols), data, frames)
+        return (*merged, data)
+
+    def _slow(self, raw: bytes, line_no: int) -> Frame | None:
+        """One line through the parser: its frame, or None (comments, events, damage reported)."""
+        s = raw.rstrip(b"\r").decode("latin-1").strip()
+        if not s or s.startswith(";"):
+            return None
+        try:
+            return self.parse_line(s)
+        except BadLine as bad:
+            self.problem(bad.kind, f"line skipped: {bad.message}", line=line_no)
+            return None
 
     def _long_line(self, line_no: int) -> None:
         self.problem("bad_line", "line skipped: longer than 64 kB (binary data?)", line=line_no)
