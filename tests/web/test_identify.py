@@ -132,9 +132,18 @@ def test_identify_page_finds_the_file_off_and_applies_it(page: Any, server: Serv
     page.wait_for_selector("#identify-applied >> text=stored ev")
     assert len(api(server, "/vehicles/ev/versions")) == versions + 1
     assert f"stored ev v{versions + 1}" in (page.text_content("#identify-applied") or "")
-    assert page.get_attribute("#identify-applied a", "href") == "#/vehicles"
+    start = api(server, f"/identifications/{iid}")["vehicle_version"]
+    href = f"#/vehicles/ev/{start}/{versions + 1}"
+    assert page.get_attribute("#identify-applied a", "href") == href
+    page.click("#identify-applied a")  # the vehicle's page with the two versions compared in engineering figures
+    page.wait_for_selector("#compare-figures")
+    assert page.input_value("#compare-a") == str(start) and page.input_value("#compare-b") == str(versions + 1)
+    figures = api(server, f"/vehicles/ev/compare?a={start}&b={versions + 1}")["figures"]
+    assert len(page.query_selector_all("#compare-figures tbody tr")) == len(figures)
+    page.go_back()
     assert api(server, f"/identifications/{iid}")["applied"] == {"vehicle": "ev", "version": versions + 1}
 
+    page.wait_for_selector(f"#identify-applied a[href='{href}']")  # the page reloaded says it was applied
     page.goto(f"{server.url}/#/identify")  # this browser remembers the identification it started
     page.wait_for_selector(f"#identify-recent a[href='#/identify/{iid}']")
     assert not errors, errors

@@ -249,7 +249,7 @@ function checks(r) {
 function actions(doc) {
   const out = h("div", { id: "identify-applied" },
     doc.applied ? h("span", {}, `applied as ${doc.applied.vehicle} v${doc.applied.version}; `,
-      h("a", { href: "#/vehicles" }, "compare the versions")) : null);
+      compareLink(doc.applied.vehicle, doc.vehicle_version, doc.applied.version)) : null);
   const file = `${doc.vehicle}-identified.toml`;
   const link = h("a", { href: doc.links.vehicle, download: file, id: "identify-download", onclick: async (e) => {
     e.preventDefault(); // through fetch, so that the API key goes with it
@@ -264,7 +264,7 @@ function actions(doc) {
     try {
       const a = await api(`/identifications/${doc.id}/apply`, { method: "POST" });
       out.replaceChildren(h("span", {}, `stored ${a.vehicle} v${a.version} (from ${a.from}); `,
-        h("a", { href: "#/vehicles" }, "compare the versions")));
+        compareLink(a.vehicle, doc.vehicle_version, a.version)));
     } catch (err) {
       out.replaceChildren(errorBox(err));
     } finally {
@@ -273,4 +273,9 @@ function actions(doc) {
   } }, "Apply as new vehicle version");
   return h("section", { class: "card" }, h("h2", {}, "The identified vehicle"),
     h("div", { class: "toolbar" }, link, h("span", {}, " · "), apply, out));
+}
+
+// the vehicle's page with the version identified from and the one stored from it compared (figures and fields)
+function compareLink(vehicle, from, to) {
+  return h("a", { href: `#/vehicles/${encodeURIComponent(vehicle)}/${from}/${to}` }, `compare v${from} with v${to}`);
 }

@@ -4,7 +4,8 @@
 import { api, upload } from "./api.js";
 import { errorBox, fmt, h, utc } from "./util.js";
 
-export async function render(main) {
+// #/vehicles/<name>[/<a>/<b>]: that vehicle's versions, versions a and b compared (the identify page links here)
+export async function render(main, name, first, second) {
   const list = h("div", { id: "vehicles" });
   const detail = h("div", { id: "vehicle-detail" });
   main.append(h("h1", {}, "Vehicles"), await registration(refresh),
@@ -20,12 +21,15 @@ export async function render(main) {
       : h("p", { class: "muted" }, "No vehicles yet."));
   }
 
-  async function versions(vname) {
+  async function versions(vname, pick = []) {
     try {
       const vs = await api(`/vehicles/${encodeURIComponent(vname)}/versions`);
       const a = h("select", { id: "compare-a" }, vs.map((v) => h("option", { value: v.version }, `v${v.version}`)));
       const b = h("select", { id: "compare-b" }, vs.map((v) => h("option", { value: v.version }, `v${v.version}`)));
-      if (vs.length > 1) {
+      const known = (x) => vs.some((v) => String(v.version) === String(x));
+      if (pick.length === 2 && pick.every(known)) {
+        [a.value, b.value] = pick;
+      } else if (vs.length > 1) {
         a.value = vs[vs.length - 2].version;
         b.value = vs[vs.length - 1].version;
       }
@@ -73,6 +77,7 @@ export async function render(main) {
         h("td", { class: "num" }, f.ratio == null ? "" : `${fmt(100 * (f.ratio - 1), 1)} %`))))));
   }
   await refresh();
+  if (name) await versions(name, first && second ? [first, second] : []);
 }
 
 function show(v) {
