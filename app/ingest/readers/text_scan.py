@@ -171,6 +171,14 @@ def tokenise(block: bytes) -> Tokens:
                   ntok=ntok.astype(np.int64), blank=ntok == 0, clean=clean)
 
 
+def block_lines(block: bytes) -> list[bytes]:
+    """The lines of a block of whole lines, without their newlines (the line parsers' path)."""
+    parts = block.split(b"\n")
+    if block.endswith(b"\n"):
+        parts.pop()
+    return parts
+
+
 Frame = tuple[int, int, int, int, int, bytes]  # t_ns, channel, arb_id, flags, dlc, payload
 
 

@@ -29,7 +29,7 @@ from app.errors import LogFormatError
 from app.ingest.frames import FrameChunk, FrameFlag
 from app.ingest.readers._base import BaseReader, ChunkBuilder
 from app.ingest.readers._text import BadLine, LineSource, decimal_to_ns, dlc2len, hex_bytes, parse_int, printable
-from app.ingest.readers.text_scan import Frame, merge_rows
+from app.ingest.readers.text_scan import Frame, block_lines, merge_rows
 from app.ingest.readers.trc_scan import Layout, scan_block
 from app.log_formats import LogFormat
 
@@ -210,10 +210,7 @@ class TRCReader(BaseReader):
 
     def _line_by_line(self, block: bytes, first: int, builder: ChunkBuilder) -> Iterator[FrameChunk]:
         """Every line through :meth:`parse_line` (small blocks, and the reference the scanner is tested against)."""
-        parts = block.split(b"\n")
-        if block.endswith(b"\n"):
-            parts.pop()
-        for i, raw in enumerate(parts):
+        for i, raw in enumerate(block_lines(block)):
             frame = self._slow(raw, first + i)
             if frame is not None:
                 builder.add(*frame)
