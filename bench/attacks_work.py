@@ -45,6 +45,7 @@ from app.tempfiles import owner_tag  # noqa: E402
 from tests.api.attacks import (  # noqa: E402
     backtracking_log,
     blf_bomb,
+    damaged_bomb,
     described_format,
     gzip_bomb,
     many_stage_driveline,
@@ -314,6 +315,10 @@ def attacks(url: str, short: bool = False) -> list[tuple[str, Callable[[httpx.Cl
     for fmt, bomb in bombs.items():
         listing.append((f"gzip bomb {fmt}, {len(bomb) / 2**20:.1f} MiB gzipped",
                         partial(upload, name=f"drive.{fmt}.gz", body=bomb)))
+    # every line damaged: no chunk of frames ever completes, so only a limit checked as the log is read stops it
+    damaged = damaged_bomb(size // 2)
+    listing.append((f"gzip bomb trc, every line damaged, {len(damaged) / 2**20:.1f} MiB gzipped",
+                    partial(upload, name="damaged.trc.gz", body=damaged)))
     frames = 1_000_000 if short else 3_000_000
     blf = blf_bomb(frames)
     listing.append((f"BLF of zlib containers, {len(blf) / 2**20:.1f} MiB ({frames * 48 / 1e6:.0f} MB of frames)",

@@ -36,6 +36,17 @@ def gzip_bomb(fmt: str, inflated: int) -> bytes:
     return out.getvalue()
 
 
+def damaged_bomb(inflated: int) -> bytes:
+    """A gzipped TRC 1.1 of about ``inflated`` bytes whose every line is damaged (a non-hex data byte)."""
+    block = b"     1)         0.0  Rx         0123  8  00 11 22 ZZ 44 55 66 77\n" * 16_000
+    out = io.BytesIO()
+    with gzip.GzipFile(fileobj=out, mode="wb", compresslevel=9) as f:
+        f.write(b";$FILEVERSION=1.1\n")
+        for _ in range(inflated // len(block) + 1):
+            f.write(block)
+    return out.getvalue()
+
+
 def blf_bomb(frames: int) -> bytes:
     """A BLF of ``frames`` identical frames at one timestamp: its zlib containers inflate about 280x."""
     import can
