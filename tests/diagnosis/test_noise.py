@@ -67,3 +67,34 @@ def test_torque_quantisation_variance_matches_a_monte_carlo_of_held_torques() ->
     assert model[late] == pytest.approx(empirical[late], rel=0.25)
     assert model[~late].max() < model[late].min()  # it grows with the time since the anchor
     assert np.all(torque_quantisation_variance(ev, 0.0, inertia) == 0.0)  # unquantised torque: no term
+
+
+def _matrix_reference(ev: DiagEvent, step_nm: float, inertia: float) -> np.ndarray:
+    """The quantisation term by its definition: every run's acting time at every sample, as a matrix."""
+    tt, vv = ev.torque_t, ev.torque_nm
+    edges = np.concatenate([[tt[0] - 0.5 * (tt[1] - tt[0])], 0.5 * (tt[1:] + tt[:-1]),
+                            [tt[-1] + 0.5 * (tt[-1] - tt[-2])]])
+    first = np.flatnonzero(np.concatenate([[True], np.diff(vv) != 0]))
+    last = np.concatenate([first[1:] - 1, [vv.size - 1]])
+    start = np.maximum(edges[first], ev.t_fine[0])
+    acted = np.clip(np.minimum(edges[last + 1][None, :], ev.speed_t[:, None]) - start[None, :], 0.0, None)
+    if ev.pre.any():
+        acted -= acted[ev.pre].mean(axis=0)
+    return np.asarray(step_nm**2 / 12.0 * (30.0 / np.pi / inertia) ** 2 * np.sum(acted**2, axis=1))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_torque_quantisation_variance_equals_its_definition(seed: int) -> None:
+    """The prefix-sum form against the (samples, runs) matrix: held, dithered and ramping torques at 20 Hz to
+    1 kHz, runs that start before the simulation, anchors of none to a few samples."""
+    rng = np.random.default_rng(seed)
+    for _ in range(40):
+        rate = float(rng.choice([20, 50, 100, 1000]))
+        tq_t = np.sort(rng.uniform(-3, 0) + np.cumsum(rng.uniform(0.5, 1.5, int(rng.integers(5, 900))) / rate))
+        q = float(rng.choice([0.1, 0.5, 1.0]))
+        tq_v = np.round(rng.normal(0, 3, tq_t.size).cumsum() * float(rng.choice([0.0, 0.05, 1.0])) / q) * q
+        speed_t = np.arange(0.0, 1.3, 1.0 / float(rng.choice([20, 100, 1000]))) + rng.uniform(0, 0.01)
+        ev = DiagEvent(0, "tip_in", 0.3, 0.0, 1.29, 2000.0, 150.0, tq_t, tq_v, speed_t, np.zeros(speed_t.size),
+                       np.ones(speed_t.size), speed_t < float(rng.choice([0.0, 0.1, 0.22])))
+        want = _matrix_reference(ev, q, 1.5)
+        assert torque_quantisation_variance(ev, q, 1.5) == pytest.approx(want, rel=1e-9, abs=1e-12 * want.max())

@@ -28,6 +28,39 @@ def _torque(step_at: float) -> tuple[np.ndarray, np.ndarray]:
     return t, np.where(t < step_at, -40.0, 80.0)
 
 
+def _scan_back(tq_t: np.ndarray, tq_v: np.ndarray, t_window: float, p: WindowParams) -> float:
+    """The warm start by its definition: sample by sample back from the window, the spread of the torque over
+    the settle time before each."""
+    lo = max(float(tq_t[0]), t_window - p.max_warm_s)
+    near = (tq_t >= lo - p.settle_s) & (tq_t <= t_window)
+    tt, vv = tq_t[near], tq_v[near]
+    first = np.searchsorted(tt, tt - p.settle_s)
+    for j in range(tt.size - 1, -1, -1):
+        if tt[j] < lo or tt[j] - p.settle_s < tq_t[0]:
+            break
+        if float(np.ptp(vv[first[j]:j + 1])) <= p.settle_tol_nm:
+            return t_window if j == tt.size - 1 else float(tt[j])
+    return lo
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_warm_start_equals_the_sample_by_sample_search(seed: int) -> None:
+    """Random torques at 20 Hz to 1 kHz (wandering, quantised, with a NaN sample) and windows anywhere."""
+    rng = np.random.default_rng(seed)
+    p = WindowParams()
+    for _ in range(150):
+        rate = float(rng.choice([20, 50, 100, 1000]))
+        n = int(rng.integers(2, 8000 if rate == 1000 else 1200))
+        t = np.cumsum(rng.uniform(0.3, 1.7, n) / rate) + rng.uniform(0, 5)
+        v = np.cumsum(rng.normal(0, float(rng.choice([0.05, 0.3, 1.0, 3.0])), n))
+        if rng.random() < 0.2:
+            v = np.round(v)
+        if rng.random() < 0.1:
+            v[rng.integers(0, n)] = np.nan
+        t_window = float(rng.uniform(t[0] - 1, t[-1] + 0.5))
+        assert warm_start(t, v, t_window, p) == _scan_back(t, v, t_window, p)
+
+
 def test_warm_start_is_the_window_start_when_the_torque_has_settled() -> None:
     t, q = _torque(5.0)
     assert warm_start(t, q, 10.0, WindowParams()) == 10.0  # 5 s steady before the window

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+import numpy.typing as npt
 
 from app.analysis.diagnosis.forward import MARGIN_S, DiagEvent, FloatArray
 from app.analysis.diagnosis.noise import (
@@ -65,12 +66,36 @@ def warm_start(tq_t: FloatArray, tq_v: FloatArray, t_window: float, p: WindowPar
     near = (tq_t >= lo - p.settle_s) & (tq_t <= t_window)
     tt, vv = tq_t[near], tq_v[near]
     first = np.searchsorted(tt, tt - p.settle_s)  # first sample of the settle time before each sample
-    for j in range(tt.size - 1, -1, -1):
-        if tt[j] < lo or tt[j] - p.settle_s < tq_t[0]:
-            break
-        if float(np.ptp(vv[first[j]:j + 1])) <= p.settle_tol_nm:
+    # the samples that may end a settle time, searched back from the last: from lo on, with a whole settle time of
+    # log before them (the last run of such samples: all of them where the times increase)
+    ok = (tt >= lo) & (tt - p.settle_s >= tq_t[0])
+    bad = np.flatnonzero(~ok)
+    cand = np.arange(bad[-1] + 1 if bad.size else 0, tt.size)
+    if cand.size:
+        steady = np.flatnonzero(_window_ptp(vv, first[cand], cand) <= p.settle_tol_nm)
+        if steady.size:
+            j = int(cand[steady[-1]])
             return t_window if j == tt.size - 1 else float(tt[j])
     return lo
+
+
+def _window_ptp(v: FloatArray, a: npt.NDArray[np.intp], b: npt.NDArray[np.intp]) -> FloatArray:
+    """``np.ptp(v[a_i:b_i + 1])`` for every pair (``a_i <= b_i``) from a sparse table of maxima and minima: exact,
+    NaN where the window holds one, O(n log n) instead of one pass per window."""
+    out = np.empty(a.size)
+    if not a.size:
+        return out
+    level = np.floor(np.log2(b - a + 1)).astype(np.intp)
+    hi, lo = v.astype(np.float64), v.astype(np.float64)
+    for k in range(int(level.max()) + 1):
+        if k:
+            w = 1 << (k - 1)
+            hi, lo = np.maximum(hi[:-w], hi[w:]), np.minimum(lo[:-w], lo[w:])  # windows of 2^k from each start
+        at = level == k
+        if at.any():
+            end = b[at] - (1 << k) + 1
+            out[at] = np.maximum(hi[a[at]], hi[end]) - np.minimum(lo[a[at]], lo[end])
+    return out
 
 
 def speed_at(sp_t: FloatArray, sp_v: FloatArray, t: float, half_s: float = 0.03) -> float:

@@ -117,11 +117,35 @@ def torque_quantisation_variance(ev: DiagEvent, step_nm: float, inertia: float) 
     first = np.flatnonzero(np.concatenate([[True], np.diff(vv) != 0]))
     last = np.concatenate([first[1:] - 1, [vv.size - 1]])
     start = np.maximum(edges[first], ev.t_fine[0])
-    per_run = np.clip(np.minimum(edges[last + 1][None, :], ev.speed_t[:, None]) - start[None, :], 0.0, None)
-    if ev.pre.any():
-        per_run -= per_run[ev.pre].mean(axis=0)
+    end = edges[last + 1]
+    # run r has acted for p(s) = clip(min(end_r, s) - start_r, 0) by sample time s: its whole length once it has
+    # ended, s - start_r while it is held, 0 before; less its mean m_r over the anchor samples. The sum over runs of
+    # (p - m)^2 is then a prefix sum over the ended runs, the held run's term and a suffix sum over the runs to come
+    # (the runs follow each other: at most one is held at any time), O(samples + runs) instead of a
+    # (samples, runs) matrix (1300 x 5000 for a 1 kHz window)
+    length = np.clip(end - start, 0.0, None)
+    m = _anchor_means(ev.speed_t[ev.pre], start, end) if ev.pre.any() else np.zeros(first.size)
+    done = np.concatenate([[0.0], np.cumsum((length - m) ** 2)])
+    to_come = np.concatenate([np.cumsum((m**2)[::-1])[::-1], [0.0]])
+    s = ev.speed_t
+    k = np.searchsorted(end, s, side="right")  # runs ended by s (end increases run by run)
+    held = k < first.size
+    kk = np.minimum(k, first.size - 1)
+    q = np.where(held, np.clip(s - start[kk], 0.0, None), 0.0)
+    total = done[k] + np.where(held, (q - m[kk]) ** 2 + to_come[np.minimum(k + 1, first.size)], 0.0)
     rpm_per_nm_s = 30.0 / np.pi / inertia
-    return np.asarray(step_nm**2 / 12.0 * rpm_per_nm_s**2 * np.sum(per_run**2, axis=1), dtype=np.float64)
+    return np.asarray(step_nm**2 / 12.0 * rpm_per_nm_s**2 * total, dtype=np.float64)
+
+
+def _anchor_means(s: FloatArray, start: FloatArray, end: FloatArray) -> FloatArray:
+    """Per run, the mean over the anchor sample times ``s`` of the time it has acted, clip(min(end, s) - start, 0)."""
+    s = np.sort(s)
+    cum = np.concatenate([[0.0], np.cumsum(s)])
+    length = np.clip(end - start, 0.0, None)
+    a = np.searchsorted(s, start, side="left")  # samples before the run starts: 0
+    b = np.searchsorted(s, np.maximum(end, start), side="left")  # samples after it ended: its whole length
+    acting = (cum[b] - cum[a]) - (b - a) * start  # samples while it is held: s - start
+    return np.asarray((acting + (s.size - b) * length) / s.size, dtype=np.float64)
 
 
 def _local_mean_square(ev: DiagEvent, d: FloatArray, smooth_s: float) -> FloatArray:
