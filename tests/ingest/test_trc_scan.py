@@ -141,7 +141,8 @@ def test_scanner_reads_the_fields_as_written() -> None:
     assert data[0, :3].tolist() == [1, 10, 255] and data[2, :2].tolist() == [1, 2]
     v2 = b"      1     17535.400 DT 1  00000100 Tx -  12    " + b"00 " * 8 + b"\n"
     _, fast, (_, _, _, flags, dlc), _ = scan_block(v2, Layout("2.1", {c: i for i, c in enumerate("NOTBIdRLD")}))
-    assert fast.tolist() == [True] and dlc.tolist() == [8] and flags.tolist() == [int(FrameFlag.EXTENDED | FrameFlag.TX)]
+    assert fast.tolist() == [True] and dlc.tolist() == [8]
+    assert flags.tolist() == [int(FrameFlag.EXTENDED | FrameFlag.TX)]
 
 
 TRC_FILES = sample_files("", "**/*.trc")
