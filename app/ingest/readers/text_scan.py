@@ -27,7 +27,6 @@ for _i, _c in enumerate(b"abcdef"):
 DIGIT = np.full(256, -1, np.int64)
 DIGIT[48:58] = np.arange(10)
 _DIGIT8 = DIGIT.astype(np.int8)
-_POW10 = 10 ** np.arange(19, dtype=np.int64)
 _MAX_DIGITS = 9  # whole and fraction digits of a decimal time read here (more: the line parser's)
 _TS_OFFSETS = np.array([*range(-_MAX_DIGITS, 0), *range(1, _MAX_DIGITS + 1)], np.int64)  # around the dot
 
@@ -84,21 +83,20 @@ class Tokens:
 
     def hex_value(self, start: I64, length: I64, width: int) -> tuple[I64, BOOL]:
         """Value of spans of 1 to ``width`` hex digits; False where a character is not one."""
-        chars, inside = self.chars(start, length, width)
-        digit = HEX[chars]
-        ok = np.all((digit >= 0) | ~inside, axis=1) & (length >= 1) & (length <= width)
-        shift = np.clip(length[:, None] - 1 - np.arange(width)[None, :], 0, None) * 4
-        value = np.sum(np.where(inside, np.maximum(digit, 0) << shift, 0), axis=1)
-        return value, ok
+        return self._number(start, length, width, HEX, 16)
 
     def decimal(self, idx: I64, width: int) -> tuple[I64, BOOL]:
         """Value of tokens of 1 to ``width`` decimal digits; False elsewhere."""
-        length = self.tok_len[idx]
-        chars, inside = self.chars(self.tok_start[idx], length, width)
-        digit = DIGIT[chars]
+        return self._number(self.tok_start[idx], self.tok_len[idx], width, DIGIT, 10)
+
+    def _number(self, start: I64, length: I64, width: int, table: I64, base: int) -> tuple[I64, BOOL]:
+        """Value of spans of 1 to ``width`` digits of ``base`` (``table``: each byte's digit, -1 for none)."""
+        chars, inside = self.chars(start, length, width)
+        digit = table[chars]
         ok = np.all((digit >= 0) | ~inside, axis=1) & (length >= 1) & (length <= width)
-        shift = np.clip(length[:, None] - 1 - np.arange(width)[None, :], 0, width - 1)
-        return np.sum(np.where(inside, np.maximum(digit, 0) * _POW10[shift], 0), axis=1), ok
+        place = np.clip(length[:, None] - 1 - np.arange(width)[None, :], 0, width - 1)
+        weight = base ** np.arange(width, dtype=np.int64)
+        return np.sum(np.where(inside, np.maximum(digit, 0) * weight[place], 0), axis=1), ok
 
     def time_ns(self, idx: I64, scale_exp: int, *, dot_required: bool) -> tuple[I64, BOOL]:
         """Tokens ``digits{1,9}[.digits{1,9}]`` as integer ns for a unit of ``10**scale_exp`` ns.

@@ -32,7 +32,6 @@ class Layout:
 
     def __init__(self, version: str, columns: dict[str, int]) -> None:
         self.numbered = not version.startswith("2")  # 1.x lines start with ``N)``
-        self.reserved = False
         self.direction: int | None = None
         self.kind_1x: int | None = None  # 1.x: the Rx/Tx column (1.0 has none)
         self.length_col: str = "dlc"  # 1.x and 2.x "L": a DLC; 2.x "l": a data length
@@ -73,16 +72,12 @@ def scan_block(block: bytes, layout: Layout) -> tuple[Tokens, BOOL, tuple[I64, I
     flags = np.zeros(cand.size, np.int64)
     if layout.kind >= 0:  # 2.x: the type column
         ok &= tk.equals(at(f + layout.kind), b"DT")
-    elif layout.kind_1x is not None:
-        kind = at(f + layout.kind_1x)
-        rx, tx = tk.equals(kind, b"Rx"), tk.equals(kind, b"Tx")
-        ok &= rx | tx
-        flags |= np.where(tx, _TX, 0)
-    if layout.direction is not None:
-        d = at(f + layout.direction)
-        rx, tx = tk.equals(d, b"Rx"), tk.equals(d, b"Tx")
-        ok &= rx | tx
-        flags |= np.where(tx, _TX, 0)
+    # the direction: 1.1-1.3's type column, 2.x's own column where there is one
+    for col in (layout.kind_1x, layout.direction):
+        if col is not None:
+            rx, tx = tk.equals(at(f + col), b"Rx"), tk.equals(at(f + col), b"Tx")
+            ok &= rx | tx
+            flags |= np.where(tx, _TX, 0)
     if layout.length_col == "L":
         code, len_ok = tk.decimal(at(f + layout.length), 2)
         length = np.minimum(code, 8)
