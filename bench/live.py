@@ -12,9 +12,14 @@ a time receives the same traffic through python-can's Bus API:
 
 Latency is per frame, from its receipt by the consumer (``bus.recv`` returned) to its decoded
 values being available. A third phase sends as fast as the generator can (no pacing) to find
-each consumer's ceiling. Usage::
+each consumer's ceiling.
 
-    .venv/bin/python bench/live.py [--rate 20000] [--seconds 6] [--flood 150000]
+A last phase measures replay pacing: the same traffic written to a BLF log at ``--replay-rate``
+frames/s is replayed onto the loopback bus by :class:`app.live.replay.Replayer` and by the
+obvious alternative, python-can's ``can.MessageSync`` loop with ``bus.send``; the pacing error
+of each frame is its send time minus its deadline (start + log time). Usage::
+
+    .venv/bin/python bench/live.py [--rate 20000] [--seconds 6] [--flood 150000] [--replay-rate 2000]
 """
 
 from __future__ import annotations
@@ -237,6 +242,45 @@ def decode_cost(sizes: tuple[int, ...] = (1, 5, 20, 64, 1000), frames: int = 800
     return lines
 
 
+def replay_pacing(tmp: Path, rate: int, seconds: float) -> dict[str, dict[str, float]]:
+    """Pacing error (send time minus deadline, ms) of lashscope's Replayer and of can.MessageSync."""
+    from app.ingest.readers import open_log
+    from app.live.bus import BusLink
+    from app.live.loopback import decode_records
+    from app.live.replay import Replayer
+
+    n = int(rate * seconds)
+    msgs, _ = decode_records(bytearray(b"".join(traffic(n))))
+    log = tmp / "replay.blf"
+    with can.BLFWriter(str(log)) as writer:
+        for i, m in enumerate(msgs):
+            m.timestamp = 1000.0 + i / rate
+            writer.on_message_received(m)
+    out: dict[str, dict[str, float]] = {}
+    with LoopbackHub() as hub:
+        link = BusLink(BusConfig("tcp_loopback", hub.channel))
+        link.open()
+        try:
+            summary = Replayer(link, lambda: open_log(log).chunks()).run().summary()
+        finally:
+            link.close()
+        out["lashscope Replayer"] = {"frames": float(summary["frames_sent"]), "p50": float(summary["pacing_p50_ms"]),
+                                     "p99": float(summary["pacing_p99_ms"]), "max": float(summary["pacing_max_ms"])}
+        errs = []
+        with LoopbackBus(hub.channel) as bus, can.LogReader(str(log)) as reader:
+            t_first = None
+            start = time.perf_counter()
+            for m in can.MessageSync(reader):
+                if t_first is None:
+                    t_first = m.timestamp
+                bus.send(m)
+                errs.append(time.perf_counter() - (start + m.timestamp - t_first))
+        e = np.maximum(np.array(errs) * 1e3, 0.0)
+        out["python-can MessageSync"] = {"frames": float(len(e)), "p50": float(np.percentile(e, 50)),
+                                         "p99": float(np.percentile(e, 99)), "max": float(e.max())}
+    return out
+
+
 def run_phase(gen: subprocess.Popen[str], consumer: Lashscope | Naive, cmd: str, expected: int,
               timeout: float) -> dict[str, float]:
     assert gen.stdin is not None and gen.stdout is not None
@@ -267,6 +311,7 @@ def main() -> int:
     ap.add_argument("--flood", type=int, default=150000, help="frames sent unpaced in the ceiling phase")
     ap.add_argument("--load", type=int, default=0,
                     help="busy-loop processes competing for the CPUs during the phases (a loaded machine)")
+    ap.add_argument("--replay-rate", type=int, default=2000, help="frames/s of the log replayed in the pacing phase")
     ap.add_argument("--generator", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.generator:
@@ -287,6 +332,7 @@ def main() -> int:
             for cls in (Lashscope, Naive):
                 consumer = cls(channel, Path(tmp) / f"{cls.__name__}-{phase}.blf", max(n, 1024))
                 rows.append((phase, cls.name, run_phase(gen, consumer, cmd, n, timeout=60.0)))
+        pacing = replay_pacing(Path(tmp), args.replay_rate, args.seconds)
     for hog in hogs:
         hog.kill()
         hog.wait()
@@ -315,6 +361,14 @@ def main() -> int:
           f"{fn['cpu_us_per_frame'] / fl['cpu_us_per_frame']:.2f}x (flood); "
           f"ceiling: lashscope {fl['fps']:.0f} frames/s vs naive {fn['fps']:.0f} frames/s "
           f"= {fl['fps'] / fn['fps']:.2f}x")
+    print(f"replay pacing, {args.replay_rate} frames/s for {args.seconds:g} s onto the loopback bus "
+          f"(send time minus deadline):")
+    print(f"{'replayer':24} {'frames':>7} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7}")
+    for name, r in pacing.items():
+        print(f"{name:24} {r['frames']:7.0f} {r['p50']:7.3f} {r['p99']:7.3f} {r['max']:7.3f}")
+    rp, ms = pacing["lashscope Replayer"], pacing["python-can MessageSync"]
+    print(f"replay pacing p99: lashscope {rp['p99']:.3f} ms (target < 2 ms), MessageSync {ms['p99']:.3f} ms "
+          f"= {ms['p99'] / max(rp['p99'], 1e-3):.1f}x")
     return 0
 
 
