@@ -26,7 +26,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from app.identify import IdentifyOptions, identify_logs  # noqa: E402
-from app.identify.fit import MODEL_FORM, model_form  # noqa: E402
+from app.identify.fit import MODEL_FORM, MOVE_FORM, model_form  # noqa: E402
 from bench.diagnosis_indep import generate  # noqa: E402
 from bench.identify_indep import OURS, PARAMS  # noqa: E402
 from bench.indep.car import is_chain, vehicle_source  # noqa: E402
@@ -35,6 +35,7 @@ from bench.indep.record import DBC, MAP  # noqa: E402
 from sim import load_vehicle  # noqa: E402
 
 LEVEL = 0.9
+MOVE_BINS = ((0.0, 0.15), (0.15, 0.5), (0.5, math.inf))  # the identified car's move from its file
 
 
 def collect(sets: list[str]) -> list[dict[str, Any]]:
@@ -60,36 +61,58 @@ def collect(sets: list[str]) -> list[dict[str, Any]]:
                 if p is None or not p.identified or q not in parts:
                     continue
                 row["params"][q] = {"value": p.value, "lo": p.lo, "hi": p.hi, "truth": case.truth[truth_key],
-                                    **parts[q]._asdict()}
+                                    "nominal": p.nominal, **parts[q]._asdict()}
             rows.append(row)
             print(f"{which} [{i + 1}/{len(clean)}] {case.name}: {len(row['params'])} parameters identified "
                   f"({time.process_time() - t0:.1f} s CPU)", flush=True)
     return rows
 
 
-def half_width(name: str, p: dict[str, Any], form: dict[str, tuple[float, float]]) -> float:
-    """90 % half-width (log scale) of saved parameter ``name`` under the model-form floors ``form``, as
-    ``app.identify.fit.assemble`` computes it."""
-    return math.hypot(p["stat"], math.log1p(model_form(name, p["scale"], form) * p["misfit"]))
+def move_of(row: dict[str, Any]) -> float:
+    """The identified car's move from its file (``fit.move_from_file``): saved, or from the saved figures and the
+    file's (rows saved before the move was part of the floor carry the file's figure as ``nominal``, or nothing: 0)."""
+    for p in row["params"].values():
+        if "move" in p:
+            return float(p["move"])
+    logs = [math.log(p["value"] / p["nominal"]) for p in row["params"].values() if p.get("nominal")]
+    return math.sqrt(sum(x * x for x in logs))
 
 
-def score(rows: list[dict[str, Any]], form: dict[str, tuple[float, float]]) -> None:
-    """Coverage per parameter, for each car and for all drives, under the floors ``form``."""
-    print(f"{'parameter':10s} {'floor (level, slope)':22s} {'paper car':>16s} {'chain car':>16s} {'all':>16s}")
+def half_width(name: str, p: dict[str, Any], form: dict[str, tuple[float, float]], move: float = 0.0,
+               per_move: float = MOVE_FORM) -> float:
+    """90 % half-width (log scale) of saved parameter ``name`` under the model-form floors ``form`` and ``per_move``,
+    on a drive whose identified car moved ``move`` from its file, as ``app.identify.fit.assemble`` computes it."""
+    return math.hypot(p["stat"], math.log1p(model_form(name, p["scale"], form, move, per_move) * p["misfit"]))
+
+
+def score(rows: list[dict[str, Any]], form: dict[str, tuple[float, float]], per_move: float = MOVE_FORM) -> None:
+    """Coverage per parameter, for each car and for all drives, under the floors ``form`` and ``per_move``; and the
+    paper car's by its identified car's move from the file."""
+    print(f"{'parameter':10s} {'floor (level, slope)':22s} {'paper car':>16s} {'chain car':>16s} {'all':>16s}"
+          f"   paper car moved {' | '.join(f'{lo:g}-{hi:g}' for lo, hi in MOVE_BINS)}")
     for q, (level, slope) in form.items():
         counts = {"paper": [0, 0], "chain": [0, 0]}
+        by_move = [[0, 0] for _ in MOVE_BINS]
         for r in rows:
             p = r["params"].get(q)
             if p is None:
                 continue
             c = counts["chain" if is_chain(r["car"]) else "paper"]
-            c[0] += abs(math.log(p["value"] / p["truth"])) <= half_width(q, p, form)
+            move = move_of(r)
+            hit = abs(math.log(p["value"] / p["truth"])) <= half_width(q, p, form, move, per_move)
+            c[0] += hit
             c[1] += 1
+            if not is_chain(r["car"]):
+                for k, (lo, hi) in enumerate(MOVE_BINS):
+                    if lo <= move < hi:
+                        by_move[k][0] += hit
+                        by_move[k][1] += 1
         cells = [f"{h:3d}/{n:3d} {100 * h / n:5.1f} %" if n else f"{'-':>16s}" for h, n in counts.values()]
         h = counts["paper"][0] + counts["chain"][0]
         n = counts["paper"][1] + counts["chain"][1]
         cells.append(f"{h:3d}/{n:3d} {100 * h / n:5.1f} %" if n else f"{'-':>16s}")
-        print(f"{q:10s} {f'{level:g}, {slope:g}':22s} " + " ".join(f"{c:>16s}" for c in cells))
+        moved = " | ".join(f"{h}/{n} {100 * h / n:.0f} %" if n else "-" for h, n in by_move)
+        print(f"{q:10s} {f'{level:g}, {slope:g}':22s} " + " ".join(f"{c:>16s}" for c in cells) + f"   {moved}")
 
 
 def check_parts(rows: list[dict[str, Any]]) -> int:
@@ -98,7 +121,7 @@ def check_parts(rows: list[dict[str, Any]]) -> int:
     for r in rows:
         for q, p in r["params"].items():
             half = math.log(p["hi"] / p["value"])
-            bad += abs(half - half_width(q, p, MODEL_FORM)) > 1e-9 * max(1.0, half)
+            bad += abs(half - half_width(q, p, MODEL_FORM, move_of(r))) > 1e-9 * max(1.0, half)
     return bad
 
 
@@ -109,6 +132,9 @@ def main() -> int:
     ap.add_argument("--load", type=Path, help="score saved rows instead of identifying")
     ap.add_argument("--form", action="append", default=[], metavar="NAME=LEVEL,SLOPE",
                     help="score under this model-form floor instead of the code's (repeatable)")
+    ap.add_argument("--per-move", type=float, default=MOVE_FORM,
+                    help="score with this floor per unit of the identified car's move from its file "
+                         f"(the code's: {MOVE_FORM:g})")
     args = ap.parse_args()
     form = dict(MODEL_FORM)
     for item in args.form:
@@ -127,11 +153,12 @@ def main() -> int:
         rows = collect(sets)
         if args.save:
             args.save.write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
+    given = bool(args.form) or args.per_move != MOVE_FORM
     print(f"\n{len(rows)} drives without an effect; 90 % intervals covering the truth "
-          f"({'the code' if not args.form else 'given'} floors)")
-    if not args.form:
+          f"({'given' if given else 'the code'} floors, {args.per_move:g} per unit of move)")
+    if not given:
         print(f"intervals not reproduced from their parts: {check_parts(rows)}")
-    score(rows, form)
+    score(rows, form, args.per_move)
     return 0
 
 

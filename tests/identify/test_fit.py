@@ -56,9 +56,13 @@ def test_each_interval_is_its_statistics_and_its_model_form_in_quadrature(off_re
 
     parts = off_result.interval_parts
     assert sorted(parts) == ["damping", "lash", "mass", "stiffness"]
+    # the identified car's move from its file: the four figures' log ratios in quadrature, the same for each
+    logs = [np.log(off_result.params[q].value / off_result.params[q].nominal) for q in parts]
+    assert all(part.move == pytest.approx(float(np.sqrt(np.sum(np.square(logs))))) for part in parts.values())
+    assert parts["stiffness"].move > 0.2  # the OFF file is far off
     for name, part in parts.items():
         p = off_result.params[name]
-        form = np.log1p(model_form(name, part.scale) * part.misfit)
+        form = np.log1p(model_form(name, part.scale, move=part.move) * part.misfit)
         assert np.log(p.hi / p.value) == pytest.approx(np.hypot(part.stat, form), rel=1e-12), name
         assert np.log(p.value / p.lo) == pytest.approx(np.hypot(part.stat, form), rel=1e-12), name
         assert part.scale == 1.0 and part.misfit >= 1.0 and part.stat >= 0.0  # 1 kHz: ten samples a period and more
@@ -165,15 +169,33 @@ def test_the_model_form_floor_has_its_calibrated_level_and_slope() -> None:
 
     # at ten or more samples per mode period: the level alone (the paper car at 100 Hz and 1 kHz)
     assert {q: model_form(q, model_form_scale(7.7, 0.01)) for q in MODEL_FORM} == {
-        "stiffness": 0.0045, "damping": 0.005, "mass": 0.008, "lash": 0.009}
+        "stiffness": 0.0036, "damping": 0.004, "mass": 0.0064, "lash": 0.0072}
     # the low-mode chain car at 25 Hz (2.2x the scale): each parameter's slope on top, the mass' steepest
     scale = model_form_scale(5.5, 0.04)
-    assert model_form("stiffness", scale) == pytest.approx(0.0045 + 0.015 * 1.2)
-    assert model_form("damping", scale) == pytest.approx(0.005 + 0.02 * 1.2)
-    assert model_form("mass", scale) == pytest.approx(0.008 + 0.06 * 1.2)
-    assert model_form("lash", scale) == pytest.approx(0.009 + 0.02 * 1.2)
+    assert model_form("stiffness", scale) == pytest.approx(0.0036 + 0.015 * 1.2)
+    assert model_form("damping", scale) == pytest.approx(0.004 + 0.02 * 1.2)
+    assert model_form("mass", scale) == pytest.approx(0.0064 + 0.06 * 1.2)
+    assert model_form("lash", scale) == pytest.approx(0.0072 + 0.02 * 1.2)
     with pytest.raises(KeyError):
         model_form("torque_gain", 1.0)
+
+
+def test_the_model_form_floor_grows_with_the_identified_cars_move_from_its_file() -> None:
+    from app.identify.fit import MOVE_FORM, model_form, move_from_file
+
+    paper = load_vehicle("paper")
+    nominal = physical(paper)
+    assert move_from_file(nominal, nominal, ["stiffness", "mass", "lash"]) == 0.0
+    moved = physical(with_base(paper, {"stiffness": 1.3, "mass": 0.9}))
+    # the figures' log ratios in quadrature, over the parameters named only
+    logs = [np.log(moved.value(q) / nominal.value(q)) for q in ("stiffness", "mass")]
+    move = move_from_file(nominal, moved, ["stiffness", "mass"])
+    assert move == pytest.approx(np.sqrt(np.sum(np.square(logs)))) and move > 0.25
+    assert move_from_file(nominal, moved, ["lash"]) == pytest.approx(0.0, abs=1e-12)
+    # each parameter's floor: its level plus the same amount per unit of move
+    for q in ("stiffness", "damping", "mass", "lash"):
+        assert model_form(q, 1.0, move=move) == pytest.approx(model_form(q, 1.0) + MOVE_FORM * move)
+    assert model_form("stiffness", 1.0, move=0.5, per_move=0.0) == model_form("stiffness", 1.0)
 
 
 def test_staged_identification_stops_once_two_stages_agree() -> None:
