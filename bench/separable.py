@@ -21,6 +21,8 @@ Results are cached beside the set's manifest, keyed by the generator's version.
 from __future__ import annotations
 
 import json
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -67,7 +69,12 @@ def separable(folder: Path, cases: list[Case]) -> dict[str, float]:
     if doc.get("generator") != version:
         doc = {"generator": version, "sigma": {}}
     todo = [c for c in cases if c.kind == "base_effect" and c.name not in doc["sigma"]]
-    for c in todo:
+    t0 = time.perf_counter()
+    for i, c in enumerate(todo):
         doc["sigma"][c.name] = separable_sigma(c)
         path.write_text(json.dumps(doc, indent=1), encoding="utf-8")
+        spent = time.perf_counter() - t0
+        print(f"separable [{i + 1}/{len(todo)}] {c.name}: {doc['sigma'][c.name]:.1f} sigma beyond the best data "
+              f"sheet ({spent:.0f} s, about {spent / (i + 1) * (len(todo) - i - 1):.0f} s left)",
+              file=sys.stderr, flush=True)
     return {c.name: float(doc["sigma"][c.name]) for c in cases if c.name in doc["sigma"]}
