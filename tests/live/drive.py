@@ -131,3 +131,9 @@ def frames_of(chunks: list[FrameChunk]) -> list[tuple[int, int, int, bytes]]:
 
 def times_of(chunks: list[FrameChunk]) -> np.ndarray:
     return np.concatenate([c.t_ns for c in chunks]) if chunks else np.empty(0, np.int64)
+
+
+def span_s(chunks: list[FrameChunk]) -> float:
+    """Seconds from the first frame of ``chunks`` to the last."""
+    t = times_of(chunks)
+    return float(t[-1] - t[0]) / 1e9

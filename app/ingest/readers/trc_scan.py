@@ -75,7 +75,8 @@ def scan_block(block: bytes, layout: Layout) -> tuple[Tokens, BOOL, tuple[I64, I
     # the direction: 1.1-1.3's type column, 2.x's own column where there is one
     for col in (layout.kind_1x, layout.direction):
         if col is not None:
-            rx, tx = tk.equals(at(f + col), b"Rx"), tk.equals(at(f + col), b"Tx")
+            d = at(f + col)
+            rx, tx = tk.equals(d, b"Rx"), tk.equals(d, b"Tx")
             ok &= rx | tx
             flags |= np.where(tx, _TX, 0)
     if layout.length_col == "L":
