@@ -7,6 +7,8 @@ whose data sheet is also off is named, with the base parameters refitted with it
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -162,6 +164,9 @@ def test_an_effect_the_identification_takes_in_part_is_named_on_a_correct_data_s
     screened = next(line for line in res.fit_order if line.startswith("candidates on the file's vehicle"))
     assert screened.split(": ", 1)[1].startswith("progressive_stiffness ")
     assert any(line.startswith("progressive_stiffness + base parameters (jointly") for line in res.fit_order)
+    # ... and held against the base alone refitted from that joint fit (rebase.base_alone), which it beats
+    alone = next(line for line in res.fit_order if line.startswith("base parameters alone, from progressive_stiffness"))
+    assert "progressive_stiffness preferred to the base alone" in alone, alone
     assert res.identified_score is not None and d.best is not None
     assert res.identified_score.explained.value < 0.75 < d.best.explained.value
     # refitted with the base parameters from both sides (rebase.joint_with_base), they come back to the file's, which
@@ -190,16 +195,12 @@ def test_an_effect_is_not_attributed_when_the_vehicle_cannot_be_identified_first
     assert more.decision.status == "explained" and more.decision.top == ("torque_lag",)
 
 
-def test_the_joint_refit_with_the_base_also_starts_from_the_file_side() -> None:
-    """A tyre's relaxation trades along a ridge with the shaft's stiffness: an effect fitted on the file's vehicle is
-    itself a point of its joint model with the base parameters (the base at the file's values), so the joint refit
-    starts from there as well as from the identified base, and is never worse on calibration events than the single
-    fit it refines. On this drive the identification reads the tyre as a shaft at 0.56x the file's stiffness and a
-    car at 0.64x its mass; refined from there alone, the joint fit ends worse than the tyre on the file's vehicle
-    with the stiffness 6 % off, and from both sides it keeps the file's stiffness, which is the truth."""
+@pytest.fixture(scope="module")
+def tyre_on_file() -> dict[str, Any]:
+    """A tyre's slip on a right data sheet, prepared as the diagnosis prepares it: events, split, the file's baseline,
+    the identification (which reads the tyre as a softer shaft and a lighter car) and the tyre fitted alone."""
     from app.analysis.diagnosis.calibrate import Bounds, fit
     from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS
-    from app.analysis.diagnosis.rebase import joint_with_base
     from app.analysis.diagnosis.split import make_split
     from app.identify import FitOptions, identify_events
     from app.identify.logs import prepared_logs
@@ -213,11 +214,76 @@ def test_the_joint_refit_with_the_base_also_starts_from_the_file_side() -> None:
     bounds = Bounds.for_period(noise.period_s)
     base = fit(paper(), cal, split, (), bounds=bounds)
     ident = identify_events(events, noise, paper(), FitOptions(seed=0), split=split, baseline=base)
-    assert ident.ratios  # base parameters were fitted (the drive's tyre shows as a softer shaft to a base-only fit)
     single = fit(paper(), cal, split, (get_effect("tyre_slip"),), bounds=bounds, start=base)
+    return {"events": events, "split": split, "cal": cal, "bounds": bounds, "ident": ident, "single": single}
+
+
+def test_the_joint_refit_with_the_base_also_starts_from_the_file_side(tyre_on_file: dict[str, Any]) -> None:
+    """A tyre's relaxation trades along a ridge with the shaft's stiffness: an effect fitted on the file's vehicle is
+    itself a point of its joint model with the base parameters (the base at the file's values), so the joint refit
+    starts from there as well as from the identified base, and is never worse on calibration events than the single
+    fit it refines. On this drive the identification reads the tyre as a shaft at 0.56x the file's stiffness and a
+    car at 0.64x its mass; refined from there alone, the joint fit ends worse than the tyre on the file's vehicle
+    with the stiffness 6 % off, and from both sides it keeps the file's stiffness, which is the truth."""
+    from app.analysis.diagnosis.rebase import joint_with_base
+
+    t = tyre_on_file
+    cal, split, bounds, ident, single = t["cal"], t["split"], t["bounds"], t["ident"], t["single"]
+    assert ident.ratios  # base parameters were fitted (the drive's tyre shows as a softer shaft to a base-only fit)
     identified_side = joint_with_base(paper(), ident, cal, split, "tyre_slip", single, bounds, "multibody")
     both = joint_with_base(paper(), ident, cal, split, "tyre_slip", single, bounds, "multibody", single_on_file=True)
     assert identified_side is not None and both is not None
     assert both.chi2 <= min(single.chi2, identified_side.chi2) * (1.0 + 1e-9)
     stiffness = 2.0 ** both.values["base_stiffness"]["log2_scale"] if "base_stiffness" in both.values else 1.0
     assert stiffness == pytest.approx(1.0, abs=0.02)
+
+
+def test_the_base_alone_is_refitted_from_an_effects_joint_fit(tyre_on_file: dict[str, Any]) -> None:
+    """rebase.base_alone: the identification's base parameters refitted with the effect switched off, started at the
+    joint fit's values. It fits the base effects only, in the identification's order; the tyre is real, so the base
+    alone fits the calibration events worse than the tyre with the base."""
+    from app.analysis.diagnosis.rebase import base_alone, joint_with_base
+    from app.identify.base import BASE_EFFECTS
+
+    t = tyre_on_file
+    cal, split, bounds, ident = t["cal"], t["split"], t["bounds"], t["ident"]
+    joint = joint_with_base(paper(), ident, cal, split, "tyre_slip", t["single"], bounds, "multibody",
+                            single_on_file=True)
+    assert joint is not None
+    alone = base_alone(paper(), ident, joint, cal, split, bounds, "multibody")
+    assert list(alone.effects) == [BASE_EFFECTS[k].id for k in ident.ratios]
+    assert "tyre_slip" not in alone.values and set(alone.values) == set(alone.effects)
+    assert alone.chi2 > joint.chi2
+
+
+def test_an_effect_no_better_than_the_base_alone_is_not_attributed(tyre_on_file: dict[str, Any]) -> None:
+    """rebase.effect_not_needed: an effect that held-out events do not prefer to the base alone gives
+    ``base_parameters`` with the refitted base's named parameters, the two figures and the bootstrap's verdict in the
+    reason; where that base names nothing either, ``none_of_candidates``."""
+    from dataclasses import replace
+
+    from app.analysis.diagnosis.decide import Decision, DecisionRules, bootstrap_draws, gap_ratio, score_candidate
+    from app.analysis.diagnosis.rebase import effect_not_needed
+    from app.analysis.diagnosis.score import Interval
+
+    ident = tyre_on_file["ident"]
+    assert ident.named  # the identification reads the tyre as a softer shaft and a lighter car
+    rules = DecisionRules()
+    n = np.full(8, 100.0)
+    base = np.full(8, 900.0)
+    draws = bootstrap_draws(8, rules, 0)
+    with_effect = score_candidate("tyre_slip", ("tyre_slip",), base, np.full(8, 200.0), n, draws, rules, None)
+    alone = score_candidate("base_parameters", (), base, np.full(8, 202.0), n, draws, rules, None)
+    decision = Decision("partial", top=("tyre_slip",), reason="tyre_slip: ...", best=with_effect)
+    share = Interval(0.01, -0.05, 0.07)
+    out = effect_not_needed(decision, ident, with_effect, alone, n, gap_ratio(base, n, draws, 0.9), 0.4, 0.02, share,
+                            rules)
+    assert out.status == "base_parameters" and out.top == () and out.best is alone
+    assert {i["name"] for i in out.details["base_parameters"]} == set(ident.named)
+    assert out.details["effect_not_needed"] == {"effect": "tyre_slip", "probability": 0.4, "separation": 0.02,
+                                                "share_of_base_remainder": {"value": 0.01, "lo": -0.05, "hi": 0.07}}
+    assert "the vehicle file is off" in out.reason and "leaves 2.00x" in out.reason and "leave 2.02x" in out.reason
+    assert "probability 0.40" in out.reason and "removes 1 % [-5, 7] of what the base alone leaves" in out.reason
+    quiet = replace(ident, params={k: replace(p, named=False) for k, p in ident.params.items()})
+    none = effect_not_needed(decision, quiet, with_effect, alone, n, None, 0.4, 0.02, share, rules)
+    assert none.status == "none_of_candidates" and none.top == () and "base_parameters" not in none.details
