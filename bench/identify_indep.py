@@ -19,6 +19,7 @@ diagnosis still scored; the identification targets are reported unavailable.
     .venv/bin/python bench/identify_indep.py --set ifinal            # scored once, with the rule fixed
     .venv/bin/python bench/identify_indep.py --set idev2 --jobs 2    # the low-mode chain car (chain_low.toml)
     .venv/bin/python bench/identify_indep.py --set ifinal2           # its fresh set, scored once
+    .venv/bin/python bench/identify_indep.py --set ifinal11 --jobs 2 --no-separable  # without the separable step
 """
 
 from __future__ import annotations
@@ -278,6 +279,9 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     ap.add_argument("--case", action="append", default=[], help="only the case of this name (repeatable)")
     ap.add_argument("--generate-only", action="store_true", help="make (or check) the cached drives and stop")
+    ap.add_argument("--no-separable", action="store_true",
+                    help="skip bench/separable.py's step (tens of minutes per set): the targets that need each "
+                         "effect's signature beyond the best data sheet are not printed")
     args = ap.parse_args()
     folder, todo = generate(args.which, args.quick, args.jobs, args.case)
     if args.case and not todo:
@@ -301,7 +305,8 @@ def main() -> int:
         for i, o in enumerate(pool.map(run, todo, [folder] * len(todo))):
             out.append(o)
             print(f"[{i + 1:2d}/{len(todo)}] {line(o)}", flush=True)
-    apart = separable(folder, todo)  # base_effect cases, by the generator's own equations (cached)
+    # base_effect cases, by the generator's own equations (cached)
+    apart = None if args.no_separable else separable(folder, todo)
     print("\ntargets")
     if identify_logs is None:
         print(f"  [n/a] identification targets: identification unavailable ({UNAVAILABLE})")

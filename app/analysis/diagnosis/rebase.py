@@ -17,6 +17,10 @@ scored on the held-out events against the file's, like a candidate (:func:`.deci
   significant held-out improvement: the identified vehicle becomes the base, and the candidates
   decide on it (the law is model form, not a data sheet that is off);
 - anything else: the file's vehicle stays the base (the identification is reported).
+
+Whichever base the candidates start from, an effect refitted jointly with the base parameters is named only
+if it beats the base alone refitted from that joint fit (:func:`base_alone`, :func:`effect_not_needed`), and a
+second effect only beside the first refitted so (``select``).
 """
 
 from __future__ import annotations
