@@ -70,3 +70,32 @@ def test_a_refinement_stops_at_its_pass_budget_with_the_best_point_seen() -> Non
                screen=False)
     assert "pass budget" not in full.message
     assert full.chi2 <= short.chi2 < first.chi2  # the drag lowers it at once; the full refinement further
+
+
+@cache
+def lagged_baseline():  # type: ignore[no-untyped-def]
+    """Calibration events of a drive whose torque reaches the shafts 35 ms late (a 20 ms delay and a 15 ms lag),
+    beyond the time offset's +-20 ms, and the baseline fit (its offset on the bound)."""
+    v = paper()
+    rng = np.random.default_rng(23)
+    drive = make_drive(v, rng, DriveSpec(duration_s=30.0))
+    lag = {"torque_lag": {"tau_s": 0.015, "delay_s": 0.02}}
+    signals = to_signals(measure(drive, run_truth(apply_effects(v, lag), drive), CanSampling(), rng))
+    events, noise, _ = prepare(signals, detect_events(signals, DIAGNOSIS_EVENTS))
+    split = make_split(events, seed=1)
+    cal = split.calibration_events(events)
+    bounds = Bounds.for_period(noise.period_s)
+    return cal, fit(v, cal, split, (), bounds=bounds), bounds
+
+
+def test_the_screen_moves_the_nuisance_only_as_far_as_a_fit_could() -> None:
+    """With the time offset on its bound, the lag beyond it is the lag's to take: unbounded, the offset's column
+    carries the delay past the bound to first order and the lag screens as a fraction of what it removes."""
+    cal, base, bounds = lagged_baseline()
+    assert base.nuisance.offset_s == pytest.approx(bounds.offset_s[1], abs=1e-3)
+    (free,) = screen_partners(paper(), cal, base, ["torque_lag"], "multibody")
+    (held,) = screen_partners(paper(), cal, base, ["torque_lag"], "multibody", bounds)
+    assert held.gain > 2.5 * free.gain  # 1.59e6 against 0.49e6 on this drive
+    assert held.gain > 0.8 * base.chi2  # nearly all the baseline leaves is the lag beyond the offset
+    lin = held.starts[0]
+    assert lin["tau_s"] + lin["delay_s"] > 0.005  # the start moves the lag towards the truth

@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import lsq_linear
 
-from app.analysis.diagnosis.calibrate import FitResult
+from app.analysis.diagnosis.calibrate import Bounds, FitResult
 from app.analysis.diagnosis.forward import (
     DiagEvent,
     EffectSetting,
@@ -95,22 +95,46 @@ def _cost(r0: FloatArray, cols: FloatArray, lo: FloatArray, hi: FloatArray) -> t
     return float(res @ res), a
 
 
+def _nuisance_range(bounds: Bounds | None, name: str, value: float, step: float) -> tuple[float, float]:
+    """The range of a nuisance column's coefficient: the fit's bounds on that parameter over the probe step
+    (unbounded without ``bounds``)."""
+    if bounds is None:
+        return -np.inf, np.inf
+    lo, hi = getattr(bounds, name)
+    a, b = sorted(((lo - value) / step, (hi - value) / step))
+    return min(a, 0.0), max(b, 0.0)
+
+
 def screen_partners(base: Vehicle, events: Sequence[DiagEvent], first: FitResult, partners: Sequence[str],
-                    model: str) -> list[PartnerScreen]:
-    """Linearised gain of each of ``partners`` on top of ``first`` on calibration ``events``, best first."""
+                    model: str, bounds: Bounds | None = None) -> list[PartnerScreen]:
+    """Linearised gain of each of ``partners`` on top of ``first`` on calibration ``events``, best first.
+
+    ``bounds``: the nuisance parameters' bounds of the fits the screen stands for. With them, the nuisance columns
+    move only as far as a fit could: a time offset the single fit left on its bound cannot take up more of a delay
+    in the screen (a 20 ms torque lag beside a tyre's slip screened at 1 % of the partner threshold, the offset
+    carrying the lag past its bound to first order)."""
     nui = first.nuisance
     settings = tuple(first.settings)
     r0 = residual_at(base, events, nui, settings, model)
     if r0 is None:
         return [PartnerScreen(c, 0.0) for c in partners]
     n_cols: list[FloatArray] = []
+    n_lo: list[float] = []
+    n_hi: list[float] = []
     for name, step in NUISANCE_STEPS.items():
-        moved = residual_at(base, events, replace(nui, **{name: getattr(nui, name) + step}), settings, model)
+        value = float(getattr(nui, name))
+        if bounds is not None and value + step > getattr(bounds, name)[1]:
+            step = -step  # probed away from the upper bound it sits on
+        moved = residual_at(base, events, replace(nui, **{name: value + step}), settings, model)
         if moved is not None:
             n_cols.append(moved - r0)
+            lo_a, hi_a = _nuisance_range(bounds, name, value, step)
+            n_lo.append(lo_a)
+            n_hi.append(hi_a)
     jn = np.column_stack(n_cols) if n_cols else np.zeros((r0.size, 0))
-    inf = np.full(jn.shape[1], np.inf)
-    cost_n, _ = _cost(r0, jn, -inf, inf)
+    top = np.array(n_hi, dtype=np.float64)
+    neg = np.array(n_lo, dtype=np.float64)
+    cost_n, _ = _cost(r0, jn, neg, top)
     out = []
     for cid in partners:
         eff = get_effect(cid)
@@ -135,7 +159,7 @@ def screen_partners(base: Vehicle, events: Sequence[DiagEvent], first: FitResult
             out.append(PartnerScreen(cid, 0.0))
             continue
         jc = np.column_stack([jn, *cols])
-        cost, a = _cost(r0, jc, np.concatenate([-inf, lo]), np.concatenate([inf, hi]))
+        cost, a = _cost(r0, jc, np.concatenate([neg, lo]), np.concatenate([top, hi]))
         moves = [(p, float(ak * step)) for (p, step), ak in zip(steps, a[jn.shape[1]:], strict=True)]
         starts = tuple({p.name: float(np.clip(p.off + share * move, p.lo, p.hi)) for p, move in moves}
                        for share in STEP_SHARES)

@@ -78,6 +78,7 @@ from app.analysis.diagnosis.rebase import (
     mimicked_by,
     not_separable,
     nuisance_only,
+    pair_with_base,
     told_apart,
     with_base,
     with_form,
@@ -409,7 +410,7 @@ def _diagnose(
         elif outcome.stop is not None:
             # the file's error explains the gap; which effects would change the log alike on a right data sheet
             say(step[0] / n_steps, "screening the candidates on the file's vehicle")
-            screen = screen_partners(vehicle, cal, base_fit, candidates, opts.model)
+            screen = screen_partners(vehicle, cal, base_fit, candidates, opts.model, bounds)
             fit_order.append(f"candidates on the file's vehicle (linearised gain): "
                              f"{', '.join(s.describe() for s in screen)}")
             decision = with_tones(mimicked_by(outcome.stop, screen, base_fit), noise.tones)
@@ -441,6 +442,18 @@ def _diagnose(
         rem = remainder(ho, evals[cid].scores, evals[cid].predictions, period)
         return score_candidate(cid, effects, b, evals[cid].chi2(ho_idx), n, draws, rules, rem)
 
+    def pair_scored(first: str, second: str, fitted: FitResult, on: Vehicle | None = None) -> CandidateScore:
+        """A pair fit (``second`` its last effect) scored on the held-out events, with the first effect's share: the
+        pair's fit with ``second`` switched off."""
+        alone = replace(fitted, effects=fitted.effects[:-1], settings=fitted.settings[:-1],
+                        values={k: v for k, v in fitted.values.items() if k != second})
+        first_only = evaluate(on or vehicle, alone, ho, opts.model, phases, period).chi2(ho_idx)
+        # a trade-off between the two effects' parameters, as (first's parameter, second's, correlation)
+        tangled = next(((x, y, r) if x.split(".")[0] == first else (y, x, r) for x, y, r in fitted.trade_offs
+                        if {x.split(".")[0], y.split(".")[0]} == {first, second}), None)
+        return replace(held_out(f"{first}+{second}", (first, second), fitted, on=on), without_second=first_only,
+                       entangled=tangled)
+
     quiet = rebased is not None and not rebased.named and not has_gap(gap_ratio(b, n, draws, rules.level), rules)
     if quiet:  # the contact law the log chose leaves no clear gap: nothing for a candidate to explain
         fit_order.append("candidates: not fitted (with the contact law the log chose, the residual is not clearly "
@@ -462,7 +475,8 @@ def _diagnose(
         # partners by what each could add to the best single fit, to first order, on calibration events: the
         # choice does not peek at held-out data, and an effect that fits to "off" alone is still found
         say(step[0] / n_steps, f"screening partners of {first}")
-        screen = screen_partners(vehicle, cal, evals[first].fit, [c for c in candidates if c != first], opts.model)
+        screen = screen_partners(vehicle, cal, evals[first].fit, [c for c in candidates if c != first], opts.model,
+                                 bounds)
         fit_order.append(f"partners of {first} (linearised gain): {', '.join(s.describe() for s in screen)}")
         one = evals[first].fit
         least = max(opts.min_partner_gain * max(one.chi2 - one.n, 0.0), float(np.sqrt(2.0 * one.n)))
@@ -481,22 +495,31 @@ def _diagnose(
                     start=start, screen=not at, alternatives=at[1:], passes_per_param=PAIR_PASSES_PER_PARAM,
                     seed=opts.seed)
             fit_order.append(f"{pid}: {[e.index for e in cal]}")
-            alone = replace(f, effects=f.effects[:1], values={first: f.values[first]}, settings=f.settings[:1])
-            first_only = evaluate(vehicle, alone, ho, opts.model, phases, period).chi2(ho_idx)
-            # a trade-off between the two effects' parameters, as (first's parameter, second's, correlation)
-            tangled = next(((x, y, r) if x.split(".")[0] == first else (y, x, r) for x, y, r in f.trade_offs
-                            if {x.split(".")[0], y.split(".")[0]} == {first, second}), None)
             # a first-effect parameter the single fit left on a prior bound and the pair's fit moves inside it
             relieved = next(((k, one.values[first][k.split(".", 1)[1]], f.values[first][k.split(".", 1)[1]])
                              for k in one.at_bound if k.split(".")[0] == first and k not in f.at_bound), None)
-            pairs.append(replace(held_out(pid, (first, second), f), without_second=first_only, entangled=tangled,
-                                 relieves=relieved))
+            pairs.append(replace(pair_scored(first, second, f), relieves=relieved))
             tick(f"{pid}: held-out shrink {100 * pairs[-1].shrink.value:.0f} %")
         refined = _refit_first(vehicle, cal, split, first, evals, [p.id for p in pairs], bounds, opts)
         if refined is not None:
             fit_order.append(f"{first} (again, from the pair's values): {[e.index for e in cal]}")
             again = held_out(first, (first,), refined)
             singles = [again if s.id == first else s for s in singles]
+
+    def refit_jointly(cid: str, base: Identification, scored: list[CandidateScore], why: str,
+                      from_file: tuple[FitResult, tuple[dict[str, float], ...]] | None = None) -> list[CandidateScore]:
+        """Effect ``cid`` refitted jointly with ``base``'s parameters from the file's vehicle (``joint_with_base``),
+        kept where it fits the calibration events better than the effect's fit so far, like every fit: then scored
+        on the held-out events in ``scored``'s place and its base parameters kept in ``joint_ident``."""
+        joint = joint_with_base(nominal, base, cal, split, cid, evals[cid].fit, bounds, opts.model, from_file,
+                                single_on_file=rebased is None)
+        fit_order.append(f"{cid} + base parameters (jointly, {why}): {[e.index for e in cal]}")
+        if joint is None or joint.chi2 >= evals[cid].fit.chi2:
+            return scored
+        again = held_out(cid, (cid,), joint, on=nominal)
+        joint_ident[cid] = identified_with(nominal, [k for k in base.ratios if BASE_EFFECTS[k].id in joint.values],
+                                           joint, cal, base.chi2_before, held=base)
+        return [again if c.id == cid else c for c in scored]
 
     if refit_with is not None and singles:
         # the best effect refitted jointly with the base parameters, from the nominal file: the identification
@@ -509,7 +532,7 @@ def _diagnose(
             # the identified base can take an effect it mimics only in part (a shaft hardening under load read as
             # a stiffer shaft), and on that base the effect then adds nothing: each candidate's linearised gain on
             # the file's vehicle picks the one more to refit jointly, also from the file's values
-            scr = screen_partners(nominal, cal, file_eval.fit, candidates, opts.model)
+            scr = screen_partners(nominal, cal, file_eval.fit, candidates, opts.model, bounds)
             fit_order.append(f"candidates on the file's vehicle (linearised gain): "
                              f"{', '.join(s.describe() for s in scr)}")
             for s in scr[:FILE_SCREEN_REFITS]:
@@ -518,15 +541,7 @@ def _diagnose(
                     tops += [] if s.id in tops else [s.id]
         for top in tops:
             say(step[0] / n_steps, f"refitting {top} jointly with the base parameters")
-            joint = joint_with_base(nominal, refit_with, cal, split, top, evals[top].fit, bounds, opts.model,
-                                    from_file.get(top), single_on_file=rebased is None)
-            fit_order.append(f"{top} + base parameters (jointly, from the file's vehicle): {[e.index for e in cal]}")
-            if joint is not None and joint.chi2 < evals[top].fit.chi2:  # kept on calibration events, like every fit
-                again = held_out(top, (top,), joint, on=nominal)
-                singles = [again if c.id == top else c for c in singles]
-                fitted_base = [k for k in refit_with.ratios if BASE_EFFECTS[k].id in joint.values]
-                joint_ident[top] = identified_with(nominal, fitted_base, joint, cal, refit_with.chi2_before,
-                                                   held=refit_with)
+            singles = refit_jointly(top, refit_with, singles, "from the file's vehicle", from_file.get(top))
     decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     base_src = refit_with if refit_with is not None else ident  # the base parameters an effect is refitted with
     first = decision.top[0] if decision.top else ""
@@ -536,15 +551,8 @@ def _diagnose(
         # by less than the identification names, the second effect otherwise takes up the file's error (a mount
         # beside a drag, on a car whose lash was 15 % over the file's)
         say(step[0] / n_steps, f"refitting {first} jointly with the base parameters before naming a second effect")
-        joint = joint_with_base(nominal, base_src, cal, split, first, evals[first].fit, bounds, opts.model,
-                                single_on_file=rebased is None)
-        fit_order.append(f"{first} + base parameters (jointly, before naming {decision.top[1]} beside it): "
-                         f"{[e.index for e in cal]}")
-        if joint is not None and joint.chi2 < evals[first].fit.chi2:
-            singles = [held_out(first, (first,), joint, on=nominal) if c.id == first else c for c in singles]
-            joint_ident[first] = identified_with(nominal, [k for k in base_src.ratios
-                                                           if BASE_EFFECTS[k].id in joint.values],
-                                                 joint, cal, base_src.chi2_before, held=base_src)
+        singles = refit_jointly(first, base_src, singles, f"before naming {decision.top[1]} beside it")
+        if first in joint_ident:
             decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     if (base_src is not None and bound_stop is None and len(decision.top) == 1 and decision.top[0] in joint_ident
             and decision.best is not None and decision.status in ("explained", "partial")):
@@ -580,6 +588,31 @@ def _diagnose(
                           draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=refit_ident,
                           identified_score=alone_score, nominal_gap=nominal_gap, identification_note=ident_note,
                           file_baseline=file_eval)
+        one = evals[top].fit
+        kept = decision.best
+        if len(candidates) > 1 and kept is not None and (kept.explained.value < rules.explained_share
+                                                         or structured(kept, rules)):
+            # what the effect and the base leave: a second effect screened and fitted on that joint fit, not on the
+            # vehicle the identification alone gave (pair_with_base)
+            say(step[0] / n_steps, f"screening partners of {top} fitted with the base parameters")
+            scr = screen_partners(nominal, cal, one, [c for c in candidates if c != top], opts.model, bounds)
+            fit_order.append(f"partners of {top} + base parameters (linearised gain): "
+                             f"{', '.join(s.describe() for s in scr)}")
+            least = max(opts.min_partner_gain * max(one.chi2 - one.n, 0.0), float(np.sqrt(2.0 * one.n)))
+            paired = False
+            for partner in [s for s in scr if s.starts and s.gain >= least][:opts.max_pairs]:
+                pid = f"{top}+{partner.id}"
+                say(step[0] / n_steps, f"fitting {pid} jointly with the base parameters")
+                both = pair_with_base(nominal, one, cal, split, partner.id, partner.starts, bounds, opts.model)
+                fit_order.append(f"{pid} + base parameters (jointly, from {top}'s joint fit): {[e.index for e in cal]}")
+                if both.chi2 < one.chi2:
+                    pairs = [*(p for p in pairs if p.id != pid), pair_scored(top, partner.id, both, on=nominal)]
+                    joint_ident[pid] = identified_with(nominal, [k for k in base_src.ratios
+                                                                 if BASE_EFFECTS[k].id in both.values],
+                                                       both, cal, base_src.chi2_before, held=base_src)
+                    paired = True
+            if paired:
+                decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     decision = lags_apart(decision, traverse, MIN_TRAVERSE_SAMPLES, candidates)
     if (chosen_fit := evals.get("+".join(decision.top))) is not None:
