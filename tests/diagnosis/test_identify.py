@@ -39,6 +39,17 @@ def test_independent_columns_and_nuisance_pairs_are_not_reported() -> None:
     assert all("nuisance" not in a and "nuisance" not in b for a, b, _ in trade_offs(j, NAMES, OWNERS))
 
 
+
+def test_a_parameter_the_data_do_not_move_has_no_correlation_and_none_exceeds_one() -> None:
+    """A zero column (a second lash the fitted total already sets) has no variance in the pseudo-inverse: its
+    correlations are not reported (they read 1e130 from rounding), and no correlation leaves [-1, 1]."""
+    j = _jac(0.2)
+    j[:, 3] = 1e-300 * j[:, 2]
+    assert trade_offs(j, NAMES, OWNERS) == ()
+    j[:, 3] = 2.0 * j[:, 2]  # exactly collinear: rounding read 1.0000000000000002
+    pairs = trade_offs(j, NAMES, OWNERS)
+    assert len(pairs) == 1 and abs(pairs[0][2]) <= 1.0
+
 def test_motor_side_lash_of_the_paper_vehicle() -> None:
     v = paper()
     nominal = lash_mrad(v)

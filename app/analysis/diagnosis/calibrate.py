@@ -311,8 +311,12 @@ def trade_offs(jac: FloatArray, names: Sequence[str], owners: Sequence[str],
     if j.ndim != 2 or j.shape[1] < 2 or not np.all(np.isfinite(j)):
         return ()
     cov = np.linalg.pinv(j.T @ j)
-    d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = cov / np.outer(d, d)
+    var = np.diag(cov)
+    # a parameter the pseudo-inverse gives no variance (its column is zero: the data do not move with it) has no
+    # correlation to report; elsewhere rounding cannot take a correlation past +-1
+    seen = var > 1e-12 * max(float(var.max()), 1e-300)
+    d = np.sqrt(np.where(seen, var, 1.0))
+    corr = np.clip(np.where(np.outer(seen, seen), cov / np.outer(d, d), 0.0), -1.0, 1.0)
     out = []
     for a in range(len(names)):
         for b in range(a + 1, len(names)):

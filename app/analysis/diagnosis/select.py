@@ -595,7 +595,11 @@ def _diagnose(
             # what the effect and the base leave: a second effect screened and fitted on that joint fit, not on the
             # vehicle the identification alone gave (pair_with_base)
             say(step[0] / n_steps, f"screening partners of {top} fitted with the base parameters")
-            scr = screen_partners(nominal, cal, one, [c for c in candidates if c != top], opts.model, bounds)
+            # not the backlash beside the fitted total lash: both set the gaps (a lag + backlash pair whose joint fit
+            # could not tell the backlash's sizes from the lash's scale was named over a right torque lag)
+            lash_fitted = BASE_EFFECTS["lash"].id in one.values
+            scr = screen_partners(nominal, cal, one, [c for c in candidates if c != top
+                                                      and not (c == "backlash" and lash_fitted)], opts.model, bounds)
             fit_order.append(f"partners of {top} + base parameters (linearised gain): "
                              f"{', '.join(s.describe() for s in scr)}")
             least = max(opts.min_partner_gain * max(one.chi2 - one.n, 0.0), float(np.sqrt(2.0 * one.n)))
