@@ -344,13 +344,11 @@ def timing_unresolved(decision: Decision, fit_at_bound: Sequence[str], offset_s:
     right data sheet was fitted with the offset on its bound beside it, and named rightly. So where no effect of the
     answer models a delay, nothing is attributed, and the reason names the offset. (The rule also withdraws half
     answers: two drives whose truth pairs a torque lag with tyre slip read ``partial tyre_slip`` with the offset on
-    its bound, the lag the offset could not take unnamed; docs/diagnosis.md.) A decision whose second effect is a lag
-    or a filter, not told apart (``details.second_unresolved``, :func:`_with_partner`), has a delay modelled beside
-    the effect it names either way, and stands."""
-    unresolved = decision.details.get("second_unresolved") or ()
+    its bound, the lag the offset could not take unnamed; docs/diagnosis.md.) It withdraws a first effect beside a
+    lag or a filter not told apart (``details.second_unresolved``) too: that effect was fitted under the misalignment
+    the unnamed lag removes (a soft mount beside a speed filter on ``ifinal6``, where the filter was the truth)."""
     if (decision.status not in ("explained", "partial") or OFFSET_AT_BOUND not in fit_at_bound
-            or any(e in LAG_EFFECTS for e in decision.top)
-            or (unresolved and all(e in LAG_EFFECTS for e in unresolved))):
+            or any(e in LAG_EFFECTS for e in decision.top)):
         return decision
     top = " + ".join(decision.top)
     return Decision("none_of_candidates", gap_ratio=decision.gap_ratio, best=decision.best, reason=(
