@@ -283,25 +283,6 @@ def base_alone(nominal: Vehicle, ident: Identification, joint: FitResult, events
                passes_per_param=JOINT_PASSES_PER_PARAM)
 
 
-def pair_with_base(nominal: Vehicle, joint: FitResult, events: Sequence[DiagEvent], split: Split, partner: str,
-                   starts: Sequence[dict[str, float]], bounds: Bounds, model: str,
-                   passes_per_param: int = JOINT_PASSES_PER_PARAM) -> FitResult:
-    """A second effect ``partner`` fitted with a joint fit of an effect and the base parameters
-    (:func:`joint_with_base`), all together on the file's vehicle, from that fit's values and the partner at each of
-    ``starts`` (its linearised screen on that fit, :func:`.partners.screen_partners`).
-
-    The greedy pairs are fitted on the vehicle the identification alone gave, and an identification that took up
-    part of the first effect (a tyre's slip read as a shaft 35 % softer and a car 29 % lighter) leaves the second
-    effect's signature distorted: a 20 ms torque lag beside the slip screened under the partner threshold there.
-    The pair refitted with the base parameters is judged, like the first effect, on what that base cannot explain."""
-    by_id = {e.id: e for e in BASE_EFFECTS.values()}
-    effects = (*(by_id[c] if c in by_id else get_effect(c) for c in joint.effects), get_effect(partner))
-    values = {c: dict(joint.values[c]) for c in joint.effects}
-    begin = [FitResult((), joint.nuisance, {**values, partner: dict(st)}, 0.0, 0, 0) for st in starts]
-    return fit(nominal, events, split, effects, bounds=bounds, model=model, start=begin[0], screen=False,
-               alternatives=begin[1:], passes_per_param=passes_per_param)
-
-
 def effect_not_needed(decision: Decision, ident: Identification, with_effect: CandidateScore,
                       alone: CandidateScore, n_heldout: Any, nominal_gap: Any, p_better: float, gap: float,
                       share: Interval, rules: DecisionRules) -> Decision:

@@ -78,7 +78,6 @@ from app.analysis.diagnosis.rebase import (
     mimicked_by,
     not_separable,
     nuisance_only,
-    pair_with_base,
     told_apart,
     with_base,
     with_form,
@@ -442,16 +441,16 @@ def _diagnose(
         rem = remainder(ho, evals[cid].scores, evals[cid].predictions, period)
         return score_candidate(cid, effects, b, evals[cid].chi2(ho_idx), n, draws, rules, rem)
 
-    def pair_scored(first: str, second: str, fitted: FitResult, on: Vehicle | None = None) -> CandidateScore:
+    def pair_scored(first: str, second: str, fitted: FitResult) -> CandidateScore:
         """A pair fit (``second`` its last effect) scored on the held-out events, with the first effect's share: the
         pair's fit with ``second`` switched off."""
         alone = replace(fitted, effects=fitted.effects[:-1], settings=fitted.settings[:-1],
                         values={k: v for k, v in fitted.values.items() if k != second})
-        first_only = evaluate(on or vehicle, alone, ho, opts.model, phases, period).chi2(ho_idx)
+        first_only = evaluate(vehicle, alone, ho, opts.model, phases, period).chi2(ho_idx)
         # a trade-off between the two effects' parameters, as (first's parameter, second's, correlation)
         tangled = next(((x, y, r) if x.split(".")[0] == first else (y, x, r) for x, y, r in fitted.trade_offs
                         if {x.split(".")[0], y.split(".")[0]} == {first, second}), None)
-        return replace(held_out(f"{first}+{second}", (first, second), fitted, on=on), without_second=first_only,
+        return replace(held_out(f"{first}+{second}", (first, second), fitted), without_second=first_only,
                        entangled=tangled)
 
     quiet = rebased is not None and not rebased.named and not has_gap(gap_ratio(b, n, draws, rules.level), rules)
@@ -588,35 +587,6 @@ def _diagnose(
                           draws=draws, fit_order=fit_order, not_applicable=not_applicable, identification=refit_ident,
                           identified_score=alone_score, nominal_gap=nominal_gap, identification_note=ident_note,
                           file_baseline=file_eval)
-        one = evals[top].fit
-        kept = decision.best
-        if len(candidates) > 1 and kept is not None and (kept.explained.value < rules.explained_share
-                                                         or structured(kept, rules)):
-            # what the effect and the base leave: a second effect screened and fitted on that joint fit, not on the
-            # vehicle the identification alone gave (pair_with_base)
-            say(step[0] / n_steps, f"screening partners of {top} fitted with the base parameters")
-            # not the backlash beside the fitted total lash: both set the gaps (a lag + backlash pair whose joint fit
-            # could not tell the backlash's sizes from the lash's scale was named over a right torque lag)
-            lash_fitted = BASE_EFFECTS["lash"].id in one.values
-            scr = screen_partners(nominal, cal, one, [c for c in candidates if c != top
-                                                      and not (c == "backlash" and lash_fitted)], opts.model, bounds)
-            fit_order.append(f"partners of {top} + base parameters (linearised gain): "
-                             f"{', '.join(s.describe() for s in scr)}")
-            least = max(opts.min_partner_gain * max(one.chi2 - one.n, 0.0), float(np.sqrt(2.0 * one.n)))
-            paired = False
-            for partner in [s for s in scr if s.starts and s.gain >= least][:opts.max_pairs]:
-                pid = f"{top}+{partner.id}"
-                say(step[0] / n_steps, f"fitting {pid} jointly with the base parameters")
-                both = pair_with_base(nominal, one, cal, split, partner.id, partner.starts, bounds, opts.model)
-                fit_order.append(f"{pid} + base parameters (jointly, from {top}'s joint fit): {[e.index for e in cal]}")
-                if both.chi2 < one.chi2:
-                    pairs = [*(p for p in pairs if p.id != pid), pair_scored(top, partner.id, both, on=nominal)]
-                    joint_ident[pid] = identified_with(nominal, [k for k in base_src.ratios
-                                                                 if BASE_EFFECTS[k].id in both.values],
-                                                       both, cal, base_src.chi2_before, held=base_src)
-                    paired = True
-            if paired:
-                decision = decide(b, n, singles, pairs, draws, rules, len(cal))
     decision = with_identifiability(decision, {k: e.fit for k, e in evals.items()}, vehicle)
     decision = lags_apart(decision, traverse, MIN_TRAVERSE_SAMPLES, candidates)
     if (chosen_fit := evals.get("+".join(decision.top))) is not None:
