@@ -95,12 +95,9 @@ def _cost(r0: FloatArray, cols: FloatArray, lo: FloatArray, hi: FloatArray) -> t
     return float(res @ res), a
 
 
-def _nuisance_range(bounds: Bounds | None, name: str, value: float, step: float) -> tuple[float, float]:
-    """The range of a nuisance column's coefficient: the fit's bounds on that parameter over the probe step
-    (unbounded without ``bounds``)."""
-    if bounds is None:
-        return -np.inf, np.inf
-    lo, hi = getattr(bounds, name)
+def _coefficient_range(lo: float, hi: float, value: float, step: float) -> tuple[float, float]:
+    """The range of a column's coefficient: a parameter at ``value`` probed by ``step`` stays within ``lo..hi`` (and
+    the coefficient 0, no move, is always inside, for a value already past a bound)."""
     a, b = sorted(((lo - value) / step, (hi - value) / step))
     return min(a, 0.0), max(b, 0.0)
 
@@ -128,13 +125,16 @@ def screen_partners(base: Vehicle, events: Sequence[DiagEvent], first: FitResult
         moved = residual_at(base, events, replace(nui, **{name: value + step}), settings, model)
         if moved is not None:
             n_cols.append(moved - r0)
-            lo_a, hi_a = _nuisance_range(bounds, name, value, step)
+            lo_a, hi_a = (-np.inf, np.inf)
+            if bounds is not None:
+                b_lo, b_hi = getattr(bounds, name)
+                lo_a, hi_a = _coefficient_range(b_lo, b_hi, value, step)
             n_lo.append(lo_a)
             n_hi.append(hi_a)
     jn = np.column_stack(n_cols) if n_cols else np.zeros((r0.size, 0))
-    top = np.array(n_hi, dtype=np.float64)
-    neg = np.array(n_lo, dtype=np.float64)
-    cost_n, _ = _cost(r0, jn, neg, top)
+    nui_lo = np.array(n_lo, dtype=np.float64)
+    nui_hi = np.array(n_hi, dtype=np.float64)
+    cost_n, _ = _cost(r0, jn, nui_lo, nui_hi)
     out = []
     for cid in partners:
         eff = get_effect(cid)
@@ -150,7 +150,7 @@ def screen_partners(base: Vehicle, events: Sequence[DiagEvent], first: FitResult
             moved = residual_at(base, events, nui, (*settings, (eff, vals)), model)
             if moved is None:
                 continue
-            a_lo, a_hi = sorted(((p.lo - p.off) / step, (p.hi - p.off) / step))
+            a_lo, a_hi = _coefficient_range(p.lo, p.hi, p.off, step)
             cols.append(moved - r0)
             lo.append(a_lo)
             hi.append(a_hi)
@@ -159,7 +159,7 @@ def screen_partners(base: Vehicle, events: Sequence[DiagEvent], first: FitResult
             out.append(PartnerScreen(cid, 0.0))
             continue
         jc = np.column_stack([jn, *cols])
-        cost, a = _cost(r0, jc, np.concatenate([neg, lo]), np.concatenate([top, hi]))
+        cost, a = _cost(r0, jc, np.concatenate([nui_lo, lo]), np.concatenate([nui_hi, hi]))
         moves = [(p, float(ak * step)) for (p, step), ak in zip(steps, a[jn.shape[1]:], strict=True)]
         starts = tuple({p.name: float(np.clip(p.off + share * move, p.lo, p.hi)) for p, move in moves}
                        for share in STEP_SHARES)
