@@ -36,7 +36,7 @@ import numpy.typing as npt
 from scipy import stats
 from scipy.optimize import least_squares
 
-from app.analysis.diagnosis.calibrate import GAIN_BOUNDS, Bounds, FitResult, fit
+from app.analysis.diagnosis.calibrate import GAIN_BOUNDS, Bounds, FitResult, Reach, fit, linear_reach
 from app.analysis.diagnosis.forward import DiagEvent, Nuisance, prediction, simulate_events, vehicle_with
 from app.analysis.diagnosis.localise import MIN_TRAVERSE_SAMPLES, phase_times
 from app.analysis.diagnosis.noise import NoiseFloor
@@ -73,6 +73,14 @@ MAX_MODE_SPAN = 0.05  # ... its frequency's 90 % half-width, relative, at most
 # too, and is kept where it alone comes within this many times the noise floor: the pins were off (a heavily damped
 # mode read through the lash: 4 % of stiffness the lash took up), not the model short of an effect
 PIN_RECHECK = 1.5
+# ... but not where the grey box's first Gauss-Newton step from the pins (:func:`_grey_box_reach`: 1 + parameters
+# passes, against up to 10 per parameter for its fit) still leaves more than REACH_SKIP x that *and* more than
+# REACH_SHARE of what the pins leave: stiffness and damping then take up little of a residual far above the noise
+# floor, an effect's that the fit would leave too. Both, since the first step can promise several times too little
+# where it does promise much: 20.8x the noise floor on the pins, 7.5x promised, the fit within 1.5x
+# (bench/identify_indep.py's ifinal11); where a large residual was left, the fit came within 0.8-1.3x of the promise
+REACH_SKIP = 10.0
+REACH_SHARE = 0.5
 MAX_MODE_NYQUIST = 0.3  # ... and its frequency at most this many times the speed channel's sampling rate
 MAX_FILE_MODE_NYQUIST = 0.45  # the file's own first mode beyond this share of the sampling rate: not resolved
 N_NUISANCE = 2  # unit-box columns before the effects': torque gain and road load (the offset is profiled)
@@ -464,17 +472,32 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
         at = None if worse else {
             **{BASE_EFFECTS[n].id: {"log2_scale": float(np.log2(r))} for n, (r, _) in pins.items()},
             **{BASE_EFFECTS[n].id: taken.joint.values[BASE_EFFECTS[n].id] for n in taken.names}}
-        try:
-            free = path({}, names, log_free, at)
-        except NotIdentifiableError:
-            free = None
+        reach = None if at is None else _grey_box_reach(vehicle, evs, split, [*pins, *taken.names], taken.joint, at,
+                                                         bounds, opts.model)
+        free: _Path | None = None
+        skip = reach is not None and _out_of_reach(reach, left)
+        if reach is not None and skip:
+            log.append(f"stiffness and damping from the model-free first mode leave chi2/n {left:.3g}; the grey box "
+                       f"fitting them too would leave {reach.chi2 / reach.n:.3g} to first order (over "
+                       f"{REACH_SKIP:g}x the {PIN_RECHECK:g} it must reach and {REACH_SHARE:.0%} of what the mode's "
+                       f"values leave; {reach.nfev} passes): the mode's values kept")
+        else:
+            if reach is not None:
+                log_free.append(f"to first order the grey box leaves chi2/n {reach.chi2 / reach.n:.3g} "
+                                f"({reach.nfev} passes)")
+            try:
+                free = path({}, names, log_free, at)
+            except NotIdentifiableError:
+                free = None
         if free is not None and free.joint.chi2 < taken.joint.chi2 and (
                 worse or free.joint.chi2 / free.joint.n <= PIN_RECHECK):
             taken = free
             log[:] = log_free
-        elif not worse:
+        elif not worse and not skip:
             log.append(f"the grey box fitting stiffness and damping too leaves chi2/n "
-                       f"{'-' if free is None else f'{free.joint.chi2 / free.joint.n:.3g}'}: the mode's values kept")
+                       f"{'-' if free is None else f'{free.joint.chi2 / free.joint.n:.3g}'}"
+                       f"{'' if reach is None else f' ({reach.chi2 / reach.n:.3g} to first order)'}: the mode's values "
+                       "kept")
     joint, names, pins, fitted_on, unresolved, why = taken
     notes: dict[str, str] = {}
     by_rigid = rigid_pin(fitted_on, names, joint, rigid) if rigid is not None else None
@@ -521,6 +544,25 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
     result.modal, result.modal_error = modal, modal_error
     say(1.0, "identified: " + (", ".join(result.named) or "nothing off the file"))
     return result
+
+
+def _out_of_reach(reach: Reach, left: float) -> bool:
+    """Whether the grey box's first step (``reach``) leaves too much for its fit to be tried, the pinned fit
+    leaving ``left`` (chi2 per sample; see :data:`REACH_SKIP`)."""
+    promised = reach.chi2 / max(reach.n, 1)
+    return promised > REACH_SKIP * PIN_RECHECK and promised > REACH_SHARE * left
+
+
+def _grey_box_reach(vehicle: Vehicle, evs: Sequence[DiagEvent], split: Split, names: Sequence[str],
+                    pinned: FitResult, at: Values, bounds: Bounds, model: str) -> Reach | None:
+    """What the grey box fitting ``names`` (stiffness and damping among them) from the pinned solution ``at`` (its
+    nuisance from ``pinned``) reaches to first order (:func:`~app.analysis.diagnosis.calibrate.linear_reach`)."""
+    start = FitResult((), pinned.nuisance, {k: dict(v) for k, v in at.items()}, 0.0, 0, 0)
+    try:
+        return linear_reach(vehicle, evs, split, tuple(BASE_EFFECTS[n] for n in names), start, bounds=bounds,
+                            model=model)
+    except SimError:
+        return None
 
 
 def _unresolved(vehicle: Vehicle, names: Sequence[str], period_s: float) -> list[str]:

@@ -5,13 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import app.identify.fit as fitmod
+from app.analysis.diagnosis.calibrate import Bounds, FitResult, linear_reach
+from app.analysis.diagnosis.calibrate import fit as calfit
 from app.errors import InsufficientDataError, NotIdentifiableError
 from app.identify import FitOptions, identify_events, physical, with_base
-from app.identify.base import effective_stiffness, first_mode, lash_mrad
+from app.identify.base import BASE_EFFECTS, effective_stiffness, first_mode, lash_mrad
+from app.identify.fit import PIN_RECHECK, REACH_SKIP, all_events_split
 from app.signals import Signal, SignalSet
 from sim import load_vehicle
+from sim.effects import apply_effects
 from tests.identify.drives import OFF, drive_signals, prepared
-from tests.support.synthetic import CanSampling
+from tests.support.synthetic import CanSampling, DriveSpec, make_drive, measure, run_truth, to_signals
 
 
 @pytest.fixture(scope="module")
@@ -220,3 +225,74 @@ def test_staged_identification_stops_once_two_stages_agree() -> None:
     assert any(m.startswith("stage 2 (16 events)") for m in said)
     # a drive no longer than a first stage is one identification of all its events
     assert identify_staged(events[:12], noise, load_vehicle("paper"), first=12).n_events == 12
+
+
+def _tyre_drive(seed: int):  # type: ignore[no-untyped-def]
+    """A paper car 10 % heavier than its file, whose tyres slip (an effect no base parameter is)."""
+    paper = load_vehicle("paper")
+    truth = apply_effects(with_base(paper, {"mass": 1.1}), {"tyre_slip": {"compliance_per_mn": 25.0,
+                                                                          "relaxation_m": 0.3}})
+    rng = np.random.default_rng(seed)
+    drive = make_drive(paper, rng, DriveSpec(duration_s=40.0))
+    return prepared(to_signals(measure(drive, run_truth(truth, drive), CanSampling(period_s=0.01), rng)))
+
+
+def _counted(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Simulator passes of every fit and first-order reach the identification runs, as they run."""
+    passes: list[int] = []
+    fit, reach = fitmod.fit, fitmod.linear_reach
+
+    def counted_fit(*a, **kw):  # type: ignore[no-untyped-def]
+        res = fit(*a, **kw)
+        passes.append(res.nfev)
+        return res
+
+    def counted_reach(*a, **kw):  # type: ignore[no-untyped-def]
+        res = reach(*a, **kw)
+        passes.append(0 if res is None else res.nfev)
+        return res
+
+    monkeypatch.setattr(fitmod, "fit", counted_fit)
+    monkeypatch.setattr(fitmod, "linear_reach", counted_reach)
+    return passes
+
+
+def test_the_grey_box_is_not_refitted_where_its_first_step_cannot_reach_the_noise_floor(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The mode's stiffness and damping leave a tyre's slip, many times the noise floor: the grey box fitting them
+    too would, to first order, leave nearly as much, so it is not fitted; the answer is the one its fit gave."""
+    events, noise = _tyre_drive(7)
+    paper = load_vehicle("paper")
+    passes = _counted(monkeypatch)
+    quick = identify_events(events, noise, paper, FitOptions(seed=7))
+    quick_passes = sum(passes)
+    skipped = [line for line in quick.fit_log if "to first order" in line]
+    assert len(skipped) == 1 and "the mode's values kept" in skipped[0]
+    left = float(skipped[0].split("would leave ")[1].split(" ")[0])
+    assert left > REACH_SKIP * PIN_RECHECK
+
+    passes.clear()
+    monkeypatch.setattr(fitmod, "REACH_SKIP", float("inf"))  # the grey box fitted every time, as before
+    full = identify_events(events, noise, paper, FitOptions(seed=7))
+    assert any(line.startswith("the grey box fitting stiffness and damping too leaves") for line in full.fit_log)
+    assert quick.ratios == full.ratios and quick.named == full.named
+    assert quick.chi2_after == full.chi2_after
+    assert quick_passes < 0.7 * sum(passes)
+
+
+def test_the_first_step_of_a_refit_promises_what_a_near_linear_parameter_gives() -> None:
+    """A car 15 % heavier than its file: from the file's values, the mass's first Gauss-Newton step (with the
+    nuisance) promises about what its fit removes, at one pass at the start and one per parameter."""
+    paper = load_vehicle("paper")
+    events, noise = prepared(drive_signals({"mass": 1.15}, seed=9))
+    split = all_events_split(events)
+    bounds = Bounds.for_period(noise.period_s)
+    base = calfit(paper, events, split, (), bounds=bounds, seed=9)
+    mass = BASE_EFFECTS["mass"]
+    reach = linear_reach(paper, events, split, (mass,), base, bounds=bounds)
+    assert reach is not None and reach.nfev == 4  # the start, torque gain, road load, mass
+    assert reach.chi2_at == pytest.approx(base.chi2, rel=1e-9) and reach.n == base.n
+    start = FitResult((), base.nuisance, {mass.id: {"scale": 1.0}}, 0.0, 0, 0)
+    fitted = calfit(paper, events, split, (mass,), bounds=bounds, start=start, screen=False, seed=9)
+    assert fitted.values[mass.id]["scale"] == pytest.approx(1.15, rel=0.03)
+    assert fitted.chi2 < reach.chi2 < 0.1 * reach.chi2_at

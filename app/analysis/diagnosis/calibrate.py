@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, lsq_linear
 
 from app.analysis.blas_threads import single_blas_thread
 from app.analysis.diagnosis import forward
@@ -460,3 +460,44 @@ def fit(
     pairs = trade_offs(jac, [p.name for p in prob.specs], prob.owner) if effects and jac is not None else ()
     return FitResult(tuple(e.id for e in effects), nui, values, _chi2(r), prob.n_res, prob.nfev, tuple(at_bound),
                      message, pairs, settings, r, None if jac is None else np.asarray(jac, dtype=np.float64))
+
+
+@dataclass(frozen=True)
+class Reach:
+    """What a refinement from a point can reach to first order (:func:`linear_reach`).
+
+    Attributes
+    ----------
+    chi2 : calibration chi2 at the bounded Gauss-Newton step from the point (noise units).
+    chi2_at : calibration chi2 at the point itself.
+    n : residual samples.
+    nfev : simulator passes it took (the point and one per parameter).
+    """
+
+    chi2: float
+    chi2_at: float
+    n: int
+    nfev: int
+
+
+@single_blas_thread()
+def linear_reach(base: Vehicle, events: Sequence[DiagEvent], split: Split, effects: Sequence[Effect],
+                 start: FitResult, *, bounds: Bounds, model: str = "multibody") -> Reach | None:
+    """The calibration chi2 a refinement of ``effects`` (with the nuisance) from ``start`` reaches to first order.
+
+    One pass at the start and one per unit-box parameter give the residual and its forward-difference Jacobian (the
+    steps and the profiled time offset of :func:`fit`'s own refinement); the bounded linear least-squares step in the
+    unit box is Gauss-Newton's first step without a trust region, the most a first step could promise. A refinement
+    that needs more than this promise to reach a target rarely gets there, and the promise costs ``1 + parameters``
+    passes against ``PASSES_PER_PARAM`` x that for the refinement. None when the simulator rejects the start.
+    """
+    require_calibration(split, events)
+    prob = _Problem(base, events, effects, bounds, model)
+    u0 = prob.encode(start.nuisance, start.values)
+    r0 = prob.residuals(u0)
+    if np.all(r0 == _PENALTY):
+        return None
+    jac = prob.jacobian(u0, r0)
+    sol = lsq_linear(jac, -r0, bounds=(-u0, 1.0 - u0), method="bvls")
+    r1 = r0 + jac @ np.asarray(sol.x, dtype=np.float64)
+    return Reach(_chi2(r1), _chi2(r0), prob.n_res, prob.nfev)
