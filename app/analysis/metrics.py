@@ -149,27 +149,90 @@ def _impact_peak(y: FloatArray, i0: int, i1: int, prom: float) -> tuple[int, int
     return (j, _adjacent_valley(y, j, peaks, prom)) if i0 < j < y.size - 1 and rises else None
 
 
+KNEE_ROWS = 256  # grid points of the knee fit evaluated at once: (rows, samples) arrays that stay in cache
+KNEE_EDGE = 4  # grid points with this many samples after them or fewer are always evaluated in full
+KNEE_TOL = 1e-6  # relative to n var(y): how close to the screened minimum a grid point is evaluated in full
+
+
+def _knee_rows(t: FloatArray, y: FloatArray, knots: FloatArray, p: float) -> tuple[FloatArray, FloatArray,
+                                                                                 FloatArray]:
+    """SSE, slope and mean regressor of ``b + a max(0, t - t0)^p`` at every knot ``t0``: (rows, n) arrays a block of
+    rows at a time (each row's sums are the same however the rows are grouped)."""
+    n = y.size
+    yc = y - y.mean()
+    vy = np.var(y)
+    sse, a, um = np.empty(knots.size), np.empty(knots.size), np.empty(knots.size)
+    for s in range(0, knots.size, KNEE_ROWS):
+        d = np.maximum(0.0, t[None, :] - knots[s:s + KNEE_ROWS, None])
+        u = d if p == 1.0 else d ** p
+        m = u.mean(axis=1)
+        cov = (u * yc[None, :]).mean(axis=1)
+        var = (u * u).mean(axis=1) - m * m
+        with np.errstate(invalid="ignore", divide="ignore"):
+            slope = cov / var
+            err = n * (vy - cov * cov / var)
+        sse[s:s + KNEE_ROWS] = np.where((var > 0) & (slope > 0), err, np.inf)
+        a[s:s + KNEE_ROWS], um[s:s + KNEE_ROWS] = slope, m
+    return sse, a, um
+
+
+def _knee_screen(t: FloatArray, y: FloatArray, grid: FloatArray, p: float) -> tuple[FloatArray, npt.NDArray[np.intp]]:
+    """The knee fit's SSE at every grid point from running sums (O(grid + n) instead of O(grid n); rounding differs
+    from :func:`_knee_rows`), and the number of samples after each grid point.
+
+    Every sum is taken in the distance ``s`` of a sample from the end of the rise, and every regressor
+    ``t - t0 = D - s`` with ``D`` the knot's distance from the end: each term is within ``D^4`` of the result,
+    whatever the window's length, so the binomial expansions lose no more than a factor 16 to rounding."""
+    n = y.size
+    sig = t[-1] - t
+    d = t[-1] - grid
+    yc = y - y.mean()
+    first = np.searchsorted(t, grid, side="right")  # the samples after each knot: first..n-1
+
+    def tail(x: FloatArray) -> FloatArray:  # sum of x over the samples after each knot, summed from the end
+        return np.concatenate([np.cumsum(x[::-1])[::-1], [0.0]])[first]
+
+    k = (n - first).astype(np.float64)
+    s1, s2, b0, b1 = tail(sig), tail(sig ** 2), tail(yc), tail(sig * yc)
+    if p == 1.0:
+        su, suu, suy = k * d - s1, k * d * d - 2.0 * d * s1 + s2, d * b0 - b1
+    else:
+        s3, s4, b2 = tail(sig ** 3), tail(sig ** 4), tail(sig * sig * yc)
+        su = k * d * d - 2.0 * d * s1 + s2
+        suu = k * d ** 4 - 4.0 * d ** 3 * s1 + 6.0 * d * d * s2 - 4.0 * d * s3 + s4
+        suy = d * d * b0 - 2.0 * d * b1 + b2
+    m, cov = su / n, suy / n
+    var = suu / n - m * m
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sse = n * (np.var(y) - cov * cov / var)
+    return np.asarray(np.where((var > 0) & (cov > 0), sse, np.inf), dtype=np.float64), n - first
+
+
 def _knee_fit(t: FloatArray, y: FloatArray) -> tuple[float, float]:
-    """Fit ``b + a max(0, t - t0)^p`` (a > 0, p in {1, 2}) to a rise; return (t0, b)."""
+    """Fit ``b + a max(0, t - t0)^p`` (a > 0, p in {1, 2}) to a rise; return (t0, b).
+
+    ``t0`` runs over a grid of an eighth of the sample spacing. Running sums screen every grid point; the points
+    within :data:`KNEE_TOL` of the screened minimum, and those the sums cannot resolve (near the end of the rise),
+    are then evaluated in full, so the result is the full evaluation's at every point
+    (``tests/analysis/test_metrics.py`` holds the two equal)."""
     step = max(min(float(np.min(np.diff(t))) / 8.0, 1e-3), 1e-5)
     grid = np.arange(t[0], t[-1], step)
     if grid.size == 0:
         return float(t[0]), float(y[0])
     best = (np.inf, float(t[0]), float(y[0]))
-    n = y.size
+    ym = y.mean()
+    scale = y.size * float(np.var(y))
     for p in (1.0, 2.0):
-        u = np.maximum(0.0, t[None, :] - grid[:, None]) ** p  # (g, n)
-        um = u.mean(axis=1)
-        ym = y.mean()
-        cov = (u * (y - ym)[None, :]).mean(axis=1)
-        var = (u * u).mean(axis=1) - um * um
-        with np.errstate(invalid="ignore", divide="ignore"):
-            a = cov / var
-            sse = n * (np.var(y) - cov * cov / var)
-        sse = np.where((var > 0) & (a > 0), sse, np.inf)
+        screened, after = _knee_screen(t, y, grid, p)
+        low = float(np.min(screened))
+        if not low < (1.0 - 1e-3) * scale:  # nothing fits clearly better than a constant: every point in full
+            rows = np.arange(grid.size)
+        else:
+            rows = np.flatnonzero((screened <= low + KNEE_TOL * scale) | (after <= KNEE_EDGE))
+        sse, a, um = _knee_rows(t, y, grid[rows], p)
         g = int(np.argmin(sse))
         if sse[g] < best[0]:
-            best = (float(sse[g]), float(grid[g]), float(ym - a[g] * um[g]))
+            best = (float(sse[g]), float(grid[rows[g]]), float(ym - a[g] * um[g]))
     return best[1], best[2]
 
 
