@@ -152,6 +152,7 @@ def _impact_peak(y: FloatArray, i0: int, i1: int, prom: float) -> tuple[int, int
 KNEE_ROWS = 256  # grid points of the knee fit evaluated at once: (rows, samples) arrays that stay in cache
 KNEE_EDGE = 4  # grid points with this many samples after them or fewer are always evaluated in full
 KNEE_TOL = 1e-6  # relative to n var(y): how close to the screened minimum a grid point is evaluated in full
+KNEE_DIRECT = 40_000  # grid points x samples up to which every point is evaluated in full without a screen
 
 
 def _knee_rows(t: FloatArray, y: FloatArray, knots: FloatArray, p: float) -> tuple[FloatArray, FloatArray,
@@ -222,17 +223,40 @@ def _knee_fit(t: FloatArray, y: FloatArray) -> tuple[float, float]:
     best = (np.inf, float(t[0]), float(y[0]))
     ym = y.mean()
     scale = y.size * float(np.var(y))
+    every = np.arange(grid.size)
     for p in (1.0, 2.0):
-        screened, after = _knee_screen(t, y, grid, p)
-        low = float(np.min(screened))
-        if not low < (1.0 - 1e-3) * scale:  # nothing fits clearly better than a constant: every point in full
-            rows = np.arange(grid.size)
-        else:
-            rows = np.flatnonzero((screened <= low + KNEE_TOL * scale) | (after <= KNEE_EDGE))
+        rows = every
+        if grid.size * y.size > KNEE_DIRECT:  # a short rise: every point in full costs less than the screen
+            screened, after = _knee_screen(t, y, grid, p)
+            low = float(np.min(screened))
+            if low < (1.0 - 1e-3) * scale:  # else nothing fits clearly better than a constant: every point in full
+                rows = np.flatnonzero((screened <= low + KNEE_TOL * scale) | (after <= KNEE_EDGE))
         sse, a, um = _knee_rows(t, y, grid[rows], p)
         g = int(np.argmin(sse))
         if sse[g] < best[0]:
             best = (float(sse[g]), float(grid[rows[g]]), float(ym - a[g] * um[g]))
+    return best[1], best[2]
+
+
+def knee_fit_in_full(t: FloatArray, y: FloatArray) -> tuple[float, float]:
+    """:func:`_knee_fit` with every grid point evaluated in full, in one (grid, samples) array per power, as the fit
+    was first written: the reference the screened fit is held equal to (tests) and timed against (bench/knee.py)."""
+    step = max(min(float(np.min(np.diff(t))) / 8.0, 1e-3), 1e-5)
+    grid = np.arange(t[0], t[-1], step)
+    if grid.size == 0:
+        return float(t[0]), float(y[0])
+    best = (np.inf, float(t[0]), float(y[0]))
+    for p in (1.0, 2.0):
+        u = np.maximum(0.0, t[None, :] - grid[:, None]) ** p
+        um = u.mean(axis=1)
+        cov = (u * (y - y.mean())[None, :]).mean(axis=1)
+        var = (u * u).mean(axis=1) - um * um
+        with np.errstate(invalid="ignore", divide="ignore"):
+            a = cov / var
+            sse = np.where((var > 0) & (a > 0), y.size * (np.var(y) - cov * cov / var), np.inf)
+        g = int(np.argmin(sse))
+        if sse[g] < best[0]:
+            best = (float(sse[g]), float(grid[g]), float(y.mean() - a[g] * um[g]))
     return best[1], best[2]
 
 

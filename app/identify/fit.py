@@ -78,7 +78,7 @@ PIN_RECHECK = 1.5
 # REACH_SHARE of what the pins leave: stiffness and damping then take up little of a residual far above the noise
 # floor, an effect's that the fit would leave too. Both, since the first step can promise several times too little
 # where it does promise much: 20.8x the noise floor on the pins, 7.5x promised, the fit within 1.5x
-# (bench/identify_indep.py's ifinal11); where a large residual was left, the fit came within 0.8-1.3x of the promise
+# (bench/identify_indep.py's ifinal11); where the step promised over 15x, the fit left 0.78-1.0x of it (17 drives)
 REACH_SKIP = 10.0
 REACH_SHARE = 0.5
 MAX_MODE_NYQUIST = 0.3  # ... and its frequency at most this many times the speed channel's sampling rate

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.analysis.metrics import MetricParams, _knee_fit, rigid_trend, ripple_metrics
+from app.analysis.metrics import MetricParams, _knee_fit, knee_fit_in_full, rigid_trend, ripple_metrics
 from app.signals import Signal
 from tests.analysis.synthetic import damped_response
 
@@ -91,27 +91,6 @@ def test_a_trace_without_ripple_has_no_metrics() -> None:
     assert np.isnan(m.fluctuation_rpm) and np.isnan(m.shuffle_freq_hz)
 
 
-def _knee_in_full(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """The knee fit evaluated at every grid point (the screen's reference)."""
-    step = max(min(float(np.min(np.diff(t))) / 8.0, 1e-3), 1e-5)
-    grid = np.arange(t[0], t[-1], step)
-    if grid.size == 0:
-        return float(t[0]), float(y[0])
-    best = (np.inf, float(t[0]), float(y[0]))
-    for p in (1.0, 2.0):  # one (grid, samples) array, as the fit was first written
-        u = np.maximum(0.0, t[None, :] - grid[:, None]) ** p
-        um = u.mean(axis=1)
-        cov = (u * (y - y.mean())[None, :]).mean(axis=1)
-        var = (u * u).mean(axis=1) - um * um
-        with np.errstate(invalid="ignore", divide="ignore"):
-            a = cov / var
-            sse = np.where((var > 0) & (a > 0), y.size * (np.var(y) - cov * cov / var), np.inf)
-        g = int(np.argmin(sse))
-        if sse[g] < best[0]:
-            best = (float(sse[g]), float(grid[g]), float(y.mean() - a[g] * um[g]))
-    return best[1], best[2]
-
-
 @pytest.mark.parametrize("kind", ["rise", "quantised rise", "noise", "fall", "one late sample"])
 def test_the_screened_knee_fit_is_the_full_evaluations_to_the_last_bit(kind: str) -> None:
     """Running sums screen the grid, and only points near the screened minimum are evaluated in full: the result
@@ -133,7 +112,7 @@ def test_the_screened_knee_fit_is_the_full_evaluations_to_the_last_bit(kind: str
         else:
             y = np.zeros(n)
             y[-1] = 5.0
-        assert _knee_fit(t, y) == _knee_in_full(t, y)
+        assert _knee_fit(t, y) == knee_fit_in_full(t, y)
 
 
 def test_the_knee_fit_finds_the_knee_of_a_clean_rise() -> None:
