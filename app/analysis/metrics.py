@@ -225,8 +225,8 @@ def _knee_fit(t: FloatArray, y: FloatArray) -> tuple[float, float]:
     scale = y.size * float(np.var(y))
     every = np.arange(grid.size)
     for p in (1.0, 2.0):
-        rows = every
-        if grid.size * y.size > KNEE_DIRECT:  # a short rise: every point in full costs less than the screen
+        rows = every  # a short rise: every point in full costs less than the screen
+        if grid.size * y.size > KNEE_DIRECT:
             screened, after = _knee_screen(t, y, grid, p)
             low = float(np.min(screened))
             if low < (1.0 - 1e-3) * scale:  # else nothing fits clearly better than a constant: every point in full

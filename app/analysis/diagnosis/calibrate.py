@@ -487,9 +487,11 @@ def linear_reach(base: Vehicle, events: Sequence[DiagEvent], split: Split, effec
 
     One pass at the start and one per unit-box parameter give the residual and its forward-difference Jacobian (the
     steps and the profiled time offset of :func:`fit`'s own refinement); the bounded linear least-squares step in the
-    unit box is Gauss-Newton's first step without a trust region, the most a first step could promise. A refinement
-    that needs more than this promise to reach a target rarely gets there, and the promise costs ``1 + parameters``
-    passes against ``PASSES_PER_PARAM`` x that for the refinement. None when the simulator rejects the start.
+    unit box is Gauss-Newton's first step without a trust region. Where the residual is near linear in the parameters
+    the refinement ends near this promise; where it is not, it can end far below it (a progressive shaft's joint fit
+    with the base: 37x, docs/diagnosis.md), so a caller weighs it with a margin measured for its own parameters. The
+    promise costs ``1 + parameters`` passes against ``PASSES_PER_PARAM`` x that for the refinement. None when the
+    simulator rejects the start.
     """
     require_calibration(split, events)
     prob = _Problem(base, events, effects, bounds, model)
