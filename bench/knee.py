@@ -16,6 +16,8 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +39,17 @@ def drive(period_s: float, seed: int = 3) -> SignalSet:
     return to_signals(measure(d, run_truth(paper, d), CanSampling(period_s=period_s), rng))
 
 
+@contextmanager
+def knee_fit(f: Callable[[np.ndarray, np.ndarray], tuple[float, float]]) -> Iterator[None]:
+    """``analyze_signals`` with ``f`` as its knee fit while the block runs."""
+    saved = metrics._knee_fit
+    metrics._knee_fit = f
+    try:
+        yield
+    finally:
+        metrics._knee_fit = saved
+
+
 def windows(signals: SignalSet) -> list[tuple[np.ndarray, np.ndarray]]:
     """The rise windows ``analyze_signals`` fits a knee to."""
     kept: list[tuple[np.ndarray, np.ndarray]] = []
@@ -46,11 +59,8 @@ def windows(signals: SignalSet) -> list[tuple[np.ndarray, np.ndarray]]:
         kept.append((t.copy(), y.copy()))
         return fit(t, y)
 
-    metrics._knee_fit = keep
-    try:
+    with knee_fit(keep):
         analyze_signals(signals, load_vehicle("paper"))
-    finally:
-        metrics._knee_fit = fit
     return kept
 
 
@@ -87,12 +97,8 @@ def main() -> int:
         vehicle = load_vehicle("paper")
         spent = {}
         for name, f in (("screened", metrics._knee_fit), ("in full", metrics.knee_fit_in_full)):
-            saved = metrics._knee_fit
-            metrics._knee_fit = f
-            try:
+            with knee_fit(f):
                 spent[name] = min(_timed(lambda: analyze_signals(fast, vehicle)) for _ in range(args.repeat))
-            finally:
-                metrics._knee_fit = saved
         print(f"analyze_signals on the 1 kHz drive: {spent['screened']:.2f} s CPU with the screened fit, "
               f"{spent['in full']:.2f} s in full, ratio {spent['in full'] / spent['screened']:.2f}")
     return 0

@@ -462,6 +462,17 @@ def fit(
                      message, pairs, settings, r, None if jac is None else np.asarray(jac, dtype=np.float64))
 
 
+def linear_cost(r0: FloatArray, cols: FloatArray, lo: FloatArray, hi: FloatArray) -> tuple[float, FloatArray]:
+    """Least ``|r0 + cols a|^2`` over ``lo <= a <= hi``, and its ``a`` (a first-order step: :func:`linear_reach`,
+    and the partner screen of :mod:`~app.analysis.diagnosis.partners`)."""
+    if cols.shape[1] == 0:
+        return float(r0 @ r0), np.zeros(0)
+    sol = lsq_linear(cols, -r0, bounds=(lo, hi), method="bvls")
+    a = np.asarray(sol.x, dtype=np.float64)
+    res = r0 + cols @ a
+    return float(res @ res), a
+
+
 @dataclass(frozen=True)
 class Reach:
     """What a refinement from a point can reach to first order (:func:`linear_reach`).
@@ -499,7 +510,5 @@ def linear_reach(base: Vehicle, events: Sequence[DiagEvent], split: Split, effec
     r0 = prob.residuals(u0)
     if np.all(r0 == _PENALTY):
         return None
-    jac = prob.jacobian(u0, r0)
-    sol = lsq_linear(jac, -r0, bounds=(-u0, 1.0 - u0), method="bvls")
-    r1 = r0 + jac @ np.asarray(sol.x, dtype=np.float64)
-    return Reach(_chi2(r1), _chi2(r0), prob.n_res, prob.nfev)
+    promised, _ = linear_cost(r0, prob.jacobian(u0, r0), -u0, 1.0 - u0)
+    return Reach(promised, _chi2(r0), prob.n_res, prob.nfev)

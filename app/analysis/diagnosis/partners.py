@@ -27,9 +27,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import lsq_linear
 
-from app.analysis.diagnosis.calibrate import Bounds, FitResult
+from app.analysis.diagnosis.calibrate import Bounds, FitResult, linear_cost
 from app.analysis.diagnosis.forward import (
     DiagEvent,
     EffectSetting,
@@ -85,16 +84,6 @@ def residual_at(base: Vehicle, events: Sequence[DiagEvent], nui: Nuisance, setti
     return np.asarray(np.nan_to_num(r, nan=0.0, posinf=0.0, neginf=0.0), dtype=np.float64)
 
 
-def _cost(r0: FloatArray, cols: FloatArray, lo: FloatArray, hi: FloatArray) -> tuple[float, FloatArray]:
-    """Least ``|r0 + cols a|^2`` over ``lo <= a <= hi``, and its ``a``."""
-    if cols.shape[1] == 0:
-        return float(r0 @ r0), np.zeros(0)
-    sol = lsq_linear(cols, -r0, bounds=(lo, hi), method="bvls")
-    a = np.asarray(sol.x, dtype=np.float64)
-    res = r0 + cols @ a
-    return float(res @ res), a
-
-
 def _coefficient_range(lo: float, hi: float, value: float, step: float) -> tuple[float, float]:
     """The range of a column's coefficient: a parameter at ``value`` probed by ``step`` stays within ``lo..hi`` (and
     the coefficient 0, no move, is always inside, for a value already past a bound)."""
@@ -134,7 +123,7 @@ def screen_partners(base: Vehicle, events: Sequence[DiagEvent], first: FitResult
     jn = np.column_stack(n_cols) if n_cols else np.zeros((r0.size, 0))
     nui_lo = np.array(n_lo, dtype=np.float64)
     nui_hi = np.array(n_hi, dtype=np.float64)
-    cost_n, _ = _cost(r0, jn, nui_lo, nui_hi)
+    cost_n, _ = linear_cost(r0, jn, nui_lo, nui_hi)
     out = []
     for cid in partners:
         eff = get_effect(cid)
@@ -159,7 +148,7 @@ def screen_partners(base: Vehicle, events: Sequence[DiagEvent], first: FitResult
             out.append(PartnerScreen(cid, 0.0))
             continue
         jc = np.column_stack([jn, *cols])
-        cost, a = _cost(r0, jc, np.concatenate([nui_lo, lo]), np.concatenate([nui_hi, hi]))
+        cost, a = linear_cost(r0, jc, np.concatenate([nui_lo, lo]), np.concatenate([nui_hi, hi]))
         moves = [(p, float(ak * step)) for (p, step), ak in zip(steps, a[jn.shape[1]:], strict=True)]
         starts = tuple({p.name: float(np.clip(p.off + share * move, p.lo, p.hi)) for p, move in moves}
                        for share in STEP_SHARES)
