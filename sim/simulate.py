@@ -123,7 +123,7 @@ def plan_step(chain: ChainModel, output_dt: float, dt: float | None = None, *, t
     nc = chain.n_couplings
     none = np.zeros(nc, dtype=np.bool_)
     if dt is not None or not AUTO_IMPLICIT:
-        return (*choose_step(chain, output_dt, dt, torque_max=torque_max, omega_vehicle=omega_vehicle), none)
+        return (*choose_step(chain, output_dt, dt), none)
     if output_dt <= 0 or not math.isfinite(output_dt):
         raise ParameterError("output_dt", output_dt, "must be a positive number of seconds")
     ck = tangent_stiffness(chain, torque_max)
