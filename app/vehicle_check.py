@@ -4,7 +4,7 @@ Loading a driveline checks its values one by one; a value can still be legal and
 (``mesh2_stiffness = 1e30``), making the stiffest mode so fast that the integrator step
 collapses and one simulated second needs more steps than any analysis could afford. The
 trial builds the chain and asks the simulator for its step at the analysis' 1 ms output grid
-(:func:`sim.simulate.plan_step`, no integration), and rejects the vehicle when a simulated
+(:func:`sim.simulate.choose_step`, no integration), and rejects the vehicle when a simulated
 second needs more than :data:`MAX_STEPS_PER_S` steps, naming the fields furthest from the
 paper preset as the likely cause.
 """
@@ -16,7 +16,7 @@ import tomllib
 from typing import Any
 
 from sim import ParameterError, SimError, Vehicle, dump_toml, load_vehicle
-from sim.simulate import plan_step
+from sim.simulate import choose_step
 
 MAX_STEPS_PER_S = 1_000_000  # the paper preset needs 15 000; a 30-min log at this cost is ~2e9 steps
 TRIAL_TORQUE_NM = 400.0  # progressive springs are judged at the deflection this torque causes
@@ -77,7 +77,7 @@ def suspect_fields(vehicle: Vehicle) -> list[tuple[str, float, float]]:
 
 def steps_per_second(vehicle: Vehicle) -> float:
     """Integrator steps one simulated second of the multibody model needs at a 1 ms output grid."""
-    _, sub, _ = plan_step(vehicle.compiled, 0.001, torque_max=TRIAL_TORQUE_NM)
+    _, sub = choose_step(vehicle.compiled, 0.001, torque_max=TRIAL_TORQUE_NM)
     return 1000.0 * sub
 
 

@@ -16,10 +16,6 @@ Run: ``.venv/bin/python bench/sim.py`` (single process; numba compiles once and 
 1b. Real-time factor of that log through every preset (``--presets``: only this part).
 4. With ``--scan``: the accuracy scan behind the step rule. Four tip-in scenarios against LSODA
    at rtol 1e-10 on a 10 us grid; for each step, the largest p2p-ripple and unloaded-time error.
-5. With ``--implicit``: the explicit kick against implicit stiff dampers (``sim.simulate.plan_step`` with
-   ``AUTO_IMPLICIT``) on the paper car with every stage's damping x1-x8 (identification fits damping up to
-   x8): steps, CPU per run (best of 5, same process) and the ratio, each scheme's error against LSODA
-   (rtol 1e-9) on a tip-in.
 """
 
 from __future__ import annotations
@@ -194,68 +190,14 @@ def step_scan() -> None:
               f"max p2p error {e[:, 0].max():.3f} rpm, max unloaded-time error {e[:, 1].max():.3f} ms")
 
 
-def implicit_dampers() -> None:
-    """Part 5: explicit kick vs implicit stiff dampers on a more and more damped paper car."""
-    import importlib
-
-    from sim.linear import step_limit, tangent_stiffness
-    from sim.model import build_chain, quasi_static_full
-    from sim.reference import solve_reference
-    from sim.runner import run_from_state
-
-    sm = importlib.import_module("sim.simulate")  # the module: sim.simulate is also the function
-    paper = load_vehicle("paper")
-    t, q = tip_in_torque(1.0, duration_s=0.45)
-    grid = np.arange(0.0, 0.45, 1e-3)
-    q_max = float(np.max(np.abs(q)))
-    print("[5] implicit stiff dampers: the paper car, every stage's damping scaled; one 0.45 s tip-in")
-    total = {"explicit": 0.0, "implicit": 0.0}
-    for factor in (1.0, 2.0, 3.0, 4.0, 6.0, 8.0):
-        v = paper.with_changes({paper.field_of(st.name, "damping"): float(st.damping) * factor for st in paper.chain
-                                if st.kind not in ("rotor", "wheel") and st.has_coupling and st.damping > 0})
-        m = build_chain(v)
-        theta0, omega0, tyre0 = quasi_static_full(m, float(q[0]), 100.0)
-        _, om, _ = solve_reference(m, t, q, True, 100.0, grid, rtol=1e-9, atol=1e-10)
-        ref = (om[:, m.rotor] - om[:, m.housing]) * RPM
-        sm.AUTO_IMPLICIT = True
-        try:
-            plan = sm.plan_step(m, 1e-3, torque_max=q_max)
-        finally:
-            sm.AUTO_IMPLICIT = False
-        explicit = sm.choose_step(m, 1e-3, torque_max=q_max)
-        explicit_limit = step_limit(m, 0.0, tangent_stiffness(m, q_max))
-        line = [f"    damping x{factor:<3g} explicit limit {explicit_limit * 1e6:6.1f} us"]
-        cpu = {}
-        for name, (step, sub, mask) in (("explicit", (*explicit, None)), ("implicit", plan)):
-            best = np.inf
-            for _ in range(5):
-                c0 = time.process_time()
-                run = run_from_state(m, t, q, True, 0.0, step, sub, grid.size, theta0, omega0, tyre0,
-                                     events=False, states=False, implicit=mask)
-                best = min(best, time.process_time() - c0)
-            cpu[name] = best
-            total[name] += best
-            err = run.resolver * RPM - ref
-            n_imp = 0 if mask is None else int(np.sum(mask))
-            line.append(f"{name} {step * 1e6:5.1f} us ({n_imp} implicit) {best * 1e3:6.2f} ms CPU, "
-                        f"rms error {np.sqrt(np.mean(err ** 2)):.3f} rpm, max {np.max(np.abs(err)):.3f}")
-        line.append(f"ratio {cpu['explicit'] / cpu['implicit']:.2f}")
-        print(" | ".join(line))
-    print(f"    total: explicit {total['explicit'] * 1e3:.1f} ms, implicit {total['implicit'] * 1e3:.1f} ms, "
-          f"ratio {total['explicit'] / total['implicit']:.2f}")
-
-
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description="Simulator benchmark: compiled integrator vs solve_ivp (LSODA), Monte "
                                  "Carlo (parts 1-3 of the module docstring; the whole run takes a few minutes)")
     part = ap.add_mutually_exclusive_group()
     part.add_argument("--presets", action="store_true", help="only part 1b: real-time factor of every preset")
     part.add_argument("--scan", action="store_true", help="only part 4: the accuracy scan behind the step rule")
-    part.add_argument("--implicit", action="store_true", help="only part 5: explicit kick vs implicit stiff dampers")
     args = ap.parse_args()
-    if args.implicit:
-        implicit_dampers()
-    elif args.scan:
+    if args.scan:
         step_scan()
     elif args.presets:
         presets_realtime(*drive_log())

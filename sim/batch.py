@@ -16,7 +16,7 @@ from sim.integrate import STATUS_OK, is_kernel_layout, run_chain_batch
 from sim.metrics import peak_to_valley, unloaded_time
 from sim.model import ChainModel, deflections, quasi_static_full
 from sim.params import Vehicle
-from sim.simulate import RPM, _grid, _pair_events, airgap_input, initial_speed, plan_step
+from sim.simulate import RPM, _grid, _pair_events, airgap_input, choose_step, initial_speed
 
 F64 = NDArray[np.float64]
 EVENTS_PER_VARIANT = 2000
@@ -98,11 +98,12 @@ def _simulate_batch(
     w0 = initial_speed(vehicle, speed0_rpm)
     states = [quasi_static_full(c, float(inp.torque[0]), w0) for c in chains]
     q_max = float(np.max(np.abs(inp.torque)))
-    steps = [plan_step(c, output_dt, torque_max=q_max, omega_vehicle=float(s[1][c.vehicle]) if c.vehicle >= 0 else 0.0)
+    steps = [choose_step(c, output_dt, torque_max=q_max,
+                         omega_vehicle=float(s[1][c.vehicle]) if c.vehicle >= 0 else 0.0)
              for c, s in zip(chains, states, strict=True)]
-    for k, (step, sub, _) in enumerate(steps):
+    for k, (step, sub) in enumerate(steps):
         check_steps(span, step, (n_out - 1) * sub, auto=True, what=f"variant {k}")
-    total = sum((n_out - 1) * s[1] for s in steps)
+    total = sum((n_out - 1) * sub for _, sub in steps)
     check_steps(span, min(s[0] for s in steps), total, auto=True, limit=MAX_BATCH_STEPS,
                 what=f"all {nv} variants together")
 
@@ -127,7 +128,7 @@ def _simulate_batch(
         inp.t, inp.torque, inp.linear, t0, np.array([s[0] for s in steps]), n_out,
         np.array([s[1] for s in steps], dtype=np.int64),
         np.stack([s[0] for s in states]), np.stack([s[1] for s in states]), 20.0 * abs(w0) + 5000.0,
-        np.stack([s[2] for s in steps]), out, ev_gap, ev_t, ev_kind, status, n_events, out_body, body,
+        out, ev_gap, ev_t, ev_kind, status, n_events, out_body, body,
     )
     bad = np.flatnonzero(status != STATUS_OK)
     if bad.size:
@@ -306,8 +307,8 @@ def _check_analysis_budget(vehicle: Vehicle, t_s: ArrayLike, torque_nm: ArrayLik
     check_output(float(inp.t[-1]) - t0, output_dt, n_out, 32 * runs)  # every variant's speeds, kept for metrics
     chain = vehicle.compiled
     _, omega0, _ = quasi_static_full(chain, float(inp.torque[0]), initial_speed(vehicle, speed0_rpm))
-    step, sub, _ = plan_step(chain, output_dt, torque_max=float(np.max(np.abs(inp.torque))),
-                             omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
+    step, sub = choose_step(chain, output_dt, torque_max=float(np.max(np.abs(inp.torque))),
+                            omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
     span = float(inp.t[-1]) - t0
     check_steps(span, step, (n_out - 1) * sub, auto=True, limit=MAX_STEPS, what="one variant")
     check_steps(span, step, runs * (n_out - 1) * sub, auto=True, limit=MAX_BATCH_STEPS,

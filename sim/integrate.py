@@ -61,141 +61,6 @@ def contact_torque(delta: float, ddelta: float, k: float, k3: float, c: float, h
 
 
 @njit(cache=True, inline="always")
-def contact_torque_rate(delta: float, ddelta: float, k: float, k3: float, c: float, half: float,
-                        ramp: float) -> tuple[float, float]:
-    """:func:`contact_torque` (the same arithmetic) and its ``d torque / d ddelta`` in the regime the state is in
-    (N m s/rad): the damping a linearly implicit step takes at the new speeds; 0 in the dead zone, where the
-    clamp acts and where the ``limited`` law's damper is capped by the spring."""
-    if half <= 0.0:
-        return k * delta + k3 * delta * delta * delta + c * ddelta, c
-    if delta > half:
-        x = delta - half
-        tc = k * x + k3 * x * x * x
-        td = c * ddelta
-        if ramp > 0.0:
-            w = min(x / ramp, 1.0)
-            f = tc + td * w
-            return (f, c * w) if f > 0.0 else (0.0, 0.0)
-        if td > -tc:
-            return (tc + td, c) if td < tc else (tc + tc, 0.0)
-        return 0.0, 0.0
-    if delta < -half:
-        x = delta + half
-        tc = k * x + k3 * x * x * x
-        td = c * ddelta
-        if ramp > 0.0:
-            w = min(-x / ramp, 1.0)
-            f = tc + td * w
-            return (f, c * w) if f < 0.0 else (0.0, 0.0)
-        if td < -tc:
-            return (tc + td, c) if td > tc else (tc + tc, 0.0)
-        return 0.0, 0.0
-    return 0.0, 0.0
-
-
-@njit(cache=True)
-def coupling_pattern(ca: np.ndarray, cb: np.ndarray, cr: np.ndarray, ce: np.ndarray, cb2: np.ndarray,
-                     housing: int, nb: int, implicit: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int]:
-    """Non-zeros of every coupling's row of ``G`` (``delta = G theta``, as the step loop forms it): body
-    indices (nc, 4), coefficients (nc, 4) and counts (nc,); the envelope of ``G' diag(implicit) G``, the first
-    column of every row's lower part (nb,), which an LDL' factor keeps (a serial chain: the subdiagonal); and
-    the bodies ``lo:hi`` the implicit couplings touch. The housing mount (last, ``cb < 0``) is the housing's own
-    angle."""
-    nc = ca.size
-    idx = np.zeros((nc, 4), dtype=np.int64)
-    val = np.zeros((nc, 4))
-    cnt = np.zeros(nc, dtype=np.int64)
-    first = np.arange(nb)
-    lo, hi = nb, 0
-    for j in range(nc):
-        idx[j, 0] = ca[j]
-        val[j, 0] = 1.0
-        n = 1
-        if cb2[j] >= 0:
-            idx[j, 1] = cb[j]
-            val[j, 1] = -0.5 * cr[j]
-            idx[j, 2] = cb2[j]
-            val[j, 2] = -0.5 * cr[j]
-            n = 3
-        elif cb[j] >= 0:
-            idx[j, 1] = cb[j]
-            val[j, 1] = -cr[j]
-            n = 2
-        if cb[j] >= 0 and housing >= 0 and ce[j] != 0.0:
-            idx[j, n] = housing
-            val[j, n] = -ce[j]
-            n += 1
-        cnt[j] = n
-        if not implicit[j]:
-            continue
-        for u in range(n):
-            lo = min(lo, idx[j, u])
-            hi = max(hi, idx[j, u] + 1)
-            for v in range(n):
-                if idx[j, v] < first[idx[j, u]]:
-                    first[idx[j, u]] = idx[j, v]
-    return idx, val, cnt, first, lo, hi
-
-
-@njit(cache=True)
-def implicit_factor(inertia: np.ndarray, dt: float, rate: np.ndarray, g_idx: np.ndarray, g_val: np.ndarray,
-                    g_cnt: np.ndarray, first: np.ndarray, lo: int, hi: int, a: np.ndarray) -> None:
-    """``a[lo:hi, lo:hi]`` := LDL' of ``J + dt G' diag(rate) G`` on the bodies ``lo:hi`` within the envelope
-    ``first``: L below the diagonal, 1 / D on it (``rate`` is zero for the explicit couplings). The matrix is
-    symmetric positive definite (inertias > 0, rates >= 0): no pivoting."""
-    for p in range(lo, hi):
-        for q in range(lo, hi):
-            a[p, q] = 0.0
-        a[p, p] = inertia[p]
-    for j in range(rate.size):
-        r = dt * rate[j]
-        if r == 0.0:
-            continue
-        n = g_cnt[j]
-        for u in range(n):
-            ru = r * g_val[j, u]
-            iu = g_idx[j, u]
-            for v in range(n):
-                a[iu, g_idx[j, v]] += ru * g_val[j, v]
-    for p in range(lo, hi):  # a[q, q] holds D for q < p until the reciprocals are taken below
-        d = a[p, p]
-        for q in range(first[p], p):
-            d -= a[p, q] * a[p, q] * a[q, q]
-        a[p, p] = d
-        for i in range(p + 1, hi):
-            if first[i] > p:
-                continue
-            s = a[i, p]
-            for q in range(max(first[i], first[p]), p):
-                s -= a[i, q] * a[p, q] * a[q, q]
-            a[i, p] = s / d
-    for p in range(lo, hi):
-        a[p, p] = 1.0 / a[p, p]
-
-
-@njit(cache=True, inline="always")
-def implicit_kick(acc: np.ndarray, inertia: np.ndarray, a: np.ndarray, first: np.ndarray, lo: int, hi: int) -> None:
-    """Turn the net torques ``acc`` into those whose explicit kick ``dt acc / J`` is the linearly implicit one,
-    ``(J + dt G' diag(rate) G) dw = dt acc`` with ``a`` that matrix's LDL' on the bodies ``lo:hi``
-    (:func:`implicit_factor`): the implicit couplings' damping taken at the new speeds. ``acc := J A^-1 acc``
-    (``dt`` cancels); the other bodies keep their explicit kick."""
-    for p in range(lo, hi):
-        s = acc[p]
-        for q in range(first[p], p):
-            s -= a[p, q] * acc[q]
-        acc[p] = s
-    for p in range(lo, hi):
-        acc[p] *= a[p, p]
-    for p in range(hi - 1, lo - 1, -1):  # L' x = D^-1 y, column by column within the envelope
-        x = acc[p]
-        for q in range(first[p], p):
-            acc[q] -= a[p, q] * x
-    for p in range(lo, hi):
-        acc[p] *= inertia[p]
-
-
-@njit(cache=True, inline="always")
 def input_at(tin: np.ndarray, tq: np.ndarray, linear: bool, t: float, k: int) -> tuple[float, int]:
     """Torque at time ``t`` from samples (hold or linear); ``k`` is a moving cursor (t non-decreasing)."""
     n = tin.size
@@ -327,7 +192,6 @@ def run_chain(
     rotor_drag: np.ndarray, lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray,
     tin: np.ndarray, tq: np.ndarray, linear: bool,
     t0: float, dt: float, n_out: int, sub: int, theta0: np.ndarray, omega0: np.ndarray, speed_limit: float,
-    implicit: np.ndarray,
     out_res: np.ndarray, out_sensor: np.ndarray, out_torque: np.ndarray, out_omega: np.ndarray,
     out_tau: np.ndarray, out_open: np.ndarray, ev_gap: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray,
 ) -> tuple[int, float, int]:
@@ -345,12 +209,6 @@ def run_chain(
     [k_t, R/sigma, tau_t at t0]``; its torque goes to column ``nc`` of ``out_tau`` if present.
     Gap events (coupling index, time interpolated within the step, 1=open 0=close) go to
     ``ev_*`` up to their length. Returns ``(status, t_fail, n_events)``.
-
-    ``implicit`` (nc, bool): the couplings whose damping (in their current regime, :func:`contact_torque_rate`)
-    is taken at the new speeds, a linearly implicit kick (:func:`implicit_kick`, one small banded solve per
-    step on the bodies they join); their dampers then do not limit the step (:func:`sim.linear.step_limit`),
-    which pays where a heavily damped coupling between light bodies, not a stiffness, sets the explicit
-    step. None set, the kick is explicit and the numbers are those of the scheme above.
 
     Coupling ``j`` joins ``ca[j]`` to ``cb[j]`` (and, for the 3-body open differential, to the
     mean of ``cb[j]`` and ``cb2[j]``); the housing mount, if any, is the last coupling and its
@@ -375,13 +233,6 @@ def run_chain(
     d_prev = np.zeros(nc)
     is_open = np.zeros(nc, dtype=np.bool_)
     tyre_tau = tyre[2] if vehicle >= 0 else 0.0
-    rate = np.zeros(nc)  # implicit couplings: d torque / d(deflection rate) this step (0 for the others)
-    g_idx, g_val, g_cnt, g_first, lo, hi = coupling_pattern(ca, cb, cr, ce, cb2, housing, nb, implicit)
-    use_imp = lo < hi
-    a_imp = np.zeros((nb, nb) if use_imp else (0, 0))
-    if housing >= 0 and implicit[nch]:
-        rate[nch] = cc[nch]  # the mount: a plain spring-damper to ground
-    rate_f = np.full(nc, -1.0)  # the rates ``a_imp`` holds the factor of (none yet)
     serial = True
     for j in range(nch):
         if ca[j] != j or cb[j] != j + 1 or cb2[j] >= 0:
@@ -420,10 +271,7 @@ def run_chain(
                 for j in range(nch):
                     d = theta[j] - cr[j] * theta[j + 1] - ce[j] * th_h
                     dd = omega[j] - cr[j] * omega[j + 1] - ce[j] * om_h
-                    if implicit[j]:
-                        f, rate[j] = contact_torque_rate(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
-                    else:
-                        f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
                     acc[j] = carry - f
                     carry = 0.0 + cr[j] * f
                     acc_h += ce[j] * f
@@ -432,10 +280,7 @@ def run_chain(
                 for j in range(nch):
                     d = theta[j] - cr[j] * theta[j + 1] - ce[j] * th_h
                     dd = omega[j] - cr[j] * omega[j + 1] - ce[j] * om_h
-                    if implicit[j]:
-                        f, rate[j] = contact_torque_rate(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
-                    else:
-                        f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
                     tau[j] = f
                     acc[j] -= f
                     acc[j + 1] += cr[j] * f
@@ -455,10 +300,7 @@ def run_chain(
                     else:
                         d = theta[a] - cr[j] * (0.5 * (theta[bb] + theta[b2])) - ce[j] * th_h
                         dd = omega[a] - cr[j] * (0.5 * (omega[bb] + omega[b2])) - ce[j] * om_h
-                    if implicit[j]:
-                        f, rate[j] = contact_torque_rate(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
-                    else:
-                        f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
+                    f = contact_torque(d, dd, ck[j], ck3[j], cc[j], chalf[j], cramp[j])
                     tau[j] = f
                     acc[a] -= f
                     if b2 < 0:
@@ -497,14 +339,6 @@ def run_chain(
             else:
                 acc[wheel] -= wheel_load(road, wheel_drag, omega[wheel], 0.5)
                 acc[wheel2] -= wheel_load(road, wheel_drag, omega[wheel2], 0.5)
-            if use_imp:  # refactor only when a coupling changed regime (gaps, clamps, the full law's ramp)
-                for j in range(nc):
-                    if rate[j] != rate_f[j]:
-                        for i in range(nc):
-                            rate_f[i] = rate[i]
-                        implicit_factor(inertia, dt, rate_f, g_idx, g_val, g_cnt, g_first, lo, hi, a_imp)
-                        break
-                implicit_kick(acc, inertia, a_imp, g_first, lo, hi)
             if s == 0:  # output row: speeds synchronised with the angles by half of this step's kick
                 res = omega[rotor] + 0.5 * dtj[rotor] * acc[rotor]
                 if housing >= 0:
@@ -547,12 +381,11 @@ def run_chain_batch(
     rotor_drag: np.ndarray,
     lag: np.ndarray, sensor_tau: float, vehicle: int, tyre: np.ndarray, tin: np.ndarray, tq: np.ndarray, linear: bool,
     t0: float, dt: np.ndarray, n_out: int, sub: np.ndarray, theta0: np.ndarray, omega0: np.ndarray,
-    speed_limit: float, implicit: np.ndarray, out_res: np.ndarray, ev_gap: np.ndarray, ev_t: np.ndarray,
-    ev_kind: np.ndarray, status: np.ndarray, n_events: np.ndarray, out_body: np.ndarray, body: int,
+    speed_limit: float, out_res: np.ndarray, ev_gap: np.ndarray, ev_t: np.ndarray, ev_kind: np.ndarray,
+    status: np.ndarray, n_events: np.ndarray, out_body: np.ndarray, body: int,
 ) -> None:
     """Variant ``v`` uses row ``v`` of every 2-D parameter array (``tyre``: (nv, 3)); resolver speed to
-    ``out_res[v]``; the speed (rad/s) of body ``body`` to ``out_body[v]`` when ``out_body`` has rows; ``implicit[v]``
-    the variant's implicit couplings (:func:`run_chain`)."""
+    ``out_res[v]``; the speed (rad/s) of body ``body`` to ``out_body[v]`` when ``out_body`` has rows."""
     nv = inertia.shape[0]
     nb = inertia.shape[1]
     nc = ca.size
@@ -569,7 +402,7 @@ def run_chain_batch(
             wheel_drag[v], road[v], rotor_drag[v], lag, sensor_tau, vehicle, tyre[v], tin, tq, linear, t0, dt[v],
             n_out, sub[v],
             theta0[v], omega0[v],
-            speed_limit, implicit[v], out_res[v], sens, torq, buf_f, buf_t, buf_o, ev_gap[v], ev_t[v], ev_kind[v],
+            speed_limit, out_res[v], sens, torq, buf_f, buf_t, buf_o, ev_gap[v], ev_t[v], ev_kind[v],
         )
         status[v] = st
         n_events[v] = ne

@@ -88,27 +88,15 @@ def max_rate(m: ChainModel, omega_vehicle: float = 0.0, ck: F64 | None = None) -
     return float(np.max(np.abs(np.linalg.eigvals(state_matrix(m, omega_vehicle, ck)))))
 
 
-def step_limit(m: ChainModel, omega_vehicle: float = 0.0, ck: F64 | None = None,
-               implicit: NDArray[np.bool_] | None = None) -> float:
+def step_limit(m: ChainModel, omega_vehicle: float = 0.0, ck: F64 | None = None) -> float:
     """Largest stable step (s) of semi-implicit Euler on the linearised chain, mode by mode.
 
     An oscillatory eigenvalue ``|lambda| = omega``, damping ratio ``zeta``, is stable for
     ``h < (2 / omega) (sqrt(1 + zeta^2) - zeta)`` (the scheme's amplification matrix
     ``[[1 - 2 zeta omega h, -omega^2 h], [h (1 - 2 zeta omega h), 1 - omega^2 h^2]]`` has trace
     ``> -1 - det``); a real one ``-sigma`` for ``h < 2 / sigma``. The rigid-body mode is free.
-
-    ``implicit`` (nc, bool): the couplings whose damping the kernel takes at the new speeds (a linearly
-    implicit kick) are left out of the limit: for one mode the amplification matrix then has determinant
-    ``1 / (1 + 2 zeta omega h)`` and is stable for ``h < (2 / omega) (sqrt(1 + zeta^2) + zeta)``, so such
-    damping only widens it. A heavily damped coupling between two light bodies, whose real eigenvalue
-    ``c / J`` sets the explicit limit, then costs nothing. The tyre's relaxation stays explicit.
     """
-    a = state_matrix(m, omega_vehicle, ck)
-    if implicit is not None and np.any(implicit):
-        nb = m.n_bodies
-        G = coupling_rows(m)
-        a[nb:2 * nb, nb:2 * nb] += (G.T @ ((m.cc * implicit)[:, None] * G)) / m.inertia[:, None]
-    lam = np.linalg.eigvals(a)
+    lam = np.linalg.eigvals(state_matrix(m, omega_vehicle, ck))
     mag = np.abs(lam)
     limits = [np.inf]
     for z, r in zip(lam, mag, strict=True):
@@ -120,13 +108,6 @@ def step_limit(m: ChainModel, omega_vehicle: float = 0.0, ck: F64 | None = None,
         elif z.real < 0:
             limits.append(2.0 / -z.real)
     return float(min(limits))
-
-
-def damper_rates(m: ChainModel) -> F64:
-    """(nc,) 1/s: every coupling's damper alone on the bodies it joins, ``c g' J^-1 g`` (``g`` its row of
-    :func:`coupling_rows`); explicit kicks need ``h < 2 / rate``."""
-    G = coupling_rows(m)
-    return np.asarray(m.cc * ((G * G) @ (1.0 / m.inertia)), dtype=np.float64)
 
 
 def tangent_stiffness(m: ChainModel, torque_max: float, overshoot: float = 3.0) -> F64:

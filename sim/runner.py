@@ -44,16 +44,13 @@ def run_from_state(
     chain: ChainModel, t_in: F64, q_in: F64, linear: bool, t0: float, step: float, sub: int, n_out: int,
     theta0: F64, omega0: F64, tyre0: float = 0.0, *, lag: tuple[float, float] = (0.0, 0.0),
     sensor_tau: float = 0.0, speed_limit: float = math.inf, events: bool = True, states: bool = True,
-    implicit: NDArray[np.bool_] | None = None,
 ) -> RawRun:
     """Integrate ``chain`` from ``(theta0, omega0, tyre0)`` at ``t0`` with step ``step``, ``sub`` steps per row.
 
     ``events=False`` leaves ``RawRun.events`` empty (the kernel still logs them when ``states`` is on; they are not
     converted); ``states=False`` leaves ``omega``, ``tau``, ``tyre`` and ``is_open`` with no rows (the kernel does
     not write them; the resolver, sensor and torque rows are the same numbers). Both off: the kernel's speed-only
-    loop (no gap states kept at all), again the same numbers. ``implicit`` (nc, bool): the couplings whose
-    damping is taken at the new speeds (:func:`sim.integrate.run_chain`; with the step of
-    :func:`sim.simulate.plan_step`); None: all explicit.
+    loop (no gap states kept at all), again the same numbers.
 
     Raises
     ------
@@ -80,7 +77,6 @@ def run_from_state(
         np.ascontiguousarray(t_in, dtype=np.float64), np.ascontiguousarray(q_in, dtype=np.float64), linear,
         float(t0), float(step), int(n_out), int(sub), np.array(theta0, dtype=np.float64),
         np.array(omega0, dtype=np.float64), float(speed_limit),
-        np.zeros(nc, dtype=np.bool_) if implicit is None else np.asarray(implicit, dtype=np.bool_),
         out_res, out_sens, out_torque, out_omega, out_tau, out_open, ev_gap, ev_t, ev_kind,
     )
     raise_status(status, t_fail, step)

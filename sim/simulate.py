@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 from sim.budget import check_output, check_steps
 from sim.errors import InputSignalError, ParameterError
 from sim.inputs import TorqueInput, prepare_input
-from sim.linear import damper_rates, step_limit, tangent_stiffness
+from sim.linear import step_limit, tangent_stiffness
 from sim.model import ChainModel, quasi_static_full
 from sim.params import Vehicle
 from sim.runner import MAX_EVENTS, RawRun, raise_status, run_from_state
@@ -24,9 +24,6 @@ from sim.whatif import WhatIf
 F64 = NDArray[np.float64]
 RPM = RPM_PER_RAD_S  # rad/s -> rpm
 STEP_SAFETY = 0.4  # fraction of the explicit stability limit of the stiffest mode (sim.linear.step_limit)
-AUTO_IMPLICIT = False  # plan_step may choose implicit dampers (bench/sim.py --implicit measures both schemes)
-IMPLICIT_BELOW = 0.45  # stiff dampers implicit where the explicit limit is under this share of the lifted one
-STIFF_DAMPER = 0.5  # a damper is stiff where its rate times the fully implicit chain's limit exceeds this
 TWO_INERTIA_SAFETY = 0.3  # fraction of 2/|lambda|max for the paper's two-inertia model
 
 
@@ -79,12 +76,11 @@ class SimResult:
 
 
 def choose_step(chain: ChainModel, output_dt: float, dt: float | None = None, *, torque_max: float = 0.0,
-                omega_vehicle: float = 0.0, implicit: NDArray[np.bool_] | None = None) -> tuple[float, int]:
+                omega_vehicle: float = 0.0) -> tuple[float, int]:
     """Integrator step (s) dividing ``output_dt`` and steps per output sample.
 
     Without ``dt`` the step is ``STEP_SAFETY`` times the stability limit of the stiffest mode of
-    the linearised chain (:func:`sim.linear.step_limit`; ``implicit``: the couplings whose damping the
-    kernel takes implicitly); progressive springs count with their
+    the linearised chain (:func:`sim.linear.step_limit`); progressive springs count with their
     tangent stiffness at the deflection ``torque_max`` (N m, largest input torque) can cause,
     the tyre at ``omega_vehicle`` (rad/s). The safety factor was chosen from accuracy scans
     against a tight solve_ivp reference (docs/simulation.md).
@@ -92,12 +88,7 @@ def choose_step(chain: ChainModel, output_dt: float, dt: float | None = None, *,
     if output_dt <= 0 or not math.isfinite(output_dt):
         raise ParameterError("output_dt", output_dt, "must be a positive number of seconds")
     dt_max = dt if dt is not None else STEP_SAFETY * step_limit(
-        chain, omega_vehicle, tangent_stiffness(chain, torque_max), implicit)
-    return _divide(output_dt, dt_max)
-
-
-def _divide(output_dt: float, dt_max: float) -> tuple[float, int]:
-    """The step dividing ``output_dt`` into the fewest steps no longer than ``dt_max``, and their number."""
+        chain, omega_vehicle, tangent_stiffness(chain, torque_max))
     if dt_max <= 0 or not math.isfinite(dt_max):
         raise ParameterError("dt", dt_max, "must be a positive number of seconds")
     ratio = output_dt / dt_max
@@ -106,32 +97,6 @@ def _divide(output_dt: float, dt_max: float) -> tuple[float, int]:
                              "and inertia values")
     sub = max(1, math.ceil(ratio - 1e-9))
     return output_dt / sub, sub
-
-
-def plan_step(chain: ChainModel, output_dt: float, dt: float | None = None, *, torque_max: float = 0.0,
-              omega_vehicle: float = 0.0) -> tuple[float, int, NDArray[np.bool_]]:
-    """Step, steps per output sample and the couplings whose damping the kernel takes implicitly (nc, bool).
-
-    A given ``dt`` is taken with the explicit kick, and so is every run while ``AUTO_IMPLICIT`` is off (the
-    default until the implicit kick's numbers have replaced the explicit ones across the project's
-    reference results). Otherwise the stiff dampers -- those whose own explicit
-    limit (:func:`sim.linear.damper_rates`) is under ``1 / STIFF_DAMPER`` times the limit of the chain
-    with every damper implicit -- are made implicit where that lifts the step above ``1 / IMPLICIT_BELOW``
-    times the explicit one, so that the fewer steps pay for the solve each one costs (``bench/sim.py
-    --implicit`` measures both); elsewhere the explicit kick and its numbers stay.
-    """
-    nc = chain.n_couplings
-    none = np.zeros(nc, dtype=np.bool_)
-    if dt is not None or not AUTO_IMPLICIT:
-        return (*choose_step(chain, output_dt, dt), none)
-    if output_dt <= 0 or not math.isfinite(output_dt):
-        raise ParameterError("output_dt", output_dt, "must be a positive number of seconds")
-    ck = tangent_stiffness(chain, torque_max)
-    explicit = step_limit(chain, omega_vehicle, ck)
-    stiff = damper_rates(chain) * step_limit(chain, omega_vehicle, ck, np.ones(nc, dtype=np.bool_)) > STIFF_DAMPER
-    lifted = step_limit(chain, omega_vehicle, ck, stiff) if stiff.any() else explicit
-    implicit = stiff if explicit < IMPLICIT_BELOW * lifted else none
-    return (*_divide(output_dt, STEP_SAFETY * (lifted if implicit.any() else explicit)), implicit)
 
 
 def initial_speed(vehicle: Vehicle, speed0_rpm: float | None) -> float:
@@ -243,13 +208,13 @@ def _run_multibody(vehicle: Vehicle, inp: TorqueInput, t0: float, n_out: int, sp
     grid and the resolver speed as reported (after the speed sensor)."""
     chain = vehicle.compiled
     theta0, omega0, tyre0 = quasi_static_full(chain, float(inp.torque[0]), w0)
-    step, sub, implicit = plan_step(chain, output_dt, dt, torque_max=float(np.max(np.abs(inp.torque))),
-                                    omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
+    step, sub = choose_step(chain, output_dt, dt, torque_max=float(np.max(np.abs(inp.torque))),
+                            omega_vehicle=float(omega0[chain.vehicle]) if chain.vehicle >= 0 else 0.0)
     check_steps(span, step, (n_out - 1) * sub, auto=dt is None)
     eff = vehicle.effects
     raw = run_from_state(chain, inp.t, inp.torque, inp.linear, t0, step, sub, n_out, theta0, omega0, tyre0,
                          lag=(eff.torque_lag.delay_s, eff.torque_lag.tau_s), sensor_tau=eff.speed_sensor.tau_s,
-                         speed_limit=20.0 * abs(w0) + 5000.0, events=events, states=states, implicit=implicit)
+                         speed_limit=20.0 * abs(w0) + 5000.0, events=events, states=states)
     t = np.asarray(t0 + np.arange(n_out) * output_dt, dtype=np.float64)
     sens = eff.speed_sensor
     speed = delay_sample_quantize(t, raw.sensor * RPM, sens.delay_s, sens.sample_s, sens.resolution_rpm)
