@@ -282,9 +282,10 @@ def _minpack_fit(tau: FloatArray, ym: FloatArray, x0: FloatArray, w0: float) -> 
         return np.column_stack((np.ones_like(tau), e * cos, -amp * tau * e * cos, -amp * tau * e * sin,
                                 -amp * e * sin))
 
-    try:
-        x, cov, info, _, ier = optimize.leastsq(resid, x0, Dfun=jac, full_output=True, maxfev=100, ftol=1e-6,
-                                                xtol=1e-6)
+    try:  # a trial step with a negative decay overflows exp; MINPACK rejects that step, the warning says nothing
+        with np.errstate(over="ignore", invalid="ignore"):
+            x, cov, info, _, ier = optimize.leastsq(resid, x0, Dfun=jac, full_output=True, maxfev=100, ftol=1e-6,
+                                                    xtol=1e-6)
     except (ValueError, TypeError, np.linalg.LinAlgError):
         return None
     if ier not in (1, 2, 3, 4):

@@ -140,3 +140,30 @@ def test_too_short_or_empty_traces_give_nan_not_an_exception() -> None:
 def test_parameters_are_checked() -> None:
     with pytest.raises(ValueError, match="cut-offs"):
         DrivabilityParams(clunk_band_hz=(50.0, 20.0))
+
+
+def test_damped_sine_fallback_is_quiet_when_a_trial_step_overflows() -> None:
+    """A growing, noisy window sends MINPACK's trial steps to a negative decay whose exp overflows; the step is
+    rejected, and the fallback fit says nothing on stderr (it did: 'overflow encountered in exp' in a benchmark)."""
+    import warnings
+
+    from app.analysis.drivability import _minpack_fit
+
+    rng = np.random.default_rng(1)
+    for _ in range(18):  # the 18th draw of this generator overflows
+        n = int(rng.integers(20, 800))
+        dt = float(rng.choice([0.001, 0.01]))
+        tau = np.arange(n) * dt
+        g, f = rng.uniform(-50, 50), rng.uniform(2, 15)
+        ym = (rng.normal(size=n) * rng.uniform(0.001, 1)
+              + np.exp(np.clip(g * tau, -50, 50)) * np.cos(2 * math.pi * f * tau) * rng.uniform(0.01, 5))
+        x0 = np.array([0.0, rng.normal(), rng.uniform(0, 20), 2 * math.pi * f * rng.uniform(0.7, 1.3),
+                       rng.uniform(-3, 3)])
+    assert g > 30 and n > 300  # the overflowing draw: a fast-growing oscillation
+    with np.errstate(over="raise"), pytest.raises(FloatingPointError):  # the model's exp overflows on it ...
+        for sig in np.linspace(0.0, -3000.0, 7):
+            np.exp(-sig * tau)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # ... and the fit stays quiet
+        fit = _minpack_fit(tau, ym, x0, 2 * math.pi * f)
+    assert fit is None or (math.isfinite(fit.sig) and fit.sig >= 0.0)
