@@ -61,6 +61,34 @@ def contact_torque(delta: float, ddelta: float, k: float, k3: float, c: float, h
 
 
 @njit(cache=True, inline="always")
+def contact_torque_linear(delta: float, ddelta: float, k: float, c: float, half: float, ramp: float) -> float:
+    """:func:`contact_torque` of a spring without a cubic term: the same number bit for bit where ``k3`` is +0.0
+    and ``k >= 0`` (``k3 x^3`` is then a zero of the sign of ``x``, and ``k x`` has that sign too, so adding it
+    changes nothing, not even the sign of a zero)."""
+    if half <= 0.0:
+        return k * delta + c * ddelta
+    if delta > half:
+        x = delta - half
+        tc = k * x
+        td = c * ddelta
+        if ramp > 0.0:
+            return max(tc + td * min(x / ramp, 1.0), 0.0)
+        if td > -tc:
+            return tc + min(tc, td)
+        return 0.0
+    if delta < -half:
+        x = delta + half
+        tc = k * x
+        td = c * ddelta
+        if ramp > 0.0:
+            return min(tc + td * min(-x / ramp, 1.0), 0.0)
+        if td < -tc:
+            return tc + max(tc, td)
+        return 0.0
+    return 0.0
+
+
+@njit(cache=True, inline="always")
 def input_at(tin: np.ndarray, tq: np.ndarray, linear: bool, t: float, k: int) -> tuple[float, int]:
     """Torque at time ``t`` from samples (hold or linear); ``k`` is a moving cursor (t non-decreasing)."""
     n = tin.size

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from sim.errors import InstabilityError
 from sim.integrate import STATUS_NONFINITE, STATUS_OK, is_kernel_layout, run_chain
 from sim.model import ChainModel
+from sim.unrolled import needs_cubic, serial_kernel
 
 F64 = NDArray[np.float64]
 MAX_EVENTS = 20000
@@ -68,6 +69,19 @@ def run_from_state(
     ev_gap = np.zeros(n_ev, dtype=np.int64)
     ev_t = np.zeros(n_ev)
     ev_kind = np.zeros(n_ev, dtype=np.int64)
+    if not (events or states) and is_serial(chain):  # the fits' runs: the loop written out for this layout
+        kernel = serial_kernel(nb, chain.n_couplings - (1 if chain.housing >= 0 else 0), chain.rotor, chain.wheel,
+                               chain.housing, chain.vehicle, needs_cubic(chain.ck, chain.ck3))
+        status, t_fail, n_ev = kernel(
+            chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf,
+            chain.cramp, chain.cb2, chain.wheel_drag, chain.road, chain.rotor_drag, np.array(lag, dtype=np.float64),
+            float(sensor_tau), np.array([chain.tyre[0], chain.tyre[1], tyre0]),
+            np.ascontiguousarray(t_in, dtype=np.float64), np.ascontiguousarray(q_in, dtype=np.float64), linear,
+            float(t0), float(step), int(n_out), int(sub), np.array(theta0, dtype=np.float64),
+            np.array(omega0, dtype=np.float64), float(speed_limit), out_res, out_sens, out_torque)
+        raise_status(status, t_fail, step)
+        return RawRun(resolver=out_res, sensor=out_sens, torque=out_torque, omega=out_omega, tau=out_tau[:, :nc],
+                      tyre=np.zeros(0), is_open=out_open, events=[])
     status, t_fail, n_ev = run_chain(
         chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf, chain.cramp,
         chain.cb2,
@@ -85,6 +99,15 @@ def run_from_state(
         tyre=out_tau[:, nc].copy() if tyre_on else np.zeros(rows), is_open=out_open,
         events=[(int(ev_gap[k]), float(ev_t[k]), int(ev_kind[k])) for k in range(n_ev)] if events else [],
     )
+
+
+def is_serial(chain: ChainModel) -> bool:
+    """Coupling ``j`` joins body ``j`` to ``j + 1`` for every chain coupling, one wheel body: the layout
+    :mod:`sim.unrolled` writes out."""
+    nch = chain.n_couplings - (1 if chain.housing >= 0 else 0)
+    j = np.arange(nch)
+    return bool(chain.wheel2 < 0 and chain.wheel == nch and np.all(chain.ca[:nch] == j)
+                and np.all(chain.cb[:nch] == j + 1) and np.all(chain.cb2[:nch] < 0))
 
 
 def raise_status(status: int, t_fail: float, step: float) -> None:

@@ -1,0 +1,136 @@
+"""The speed-only loop written out per chain layout (:mod:`sim.unrolled`) gives the generic kernel's numbers.
+
+Every serial layout a fit meets runs the generated kernel when neither states nor gap events are kept; its
+resolver, sensor and torque rows must be those of the tracked loop of :func:`sim.integrate.run_chain` bit for bit,
+with and without housing, tyre body, cubic springs, brake, hub and rotor drag, input lag and speed filter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import sim.runner as runner
+from sim import load_vehicle
+from sim.effects import apply_effects
+from sim.errors import InstabilityError
+from sim.model import quasi_static_full
+from sim.params import Vehicle
+from sim.runner import is_serial, run_from_state
+from sim.simulate import choose_step
+from sim.unrolled import _module, _source, needs_cubic, serial_kernel
+from tests.sim.test_topologies import unequal_chain_drive
+
+TYRE = {"tyre_slip": {"compliance_per_mn": 40.0, "relaxation_m": 0.3}}
+CASES: dict[str, Callable[[], Vehicle]] = {
+    "paper": lambda: load_vehicle("paper"),
+    "paper_fitted": lambda: load_vehicle("paper_fitted"),
+    "chain_drive": lambda: load_vehicle("chain_drive"),
+    "chain_full": lambda: load_vehicle("chain_drive").with_changes({"contact_damping": "full"}),
+    "single_reduction": lambda: load_vehicle("single_reduction"),
+    "no_housing": lambda: load_vehicle("paper").with_changes({"housing.enabled": False}),
+    "no_housing_tyre": lambda: apply_effects(load_vehicle("paper").with_changes({"housing.enabled": False}), TYRE),
+    "brake_hub_rotor_drag": lambda: load_vehicle("paper").with_changes(
+        {"body.brake_torque": 40.0, "wheel.viscous_drag": 0.3, "wheel.coulomb_drag": 2.0, "motor.coulomb_drag": 0.4}),
+    "all_effects": lambda: apply_effects(load_vehicle("paper"), {
+        "drag": {"coulomb_nm": 4.0, "viscous_nms": 0.01},
+        "progressive_stiffness": {"halfshaft_rel": 0.5, "mount_rel": 0.5},
+        "torque_lag": {"delay_s": 0.004, "tau_s": 0.003},
+        "speed_sensor": {"tau_s": 0.002, "delay_s": 0.003}, **TYRE}),
+}
+
+
+def _runs(v: Vehicle, q_scale: float = 1.0) -> tuple[Any, Any]:
+    m = v.compiled
+    t = np.arange(0.0, 3.0, 0.01)
+    q = q_scale * (np.where(t < 1.0, -30.0, 90.0) + 5.0 * np.sin(7.0 * t))
+    theta0, omega0, tyre0 = quasi_static_full(m, float(q[0]), 150.0)
+    step, sub = choose_step(m, 1e-3, torque_max=float(np.max(np.abs(q))))
+    eff = v.effects
+    kw: dict[str, Any] = {"lag": (eff.torque_lag.delay_s, eff.torque_lag.tau_s), "sensor_tau": eff.speed_sensor.tau_s,
+                          "speed_limit": 20.0 * 150.0 + 5000.0}
+    full = run_from_state(m, t, q, True, 0.0, step, sub, 2901, theta0, omega0, tyre0, **kw)
+    lean = run_from_state(m, t, q, True, 0.0, step, sub, 2901, theta0, omega0, tyre0, events=False, states=False,
+                          **kw)
+    return full, lean
+
+
+@pytest.fixture
+def kernel_calls(monkeypatch: pytest.MonkeyPatch) -> list[tuple[Any, ...]]:
+    """The layouts the generated kernels were asked for."""
+    calls: list[tuple[Any, ...]] = []
+
+    def spy(*key: Any) -> Any:
+        calls.append(key)
+        return serial_kernel(*key)
+
+    monkeypatch.setattr(runner, "serial_kernel", spy)
+    return calls
+
+
+@pytest.mark.parametrize("which", sorted(CASES))
+def test_the_written_out_loop_gives_the_tracked_loop_s_rows_bit_for_bit(
+        which: str, kernel_calls: list[tuple[Any, ...]]) -> None:
+    v = CASES[which]()
+    m = v.compiled
+    assert is_serial(m)
+    full, lean = _runs(v)
+    assert kernel_calls, "the serial layout did not take the generated kernel"
+    nb, nch, rotor, wheel, housing, vehicle, cubic = kernel_calls[-1]
+    assert (nb, housing, vehicle) == (m.n_bodies, m.housing, m.vehicle) and cubic == bool(np.any(m.ck3 != 0.0))
+    assert full.events  # the gaps open and close: the contact law's every branch is taken
+    for name in ("resolver", "sensor", "torque"):
+        assert np.array_equal(getattr(lean, name), getattr(full, name)), name
+    assert np.ptp(lean.resolver) > 1.0  # a drive that moves
+    assert lean.omega.shape[0] == 0 and lean.events == []
+
+
+def test_a_layout_that_is_not_serial_keeps_the_generic_kernel(kernel_calls: list[tuple[Any, ...]]) -> None:
+    v = unequal_chain_drive()
+    assert not is_serial(v.compiled)
+    full, lean = _runs(v)
+    assert kernel_calls == []
+    assert np.array_equal(lean.resolver, full.resolver)
+
+
+def test_a_diverging_run_is_refused_as_by_the_generic_kernel() -> None:
+    v = load_vehicle("paper").with_changes({"motor.rotor_inertia": 1e-4})
+    with pytest.raises(InstabilityError) as tracked:
+        _runs(v, q_scale=1e6)
+    m = v.compiled
+    t = np.arange(0.0, 3.0, 0.01)
+    q = 1e6 * (np.where(t < 1.0, -30.0, 90.0) + 5.0 * np.sin(7.0 * t))
+    theta0, omega0, tyre0 = quasi_static_full(m, float(q[0]), 150.0)
+    step, sub = choose_step(m, 1e-3, torque_max=float(np.max(np.abs(q))))
+    with pytest.raises(InstabilityError) as lean:
+        run_from_state(m, t, q, True, 0.0, step, sub, 2901, theta0, omega0, tyre0, events=False, states=False,
+                       speed_limit=20.0 * 150.0 + 5000.0)
+    assert str(lean.value) == str(tracked.value) and "diverging speed" in str(lean.value)
+
+
+def test_the_cubic_term_is_left_out_only_where_it_adds_nothing() -> None:
+    m = load_vehicle("paper").compiled
+    assert not needs_cubic(m.ck, m.ck3)
+    prog = apply_effects(load_vehicle("paper"), {"progressive_stiffness": {"halfshaft_rel": 0.5, "mount_rel": 0.5}})
+    assert needs_cubic(prog.compiled.ck, prog.compiled.ck3)
+    assert needs_cubic(m.ck, np.where(np.arange(m.ck3.size) == 2, -0.0, m.ck3))  # a negative zero keeps it
+    assert needs_cubic(np.where(np.arange(m.ck.size) == 1, -1.0, m.ck), m.ck3)
+    assert "contact_torque_linear(" in _source(8, 6, 0, 6, 7, -1, False)
+    assert "contact_torque_linear(" not in _source(8, 6, 0, 6, 7, -1, True)
+
+
+def test_the_source_is_written_once_per_layout_where_asked(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("LASHSCOPE_KERNEL_DIR", str(tmp_path / "kernels"))
+    key = (5, 4, 0, 4, -1, -1, False)
+    mod = _module(key)
+    files = list((tmp_path / "kernels").glob("lashscope_serial_*.py"))
+    assert len(files) == 1 and files[0].read_text() == _source(*key)
+    stamp = files[0].stat().st_mtime_ns
+    _module(key)  # unchanged: not rewritten, so numba's cache of it stays valid
+    assert files[0].stat().st_mtime_ns == stamp
+    assert callable(mod.run)
+    assert serial_kernel(8, 6, 0, 6, 7, -1, False) is serial_kernel(8, 6, 0, 6, 7, -1, False)
