@@ -87,8 +87,7 @@ def choose_step(chain: ChainModel, output_dt: float, dt: float | None = None, *,
     """
     if output_dt <= 0 or not math.isfinite(output_dt):
         raise ParameterError("output_dt", output_dt, "must be a positive number of seconds")
-    dt_max = dt if dt is not None else STEP_SAFETY * step_limit(
-        chain, omega_vehicle, tangent_stiffness(chain, torque_max))
+    dt_max = dt if dt is not None else STEP_SAFETY * _step_limit(chain, torque_max, omega_vehicle)
     if dt_max <= 0 or not math.isfinite(dt_max):
         raise ParameterError("dt", dt_max, "must be a positive number of seconds")
     ratio = output_dt / dt_max
@@ -97,6 +96,23 @@ def choose_step(chain: ChainModel, output_dt: float, dt: float | None = None, *,
                              "and inertia values")
     sub = max(1, math.ceil(ratio - 1e-9))
     return output_dt / sub, sub
+
+
+def _step_limit(chain: ChainModel, torque_max: float, omega_vehicle: float) -> float:
+    """:func:`sim.linear.step_limit` at the tangent stiffness for ``torque_max``, kept on the (read-only) chain per
+    the arguments it depends on: every cluster of a fit's pass runs the same chain, and the eigenvalues need
+    computing once (the tyre's start speed and, with cubic springs, the largest torque are part of the key)."""
+    key = (float(omega_vehicle) if chain.vehicle >= 0 else 0.0, float(torque_max) if np.any(chain.ck3) else 0.0)
+    memo: dict[tuple[float, float], float] | None = chain.__dict__.get("_step_memo")
+    if memo is None:
+        memo = {}
+        object.__setattr__(chain, "_step_memo", memo)
+    limit = memo.get(key)
+    if limit is None:
+        limit = step_limit(chain, omega_vehicle, tangent_stiffness(chain, torque_max))
+        if len(memo) < 64:
+            memo[key] = limit
+    return limit
 
 
 def initial_speed(vehicle: Vehicle, speed0_rpm: float | None) -> float:

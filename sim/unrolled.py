@@ -11,7 +11,8 @@ them on every preset, with and without the optional effects).
 
 The generated source is written once per layout to a cache folder (``LASHSCOPE_KERNEL_DIR``, else
 ``~/.cache/lashscope/kernels``) and imported from there, so numba's on-disk cache keeps its machine code
-between processes; a folder that cannot be written falls back to the system's temporary folder.
+between processes. A folder that cannot be written, or that another user could write to (its files are
+imported), is passed over for one of this user's own in the system's temporary folder.
 """
 
 from __future__ import annotations
@@ -170,19 +171,30 @@ def needs_cubic(ck: Any, ck3: Any) -> bool:
     return bool(np.any(ck3 != 0.0) or np.any(np.signbit(ck3)) or np.any(~(ck >= 0.0)))
 
 
+def _private(folder: Path) -> bool:
+    """The folder is ours alone: owned by this user and writable by no one else (its files are imported)."""
+    st = folder.stat()
+    return not hasattr(os, "getuid") or (st.st_uid == os.getuid() and not st.st_mode & 0o022)
+
+
 def _folder() -> Path:
+    """Where the generated sources go: ``LASHSCOPE_KERNEL_DIR``, else the user's cache folder, else a folder of
+    this user's own in the temporary folder (created 0700 and checked: a file planted there would be imported)."""
     env = os.environ.get("LASHSCOPE_KERNEL_DIR")
+    uid = os.getuid() if hasattr(os, "getuid") else 0
     for cand in ([Path(env)] if env else []) + [Path.home() / ".cache" / "lashscope" / "kernels",
-                                                  Path(tempfile.gettempdir()) / "lashscope-kernels"]:
+                                                  Path(tempfile.gettempdir()) / f"lashscope-kernels-{uid}"]:
         try:
-            cand.mkdir(parents=True, exist_ok=True)
+            cand.mkdir(mode=0o700, parents=True, exist_ok=True)
+            if not _private(cand):
+                continue
             probe = cand / f".w{os.getpid()}"
             probe.write_text("")
             probe.unlink()
             return cand
         except OSError:
             continue
-    raise OSError("no writable folder for the generated kernels (set LASHSCOPE_KERNEL_DIR)")
+    raise OSError("no private writable folder for the generated kernels (set LASHSCOPE_KERNEL_DIR)")
 
 
 def _module(key: tuple[int, int, int, int, int, int, bool]) -> ModuleType:

@@ -7,6 +7,7 @@ with and without housing, tyre body, cubic springs, brake, hub and rotor drag, i
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -22,7 +23,7 @@ from sim.model import quasi_static_full
 from sim.params import Vehicle
 from sim.runner import is_serial, run_from_state
 from sim.simulate import choose_step
-from sim.unrolled import _module, _source, needs_cubic, serial_kernel
+from sim.unrolled import _folder, _module, _source, needs_cubic, serial_kernel
 from tests.sim.test_topologies import unequal_chain_drive
 
 TYRE = {"tyre_slip": {"compliance_per_mn": 40.0, "relaxation_m": 0.3}}
@@ -134,3 +135,19 @@ def test_the_source_is_written_once_per_layout_where_asked(tmp_path: Path, monke
     assert files[0].stat().st_mtime_ns == stamp
     assert callable(mod.run)
     assert serial_kernel(8, 6, 0, 6, 7, -1, False) is serial_kernel(8, 6, 0, 6, 7, -1, False)
+
+
+def test_a_folder_others_can_write_to_is_not_used(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its files are imported: a kernel folder writable by other users is passed over for a private one."""
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    shared.chmod(0o777)
+    monkeypatch.setenv("LASHSCOPE_KERNEL_DIR", str(shared))
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    chosen = _folder()
+    assert chosen != shared and chosen == tmp_path / "home" / ".cache" / "lashscope" / "kernels"
+    assert not chosen.stat().st_mode & 0o077
+    shared.chmod(0o755)
+    assert _folder() == shared
