@@ -14,6 +14,10 @@ Run: ``.venv/bin/python bench/sim.py`` (single process; numba compiles once and 
    Speed-up = LSODA seconds per simulated second / ours.
 3. 1000 Monte Carlo variants of a 2 s tip-in window over the tolerance bands.
 1b. Real-time factor of that log through every preset (``--presets``: only this part).
+1c. With ``--fit-runs``: the speed-only runs a fit makes (``simulate_speed(gaps=False)``), the generic
+   compiled loop against the loop written out for the chain's layout (``sim.unrolled``), per preset and at 1x,
+   2x and 8x the file's damping (identification moves it that far), CPU best of 5, interleaved; and whether
+   the speeds are the same bit for bit.
 4. With ``--scan``: the accuracy scan behind the step rule. Four tip-in scenarios against LSODA
    at rtol 1e-10 on a 10 us grid; for each step, the largest p2p-ripple and unloaded-time error.
 """
@@ -82,6 +86,45 @@ def presets_realtime(t: np.ndarray, q: np.ndarray) -> None:
         m = build_chain(v)
         print(f"    {name:<34} {m.n_bodies:2d} bodies, {len(v.gap_names)} gaps, step {res.dt * 1e6:6.1f} us: "
               f"{float(res.t[-1] - res.t[0]) / min(cpus):5.0f}x real time")
+
+
+def fit_runs(t: np.ndarray, q: np.ndarray, repeats: int = 5) -> None:
+    """Part 1c: a fit's speed-only run on the generic kernel loop against the written-out one, same run."""
+    import sim.runner as runner
+    from app.identify.base import stage_paths
+    from sim import preset_names
+    from sim.effects import apply_effects
+    from sim.simulate import simulate_speed
+
+    serial = runner.is_serial
+    cases = [(name, load_vehicle(name)) for name in preset_names()]
+    cases.append(("paper + tyre slip", apply_effects(load_vehicle("paper"), {"tyre_slip": {}})))
+    cases.append(("paper + progressive shaft", apply_effects(load_vehicle("paper"), {"progressive_stiffness": {}})))
+    print(f"[1c] a fit's speed-only run of the 60 s log: generic loop vs the loop written out per layout "
+          f"(CPU, best of {repeats}, interleaved)")
+    ratios = []
+    for name, base in cases:
+        for scale in (1.0, 2.0, 8.0):
+            v = base.with_changes({p: float(base.get(p)) * scale for p in stage_paths(base, "damping")})
+            best = {False: np.inf, True: np.inf}
+            out = {}
+            for _ in range(repeats + 1):  # the first round compiles or loads from the cache
+                for written in (False, True):
+                    runner.is_serial = serial if written else (lambda chain: False)
+                    try:
+                        c1 = time.process_time()
+                        out[written] = simulate_speed(v, t, q, gaps=False).motor_speed_rpm
+                        cpu = time.process_time() - c1
+                    finally:
+                        runner.is_serial = serial
+                    if _ > 0:
+                        best[written] = min(best[written], cpu)
+            ratio = best[False] / best[True]
+            ratios.append(ratio)
+            same = np.array_equal(out[False], out[True])
+            print(f"    {name:<28} damping x{scale:<3g} generic {best[False] * 1e3:7.1f} ms  written out "
+                  f"{best[True] * 1e3:7.1f} ms  ratio {ratio:4.2f}  same speeds bit for bit: {'yes' if same else 'NO'}")
+    print(f"    ratio median {np.median(ratios):.2f}, min {min(ratios):.2f}, max {max(ratios):.2f}")
 
 
 def main() -> None:
@@ -196,10 +239,14 @@ if __name__ == "__main__":
     part = ap.add_mutually_exclusive_group()
     part.add_argument("--presets", action="store_true", help="only part 1b: real-time factor of every preset")
     part.add_argument("--scan", action="store_true", help="only part 4: the accuracy scan behind the step rule")
+    part.add_argument("--fit-runs", action="store_true",
+                      help="only part 1c: a fit's speed-only run, generic kernel loop vs the written-out one")
     args = ap.parse_args()
     if args.scan:
         step_scan()
     elif args.presets:
         presets_realtime(*drive_log())
+    elif args.fit_runs:
+        fit_runs(*drive_log())
     else:
         main()
