@@ -34,14 +34,19 @@ GRAVITY = 9.81
 
 
 @njit(cache=True, inline="always")
-def contact_torque(delta: float, ddelta: float, k: float, k3: float, c: float, half: float, ramp: float) -> float:
+def contact_law(delta: float, ddelta: float, k: float, k3: float, c: float, half: float, ramp: float,
+                cubic: bool) -> float:
     """Clamped elasto-backlash torque (N m) for deflection ``delta`` and its rate ``ddelta``; ``ramp`` the
-    penetration over which the damper engages in full (0: the damping limited to the spring torque)."""
+    penetration over which the damper engages in full (0: the damping limited to the spring torque).
+
+    ``cubic=False`` leaves the spring's ``k3 x^3`` out (a constant at every call site, so the compiler drops the
+    branch): the same number bit for bit where ``k3`` is +0.0 and ``k >= 0``, since ``k3 x^3`` is then a zero
+    with the sign of ``x`` and ``k x`` has that sign too, so adding it changes nothing, not even a zero's sign."""
     if half <= 0.0:
-        return k * delta + k3 * delta * delta * delta + c * ddelta
+        return (k * delta + k3 * delta * delta * delta if cubic else k * delta) + c * ddelta
     if delta > half:
         x = delta - half
-        tc = k * x + k3 * x * x * x
+        tc = k * x + k3 * x * x * x if cubic else k * x
         td = c * ddelta
         if ramp > 0.0:
             return max(tc + td * min(x / ramp, 1.0), 0.0)
@@ -50,7 +55,7 @@ def contact_torque(delta: float, ddelta: float, k: float, k3: float, c: float, h
         return 0.0
     if delta < -half:
         x = delta + half
-        tc = k * x + k3 * x * x * x
+        tc = k * x + k3 * x * x * x if cubic else k * x
         td = c * ddelta
         if ramp > 0.0:
             return min(tc + td * min(-x / ramp, 1.0), 0.0)
@@ -61,31 +66,15 @@ def contact_torque(delta: float, ddelta: float, k: float, k3: float, c: float, h
 
 
 @njit(cache=True, inline="always")
+def contact_torque(delta: float, ddelta: float, k: float, k3: float, c: float, half: float, ramp: float) -> float:
+    """:func:`contact_law` with the spring's cubic term."""
+    return contact_law(delta, ddelta, k, k3, c, half, ramp, True)
+
+
+@njit(cache=True, inline="always")
 def contact_torque_linear(delta: float, ddelta: float, k: float, c: float, half: float, ramp: float) -> float:
-    """:func:`contact_torque` of a spring without a cubic term: the same number bit for bit where ``k3`` is +0.0
-    and ``k >= 0`` (``k3 x^3`` is then a zero of the sign of ``x``, and ``k x`` has that sign too, so adding it
-    changes nothing, not even the sign of a zero)."""
-    if half <= 0.0:
-        return k * delta + c * ddelta
-    if delta > half:
-        x = delta - half
-        tc = k * x
-        td = c * ddelta
-        if ramp > 0.0:
-            return max(tc + td * min(x / ramp, 1.0), 0.0)
-        if td > -tc:
-            return tc + min(tc, td)
-        return 0.0
-    if delta < -half:
-        x = delta + half
-        tc = k * x
-        td = c * ddelta
-        if ramp > 0.0:
-            return min(tc + td * min(-x / ramp, 1.0), 0.0)
-        if td < -tc:
-            return tc + max(tc, td)
-        return 0.0
-    return 0.0
+    """:func:`contact_law` of a spring without a cubic term (where every ``k3`` is +0.0 and ``k >= 0``)."""
+    return contact_law(delta, ddelta, k, 0.0, c, half, ramp, False)
 
 
 @njit(cache=True, inline="always")

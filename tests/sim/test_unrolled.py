@@ -151,3 +151,15 @@ def test_a_folder_others_can_write_to_is_not_used(tmp_path: Path, monkeypatch: p
     assert not chosen.stat().st_mode & 0o077
     shared.chmod(0o755)
     assert _folder() == shared
+
+
+def test_another_integrate_module_makes_another_file(monkeypatch: pytest.MonkeyPatch) -> None:
+    """numba's cache checks only the generated file's own time stamp: the functions it inlines from
+    sim/integrate.py must name their version in the source, so that a changed contact law is compiled afresh."""
+    import sim.unrolled as unrolled
+
+    key = (8, 6, 0, 6, 7, -1, False)
+    before = _source(*key)
+    assert unrolled._integrate_hash() in before
+    monkeypatch.setattr(unrolled, "_integrate_hash", lambda: "0123456789abcdef")
+    assert _source(*key) != before
