@@ -69,9 +69,11 @@ def run_from_state(
     ev_gap = np.zeros(n_ev, dtype=np.int64)
     ev_t = np.zeros(n_ev)
     ev_kind = np.zeros(n_ev, dtype=np.int64)
+    kernel = None
     if not (events or states) and is_serial(chain):  # the fits' runs: the loop written out for this layout
         kernel = serial_kernel(nb, chain.n_couplings - (1 if chain.housing >= 0 else 0), chain.rotor, chain.wheel,
                                chain.housing, chain.vehicle, needs_cubic(chain.ck, chain.ck3))
+    if kernel is not None:
         status, t_fail, n_ev = kernel(
             chain.inertia, chain.ca, chain.cb, chain.cr, chain.ce, chain.ck, chain.ck3, chain.cc, chain.chalf,
             chain.cramp, chain.cb2, chain.wheel_drag, chain.road, chain.rotor_drag, np.array(lag, dtype=np.float64),

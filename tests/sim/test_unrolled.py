@@ -163,3 +163,22 @@ def test_another_integrate_module_makes_another_file(monkeypatch: pytest.MonkeyP
     assert unrolled._integrate_hash() in before
     monkeypatch.setattr(unrolled, "_integrate_hash", lambda: "0123456789abcdef")
     assert _source(*key) != before
+
+
+def test_no_writable_folder_runs_the_generic_loop(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                  caplog: pytest.LogCaptureFixture) -> None:
+    """A read-only file system: the generic loop, the same numbers, and one line in the log saying why."""
+    import sim.unrolled as unrolled
+
+    def refuse() -> Path:
+        raise OSError("no private writable folder for the generated kernels")
+
+    monkeypatch.setattr(unrolled, "_folder", refuse)
+    monkeypatch.setattr(unrolled, "_KERNELS", {})
+    v = load_vehicle("single_reduction")
+    with caplog.at_level("WARNING", logger="sim.unrolled"):
+        full, lean = _runs(v)
+        _runs(v)  # asked again: not tried again, not said again
+    assert np.array_equal(lean.resolver, full.resolver) and np.ptp(lean.resolver) > 1.0
+    said = [r for r in caplog.records if "generic loop" in r.getMessage()]
+    assert len(said) == 1 and "no private writable folder" in said[0].getMessage()
