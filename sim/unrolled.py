@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-VERSION = "1"  # part of the file name: a change of the template below makes a new file
+from sim import integrate
+
 _LOCK = threading.Lock()
 _KERNELS: dict[tuple[int, int, int, int, int, int, bool], Callable[..., Any] | None] = {}
 log = logging.getLogger(__name__)
@@ -117,8 +118,6 @@ _ROAD = """{i}v = {om} * r_rad
 @functools.cache
 def _integrate_hash() -> str:
     """Hash of sim/integrate.py, whose contact law, input and load functions the kernels inline."""
-    from sim import integrate
-
     return hashlib.sha256(Path(integrate.__file__).read_bytes()).hexdigest()[:16]
 
 
