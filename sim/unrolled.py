@@ -10,9 +10,10 @@ and in the same order, so the speeds are the same numbers bit for bit (``tests/s
 them on every preset, with and without the optional effects).
 
 The generated source is written once per layout to a cache folder (``LASHSCOPE_KERNEL_DIR``, else
-``~/.cache/lashscope/kernels``) and imported from there, so numba's on-disk cache keeps its machine code
-between processes. A folder that cannot be written, or that another user could write to (its files are
-imported), is passed over for one of this user's own in the system's temporary folder.
+``$NUMBA_CACHE_DIR/lashscope-kernels``, else ``~/.cache/lashscope/kernels``) and imported from there, so numba's
+on-disk cache keeps its machine code between processes. A folder that cannot be written, or that another user
+could write to (its files are imported), is passed over for one of this user's own in the system's temporary
+folder.
 """
 
 from __future__ import annotations
@@ -192,12 +193,17 @@ def _private(folder: Path) -> bool:
 
 
 def _folder() -> Path:
-    """Where the generated sources go: ``LASHSCOPE_KERNEL_DIR``, else the user's cache folder, else a folder of
-    this user's own in the temporary folder (created 0700 and checked: a file planted there would be imported)."""
+    """Where the generated sources go: ``LASHSCOPE_KERNEL_DIR``, else beside numba's own cache where
+    ``NUMBA_CACHE_DIR`` puts it (a container's), else the user's cache folder, else a folder of this user's own in
+    the temporary folder (created 0700 and checked: a file planted there would be imported)."""
     env = os.environ.get("LASHSCOPE_KERNEL_DIR")
+    numba_dir = os.environ.get("NUMBA_CACHE_DIR")
     uid = os.getuid() if hasattr(os, "getuid") else 0
-    for cand in ([Path(env)] if env else []) + [Path.home() / ".cache" / "lashscope" / "kernels",
-                                                  Path(tempfile.gettempdir()) / f"lashscope-kernels-{uid}"]:
+    cands = [Path(env)] if env else []
+    cands += [Path(numba_dir) / "lashscope-kernels"] if numba_dir else []
+    cands += [Path.home() / ".cache" / "lashscope" / "kernels",
+              Path(tempfile.gettempdir()) / f"lashscope-kernels-{uid}"]
+    for cand in cands:
         try:
             cand.mkdir(mode=0o700, parents=True, exist_ok=True)
             if not _private(cand):

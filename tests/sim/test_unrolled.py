@@ -143,6 +143,7 @@ def test_a_folder_others_can_write_to_is_not_used(tmp_path: Path, monkeypatch: p
     shared.mkdir()
     shared.chmod(0o777)
     monkeypatch.setenv("LASHSCOPE_KERNEL_DIR", str(shared))
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
     (tmp_path / "tmp").mkdir()
@@ -182,3 +183,13 @@ def test_no_writable_folder_runs_the_generic_loop(tmp_path: Path, monkeypatch: p
     assert np.array_equal(lean.resolver, full.resolver) and np.ptp(lean.resolver) > 1.0
     said = [r for r in caplog.records if "generic loop" in r.getMessage()]
     assert len(said) == 1 and "no private writable folder" in said[0].getMessage()
+
+
+def test_numba_s_cache_folder_is_used_where_it_is_set(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A container sets NUMBA_CACHE_DIR (the image's user has the data volume as its home): the generated sources
+    go beside numba's cache, not into the user's home."""
+    monkeypatch.delenv("LASHSCOPE_KERNEL_DIR", raising=False)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert _folder() == tmp_path / "numba" / "lashscope-kernels"
+    assert not (tmp_path / "home").exists()
