@@ -108,7 +108,7 @@ def fit_runs(t: np.ndarray, q: np.ndarray, repeats: int = 5) -> None:
             v = base.with_changes({p: float(base.get(p)) * scale for p in stage_paths(base, "damping")})
             best = {False: np.inf, True: np.inf}
             out = {}
-            for _ in range(repeats + 1):  # the first round compiles or loads from the cache
+            for rep in range(repeats + 1):  # the first round compiles or loads from the cache
                 for written in (False, True):
                     runner.is_serial = serial if written else (lambda chain: False)
                     try:
@@ -117,7 +117,7 @@ def fit_runs(t: np.ndarray, q: np.ndarray, repeats: int = 5) -> None:
                         cpu = time.process_time() - c1
                     finally:
                         runner.is_serial = serial
-                    if _ > 0:
+                    if rep > 0:
                         best[written] = min(best[written], cpu)
             ratio = best[False] / best[True]
             ratios.append(ratio)

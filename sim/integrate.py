@@ -105,9 +105,15 @@ def road_torque(road: np.ndarray, omega_w: float) -> float:
 def road_load_torque(road: np.ndarray, omega_v: float) -> float:
     """Rolling, aero and grade load (N m at the wheel axle) at speed ``omega_v * R``, no brake."""
     v = omega_v * road[0]
-    x = v / 0.1
-    # rolling resistance sign, smoothed through standstill; tanh is exactly +-1 in double beyond 20
-    sgn = 1.0 if x > 20.0 else (-1.0 if x < -20.0 else math.tanh(x))
+    # rolling resistance sign, smoothed through standstill; tanh is exactly +-1 in double beyond x = v / 0.1 = 20,
+    # and |v| > 2.0000001 m/s is beyond it for certain, so the division is made only near standstill
+    if v > 2.0000001:
+        sgn = 1.0
+    elif v < -2.0000001:
+        sgn = -1.0
+    else:
+        x = v / 0.1
+        sgn = 1.0 if x > 20.0 else (-1.0 if x < -20.0 else math.tanh(x))
     force = road[2] * road[1] * GRAVITY * sgn + road[3] * v * abs(v) + road[1] * GRAVITY * road[4]
     return road[0] * force
 

@@ -46,8 +46,8 @@ Built on sim/integrate.py {integrate} (numba's cache checks only this file's own
 inlined from there are named by their file's hash: another sim/integrate.py makes another file)."""
 import math
 from numba import njit
-from sim.integrate import (GRAVITY, STATUS_DIVERGED, STATUS_NONFINITE, STATUS_OK, _initial_forces, contact_torque,
-                           contact_torque_linear, input_at, wheel_load)
+from sim.integrate import (STATUS_DIVERGED, STATUS_NONFINITE, STATUS_OK, _initial_forces, contact_torque,
+                           contact_torque_linear, input_at, road_load_torque, wheel_load)
 import numpy as np
 
 
@@ -80,11 +80,6 @@ def run(inertia, ca, cb, cr, ce, ck, ck3, cc, chalf, cramp, cb2, wheel_drag, roa
     hub = wheel_drag[0] != 0.0 or wheel_drag[1] != 0.0
     tk0 = tyre[0]
     tk1 = tyre[1]
-    # road_load_torque's factors, multiplied in its order once: ((road[2] road[1]) g) sgn + (road[3] v) |v| + ...
-    r_rad = road[0]
-    r_roll = road[2] * road[1] * GRAVITY
-    r_aero = road[3]
-    r_grade = road[1] * GRAVITY * road[4]
 {load}
     t = t0
     k = 0
@@ -104,17 +99,6 @@ def run(inertia, ca, cb, cr, ce, ck, ck3, cc, chalf, cramp, cb2, wheel_drag, roa
 {check}
     return STATUS_OK, t, 0
 '''
-
-_ROAD = """{i}v = {om} * r_rad
-{i}if v > 2.0000001:  # v / 0.1 > 20 for certain: tanh is exactly 1 there (road_load_torque), no division needed
-{i}    sgn = 1.0
-{i}elif v < -2.0000001:
-{i}    sgn = -1.0
-{i}else:
-{i}    x = v / 0.1
-{i}    sgn = 1.0 if x > 20.0 else (-1.0 if x < -20.0 else math.tanh(x))
-{i}{target} {op} r_rad * (r_roll * sgn + r_aero * v * abs(v) + r_grade)"""
-
 
 @functools.cache
 def _integrate_hash() -> str:
@@ -153,10 +137,9 @@ def _source(nb: int, nch: int, rotor: int, wheel: int, housing: int, vehicle: in
     st.append(f"{i3}w_r = om{rotor}\n{i3}ext = t_air - rd0 * w_r\n{i3}if rd1 != 0.0:\n"
               f"{i4}ext -= rd1 * math.tanh(w_r / 1.0)\n{i3}a{rotor} += ext")
     if vehicle >= 0:
-        st.append(f"{i3}a{wheel} -= tyre_tau\n" + _ROAD.format(i=i3, om=f"om{vehicle}", target="load", op="=")
-                  + f"\n{i3}a{vehicle} += tyre_tau - load")
+        st.append(f"{i3}a{wheel} -= tyre_tau\n{i3}a{vehicle} += tyre_tau - road_load_torque(road, om{vehicle})")
     else:
-        st.append(_ROAD.format(i=i3, om=f"om{wheel}", target=f"a{wheel}", op="-="))
+        st.append(f"{i3}a{wheel} -= road_load_torque(road, om{wheel})")
     st.append(f"{i3}if brake != 0.0:\n{i4}a{wheel} -= brake * math.tanh(om{wheel} / 0.05)\n{i3}if hub:\n"
               f"{i4}a{wheel} -= wheel_load(road, wheel_drag, om{wheel}, 0.0)")
     res_h = f"\n{i4}res -= om{housing} + 0.5 * dtj{housing} * a{housing}" if housing >= 0 else ""

@@ -7,6 +7,7 @@ with and without housing, tyre body, cubic springs, brake, hub and rotor drag, i
 
 from __future__ import annotations
 
+import math
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -19,6 +20,7 @@ import sim.runner as runner
 from sim import load_vehicle
 from sim.effects import apply_effects
 from sim.errors import InstabilityError
+from sim.integrate import GRAVITY, road_load_torque
 from sim.model import quasi_static_full
 from sim.params import Vehicle
 from sim.runner import is_serial, run_from_state
@@ -193,3 +195,20 @@ def test_numba_s_cache_folder_is_used_where_it_is_set(tmp_path: Path, monkeypatc
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
     assert _folder() == tmp_path / "numba" / "lashscope-kernels"
     assert not (tmp_path / "home").exists()
+
+
+def test_the_road_load_skips_its_division_only_where_the_sign_is_exact() -> None:
+    """``road_load_torque`` takes the rolling resistance's sign as +-1 beyond 2.0000001 m/s without dividing by 0.1:
+    the same numbers as ``tanh(v / 0.1)`` clamped at |x| > 20, on both sides of the boundary and at standstill."""
+    road = load_vehicle("paper").compiled.road
+    radius = float(road[0])
+    v = np.concatenate([np.linspace(-40.0, 40.0, 4001), np.array([0.0, -0.0, 1e-300, 2.0, -2.0]),
+                        np.nextafter(2.0, np.array([0.0, 4.0])), np.nextafter(2.0000001, np.array([0.0, 4.0])),
+                        -np.nextafter(2.0000001, np.array([0.0, 4.0])), np.linspace(1.999, 2.001, 2001)])
+    for speed in v:
+        omega = speed / radius
+        vv = omega * road[0]
+        x = vv / 0.1
+        sgn = 1.0 if x > 20.0 else (-1.0 if x < -20.0 else math.tanh(x))
+        force = road[2] * road[1] * GRAVITY * sgn + road[3] * vv * abs(vv) + road[1] * GRAVITY * road[4]
+        assert road_load_torque(road, omega) == road[0] * force, speed
