@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script:
 
 from app.identify import IdentifyOptions, identify_logs
 from bench.indep.car import car_named, vehicle_source
-from bench.indep.cases import BANDS, IDENTIFY_SETS, _band_drive, plan, recording, truth_car
+from bench.indep.cases import BANDS, IDENTIFY_SETS, Case, _band_drive, plan, recording, truth_car
 from bench.indep.dynamics import first_mode, simulate
 from bench.indep.record import DBC, MAP, Recording, write_drive
 from sim import load_vehicle
@@ -56,6 +56,16 @@ def loggers(full: Recording) -> dict[str, Recording]:
     return out
 
 
+def record(case: Case, rec: Recording, draw: int, path: Path) -> None:
+    """Drive A of ``case``, simulated by the generator, written to ``path`` by logger ``rec`` with noise draw
+    ``draw`` (draw 0 is the case's own)."""
+    drive = _band_drive(BANDS[case.car][0], case.seed, case.duration_s, car_named(case.car))
+    car = truth_car(case.effects, case.base, case.car)
+    sim = simulate(car, drive.t, drive.torque, drive.speed0_kmh)
+    write_drive(path, car, sim, drive.t, drive.torque, np.random.default_rng(case.seed + 1 + 7919 * draw), rec,
+                epoch=1.7e9 + case.seed)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--set", default="ifinal13", choices=sorted(IDENTIFY_SETS))
@@ -67,13 +77,9 @@ def main() -> int:
     if args.case not in cases:
         ap.error(f"no case {args.case!r} in {args.set}")
     case = cases[args.case]
-    nominal = car_named(case.car)
-    drive = _band_drive(BANDS[case.car][0], case.seed, case.duration_s, nominal)
-    car = truth_car(case.effects, case.base, case.car)
-    fn, zeta, _ = first_mode(car)
+    fn, zeta, _ = first_mode(truth_car(case.effects, case.base, case.car))
     print(f"{case.name}: base {case.base} effects {case.effects}; generator's first mode {fn:.3f} Hz, "
           f"damping ratio {zeta:.3f}", flush=True)
-    sim = simulate(car, drive.t, drive.torque, drive.speed0_kmh)
     vehicle = load_vehicle(vehicle_source(case.car))
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -82,8 +88,7 @@ def main() -> int:
                 continue
             for draw in range(args.draws):
                 path = Path(tmp) / "drive.blf"
-                write_drive(path, car, sim, drive.t, drive.torque, np.random.default_rng(case.seed + 1 + 7919 * draw),
-                            rec, epoch=1.7e9 + case.seed)
+                record(case, rec, draw, path)
                 res = identify_logs([path], vehicle, IdentifyOptions(dbc=DBC, signal_map=MAP, seed=case.seed))
                 m = res.modal
                 ratios = " ".join(f"{k} {p.ratio:.3f}" for k, p in res.params.items())
