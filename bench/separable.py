@@ -58,6 +58,7 @@ from bench.indep.cases import (
     plan,
     signal_sigma,
     truth_car,
+    window_ms,
 )
 from bench.indep.dynamics import simulate
 from bench.indep.record import RPM, sensor_speed
@@ -77,29 +78,12 @@ def channels(car: Car, drive: Drive) -> Channels:
     return sim["t"], sensor_speed(car, sim["t"], sim["speed_rel"]), 0.5 * (sim["wheel_l"] + sim["wheel_r"]) * RPM
 
 
-def _window_ms(t: np.ndarray, a: np.ndarray, b: np.ndarray, drive: Drive, shift_s: float) -> float:
-    """Mean square of ``b - a`` over the event windows (as :func:`signal_sigma` cuts them), each window's level and
-    slope removed, at the best time shift of ``b`` within ``shift_s``."""
-    grids = [g for r in drive.reversals
-             if (g := np.arange(r - 0.2, r + 1.0, 0.01))[0] > shift_s and g[-1] < t[-1] - shift_s]
-
-    def ms(shift: float) -> float:
-        parts = []
-        for g in grids:
-            d = np.interp(g - shift, t, b) - np.interp(g, t, a)
-            parts.append(d - np.polyval(np.polyfit(g, d, 1), g))
-        d = np.concatenate(parts)
-        return float(np.mean(d * d))
-
-    return min(ms(float(s)) for s in np.arange(-shift_s, shift_s + 1e-9, 0.0005))
-
-
 def two_channel_sigma(truth: Channels, sheet: Channels, drive: Drive, shift_s: float = SHIFT_S) -> float:
     """Truth-vs-sheet signature over motor and wheel speed, in noise sigmas: the root of the sum of each channel's
     mean square in its own noise variance (each channel with its own shift; the ESP has its own clock)."""
     t = truth[0]
-    motor = _window_ms(t, sheet[1], truth[1], drive, shift_s) / NOISE_RPM ** 2
-    wheel = _window_ms(t, sheet[2], truth[2], drive, shift_s) / WHEEL_NOISE_RPM ** 2
+    motor = window_ms(t, sheet[1], truth[1], drive, shift_s) / NOISE_RPM ** 2
+    wheel = window_ms(t, sheet[2], truth[2], drive, shift_s) / WHEEL_NOISE_RPM ** 2
     return float(np.sqrt(motor + wheel))
 
 

@@ -203,19 +203,24 @@ def signal_sigma(truth: Car, drive: Drive, nominal: tuple[np.ndarray, np.ndarray
     within ``shift_s`` (a speed-sensor delay *is* a torque-speed time offset)."""
     t, a = nominal or _reported(nominal_car(), drive)
     _, b = _reported(truth, drive)
+    return float(np.sqrt(window_ms(t, a, b, drive, shift_s))) / NOISE_RPM
+
+
+def window_ms(t: np.ndarray, a: np.ndarray, b: np.ndarray, drive: Drive, shift_s: float = SHIFT_S) -> float:
+    """Mean square of ``b - a`` (both on times ``t``) over the drive's event windows (0.2 s before to 1 s after each
+    reversal, 10 ms apart), each window's level and slope removed, at the best shift of ``b`` within ``shift_s``."""
     grids = [g for r in drive.reversals
              if (g := np.arange(r - 0.2, r + 1.0, 0.01))[0] > shift_s and g[-1] < t[-1] - shift_s]
 
-    def rms(shift: float) -> float:
+    def ms(shift: float) -> float:
         parts = []
         for g in grids:
             d = np.interp(g - shift, t, b) - np.interp(g, t, a)
             parts.append(d - np.polyval(np.polyfit(g, d, 1), g))  # a window's level and slope are nuisance
         d = np.concatenate(parts)
-        return float(np.sqrt(np.mean(d * d)))
+        return float(np.mean(d * d))
 
-    best = min(rms(float(s)) for s in np.arange(-shift_s, shift_s + 1e-9, 0.0005))
-    return best / NOISE_RPM
+    return min(ms(float(s)) for s in np.arange(-shift_s, shift_s + 1e-9, 0.0005))
 
 
 def plan(which: str, quick: bool) -> list[Case]:
