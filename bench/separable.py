@@ -21,8 +21,8 @@ Results are cached beside the set's manifest, keyed by the generator's version.
 speeds (``ESP_WheelSpeeds``, the mean of the two driven wheels, at the generator's wheel-speed noise and the DBC's
 0.1 rpm step) are added to the signature, each channel after its own window level and slope and its own time
 shift, and the best effect-free data sheet is fitted to both. The question it answers: would a tool that also
-read the wheel speeds tell these effects from a data sheet? On ``ifinal12``'s seven effect drives it does not
-change the answer (docs/identify.md, "A second channel").
+read the wheel speeds tell these effects from a data sheet? On ``ifinal13``'s effect drives it does not change
+the answer (docs/identify.md, "A second channel does not separate them").
 
 Run alone::
 
