@@ -9,8 +9,11 @@ first mode. ``--draws`` records each logger with that many noise draws, since on
 typical one.
 
 Why: on ``ifinal13``'s ``chain_base_damping_ratio_650029`` (the low-mode chain car, damping 2.8x its file, a
-damping ratio of 0.55 at 50 Hz) the pooled mode came out 8.2 % low, the grey box set the stiffness from it and
-took the mass, the torque gain and the lash with it (docs/identify.md, "The heavily damped low mode at 50 Hz").
+damping ratio of 0.55 at 50 Hz) the pooled mode came out 8.2 % low, and the identification set the stiffness from
+it and took the mass, the torque gain and the lash with it, until pins within the noise floor were rechecked
+(``app.identify.fit.PIN_CLOSER``; docs/identify.md, "The heavily damped low mode at 50 Hz"). The modes this prints
+are the estimator's and do not depend on that rule; the identified values do (the figures in docs/identify.md
+were printed before it).
 
     .venv/bin/python bench/modal_recording.py --set ifinal13 --case chain_base_damping_ratio_650029 --draws 3
 """
