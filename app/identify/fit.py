@@ -469,15 +469,18 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
     at = None if worse or not pins else {
         **{BASE_EFFECTS[n].id: {"log2_scale": float(np.log2(r))} for n, (r, _) in pins.items()},
         **{BASE_EFFECTS[n].id: taken.joint.values[BASE_EFFECTS[n].id] for n in taken.names}}
-    closer = None  # the grey box's first step from pins that came within PIN_RECHECK, where it promises much less
-    if at is not None and left <= PIN_RECHECK:
-        first = _grey_box_reach(vehicle, evs, split, [*pins, *taken.names], taken.joint, at, bounds, opts.model)
-        if first is not None and first.chi2 / first.n <= PIN_CLOSER * left:
-            closer = first
-        elif first is not None:
+    # the grey box's first step from the pins, whichever side of PIN_RECHECK they leave: past it, it decides whether
+    # the grey box is fitted (REACH_SKIP); within it, whether the pins are rechecked at all (PIN_CLOSER)
+    reach = None if at is None else _grey_box_reach(vehicle, evs, split, [*pins, *taken.names], taken.joint, at,
+                                                     bounds, opts.model)
+    closer = None  # that step, from pins that came within PIN_RECHECK, where it promises much less than they leave
+    if reach is not None and left <= PIN_RECHECK:
+        if reach.chi2 / reach.n <= PIN_CLOSER * left:
+            closer = reach
+        else:
             log.append(f"stiffness and damping from the model-free first mode leave chi2/n {left:.3g}; the grey box "
-                       f"fitting them too would leave {first.chi2 / first.n:.3g} to first order (over {PIN_CLOSER:g}x "
-                       f"that; {first.nfev} passes): the mode's values kept")
+                       f"fitting them too would leave {reach.chi2 / reach.n:.3g} to first order (over {PIN_CLOSER:g}x "
+                       f"that; {reach.nfev} passes): the mode's values kept")
     if worse or (pins and left > PIN_RECHECK) or closer is not None:
         # the measured mode's stiffness and damping fit worse than the file's own values, or leave more than the noise
         # floor, or much more than the grey box would: a heavily damped mode read through the lash is biased, so the
@@ -490,8 +493,6 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
                   f"while the grey box's first step promises {closer.chi2 / closer.n:.3g}")
         log_free = [*tried, f"stiffness and damping from the model-free first mode leave chi2/n {left:.3g}, {reason}: "
                     "fitted by the grey box instead"]
-        reach = closer if closer is not None else None if at is None else _grey_box_reach(
-            vehicle, evs, split, [*pins, *taken.names], taken.joint, at, bounds, opts.model)
         free: _Path | None = None
         skip = closer is None and reach is not None and _out_of_reach(reach, left)
         if reach is not None and skip:
