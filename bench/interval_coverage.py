@@ -79,15 +79,18 @@ def move_of(row: dict[str, Any]) -> float:
 
 
 def half_width(name: str, p: dict[str, Any], form: dict[str, tuple[float, float]], move: float = 0.0,
-               per_move: float = MOVE_FORM) -> float:
+               per_move: float = MOVE_FORM, pins: bool = True) -> float:
     """90 % half-width (log scale) of saved parameter ``name`` under the model-form floors ``form`` and ``per_move``,
-    on a drive whose identified car moved ``move`` from its file, as ``app.identify.fit.assemble`` computes it."""
-    return math.hypot(p["stat"], math.log1p(model_form(name, p["scale"], form, move, per_move) * p["misfit"]))
+    on a drive whose identified car moved ``move`` from its file, as ``app.identify.fit.assemble`` computes it;
+    ``pins=False``: without the part the pins' uncertainty carries into the statistics (``IntervalParts.pins``)."""
+    stat = p["stat"] if pins else math.sqrt(max(p["stat"] ** 2 - p.get("pins", 0.0) ** 2, 0.0))
+    return math.hypot(stat, math.log1p(model_form(name, p["scale"], form, move, per_move) * p["misfit"]))
 
 
-def score(rows: list[dict[str, Any]], form: dict[str, tuple[float, float]], per_move: float = MOVE_FORM) -> None:
-    """Coverage per parameter, for each car and for all drives, under the floors ``form`` and ``per_move``; and the
-    paper car's by its identified car's move from the file."""
+def score(rows: list[dict[str, Any]], form: dict[str, tuple[float, float]], per_move: float = MOVE_FORM,
+          pins: bool = True) -> None:
+    """Coverage per parameter, for each car and for all drives, under the floors ``form`` and ``per_move`` (and with
+    or without the pins' part of the statistics); and the paper car's by its identified car's move from the file."""
     print(f"{'parameter':10s} {'floor (level, slope)':22s} {'paper car':>16s} {'chain car':>16s} {'all':>16s}"
           f"   paper car moved {' | '.join(f'{lo:g}-{hi:g}' for lo, hi in MOVE_BINS)}")
     for q, (level, slope) in form.items():
@@ -99,7 +102,7 @@ def score(rows: list[dict[str, Any]], form: dict[str, tuple[float, float]], per_
                 continue
             c = counts["chain" if is_chain(r["car"]) else "paper"]
             move = move_of(r)
-            hit = abs(math.log(p["value"] / p["truth"])) <= half_width(q, p, form, move, per_move)
+            hit = abs(math.log(p["value"] / p["truth"])) <= half_width(q, p, form, move, per_move, pins)
             c[0] += hit
             c[1] += 1
             if not is_chain(r["car"]):
@@ -138,6 +141,9 @@ def main() -> int:
     ap.add_argument("--per-move", type=float, default=MOVE_FORM,
                     help="score with this floor per unit of the identified car's move from its file "
                          f"(the code's: {MOVE_FORM:g})")
+    ap.add_argument("--no-pin-spread", action="store_true",
+                    help="score without the part of the statistics the pins' uncertainty carries in (rows saved "
+                         "before it was part of the intervals have none)")
     args = ap.parse_args()
     form = dict(MODEL_FORM)
     for item in args.form:
@@ -156,14 +162,16 @@ def main() -> int:
         rows = collect(sets)
         if args.save:
             args.save.write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
-    given = bool(args.form) or args.per_move != MOVE_FORM
+    given = bool(args.form) or args.per_move != MOVE_FORM or args.no_pin_spread
     print(f"\n{len(rows)} drives without an effect; 90 % intervals covering the truth "
           f"({'given' if given else 'the code'} floors, {args.per_move:g} per unit of move)")
     if not given:
         earlier = sum(not any("move" in p for p in r["params"].values()) for r in rows)
         print(f"intervals not reproduced from their parts: {check_parts(rows)}"
               + (f" ({earlier} drives saved under earlier floors not checked)" if earlier else ""))
-    score(rows, form, args.per_move)
+    if args.no_pin_spread:
+        print("without the pins' spread in the statistics")
+    score(rows, form, args.per_move, not args.no_pin_spread)
     return 0
 
 

@@ -36,7 +36,15 @@ import numpy.typing as npt
 from scipy import stats
 from scipy.optimize import least_squares
 
-from app.analysis.diagnosis.calibrate import GAIN_BOUNDS, Bounds, FitResult, Reach, fit, linear_reach
+from app.analysis.diagnosis.calibrate import (
+    GAIN_BOUNDS,
+    Bounds,
+    FitResult,
+    Reach,
+    fit,
+    linear_reach,
+    residual_moved,
+)
 from app.analysis.diagnosis.forward import DiagEvent, Nuisance, prediction, simulate_events, vehicle_with
 from app.analysis.diagnosis.localise import MIN_TRAVERSE_SAMPLES, phase_times
 from app.analysis.diagnosis.noise import NoiseFloor
@@ -131,6 +139,7 @@ class IntervalParts(NamedTuple):
     scale: float  # model_form_scale of the log
     misfit: float  # the misfit factor on the model form (1 for a pinned parameter)
     move: float = 0.0  # the identified car's move from its file (log ratios of the figures, in quadrature)
+    pins: float = 0.0  # the part of ``stat`` the pins' own uncertainty carries in (in quadrature; pin_spread)
 
 
 @dataclass(frozen=True)
@@ -556,13 +565,53 @@ def _identify_on(evs: list[DiagEvent], noise: NoiseFloor, vehicle: Vehicle, opts
                 "(too few or too similar events, or a speed that hardly responds to the torque)")
         names = keep
     say(0.9, "intervals")
+    # what the pins' own uncertainty moves the parameters fitted on them by (first order)
+    spread = pin_spread(vehicle, names, pins, joint, evs, bounds, opts.model, t) if names and pins else None
     result = assemble(vehicle, names, dropped, joint, cov if names else np.zeros((0, 0)), t, base.chi2, len(evs),
-                      pins, why, noise.period_s, notes, gain_held=by_rigid is not None)
+                      pins, why, noise.period_s, notes, gain_held=by_rigid is not None, pin_cov=spread)
     result.rigid = rigid
     result.fit_log = log
     result.modal, result.modal_error = modal, modal_error
     say(1.0, "identified: " + (", ".join(result.named) or "nothing off the file"))
     return result
+
+
+PIN_STEP = 0.02  # log step of a pin for its column of the fit's sensitivity
+
+
+def pin_slopes(vehicle: Vehicle, names: Sequence[str], pins: Mapping[str, tuple[float, float]], joint: FitResult,
+               events: Sequence[DiagEvent], bounds: Bounds, model: str) -> FloatArray | None:
+    """How the solution of ``joint`` (fitted on ``vehicle`` with the pinned parameters applied; name -> (ratio, 90 %
+    half-width of its log)) moves per unit of each pin's log, to first order: ``-pinv(J) J_p``, with ``J`` the fit's
+    Jacobian (unit box, nuisance included) and ``J_p`` the residual's response to the pin (one simulator pass per
+    pin, the time offset profiled as in the fit). Columns in ``pins`` order; None where the fit has no Jacobian or
+    the simulator rejects a moved pin."""
+    if joint.jac is None or joint.residual is None:
+        return None
+    effects = tuple(BASE_EFFECTS[n] for n in names)
+    ratios = {k: r for k, (r, _) in pins.items()}
+    cols = []
+    for q, (r, _) in pins.items():
+        moved = residual_moved(with_base(vehicle, {**ratios, q: r * float(np.exp(PIN_STEP))}), events, joint,
+                               effects, bounds=bounds, model=model)
+        if moved is None or moved.shape != joint.residual.shape:
+            return None
+        cols.append((moved - joint.residual) / PIN_STEP)
+    return np.asarray(-np.linalg.pinv(joint.jac) @ np.column_stack(cols), dtype=np.float64)
+
+
+def pin_spread(vehicle: Vehicle, names: Sequence[str], pins: Mapping[str, tuple[float, float]], joint: FitResult,
+               events: Sequence[DiagEvent], bounds: Bounds, model: str, t: float) -> FloatArray | None:
+    """Unit-box covariance that the pins' own uncertainty adds to the parameters fitted on them, to first order
+    (:func:`pin_slopes`; a pin's standard deviation is its half-width over ``t``, the quantile the fitted
+    parameters' half-widths use). A lash fitted on a heavily damped mode's stiffness and damping moves by about 1.7x
+    either pin's relative error (the low-mode chain car at 50 Hz), so an interval conditional on the pins is too
+    narrow there."""
+    a = pin_slopes(vehicle, names, pins, joint, events, bounds, model)
+    if a is None:
+        return None
+    var = np.array([(half / t) ** 2 for _, half in pins.values()])
+    return np.asarray(a @ np.diag(var) @ a.T, dtype=np.float64)
 
 
 def _out_of_reach(reach: Reach, left: float) -> bool:
@@ -701,7 +750,8 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
              t: float, chi2_before: float, n_events: int,
              pins: Mapping[str, tuple[float, float]] | None = None,
              unresolved: Mapping[str, str] | None = None, period_s: float = 0.0,
-             notes: Mapping[str, str] | None = None, gain_held: bool = False) -> Identification:
+             notes: Mapping[str, str] | None = None, gain_held: bool = False,
+             pin_cov: FloatArray | None = None) -> Identification:
     """Physical figures, intervals and status of the base parameters ``names`` of a fit.
 
     ``joint``'s effects start with the base effects of ``names`` (one parameter each, in that order), after the
@@ -711,9 +761,13 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
     the speed channel's sampling period (the model-form floor widens below :data:`MODE_SAMPLES` per mode period,
     :func:`model_form`).
     ``notes``: a parameter's note in the report (where a pin came from). ``gain_held``: the torque gain was held at
-    the file's (the mass came from the rigid-body response, with which a gain would trade).
+    the file's (the mass came from the rigid-body response, with which a gain would trade). ``pin_cov``: the
+    unit-box covariance the pins' uncertainty adds to ``cov`` (:func:`pin_spread`), kept apart in the interval parts.
     """
     pins = dict(pins or {})
+    pin_part = np.zeros(len(names))
+    if pin_cov is not None and names:
+        cov = cov + pin_cov
     unresolved = dict(unresolved or {})
     off = N_NUISANCE
     specs = [BASE_EFFECTS[n].params[0] for n in names]
@@ -725,6 +779,9 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
     # d ln(ratio) / d raw: ln 2 for the log2 parameters, 1 / ratio for the plain scales
     d = np.array([np.log(2.0) if n in LOG2 else 1.0 / ratios[n] for n in names])
     cov_log = cov_raw * np.outer(d, d)
+    if pin_cov is not None and names:
+        pin_log = pin_cov[off:off + k_n, off:off + k_n] * np.outer(spans * d, spans * d)
+        pin_part = t * np.sqrt(np.clip(np.diag(pin_log), 0.0, None))
     identified = with_base(vehicle, ratios)
     ph_nom, ph = physical(vehicle), physical(identified)
     coarse = model_form_scale(ph.freq_hz, period_s)
@@ -736,15 +793,17 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
         if q in names or q in pins:
             # 90 % half-width on the log scale: the statistics (event-clustered, or the mode's) and the model form,
             # in quadrature
+            pin_k = 0.0
             if q in pins:
                 stat, at_bound = pins[q][1], False
             else:
                 k = names.index(q)
                 stat = t * float(np.sqrt(max(cov_log[k, k], 0.0)))
+                pin_k = float(pin_part[k])
                 at_bound = bool(f"{BASE_EFFECTS[q].id}.{specs[k].name}" in joint.at_bound or
                                 min(raw[k] - specs[k].lo, specs[k].hi - raw[k]) <= 0.01 * (specs[k].hi - specs[k].lo))
             # the misfit scales the floor of what the grey-box fit gave; a pin carries its own source's uncertainty
-            parts[q] = IntervalParts(float(stat), coarse, 1.0 if q in pins else misfit, move)
+            parts[q] = IntervalParts(float(stat), coarse, 1.0 if q in pins else misfit, move, pin_k)
             half = float(np.hypot(stat, np.log1p(model_form(q, coarse, move=move) * parts[q].misfit)))
             r = ratios[q]
             r_lo, r_hi = r * np.exp(-half), r * np.exp(half)

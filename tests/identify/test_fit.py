@@ -296,3 +296,54 @@ def test_the_first_step_of_a_refit_promises_what_a_near_linear_parameter_gives()
     fitted = calfit(paper, events, split, (mass,), bounds=bounds, start=start, screen=False, seed=9)
     assert fitted.values[mass.id]["scale"] == pytest.approx(1.15, rel=0.03)
     assert fitted.chi2 < reach.chi2 < 0.1 * reach.chi2_at
+
+
+def test_the_pins_uncertainty_is_carried_into_what_is_fitted_on_them(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Stiffness and damping set from the model-free mode carry an interval of their own; mass and lash are fitted on
+    them. The first-order slopes of the fitted values on each pin predict where a refit with that pin moved lands,
+    and the fitted parameters' intervals widen by what the pins' uncertainty moves them (the pinned ones do not)."""
+    events, noise = prepared(drive_signals({"stiffness": 0.8, "damping": 1.5, "lash": 1.2}, seed=12,
+                                           duration_s=40.0, sampling=CanSampling(period_s=0.001)))
+    vehicle = load_vehicle("paper")
+    seen: dict[str, object] = {}
+    spread = fitmod.pin_spread
+
+    def keep(*args: object) -> object:
+        seen["args"] = args
+        return spread(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(fitmod, "pin_spread", keep)
+    res = identify_events(events, noise, vehicle)
+    names, pins, joint = seen["args"][1:4]  # type: ignore[index]
+    assert sorted(pins) == ["damping", "stiffness"] and "lash" in names and "mass" in names
+    slopes = fitmod.pin_slopes(*seen["args"][:7])  # type: ignore[index, arg-type]
+    assert slopes is not None and slopes.shape == (joint.jac.shape[1], 2)
+    # the damping pin moved by 1 % (the pins still come within the noise floor, so they are kept): where mass and
+    # lash go, against the slopes' prediction
+    monkeypatch.setattr(fitmod, "pin_spread", spread)
+    pinned = fitmod.mode_pins
+
+    def moved(*args, **kw):  # type: ignore[no-untyped-def]
+        p = dict(pinned(*args, **kw))
+        p["damping"] = (p["damping"][0] * 1.01, p["damping"][1])
+        return p
+
+    monkeypatch.setattr(fitmod, "mode_pins", moved)
+    again = identify_events(events, noise, vehicle)
+    assert not any("fitted by the grey box instead" in m for m in again.fit_log)  # the moved pins were kept
+    col = list(pins).index("damping")
+    for q in ("mass", "lash"):
+        k = fitmod.N_NUISANCE + list(names).index(q)
+        spec = BASE_EFFECTS[q].params[0]
+        predicted = slopes[k, col] * (spec.hi - spec.lo) / res.params[q].ratio * np.log(1.01)
+        actual = np.log(again.params[q].ratio / res.params[q].ratio)
+        assert abs(actual - predicted) <= 0.3 * abs(actual) + 0.0005, (q, actual, predicted)
+    # the intervals: wider for what was fitted on the pins than without their spread, the same for the pins
+    monkeypatch.setattr(fitmod, "mode_pins", pinned)
+    monkeypatch.setattr(fitmod, "pin_spread", lambda *a: None)
+    bare = identify_events(events, noise, vehicle)
+    for q in ("mass", "lash"):
+        assert res.params[q].value == pytest.approx(bare.params[q].value, rel=1e-9)
+        assert res.interval_parts[q].stat > bare.interval_parts[q].stat
+    for q in ("stiffness", "damping"):
+        assert res.params[q].lo == pytest.approx(bare.params[q].lo, rel=1e-12)

@@ -462,6 +462,16 @@ def fit(
                      message, pairs, settings, r, None if jac is None else np.asarray(jac, dtype=np.float64))
 
 
+def residual_moved(base: Vehicle, events: Sequence[DiagEvent], fitted: FitResult, effects: Sequence[Effect], *,
+                   bounds: Bounds, model: str = "multibody") -> FloatArray | None:
+    """The weighted calibration residual of ``fitted`` (its nuisance and ``effects``' values) evaluated on another
+    vehicle ``base``, with the time offset profiled as in :func:`fit` (one simulator pass; None where the simulator
+    rejects it): a column of the fit's sensitivity to something it held fixed."""
+    prob = _Problem(base, events, effects, bounds, model)
+    got = prob._evaluate(prob.encode(fitted.nuisance, fitted.values))
+    return None if got is None else got[0]
+
+
 def linear_cost(r0: FloatArray, cols: FloatArray, lo: FloatArray, hi: FloatArray) -> tuple[float, FloatArray]:
     """Least ``|r0 + cols a|^2`` over ``lo <= a <= hi``, and its ``a`` (a first-order step: :func:`linear_reach`,
     and the partner screen of :mod:`~app.analysis.diagnosis.partners`)."""
