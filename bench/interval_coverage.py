@@ -2,11 +2,10 @@
 
 ``identify`` runs on drive A of every drive without an effect (``none`` and ``base``) of the given sets, told the
 nominal car, as ``bench/identify_indep.py`` runs it. Each identified parameter's half-width is kept in its parts
-(``Identification.interval_parts``: the statistics, the part of them the pins carry in, the log's model-form scale and
-the misfit), so a saved run
-can be scored again under other model-form floors without identifying again (``--load`` with ``--form``): this
-is how ``app.identify.fit.MODEL_FORM`` was calibrated (docs/identify.md, step 4). Calibrate on development sets
-only; a fresh set is scored once, with the floors fixed.
+(``Identification.interval_parts``: the statistics, the part of them the pins carry in, the log's model-form scale
+and the misfit), so a saved run can be scored again under other model-form floors without identifying again
+(``--load`` with ``--form``, or ``--no-pin-spread``): this is how ``app.identify.fit.MODEL_FORM`` was calibrated
+(docs/identify.md, step 4). Calibrate on development sets only; a fresh set is scored once, with the floors fixed.
 
     .venv/bin/python bench/interval_coverage.py --sets idev2,ifinal4 --save /tmp/cov.jsonl
     .venv/bin/python bench/interval_coverage.py --load /tmp/cov.jsonl
