@@ -62,11 +62,9 @@ def law_change(first: Identification, other: Vehicle, events: Sequence[DiagEvent
     over (docs/identify.md, "The contact law and the lash")."""
     assert first.on is not None
     fit = first.fit
-    points = [fit.settings]
     lash = BASE_EFFECTS["lash"]
     at_file = tuple((eff, lash.off_values()) if eff.id == lash.id else (eff, vals) for eff, vals in fit.settings)
-    if any(eff.id == lash.id and dict(vals) != lash.off_values() for eff, vals in fit.settings):
-        points.append(at_file)
+    points = [fit.settings] if at_file == tuple(fit.settings) else [fit.settings, at_file]
     change = 0.0
     for settings in points:
         ra = residual_at(first.on, events, fit.nuisance, settings, model)
