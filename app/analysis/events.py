@@ -72,10 +72,12 @@ class EventParams:
     min_vehicle_speed_kmh: float = 3.0
     min_motor_speed_rpm: float = 100.0  # used when the log has no vehicle speed
     brake_threshold: float = 0.5  # a brake* channel this far above its resting level inside the window = braking
-    max_sample_gap_s: float = 0.1  # larger gaps in torque/speed inside a window = missing data
+    max_sample_gap_s: float = 0.1  # larger gaps in torque/speed inside a window = missing data ...
+    max_lost_periods: float = 2.5  # ... or, on a slow channel, larger than this many of its mean sample spacings
 
     def __post_init__(self) -> None:
-        for name in ("hysteresis_nm", "min_step_nm", "pre_s", "post_s", "max_sample_gap_s", "max_wheel_slip"):
+        for name in ("hysteresis_nm", "min_step_nm", "pre_s", "post_s", "max_sample_gap_s", "max_wheel_slip",
+                     "max_lost_periods"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"EventParams.{name} = {getattr(self, name)!r}: must be > 0")
         if self.min_post_s > self.post_s:
@@ -122,6 +124,16 @@ class Event(Serial):
 MAX_INVALID_SHARE = 0.05  # invalid samples in an event window beyond which the channel is not available there
 
 
+def gap_limit(sig: Signal, p: EventParams) -> float:
+    """The longest gap between a channel's samples in an event window that is not missing data: ``max_sample_gap_s``,
+    or ``max_lost_periods`` of its mean spacing over the log where that is longer (a 20 Hz logger that drops one
+    frame leaves a 0.1 s gap; a 10 Hz one has them everywhere)."""
+    if len(sig) < 2:
+        return p.max_sample_gap_s
+    spacing = float(sig.t[-1] - sig.t[0]) / (len(sig) - 1)
+    return max(p.max_sample_gap_s, p.max_lost_periods * spacing)
+
+
 def _gap_problem(sig: Signal, t0: float, t1: float, max_gap: float) -> str | None:
     if not len(sig) or sig.t[0] > t0 or sig.t[-1] < t1:
         return f"missing data: {sig.name} does not cover the window {t0:.3f}-{t1:.3f} s"
@@ -139,7 +151,8 @@ def _gap_problem(sig: Signal, t0: float, t1: float, max_gap: float) -> str | Non
     gaps = np.diff(edges)
     worst = int(np.argmax(gaps))
     if gaps[worst] > max_gap:
-        return f"missing data: {sig.name} has a {gaps[worst]:.3f} s gap at t={edges[worst]:.3f} s"
+        return (f"missing data: {sig.name} has a {gaps[worst]:.3f} s gap at t={edges[worst]:.3f} s (over "
+                f"{max_gap:.3f} s)")
     return None
 
 
@@ -239,6 +252,7 @@ def find_events(signals: SignalSet, params: EventParams | None = None, drive: Dr
 
     brakes = {name: brake_levels(signals[name], p.brake_threshold) for name in sorted(signals)
               if name.startswith("brake")}
+    gap_limits = [(sig, gap_limit(sig, p)) for sig in (signals[TORQUE], speed)]
     events: list[Event] = []
     for n, (c, before, after) in enumerate(accepted):
         kind = EventKind.TIP_IN if c.tip_in else EventKind.TIP_OUT
@@ -251,8 +265,8 @@ def find_events(signals: SignalSet, params: EventParams | None = None, drive: Dr
             if t_end - c.t_cross < p.min_post_s:
                 exclusion = (f"window cut short: next torque reversal {nxt - c.t_cross:.3f} s after this one "
                              f"leaves {t_end - c.t_cross:.3f} s < min_post_s {p.min_post_s} s")
-        for sig in (signals[TORQUE], speed):
-            exclusion = exclusion or _gap_problem(sig, t_start, t_end, p.max_sample_gap_s)
+        for sig, limit in gap_limits:
+            exclusion = exclusion or _gap_problem(sig, t_start, t_end, limit)
         pb = pa = None
         corroborated: bool | None = None
         if pedal is not None and len(pedal):

@@ -47,9 +47,22 @@ class WindowParams:
     anchor_end_s: float = 0.08  # anchor on samples more than this before the crossing (gaps open near it)
     torque_margin_s: float = 0.1  # torque kept beyond the window so the time-offset fit can shift it
     min_samples: int = 20
+    # a low-rate logger (20-25 Hz) holds 15-19 speed samples in a window cut short by the next event: such a window
+    # is used when it has at least this many samples and reaches this far past the crossing (two periods of a 5 Hz
+    # shuffle), which a 100 Hz or faster log meets with 20 samples anyway
+    min_samples_low_rate: int = 12
+    min_post_cover_s: float = 0.4
     settle_s: float = 2.5  # torque steady this long: the shuffle of the last change has decayed (quasi-static)
     settle_tol_nm: float = 4.0  # "steady": torque range within the settle time at most this (N m)
     max_warm_s: float = 4.0  # the warm-up reaches back at most this far before the window
+
+
+def enough_samples(t: FloatArray, t_cross: float, p: WindowParams) -> bool:
+    """Whether a window's speed stamps ``t`` are enough to fit: ``min_samples`` of them, or at a low rate
+    ``min_samples_low_rate`` reaching ``min_post_cover_s`` past the crossing."""
+    if t.size >= p.min_samples:
+        return True
+    return t.size >= p.min_samples_low_rate and float(t[-1]) - t_cross >= p.min_post_cover_s
 
 
 def warm_start(tq_t: FloatArray, tq_v: FloatArray, t_window: float, p: WindowParams) -> float:
@@ -158,10 +171,12 @@ def prepare(signals: SignalSet, events: Sequence[Event], params: WindowParams | 
         t_sim = warm_start(tq_t, tq_v, t0 - MARGIN_S, p)
         mt = (tq_t >= min(t_sim, t0) - p.torque_margin_s) & (tq_t <= t1 + p.torque_margin_s)
         pre = sp_t[ms] < ev.t_cross_s - p.anchor_end_s
-        if int(ms.sum()) < p.min_samples or int(pre.sum()) < 2 or int(mt.sum()) < 3:
+        if not enough_samples(sp_t[ms], ev.t_cross_s, p) or int(pre.sum()) < 2 or int(mt.sum()) < 3:
             skipped.append({"index": ev.index, "reason": (
                 f"too few samples in the diagnosis window {t0:.3f}-{t1:.3f} s: {int(ms.sum())} speed, "
-                f"{int(pre.sum())} before the crossing, {int(mt.sum())} torque")})
+                f"{int(pre.sum())} before the crossing, {int(mt.sum())} torque (needs {p.min_samples} speed, or "
+                f"{p.min_samples_low_rate} reaching {p.min_post_cover_s:g} s past the crossing; 2 before it; 3 "
+                "torque)")})
             continue
         out.append(DiagEvent(
             index=ev.index, kind=ev.kind.value, t_event=ev.t_cross_s, t_start=float(t0), t_end=float(t1),
