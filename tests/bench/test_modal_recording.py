@@ -82,3 +82,26 @@ def test_the_lash_does_not_hide_the_contact_law(tmp_path) -> None:  # type: igno
     assert ratios["lash"] > 0.8  # 0.43 under the file's law
     assert abs(ratios["mass"] - 1.0) < 0.03 and abs(ratios["stiffness"] - 1.0) < 0.05
     assert ratios["damping"] == pytest.approx(0.469 / 0.1919, rel=0.1)
+
+
+def test_a_lash_held_by_its_prior_bound_is_not_named(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The low-mode chain car with its lash 0.71x, its stiffness 1.25x and its damping 2.5x the file's, logged at
+    50 Hz. The two contact laws fit it alike (the damper acting in full leaves 0.94x), so the file's limited law
+    stays; under it the lash goes to 0.33x the file's, near its prior's 0.3x bound, with an interval past that bound
+    and far from the truth. It is reported at the bound and not named; the stiffness and damping still are."""
+    from app.identify import IdentifyOptions, identify_logs
+    from bench.indep.car import vehicle_source
+    from bench.indep.record import DBC, MAP
+    from bench.modal_recording import record
+    from sim import load_vehicle
+
+    case = next(c for c in plan("ifinal16", False) if c.name == "chain_base_damping_ratio+lash+stiffness_710031")
+    path = tmp_path / "drive.blf"
+    record(case, recording(case), 0, path)
+    res = identify_logs([path], load_vehicle(vehicle_source(case.car)),
+                        IdentifyOptions(dbc=DBC, signal_map=MAP, seed=case.seed))
+    lash = res.params["lash"]
+    assert lash.identified and lash.ratio < 0.45 and lash.ratio_lo < 0.3, res.identification.fit_log
+    assert lash.at_bound and not lash.named and "reaches the prior's bound (0.3x" in lash.note
+    assert "lash" not in res.identification.named
+    assert {"stiffness", "damping"} <= set(res.identification.named)

@@ -11,7 +11,7 @@ from app.analysis.diagnosis.calibrate import fit as calfit
 from app.errors import InsufficientDataError, NotIdentifiableError
 from app.identify import FitOptions, identify_events, physical, with_base
 from app.identify.base import BASE_EFFECTS, effective_stiffness, first_mode, lash_mrad
-from app.identify.fit import PIN_RECHECK, REACH_SKIP, all_events_split
+from app.identify.fit import PIN_RECHECK, REACH_SKIP, all_events_split, interval_reaches
 from app.signals import Signal, SignalSet
 from sim import load_vehicle
 from sim.effects import apply_effects
@@ -347,3 +347,14 @@ def test_the_pins_uncertainty_is_carried_into_what_is_fitted_on_them(monkeypatch
         assert res.interval_parts[q].stat > bare.interval_parts[q].stat
     for q in ("stiffness", "damping"):
         assert res.params[q].lo == pytest.approx(bare.params[q].lo, rel=1e-12)
+
+
+def test_an_interval_past_the_priors_bound_is_held_by_the_prior() -> None:
+    lash = BASE_EFFECTS["lash"].params[0]  # scale 0.3-2.5
+    assert interval_reaches(lash, 0.325, np.log(0.325 / 0.29), "lash") == "0.3x the file's"
+    assert interval_reaches(lash, 0.325, np.log(0.325 / 0.31), "lash") == ""
+    assert interval_reaches(lash, 2.2, np.log(2.6 / 2.2), "lash") == "2.5x the file's"
+    stiff = BASE_EFFECTS["stiffness"].params[0]  # log2 scale -3.3..1.6
+    assert interval_reaches(stiff, 1.5, 0.1 * np.log(2.0), "stiffness") == "3.03x the file's"
+    assert interval_reaches(stiff, 1.0, 0.1 * np.log(2.0), "stiffness") == ""
+    assert interval_reaches(stiff, -3.2, 0.2 * np.log(2.0), "stiffness") == "0.102x the file's"

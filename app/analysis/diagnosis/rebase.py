@@ -95,9 +95,10 @@ def judge(ident: Identification, score: CandidateScore, n_heldout: Any, draws: A
     bound = [p for k, p in ident.params.items() if k in BASE_NAMES and p.identified and p.at_bound]
     if bound:
         names = ", ".join(f"{p.label} (ratio {p.ratio:.2f} to the file's)" for p in bound)
-        reason = (f"identify the vehicle first: {names} rests on the bound of its prior, so the file is further "
-                  "off than an identification of this log can say; no unmodelled effect is attributed "
-                  "until the vehicle file is corrected")
+        reason = (f"identify the vehicle first: {names} is held by the bound of its prior (it rests on it, or its 90 % "
+                  "interval reaches it), so the file is further off than an identification of this log can say, or "
+                  "the model cannot place it on this log; no unmodelled effect is attributed until the vehicle file is "
+                  "corrected")
         return Rebase(Decision(BASE_ID, reason=reason, gap_ratio=nominal_gap,
                                details={"base_parameters": base_items(ident), "identify_first": True,
                                         "at_bound": [p.name for p in bound]}), False, reason)
