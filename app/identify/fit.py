@@ -670,8 +670,8 @@ def interval_reaches(spec: ParamSpec, raw: float, half: float, name: str) -> str
     ``raw`` value with log half-width ``half``, or "".
 
     A value whose interval runs past the prior's bound is held there by the prior, not by the log: a low-mode chain
-    car identified under the limited contact law sets its lash 0.30-0.34x the file's against a truth of 0.7-1x,
-    with an interval past the 0.3x bound (docs/identify.md, "`ifinal16`")."""
+    car identified under the limited contact law sets its lash at or near the 0.3x bound against a truth of 0.6-1x,
+    once at 0.325x with an interval past that bound (docs/identify.md, "`ifinal16`")."""
     if name in LOG2:
         lo, hi = raw - half / np.log(2.0), raw + half / np.log(2.0)
         edge = spec.lo if lo <= spec.lo else spec.hi if hi >= spec.hi else None
