@@ -101,7 +101,9 @@ SEED_BASE = {"dev": 10_000, "final": 50_000, "holdout": 90_000, "check": 130_000
 # within the noise floor rechecked where the grey box's first step promises much less (app/identify/fit.py:
 # PIN_CLOSER), scored once; ifinal15: the next, for the other contact law also tried with the lash at the file's value
 # (app/identify/form.py:law_change), scored once; ifinal16: the next, for the pins' uncertainty carried into the
-# intervals and the model-form damping floor calibrated on ifinal10-15 (app/identify/fit.py:pin_spread, MODEL_FORM)
+# intervals, the model-form damping floor calibrated on ifinal10-15 (app/identify/fit.py:pin_spread, MODEL_FORM) and
+# a slow logger's windows (app/analysis/diagnosis/prepare.py:enough_samples, app/analysis/events.py:gap_limit),
+# scored once
 IDENTIFY_SETS = ("idev", "ifinal", "idev2", "ifinal2", "ifinal3", "ichain", "ichain2", "ifinal4", "ifinal5",
                  "ichain3", "ifinal6", "ifinal7", "ifinal8", "ifinal9", "ifinal10",
                  "ifinal11", "ifinal12", "ifinal13", "ifinal14", "ifinal15", "ifinal16")
