@@ -68,7 +68,6 @@ from app.identify.modal import EventWindow, ModalEstimate, estimate_modes
 from app.identify.rigid import RigidBody
 from app.serial import Serial, rule
 from sim import Vehicle
-from sim.effects.base import ParamSpec
 from sim.errors import SimError
 
 FloatArray = npt.NDArray[np.float64]
@@ -665,19 +664,16 @@ def model_form(name: str, scale: float, table: Mapping[str, tuple[float, float]]
     return level + slope * (scale - 1.0) + per_move * move
 
 
-def interval_reaches(spec: ParamSpec, raw: float, half: float, name: str) -> str:
-    """The prior bound (as "0.3x the file's") that base parameter ``name``'s 90 % interval reaches from its fitted
-    ``raw`` value with log half-width ``half``, or "".
+def interval_reaches(name: str, r_lo: float, r_hi: float) -> str:
+    """The prior bound (as "0.3x the file's") that base parameter ``name``'s 90 % interval ``[r_lo, r_hi]`` (ratios to
+    the file's) reaches, or "".
 
     A value whose interval runs past the prior's bound is held there by the prior, not by the log: a low-mode chain
     car identified under the limited contact law sets its lash at or near the 0.3x bound against a truth of 0.6-1x,
     once at 0.325x with an interval past that bound (docs/identify.md, "`ifinal16`")."""
-    if name in LOG2:
-        lo, hi = raw - half / np.log(2.0), raw + half / np.log(2.0)
-        edge = spec.lo if lo <= spec.lo else spec.hi if hi >= spec.hi else None
-        return "" if edge is None else f"{2.0 ** edge:.3g}x the file's"
-    lo, hi = raw * np.exp(-half), raw * np.exp(half)
-    edge = spec.lo if lo <= spec.lo else spec.hi if hi >= spec.hi else None
+    spec = BASE_EFFECTS[name].params[0]
+    lo, hi = ratio_of(name, spec.lo), ratio_of(name, spec.hi)
+    edge = lo if r_lo <= lo else hi if r_hi >= hi else None
     return "" if edge is None else f"{edge:.3g}x the file's"
 
 
@@ -830,8 +826,7 @@ def assemble(vehicle: Vehicle, names: Sequence[str], dropped: Sequence[str], joi
             v = ph.value(q)
             lo, hi = v * np.exp(-half), v * np.exp(half)  # each figure scales with its parameter (damping: nearly)
             note = "at a prior bound: not trusted" if at_bound else (notes or {}).get(q, "")
-            if not at_bound and q not in pins and (edge := interval_reaches(specs[names.index(q)],
-                                                                            float(raw[names.index(q)]), half, q)):
+            if not at_bound and q not in pins and (edge := interval_reaches(q, r_lo, r_hi)):
                 at_bound, note = True, f"its 90 % interval reaches the prior's bound ({edge}): not trusted"
             named = bool(not at_bound and not (r_lo <= 1.0 <= r_hi) and abs(r - 1.0) > PRACTICAL[q])
             params[q] = Param(q, LABELS[q], UNITS[q], v, float(lo), float(hi), ph_nom.value(q), r, float(r_lo),

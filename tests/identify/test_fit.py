@@ -350,11 +350,10 @@ def test_the_pins_uncertainty_is_carried_into_what_is_fitted_on_them(monkeypatch
 
 
 def test_an_interval_past_the_priors_bound_is_held_by_the_prior() -> None:
-    lash = BASE_EFFECTS["lash"].params[0]  # scale 0.3-2.5
-    assert interval_reaches(lash, 0.325, np.log(0.325 / 0.29), "lash") == "0.3x the file's"
-    assert interval_reaches(lash, 0.325, np.log(0.325 / 0.31), "lash") == ""
-    assert interval_reaches(lash, 2.2, np.log(2.6 / 2.2), "lash") == "2.5x the file's"
-    stiff = BASE_EFFECTS["stiffness"].params[0]  # log2 scale -3.3..1.6
-    assert interval_reaches(stiff, 1.5, 0.1 * np.log(2.0), "stiffness") == "3.03x the file's"
-    assert interval_reaches(stiff, 1.0, 0.1 * np.log(2.0), "stiffness") == ""
-    assert interval_reaches(stiff, -3.2, 0.2 * np.log(2.0), "stiffness") == "0.102x the file's"
+    # the lash is fitted as a scale, 0.3-2.5; the stiffness as log2 of one, -3.3..1.6 (0.102x-3.03x)
+    assert interval_reaches("lash", 0.29, 0.325 ** 2 / 0.29) == "0.3x the file's"
+    assert interval_reaches("lash", 0.31, 0.325 ** 2 / 0.31) == ""
+    assert interval_reaches("lash", 2.2 ** 2 / 2.6, 2.6) == "2.5x the file's"
+    assert interval_reaches("stiffness", 2.0 ** 1.4, 2.0 ** 1.6) == "3.03x the file's"
+    assert interval_reaches("stiffness", 2.0 ** 0.9, 2.0 ** 1.1) == ""
+    assert interval_reaches("stiffness", 2.0 ** -3.4, 2.0 ** -3.0) == "0.102x the file's"
