@@ -327,14 +327,36 @@ def _joint(vehicle: Vehicle, events: Sequence[DiagEvent], split: Split, names: S
     effects = tuple(BASE_EFFECTS[n] for n in names)
     points = [FitResult((), base.nuisance, dict(v), 0.0, 0, 0) for v in starts]
     if "mass" in names and abs(base.nuisance.gain - 1.0) > 0.01:
-        spec = BASE_EFFECTS["mass"].params[0]
-        nui = replace(base.nuisance, gain=1.0)
-        for v in starts:
-            moved = {**v, BASE_EFFECTS["mass"].id: {spec.name: float(np.clip(
-                v[BASE_EFFECTS["mass"].id][spec.name] / base.nuisance.gain, spec.lo, spec.hi))}}
-            points.append(FitResult((), nui, moved, 0.0, 0, 0))
-    return fit(vehicle, events, split, effects, bounds=bounds, model=opts.model, start=points[0], screen=False,
-               alternatives=points[1:], passes_per_param=opts.passes_per_param, seed=opts.seed)
+        points += [gain_onto_mass(p) for p in points[:len(starts)]]
+
+    def refine(start: FitResult, alternatives: Sequence[FitResult] = ()) -> FitResult:
+        return fit(vehicle, events, split, effects, bounds=bounds, model=opts.model, start=start, screen=False,
+                   alternatives=alternatives, passes_per_param=opts.passes_per_param, seed=opts.seed)
+    return off_the_gain_bound(refine(points[0], points[1:]), refine)
+
+
+def gain_onto_mass(point: FitResult) -> FitResult:
+    """``point`` moved along the rigid-body ridge to the file's torque gain: the gain set to 1 and the mass divided
+    by the gain it had (clipped to the mass's prior), so that the torque per unit of inertia, which is what the
+    rigid-body response pins, stays where it was. A start point (no fit statistics)."""
+    mid = BASE_EFFECTS["mass"].id
+    spec = BASE_EFFECTS["mass"].params[0]
+    mass = float(np.clip(point.values[mid][spec.name] / point.nuisance.gain, spec.lo, spec.hi))
+    return FitResult((), replace(point.nuisance, gain=1.0), {**point.values, mid: {spec.name: mass}}, 0.0, 0, 0)
+
+
+def off_the_gain_bound(result: FitResult, refine: Callable[[FitResult], FitResult]) -> FitResult:
+    """``result`` refined again from :func:`gain_onto_mass` of it where its torque gain stopped on a bound with the
+    mass free, and the better of the two kept.
+
+    The rigid body pins only the ratio of torque gain to mass; a refinement that drifts along that ridge until the
+    gain's bound stops it is held there by the bound, not by the data: a lag fitted with a car 15 % heavier than its
+    file stopped with the gain at its 0.85 bound and the mass at 0.99x, and refined again from the gain at 1 and the
+    mass at 1.17x it reached the truth's lag with a third of the residual. ``refine`` refines from a start point."""
+    if "nuisance.gain" not in result.at_bound or BASE_EFFECTS["mass"].id not in result.values:
+        return result
+    other = refine(gain_onto_mass(result))
+    return other if other.chi2 < result.chi2 else result
 
 
 def windows(events: Sequence[DiagEvent]) -> list[EventWindow]:

@@ -11,7 +11,14 @@ from app.analysis.diagnosis.calibrate import fit as calfit
 from app.errors import InsufficientDataError, NotIdentifiableError
 from app.identify import FitOptions, identify_events, physical, with_base
 from app.identify.base import BASE_EFFECTS, effective_stiffness, first_mode, lash_mrad
-from app.identify.fit import PIN_RECHECK, REACH_SKIP, all_events_split, interval_reaches
+from app.identify.fit import (
+    PIN_RECHECK,
+    REACH_SKIP,
+    all_events_split,
+    gain_onto_mass,
+    interval_reaches,
+    off_the_gain_bound,
+)
 from app.signals import Signal, SignalSet
 from sim import load_vehicle
 from sim.effects import apply_effects
@@ -357,3 +364,48 @@ def test_an_interval_past_the_priors_bound_is_held_by_the_prior() -> None:
     assert interval_reaches("stiffness", 2.0 ** 1.4, 2.0 ** 1.6) == "3.03x the file's"
     assert interval_reaches("stiffness", 2.0 ** 0.9, 2.0 ** 1.1) == ""
     assert interval_reaches("stiffness", 2.0 ** -3.4, 2.0 ** -3.0) == "0.102x the file's"
+
+
+def test_a_fit_held_by_the_gain_bound_is_refined_again_along_the_rigid_body_ridge() -> None:
+    """A paper car 15 % heavier than its file with a 13 ms torque lag. The rigid body pins the torque gain per unit
+    mass, not either: a refinement stopped with the gain on its 0.85 bound and the mass at 0.99x (the valley a lag on
+    a heavier car fell into on the independent generator's drive) is refined again from the gain at 1 and the mass at
+    0.99 / 0.85, and reaches the truth; a fit inside the gain's bounds is left as it is."""
+    from app.analysis.diagnosis.forward import Nuisance
+    from sim.effects import get_effect
+
+    paper = load_vehicle("paper")
+    truth = apply_effects(with_base(paper, {"mass": 1.15}), {"torque_lag": {"tau_s": 0.013, "delay_s": 0.0}})
+    rng = np.random.default_rng(3)
+    drive = make_drive(paper, rng, DriveSpec(duration_s=30.0))
+    events, noise = prepared(to_signals(measure(drive, run_truth(truth, drive), CanSampling(period_s=0.01), rng)))
+    split = all_events_split(events)
+    effects = (BASE_EFFECTS["mass"], get_effect("torque_lag"))
+
+    def refine(start: FitResult) -> FitResult:
+        return calfit(paper, events, split, effects, bounds=Bounds.for_period(noise.period_s), start=start,
+                      screen=False, passes_per_param=8)
+
+    valley = {"base_mass": {"scale": 0.99}, "torque_lag": {"tau_s": 0.005, "delay_s": 0.0}}
+    stuck = calfit(paper, events, split, effects, bounds=Bounds.for_period(noise.period_s),
+                   start=FitResult((), Nuisance(gain=0.851), valley, 0.0, 0, 0), screen=False, max_passes=1)
+    assert "nuisance.gain" in stuck.at_bound
+    moved = gain_onto_mass(stuck)
+    assert moved.nuisance.gain == 1.0 and moved.nuisance.offset_s == stuck.nuisance.offset_s
+    assert moved.values["base_mass"]["scale"] == pytest.approx(0.99 / 0.851)
+    assert moved.values["torque_lag"] == stuck.values["torque_lag"]
+
+    out = off_the_gain_bound(stuck, refine)
+    assert out.chi2 < 0.2 * stuck.chi2
+    assert out.nuisance.gain == pytest.approx(1.0, abs=0.02)
+    assert out.values["base_mass"]["scale"] == pytest.approx(1.15, rel=0.02)
+    assert out.values["torque_lag"]["tau_s"] == pytest.approx(0.013, abs=0.0015)
+    assert "nuisance.gain" not in out.at_bound
+
+    def not_called(start: FitResult) -> FitResult:
+        raise AssertionError("a fit inside the gain's bounds is not refined again")
+
+    assert off_the_gain_bound(out, not_called) is out
+    # the mass moved onto a bound of its own prior is clipped there (a start, not a fit)
+    heavy = gain_onto_mass(FitResult((), Nuisance(gain=0.85), {"base_mass": {"scale": 1.6}}, 0.0, 0, 0))
+    assert heavy.values["base_mass"]["scale"] == BASE_EFFECTS["mass"].params[0].hi

@@ -36,7 +36,7 @@ from app.analysis.diagnosis.partners import PartnerScreen
 from app.analysis.diagnosis.score import Interval
 from app.analysis.diagnosis.split import Split
 from app.identify.base import BASE_EFFECTS, BASE_NAMES
-from app.identify.fit import Identification
+from app.identify.fit import Identification, off_the_gain_bound
 from sim import Vehicle
 from sim.effects import get_effect
 
@@ -162,6 +162,9 @@ def joint_with_base(nominal: Vehicle, ident: Identification, events: Sequence[Di
     The start that fits better before refinement is not always the side whose refinement does: on a long drive
     with a tyre's slip a joint fit refined from the identified side stopped at 8x the noise floor with the
     stiffness at 0.68x, and from the file's side reached the noise floor with it at 1.05x.
+
+    A refinement kept with the torque gain on its bound is refined again along the gain-mass ridge
+    (:func:`app.identify.fit.off_the_gain_bound`).
     """
     names = [k for k in ident.ratios if not (k == "lash" and cid == "backlash")]
     if not names or cid not in single.values:
@@ -169,20 +172,20 @@ def joint_with_base(nominal: Vehicle, ident: Identification, events: Sequence[Di
     effects = (*(BASE_EFFECTS[k] for k in names), get_effect(cid))
     values = {BASE_EFFECTS[k].id: dict(ident.fit.values[BASE_EFFECTS[k].id]) for k in names}
     values[cid] = dict(single.values[cid])
-    ours = fit(nominal, events, split, effects, bounds=bounds, model=model,
-               start=FitResult((), single.nuisance, values, 0.0, 0, 0), screen=False,
-               passes_per_param=JOINT_PASSES_PER_PARAM)
+    def refine(start: FitResult, alternatives: Sequence[FitResult] = ()) -> FitResult:
+        return fit(nominal, events, split, effects, bounds=bounds, model=model, start=start, screen=False,
+                   alternatives=alternatives, passes_per_param=JOINT_PASSES_PER_PARAM)
+    ours = refine(FitResult((), single.nuisance, values, 0.0, 0, 0))
     at_file = {BASE_EFFECTS[k].id: BASE_EFFECTS[k].off_values() for k in names}
     theirs = [FitResult((), single.nuisance, {**at_file, cid: dict(single.values[cid])}, 0.0, 0, 0)] \
         if single_on_file else []
     if from_file is not None:
         file_fit, effect_starts = from_file
         theirs += [FitResult((), file_fit.nuisance, {**at_file, cid: dict(st)}, 0.0, 0, 0) for st in effect_starts]
-    if not theirs:
-        return ours
-    other = fit(nominal, events, split, effects, bounds=bounds, model=model, start=theirs[0], screen=False,
-                alternatives=theirs[1:], passes_per_param=JOINT_PASSES_PER_PARAM)
-    return other if other.chi2 < ours.chi2 else ours
+    if theirs:
+        other = refine(theirs[0], theirs[1:])
+        ours = other if other.chi2 < ours.chi2 else ours
+    return off_the_gain_bound(ours, refine)
 
 
 def nuisance_only(ident: Identification) -> FitResult:
@@ -275,13 +278,15 @@ def base_alone(nominal: Vehicle, ident: Identification, joint: FitResult, events
     The identification alone can stop in another valley than the joint fit: a torque gain of 0.85 standing in for
     a car 16 % heavier, which the joint fit of a tyre's slip and the base left for the right mass. Started from the
     joint fit's base values (those it left out, the lash beside ``backlash``, from the identification), the base
-    alone shows what the effect adds to the file's error once both are fitted at their best."""
+    alone shows what the effect adds to the file's error once both are fitted at their best; held by the torque
+    gain's bound, it is refined again along the gain-mass ridge (:func:`app.identify.fit.off_the_gain_bound`)."""
     names = list(ident.ratios)
     values = {BASE_EFFECTS[k].id: dict(joint.values.get(BASE_EFFECTS[k].id, ident.fit.values[BASE_EFFECTS[k].id]))
               for k in names}
-    return fit(nominal, events, split, tuple(BASE_EFFECTS[k] for k in names), bounds=bounds, model=model,
-               start=FitResult((), joint.nuisance, values, 0.0, 0, 0), screen=False,
-               passes_per_param=JOINT_PASSES_PER_PARAM)
+    def refine(start: FitResult) -> FitResult:
+        return fit(nominal, events, split, tuple(BASE_EFFECTS[k] for k in names), bounds=bounds, model=model,
+                   start=start, screen=False, passes_per_param=JOINT_PASSES_PER_PARAM)
+    return off_the_gain_bound(refine(FitResult((), joint.nuisance, values, 0.0, 0, 0)), refine)
 
 
 def effect_not_needed(decision: Decision, ident: Identification, with_effect: CandidateScore,
