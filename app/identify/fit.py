@@ -97,7 +97,8 @@ REACH_SHARE = 0.5
 PIN_CLOSER = 0.75
 MAX_MODE_NYQUIST = 0.3  # ... and its frequency at most this many times the speed channel's sampling rate
 MAX_FILE_MODE_NYQUIST = 0.45  # the file's own first mode beyond this share of the sampling rate: not resolved
-LASH_STARTS = (0.7, 1.4)  # the lash's further starts (_joint), ratios to the file's (data sheets: +-40 %)
+LASH_STARTS = (0.7, 1.4)  # the lash's further starts (_joint), ratios to the file's (data sheets: +-40 %) ...
+LASH_RETRY_SHARE = 0.5  # ... tried where the grey box leaves more than this share of the baseline's chi2
 N_NUISANCE = 2  # unit-box columns before the effects': torque gain and road load (the offset is profiled)
 MIN_EVENTS = 4  # events an identification needs (the interval has G-1 degrees of freedom)
 MIN_RESPONSE = 0.1  # measured / predicted speed swing below which the speed does not follow the torque
@@ -336,13 +337,18 @@ def _joint(vehicle: Vehicle, events: Sequence[DiagEvent], split: Split, names: S
     response moved from the torque gain onto the mass: a baseline without the mass free puts a heavier car's
     slower acceleration on the gain, and a refinement from there stays in that valley).
 
-    Where it leaves more than :data:`PIN_RECHECK` (chi2 per sample) with the lash fitted, it is refined again from
-    the best of the same starts with the lash at :data:`LASH_STARTS` of the file's, and the better kept. A lash that
+    Where it leaves more than :data:`PIN_RECHECK` (chi2 per sample) with the lash fitted, and more than
+    :data:`LASH_RETRY_SHARE` of what the file's values left (``base`` is then the baseline, with no effect values), it
+    is refined again from the best of the same starts with the lash at :data:`LASH_STARTS` of the file's, and the
+    better kept. A lash that
     is off moves every impact of a window in time, and the residual is not convex in it: the impacts fit again only
     near the right value. From the file's lash a paper car with 0.75x the lash and a 0.92x mass stopped at 57 chi2
     per sample with both at the file's; from 0.7x it reached 8.8 with both named near the truth. The second
     refinement is kept only where it does better: screened with the others, a start at 0.7x won the screen on a
-    1 kHz drive whose refinement then ended at 215 against the file's lash's 171, the lash at 0.65x (truth 0.83x)."""
+    1 kHz drive whose refinement then ended at 215 against the file's lash's 171, the lash at 0.65x (truth 0.83x).
+    A refinement that took most of the baseline's residual has found its basin: refined again wherever it left over
+    1.5 chi2 per sample, the 1 kHz drives (whose model form leaves more than that) took up to twice the CPU for
+    nothing."""
     effects = tuple(BASE_EFFECTS[n] for n in names)
 
     def points(values: Sequence[Values]) -> list[FitResult]:
@@ -358,7 +364,7 @@ def _joint(vehicle: Vehicle, events: Sequence[DiagEvent], split: Split, names: S
     first = points(starts)
     best = off_the_gain_bound(refine(first[0], first[1:]), refine)
     varied = lash_starts(names, starts)
-    if varied and best.chi2 > PIN_RECHECK * best.n:
+    if varied and not base.values and best.chi2 > max(PIN_RECHECK * best.n, LASH_RETRY_SHARE * base.chi2):
         other_starts = points(varied)
         other = off_the_gain_bound(refine(other_starts[0], other_starts[1:]), refine)
         best = other if other.chi2 < best.chi2 else best
