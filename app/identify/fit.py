@@ -340,12 +340,12 @@ def _joint(vehicle: Vehicle, events: Sequence[DiagEvent], split: Split, names: S
     Where it leaves more than :data:`PIN_RECHECK` (chi2 per sample) with the lash fitted, and more than
     :data:`LASH_RETRY_SHARE` of what the file's values left (``base`` is then the baseline, with no effect values), it
     is refined again from the best of the same starts with the lash at :data:`LASH_STARTS` of the file's, and the
-    better kept. A lash that
-    is off moves every impact of a window in time, and the residual is not convex in it: the impacts fit again only
-    near the right value. From the file's lash a paper car with 0.75x the lash and a 0.92x mass stopped at 57 chi2
-    per sample with both at the file's; from 0.7x it reached 8.8 with both named near the truth. The second
-    refinement is kept only where it does better: screened with the others, a start at 0.7x won the screen on a
-    1 kHz drive whose refinement then ended at 215 against the file's lash's 171, the lash at 0.65x (truth 0.83x).
+    better kept. A lash that is off moves every impact of a window in time, and the residual is not convex in it: the
+    impacts fit again only near the right value. From the file's lash a paper car with 0.75x the lash and a 0.92x
+    mass stopped at 57 chi2 per sample with both at the file's; from 0.7x it reached 8.8 with both named near the
+    truth. The second refinement is kept only where it does better: screened with the others, a start at 0.7x won
+    the screen on a 1 kHz drive whose refinement then ended at 215 against the file's lash's 171, the lash at 0.65x
+    (truth 0.83x).
     A refinement that took most of the baseline's residual has found its basin: refined again wherever it left over
     1.5 chi2 per sample, the 1 kHz drives (whose model form leaves more than that) took up to twice the CPU for
     nothing."""
