@@ -63,3 +63,25 @@ def test_a_lash_far_from_the_files_is_found_from_a_start_near_it(tmp_path) -> No
     assert abs(lash.ratio / case.base["gap_scale"] - 1.0) < 0.15, res.identification.fit_log
     assert abs(mass.ratio / case.base["mass_scale"] - 1.0) < 0.05, res.identification.fit_log
     assert {"lash", "mass", "stiffness", "damping"} <= set(res.identification.named)
+
+
+def test_a_refinement_in_the_files_lash_basin_is_sent_to_the_others_by_its_screen(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``ifinal19``'s paper car at 1 kHz with 0.71x the file's lash, 0.94x its mass, 1.14x its stiffness and 0.46x its
+    damping. The refinement took 83 % of the file's residual and stopped at 298 chi2 per sample with the lash at 1.01x
+    and the mass at 1.02x, too large a share taken to be refined again by that rule; its own point with the lash at
+    0.7x leaves less, and refined from the lash's other starts it reaches the truth's basin, both named."""
+    from app.identify import IdentifyOptions, identify_logs
+    from bench.indep.car import vehicle_source
+    from bench.indep.record import DBC, MAP
+    from bench.modal_recording import record
+    from sim import load_vehicle
+
+    case = next(c for c in plan("ifinal19", False) if c.name == "base_damping_ratio+lash+stiffness+mass_770017")
+    path = tmp_path / "drive.blf"
+    record(case, recording(case), 0, path)
+    res = identify_logs([path], load_vehicle(vehicle_source(case.car)),
+                        IdentifyOptions(dbc=DBC, signal_map=MAP, seed=case.seed))
+    lash, mass = res.params["lash"], res.params["mass"]
+    assert abs(lash.ratio / case.base["gap_scale"] - 1.0) < 0.15, res.identification.fit_log
+    assert abs(mass.ratio / case.base["mass_scale"] - 1.0) < 0.05, res.identification.fit_log
+    assert {"lash", "mass", "stiffness", "damping"} <= set(res.identification.named)

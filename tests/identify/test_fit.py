@@ -6,17 +6,19 @@ import numpy as np
 import pytest
 
 import app.identify.fit as fitmod
-from app.analysis.diagnosis.calibrate import Bounds, FitResult, linear_reach
+from app.analysis.diagnosis.calibrate import Bounds, FitResult, chi2_at, linear_reach
 from app.analysis.diagnosis.calibrate import fit as calfit
 from app.errors import InsufficientDataError, NotIdentifiableError
 from app.identify import FitOptions, identify_events, physical, with_base
 from app.identify.base import BASE_EFFECTS, effective_stiffness, first_mode, lash_mrad
 from app.identify.fit import (
+    LASH_STARTS,
     PIN_RECHECK,
     REACH_SKIP,
     all_events_split,
     gain_onto_mass,
     interval_reaches,
+    lash_moved,
     off_the_gain_bound,
 )
 from app.signals import Signal, SignalSet
@@ -409,3 +411,36 @@ def test_a_fit_held_by_the_gain_bound_is_refined_again_along_the_rigid_body_ridg
     # the mass moved onto a bound of its own prior is clipped there (a start, not a fit)
     heavy = gain_onto_mass(FitResult((), Nuisance(gain=0.85), {"base_mass": {"scale": 1.6}}, 0.0, 0, 0))
     assert heavy.values["base_mass"]["scale"] == BASE_EFFECTS["mass"].params[0].hi
+
+
+def test_the_lash_screen_tells_a_point_in_the_files_basin_from_the_truths() -> None:
+    """A paper car with 0.7x its file's lash and 0.94x its mass. ``chi2_at`` gives a fit's own chi2 back from one
+    pass; the fit's point with the lash moved to each further start (and each moved along the gain-mass ridge) leaves
+    more than the fit, which is in the truth's basin; a point near the file's lash leaves more than its own point moved
+    to 0.7x: the screen that sends ``_joint`` to refine again from the lash's other starts."""
+    from app.analysis.diagnosis.forward import Nuisance
+
+    paper = load_vehicle("paper")
+    truth = with_base(paper, {"lash": 0.7, "mass": 0.94})
+    rng = np.random.default_rng(3)
+    drive = make_drive(paper, rng, DriveSpec(duration_s=30.0))
+    events, noise = prepared(to_signals(measure(drive, run_truth(truth, drive), CanSampling(period_s=0.01), rng)))
+    split = all_events_split(events)
+    effects = (BASE_EFFECTS["mass"], BASE_EFFECTS["lash"])
+    bounds = Bounds.for_period(noise.period_s)
+    good = calfit(paper, events, split, effects, bounds=bounds, screen=False,
+                  start=FitResult((), Nuisance(), {"base_mass": {"scale": 1.0}, "base_lash": {"scale": 1.0}}, 0, 0, 0))
+    assert good.values["base_lash"]["scale"] == pytest.approx(0.7, rel=0.03)
+    assert chi2_at(paper, events, split, effects, [good], bounds=bounds) == [pytest.approx(good.chi2, rel=1e-9)]
+
+    moved = lash_moved(good)
+    assert [p.values["base_lash"]["scale"] for p in moved] == [*LASH_STARTS, *LASH_STARTS]
+    assert all(p.values["base_mass"] == good.values["base_mass"] for p in moved[:len(LASH_STARTS)])
+    assert all(p.nuisance.gain == 1.0 for p in moved[len(LASH_STARTS):])
+    assert min(chi2_at(paper, events, split, effects, moved, bounds=bounds)) >= good.chi2 * 0.999
+
+    near_file = FitResult((), good.nuisance, {"base_mass": {"scale": 1.0}, "base_lash": {"scale": 1.02}}, 0, 0, 0)
+    own, *screen = chi2_at(paper, events, split, effects, [near_file, *lash_moved(near_file)], bounds=bounds)
+    assert min(screen) < 0.8 * own
+    no_mass = lash_moved(FitResult((), good.nuisance, {"base_lash": {"scale": 1.0}}, 0, 0, 0))
+    assert len(no_mass) == len(LASH_STARTS)

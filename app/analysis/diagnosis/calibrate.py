@@ -462,6 +462,17 @@ def fit(
                      message, pairs, settings, r, None if jac is None else np.asarray(jac, dtype=np.float64))
 
 
+def chi2_at(base: Vehicle, events: Sequence[DiagEvent], split: Split, effects: Sequence[Effect],
+            points: Sequence[FitResult], *, bounds: Bounds, model: str = "multibody") -> list[float]:
+    """The calibration chi2 at each of ``points`` (their nuisance and values for every effect of ``effects``), one
+    simulator pass each and no refinement: a screen of start points before a refinement is paid for."""
+    require_calibration(split, events)
+    prob = _Problem(base, events, effects, bounds, model)
+    us = [prob.encode(p.nuisance, p.values) for p in points]
+    prob.run_ahead(us)
+    return [_chi2(prob.residuals(u)) for u in us]
+
+
 def residual_moved(base: Vehicle, events: Sequence[DiagEvent], fitted: FitResult, effects: Sequence[Effect], *,
                    bounds: Bounds, model: str = "multibody") -> FloatArray | None:
     """The weighted calibration residual of ``fitted`` (its nuisance and ``effects``' values) evaluated on another
