@@ -100,6 +100,7 @@ MAX_MODE_NYQUIST = 0.3  # ... and its frequency at most this many times the spee
 MAX_FILE_MODE_NYQUIST = 0.45  # the file's own first mode beyond this share of the sampling rate: not resolved
 LASH_STARTS = (0.7, 1.4)  # the lash's further starts (_joint), ratios to the file's (data sheets: +-40 %) ...
 LASH_RETRY_SHARE = 0.5  # ... tried where the grey box leaves more than this share of the baseline's chi2
+LASH_SAME_BASIN = 0.1  # ... or where its point with the lash moved to a start further than this from it leaves less
 N_NUISANCE = 2  # unit-box columns before the effects': torque gain and road load (the offset is profiled)
 MIN_EVENTS = 4  # events an identification needs (the interval has G-1 degrees of freedom)
 MIN_RESPONSE = 0.1  # measured / predicted speed swing below which the speed does not follow the torque
@@ -335,10 +336,14 @@ def lash_starts(names: Sequence[str], starts: Sequence[Values]) -> list[Values]:
 def lash_moved(result: FitResult) -> list[FitResult]:
     """``result``'s point with the lash at each :data:`LASH_STARTS` ratio to the file's, and each of those moved to
     the file's torque gain along the rigid-body ridge (:func:`gain_onto_mass`) where the mass is fitted: the screen
-    that tells :func:`_joint` a refinement stopped in another basin of the lash than the best."""
+    that tells :func:`_joint` a refinement stopped in another basin of the lash than the best. A ratio within
+    :data:`LASH_SAME_BASIN` of the fitted lash is left out: that point is the fit's own, and rounding alone can make
+    it leave less."""
     lid = BASE_EFFECTS["lash"].id
     key = BASE_EFFECTS["lash"].params[0].name
-    out = [FitResult((), result.nuisance, {**result.values, lid: {key: r}}, 0.0, 0, 0) for r in LASH_STARTS]
+    now = result.values[lid][key]
+    out = [FitResult((), result.nuisance, {**result.values, lid: {key: r}}, 0.0, 0, 0) for r in LASH_STARTS
+           if abs(r / now - 1.0) > LASH_SAME_BASIN]
     if BASE_EFFECTS["mass"].id in result.values:
         out += [gain_onto_mass(p) for p in out]
     return out
@@ -383,8 +388,8 @@ def _joint(vehicle: Vehicle, events: Sequence[DiagEvent], split: Split, names: S
     varied = lash_starts(names, starts)
     if varied and not base.values and best.chi2 > PIN_RECHECK * best.n and (
             best.chi2 > LASH_RETRY_SHARE * base.chi2
-            or min(chi2_at(vehicle, events, split, effects, lash_moved(best), bounds=bounds, model=opts.model))
-            < best.chi2):
+            or min(chi2_at(vehicle, events, split, effects, lash_moved(best), bounds=bounds, model=opts.model),
+                   default=best.chi2) < best.chi2):
         other_starts = points(varied)
         other = off_the_gain_bound(refine(other_starts[0], other_starts[1:]), refine)
         best = other if other.chi2 < best.chi2 else best

@@ -61,7 +61,10 @@ for a 90 % interval from five windows).
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
+from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -91,6 +94,7 @@ MIN_R2 = 0.7  # the model must explain this share of the speed beyond a straight
 SAMPLES_PER_PARAM = 2.0  # an order is tried only with this many samples per parameter
 MAX_EVALS = 100  # residual evaluations of one order's search (a stalled search keeps its best point)
 WINDOW_LEVEL = 0.9  # confidence level of the per-window intervals
+MEMO_WINDOWS = 4096  # window results kept (:func:`window_mode`): a staged identification meets its windows again
 OUTLIER_MADS = 5.0  # pooled: a window further than this many robust spreads from the median ...
 OUTLIER_SHARE = 0.1  # ... and than this share of it is set aside
 METHOD = "output-error ARX on speed increments (variable projection), random-effects pooling"
@@ -465,7 +469,40 @@ def lash_closed_segment(w: EventWindow, *, period_s: float | None = None, band_n
     return Segment(on_grid.y[:i1], on_grid.u[:i1], i0, on_grid.dt)
 
 
+_MEMO: OrderedDict[bytes, WindowMode | str] = OrderedDict()
+_MEMO_LOCK = threading.Lock()
+
+
+def _window_key(w: EventWindow, period_s: float | None, band_nm: float) -> bytes:
+    h = hashlib.blake2b(digest_size=20)
+    for a in (w.speed_t, w.speed_rpm, w.torque_t, w.torque_nm):
+        arr = np.ascontiguousarray(a, dtype=np.float64)
+        h.update(arr.size.to_bytes(8, "little"))
+        h.update(arr.tobytes())
+    h.update(np.array([w.t_cross, w.direction, np.nan if period_s is None else period_s, band_nm]).tobytes())
+    return h.digest()
+
+
 def window_mode(w: EventWindow, *, period_s: float | None = None, band_nm: float = 5.0) -> WindowMode | str:
+    """:func:`window_estimate`, kept for the window's samples and arguments: each stage of a sequential design
+    (:func:`app.identify.fit.identify_staged`, the diagnosis') takes the previous stage's windows again, and the
+    output-error searches of a window are a third of a long drive's identification. The result is the same object
+    each time (frozen, or a reason)."""
+    key = _window_key(w, period_s, band_nm)
+    with _MEMO_LOCK:
+        hit = _MEMO.get(key)
+        if hit is not None:
+            _MEMO.move_to_end(key)
+            return hit
+    out = window_estimate(w, period_s=period_s, band_nm=band_nm)
+    with _MEMO_LOCK:
+        _MEMO[key] = out
+        while len(_MEMO) > MEMO_WINDOWS:
+            _MEMO.popitem(last=False)
+    return out
+
+
+def window_estimate(w: EventWindow, *, period_s: float | None = None, band_nm: float = 5.0) -> WindowMode | str:
     """The first torsional mode one event window shows, or the reason it shows none.
 
     Parameters

@@ -30,6 +30,7 @@ from app.identify.modal import (
     lash_closed_segment,
     modes_from_signals,
     pooled_mode,
+    window_estimate,
     window_mode,
 )
 from app.ingest.database import load_database
@@ -318,3 +319,38 @@ def test_shuffle_of_the_independent_generator(tmp_path):
     # the events the analysis left out are listed with its reasons, at their crossings
     left_out = {ev.t_cross_s: ev.exclusion for ev in events if not ev.included}
     assert {t: r for t, r in est.rejected if t in left_out} == left_out
+
+
+def test_a_window_met_again_is_not_searched_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A sequential design's stages take the previous stage's windows again: the mode of a window already seen (same
+    samples, same arguments) is the one found before, with no output-error search; a window that differs in one
+    sample, or the same samples asked with another sample period, is searched."""
+    import app.identify.modal as modal
+
+    rng = np.random.default_rng(11)
+    w = make_window(rng, 5.0, 0.1, 100.0, False, 1.0)
+    monkeypatch.setattr(modal, "_MEMO", type(modal._MEMO)())
+    searched: list[float] = []
+    real = modal._fit
+
+    def counted(*a, **k):  # type: ignore[no-untyped-def]
+        searched.append(1.0)
+        return real(*a, **k)
+
+    monkeypatch.setattr(modal, "_fit", counted)
+    first = window_mode(w)
+    n = len(searched)
+    assert n > 0 and not isinstance(first, str)
+    copy = EventWindow(w.speed_t.copy(), w.speed_rpm.copy(), w.torque_t.copy(), w.torque_nm.copy(), w.t_cross,
+                       w.direction)
+    assert window_mode(copy) is first and len(searched) == n
+    assert window_estimate(w) == first  # the search itself gives the same mode
+    moved = w.speed_rpm.copy()
+    moved[len(moved) // 2] += 0.5
+    other = window_mode(EventWindow(w.speed_t, moved, w.torque_t, w.torque_nm, w.t_cross, w.direction))
+    assert len(searched) > 2 * n and other is not first
+    window_mode(w, period_s=0.01)
+    assert len(searched) > 3 * n - 1
+    monkeypatch.setattr(modal, "MEMO_WINDOWS", 2)
+    window_mode(EventWindow(w.speed_t, w.speed_rpm + 1.0, w.torque_t, w.torque_nm, w.t_cross, w.direction))
+    assert len(modal._MEMO) == 2
