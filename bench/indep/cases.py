@@ -88,7 +88,7 @@ SEED_BASE = {"dev": 10_000, "final": 50_000, "holdout": 90_000, "check": 130_000
              "ifinal10": 590_000, "ifinal11": 610_000, "ifinal12": 630_000,
              "ifinal13": 650_000, "ifinal14": 670_000, "ifinal15": 690_000, "ifinal16": 710_000,
              "ifinal17": 730_000, "ifinal18": 750_000,
-             "ifinal19": 770_000}
+             "ifinal19": 770_000, "ifinal20": 790_000}
 # ifinal5 and ichain3: fresh sets for the contact law the log chooses (app/identify/form.py), scored once;
 # ifinal6: the fresh set for the intervals as calibrated after them (app/identify/fit.py), scored once; ifinal7: the
 # next, for the diagnosis' time-offset rule (app/analysis/diagnosis/decide.py:timing_unresolved), scored once;
@@ -109,11 +109,13 @@ SEED_BASE = {"dev": 10_000, "final": 50_000, "holdout": 90_000, "check": 130_000
 # interval_reaches) and a fit stopped on the torque gain's bound refined again along the gain-mass ridge
 # (app/identify/fit.py:off_the_gain_bound), scored once; ifinal18: the next, for the lash's other basins tried where
 # the grey box leaves most of the baseline's residual (app/identify/fit.py:_joint, LASH_STARTS), scored once;
-# ifinal19: the next, for the gain-bound refit only where that bound alone holds the fit
+# ifinal19: the next, for the gain-bound refit only where that bound alone holds the fit, scored once; ifinal20: the
+# next, for the lash's other basins also tried where the fit's own point with the lash moved fits better
+# (app/identify/fit.py:lash_moved) and each window's mode kept for the next stage (app/identify/modal.py:window_mode)
 IDENTIFY_SETS = ("idev", "ifinal", "idev2", "ifinal2", "ifinal3", "ichain", "ichain2", "ifinal4", "ifinal5",
                  "ichain3", "ifinal6", "ifinal7", "ifinal8", "ifinal9", "ifinal10",
                  "ifinal11", "ifinal12", "ifinal13", "ifinal14", "ifinal15", "ifinal16", "ifinal17", "ifinal18",
-                 "ifinal19")
+                 "ifinal19", "ifinal20")
 # the chain car of each identification set: idev and ifinal kept the preset's ~16 Hz mode (above what a 20-33 Hz
 # logger resolves); idev2 and ifinal2 drive the low-mode car the formula-student logs show (chain_low.toml)
 CHAIN_CAR = {"idev": "chain_drive", "ifinal": "chain_drive", "idev2": "chain_low", "ifinal2": "chain_low",
@@ -123,7 +125,7 @@ CHAIN_CAR = {"idev": "chain_drive", "ifinal": "chain_drive", "idev2": "chain_low
              "ifinal9": "chain_low", "ifinal10": "chain_low", "ifinal11": "chain_low", "ifinal12": "chain_low",
              "ifinal13": "chain_low", "ifinal14": "chain_low", "ifinal15": "chain_low",
              "ifinal16": "chain_low", "ifinal17": "chain_low",
-             "ifinal18": "chain_low", "ifinal19": "chain_low"}
+             "ifinal18": "chain_low", "ifinal19": "chain_low", "ifinal20": "chain_low"}
 # ichain (development; ichain2 its fresh set, scored once): the low-mode chain car with a real effect on top of its
 # wrong damping, so that what the diagnosis can name at 20-50 Hz is measured, not assumed; lags and filters drawn
 # long enough to matter
