@@ -45,6 +45,7 @@ from app.analysis.diagnosis.calibrate import (
     fit,
     linear_reach,
     residual_moved,
+    stage_starts,
 )
 from app.analysis.diagnosis.forward import DiagEvent, Nuisance, prediction, simulate_events, vehicle_with
 from app.analysis.diagnosis.localise import MIN_TRAVERSE_SAMPLES, phase_times
@@ -1137,22 +1138,24 @@ def identify_staged(events: Sequence[DiagEvent], noise: NoiseFloor, vehicle: Veh
     history: list[str] = []
     prev: Identification | None = None
     cur: Identification | None = None
-    for k, n in enumerate(sizes):
-        keep = {e.index for e in order[:n]}
-        sub = [e for e in events if e.index in keep]
+    with stage_starts() as memory:
+        for k, n in enumerate(sizes):
+            keep = {e.index for e in order[:n]}
+            sub = [e for e in events if e.index in keep]
 
-        def staged(f: float, m: str, k: int = k, n: int = n, done: float = done, planned: float = planned) -> None:
-            say(min((done + f * n) / planned, 0.99), f"stage {k + 1} ({n} events): {m}")
+            def staged(f: float, m: str, k: int = k, n: int = n, done: float = done, planned: float = planned) -> None:
+                say(min((done + f * n) / planned, 0.99), f"stage {k + 1} ({n} events): {m}")
 
-        prev, cur = cur, identify_events(sub, noise, vehicle, options, staged, rigid=rigid)
-        done += n
-        moved = _moved(prev, cur) if prev is not None else list(BASE_NAMES)
-        history.append(f"{n}: " + (", ".join(cur.named) or "nothing off the file")
-                       + (f" (moved: {', '.join(moved)})" if prev is not None and moved else ""))
-        if prev is not None and not moved and prev.named == cur.named:
-            break
-        if k + 1 < len(sizes):
-            planned = max(planned, done + sizes[k + 1])
+            memory.next_stage()
+            prev, cur = cur, identify_events(sub, noise, vehicle, options, staged, rigid=rigid)
+            done += n
+            moved = _moved(prev, cur) if prev is not None else list(BASE_NAMES)
+            history.append(f"{n}: " + (", ".join(cur.named) or "nothing off the file")
+                           + (f" (moved: {', '.join(moved)})" if prev is not None and moved else ""))
+            if prev is not None and not moved and prev.named == cur.named:
+                break
+            if k + 1 < len(sizes):
+                planned = max(planned, done + sizes[k + 1])
     assert cur is not None
     stopped = len(history) < len(sizes)
     cur.fit_log.insert(0, "sequential design (events: named): " + "; ".join(history)

@@ -117,3 +117,49 @@ def test_clusters_simulated_side_by_side_give_the_serial_result(signals_for: Cal
     for a, b in zip(serial, threaded, strict=True):
         np.testing.assert_array_equal(a.t, b.t)
         np.testing.assert_array_equal(a.speed, b.speed)
+
+
+def test_stage_starts_key_fits_by_their_effects_and_order_and_turn_over_per_stage() -> None:
+    from app.analysis.diagnosis.calibrate import StageStarts
+
+    memory = StageStarts()
+    assert memory.claim(("drag",)) == ((("drag",), 0), None)
+    assert memory.claim(("drag",))[0] == (("drag",), 1)
+    assert memory.claim(("backlash", "drag"))[0] == (("backlash", "drag"), 0)
+    memory.current[(("drag",), 1)] = "end"  # type: ignore[assignment]
+    memory.next_stage()
+    assert memory.claim(("drag",)) == ((("drag",), 0), None)
+    assert memory.claim(("drag",)) == ((("drag",), 1), "end")
+    assert memory.current == {}
+
+
+def test_a_stage_refines_its_fits_from_where_the_previous_stage_ended(signals_for: Callable[..., SignalSet]) -> None:
+    """The second stage's fit of the drag (on the first stage's events and as many again) screens the first
+    stage's end point with its own starts: it ends where the fit without it ends, or lower, for fewer passes.
+    Outside ``stage_starts`` nothing is kept."""
+    from app.analysis.diagnosis.calibrate import Bounds, fit, stage_starts
+    from app.analysis.diagnosis.prepare import DIAGNOSIS_EVENTS, prepare
+    from app.analysis.events import detect_events
+    from sim.effects import get_effect
+
+    sig = signals_for("drag", (("coulomb_nm", 3.0), ("viscous_nms", 0.005)), 5, 120.0)
+    events, noise, _ = prepare(sig, detect_events(sig, DIAGNOSIS_EVENTS))
+    split = make_split(events, 1)
+    cal = stratified_order(split.calibration_events(events))
+    first, second = cal[:len(cal) // 2], cal
+    assert len(first) >= 6
+    bounds = Bounds.for_period(noise.period_s)
+    drag = (get_effect("drag"),)
+    cold = fit(paper(), second, restricted(split, second), drag, bounds=bounds, seed=2)
+    with stage_starts() as memory:
+        memory.next_stage()
+        one = fit(paper(), first, restricted(split, first), drag, bounds=bounds, seed=2)
+        memory.next_stage()
+        two = fit(paper(), second, restricted(split, second), drag, bounds=bounds, seed=2)
+    assert memory.previous[(("drag",), 0)] is one and memory.current[(("drag",), 0)] is two
+    assert two.chi2 <= cold.chi2 * 1.001, (two.chi2, cold.chi2)
+    assert two.nfev < cold.nfev, (two.nfev, cold.nfev)
+    for name, value in cold.values["drag"].items():
+        assert two.values["drag"][name] == pytest.approx(value, rel=0.05, abs=1e-4), name
+    again = fit(paper(), second, restricted(split, second), drag, bounds=bounds, seed=2)
+    assert (again.chi2, again.nfev) == (cold.chi2, cold.nfev)

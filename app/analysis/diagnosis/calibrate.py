@@ -13,8 +13,10 @@ any event that is not on its calibration side.
 from __future__ import annotations
 
 import inspect
-from collections import OrderedDict
-from collections.abc import Callable, Iterable, Sequence
+from collections import Counter, OrderedDict
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -122,6 +124,47 @@ class FitResult(Serial):
 
 
 Progress = Callable[[str], None]
+
+
+class StageStarts:
+    """End points of one stage's fits, start points of the next stage's (the sequential design, docs/diagnosis.md).
+
+    Stage *k + 1* of a sequential design fits the events of stage *k* and as many again, with the same fits in
+    the same order. A fit with effects (a candidate, a pair, a joint refit with the base parameters) is keyed by
+    its effects and how many fits with those effects came before it in its stage; the previous stage's fit with
+    that key ended where this one most likely ends, so its end point joins the start points (screened with them,
+    or an alternative of a refinement from a given start). Only start points change: the refinement, its budget
+    and the decision rules are those of a fit without it.
+    """
+
+    def __init__(self) -> None:
+        self.previous: dict[tuple[tuple[str, ...], int], FitResult] = {}
+        self.current: dict[tuple[tuple[str, ...], int], FitResult] = {}
+        self.seen: Counter[tuple[str, ...]] = Counter()
+
+    def next_stage(self) -> None:
+        self.previous, self.current = self.current, {}
+        self.seen.clear()
+
+    def claim(self, effects: tuple[str, ...]) -> tuple[tuple[tuple[str, ...], int], FitResult | None]:
+        key = (effects, self.seen[effects])
+        self.seen[effects] += 1
+        return key, self.previous.get(key)
+
+
+_STAGE_STARTS: ContextVar[StageStarts | None] = ContextVar("lashscope_stage_starts", default=None)
+
+
+@contextmanager
+def stage_starts() -> Iterator[StageStarts]:
+    """Fits in this context (this thread's) take the previous stage's end points as start points; call
+    :meth:`StageStarts.next_stage` between stages."""
+    memory = StageStarts()
+    token = _STAGE_STARTS.set(memory)
+    try:
+        yield memory
+    finally:
+        _STAGE_STARTS.reset(token)
 
 
 class _Problem:
@@ -386,6 +429,8 @@ def fit(
     require_calibration(split, events)
     prob = _Problem(base, events, effects, bounds, model)
     rng = np.random.default_rng(seed)
+    memory = _STAGE_STARTS.get() if effects else None
+    key, warm = memory.claim(tuple(e.id for e in effects)) if memory is not None else (None, None)
     nui0 = start.nuisance if start is not None else Nuisance()
     u_nui = prob.encode(nui0)[:prob.N_NUISANCE]
     candidates: list[FloatArray] = []
@@ -411,6 +456,10 @@ def fit(
             if k < 4:  # the fixed starts also with nominal nuisance values (a drag start on top of a road load
                 # that took the drag in the baseline counts the drag twice and loses the screen)
                 candidates.append(np.concatenate([u_nominal, eff_u]))
+    if warm is not None:  # the previous stage's end point of this fit joins the start points
+        u_warm = prob.encode(warm.nuisance, warm.values)
+        u_warm[prob.N_NUISANCE:] = np.clip(u_warm[prob.N_NUISANCE:], START_MARGIN, 1.0 - START_MARGIN)
+        candidates.append(u_warm)
     if len(candidates) > 1:
         prob.run_ahead(candidates)
         scored = [(_chi2(prob.residuals(u)), i) for i, u in enumerate(candidates)]
@@ -458,8 +507,11 @@ def fit(
         if near and not resting_off:
             at_bound.append(f"{owner}.{spec.name}")
     pairs = trade_offs(jac, [p.name for p in prob.specs], prob.owner) if effects and jac is not None else ()
-    return FitResult(tuple(e.id for e in effects), nui, values, _chi2(r), prob.n_res, prob.nfev, tuple(at_bound),
-                     message, pairs, settings, r, None if jac is None else np.asarray(jac, dtype=np.float64))
+    result = FitResult(tuple(e.id for e in effects), nui, values, _chi2(r), prob.n_res, prob.nfev, tuple(at_bound),
+                       message, pairs, settings, r, None if jac is None else np.asarray(jac, dtype=np.float64))
+    if memory is not None and key is not None:
+        memory.current[key] = result
+    return result
 
 
 def chi2_at(base: Vehicle, events: Sequence[DiagEvent], split: Split, effects: Sequence[Effect],

@@ -31,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from app.analysis.blas_threads import single_blas_thread
-from app.analysis.diagnosis.calibrate import Bounds, FitResult, fit
+from app.analysis.diagnosis.calibrate import Bounds, FitResult, fit, stage_starts
 from app.analysis.diagnosis.decide import (
     CandidateScore,
     Decision,
@@ -268,20 +268,23 @@ def run_diagnosis(
     done = 0.0
     history: list[tuple[int, str]] = []
     res: DiagnosisResult | None = None
-    for k, n in enumerate(sizes):
-        keep = {e.index for e in (*cal[:n], *ho[:n])}
-        sub = [e for e in events if e.index in keep]
+    with stage_starts() as memory:
+        for k, n in enumerate(sizes):
+            keep = {e.index for e in (*cal[:n], *ho[:n])}
+            sub = [e for e in events if e.index in keep]
 
-        def staged(frac: float, msg: str, k: int = k, n: int = n, done: float = done, planned: float = planned) -> None:
-            say(min((done + frac * n) / planned, 0.99), f"stage {k + 1} ({n} events per side): {msg}")
+            def staged(frac: float, msg: str, k: int = k, n: int = n, done: float = done,
+                       planned: float = planned) -> None:
+                say(min((done + frac * n) / planned, 0.99), f"stage {k + 1} ({n} events per side): {msg}")
 
-        res = _diagnose(sub, noise, vehicle, opts, staged, skipped, restricted(split, sub))
-        d = res.decision
-        history.append((n, f"{d.status} {'+'.join(d.top)}".rstrip()))
-        done += n
-        if k == len(sizes) - 1 or (k >= 1 and history[-1][1] == history[-2][1]):
-            break
-        planned = max(planned, done + sizes[k + 1])
+            memory.next_stage()
+            res = _diagnose(sub, noise, vehicle, opts, staged, skipped, restricted(split, sub))
+            d = res.decision
+            history.append((n, f"{d.status} {'+'.join(d.top)}".rstrip()))
+            done += n
+            if k == len(sizes) - 1 or (k >= 1 and history[-1][1] == history[-2][1]):
+                break
+            planned = max(planned, done + sizes[k + 1])
     assert res is not None
     used = {e.index for e in res.events}
     stable = len(history) < len(sizes) or history[-1][1] == history[-2][1]
