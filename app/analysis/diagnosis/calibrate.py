@@ -425,6 +425,9 @@ def fit(
         x (parameters + 1)); when they run out the best point seen is the result.
     passes_per_param : see ``max_passes``.
     seed : RNG seed of the random start points.
+
+    Inside :func:`stage_starts` (a staged diagnosis or identification) a fit with effects also screens the end point
+    of the previous stage's fit with the same effects and the same place in its stage (:class:`StageStarts`).
     """
     require_calibration(split, events)
     prob = _Problem(base, events, effects, bounds, model)
