@@ -226,11 +226,17 @@ def window_ms(t: np.ndarray, a: np.ndarray, b: np.ndarray, drive: Drive, shift_s
     reversal, 10 ms apart), each window's level and slope removed, at the best shift of ``b`` within ``shift_s``."""
     grids = [g for r in drive.reversals
              if (g := np.arange(r - 0.2, r + 1.0, 0.01))[0] > shift_s and g[-1] < t[-1] - shift_s]
+    # each window's stretch of the drive (the samples around it at every shift), taken once: np.interp reads its
+    # whole table on every call, and on the drive's table a 30-minute drive took over half an hour; on a stretch
+    # that brackets the window the interpolation is the same, number for number
+    spans = [(int(max(np.searchsorted(t, g[0] - 2 * shift_s) - 1, 0)),
+              int(min(np.searchsorted(t, g[-1] + 2 * shift_s) + 2, t.size))) for g in grids]
+    windows = [(g, t[i:j], b[i:j], np.interp(g, t[i:j], a[i:j])) for g, (i, j) in zip(grids, spans, strict=True)]
 
     def ms(shift: float) -> float:
         parts = []
-        for g in grids:
-            d = np.interp(g - shift, t, b) - np.interp(g, t, a)
+        for g, tw, bw, aw in windows:
+            d = np.interp(g - shift, tw, bw) - aw
             parts.append(d - np.polyval(np.polyfit(g, d, 1), g))  # a window's level and slope are nuisance
         d = np.concatenate(parts)
         return float(np.mean(d * d))

@@ -207,6 +207,31 @@ def test_signal_size_and_manifest_round_trip(tmp_path):
     assert read_manifest(tmp_path / "old.json") == []  # made by another generator version: not reused
 
 
+def test_window_ms_on_stretches_equals_it_on_the_whole_drive():
+    """Each window is interpolated on the stretch of the drive around it; the mean square is the one the whole
+    drive's table gives, number for number (windows near both ends included)."""
+    from bench.indep.cases import SHIFT_S, _reported, truth_car, window_ms
+
+    d = make_drive(CAR, BAND_A, np.random.default_rng(5), 20.0)
+    t, a = _reported(CAR, d)
+    _, b = _reported(truth_car({"torque_lag": {"tau_s": 0.012, "dead_s": 0.0}}), d)
+    assert d.reversals.size >= 6
+    grids = [g for r in d.reversals
+             if (g := np.arange(r - 0.2, r + 1.0, 0.01))[0] > SHIFT_S and g[-1] < t[-1] - SHIFT_S]
+
+    def whole(shift: float) -> float:
+        parts = []
+        for g in grids:
+            e = np.interp(g - shift, t, b) - np.interp(g, t, a)
+            parts.append(e - np.polyval(np.polyfit(g, e, 1), g))
+        e = np.concatenate(parts)
+        return float(np.mean(e * e))
+
+    expected = min(whole(float(s)) for s in np.arange(-SHIFT_S, SHIFT_S + 1e-9, 0.0005))
+    assert expected > 0.0
+    assert window_ms(t, a, b, d) == expected
+
+
 def test_second_channel_signature_adds_the_wheels_only_where_they_differ():
     from bench.indep.cases import signal_sigma, truth_car
     from bench.separable import channels, two_channel_sigma
